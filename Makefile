@@ -1,0 +1,33 @@
+# Two set-up commands, both idempotent on a fresh machine with python3, make and gcc:
+#   make demo   create .venv, install mrpctl, run the paper example
+#   make test   create .venv, install mrpctl with its test extras, run the whole suite
+VENV ?= .venv
+PYTHON := $(VENV)/bin/python
+STAMP := $(VENV)/.mrpctl-installed
+
+.PHONY: demo test lint bench clean
+
+$(PYTHON):
+	python3 -m venv $(VENV)
+
+$(STAMP): pyproject.toml | $(PYTHON)
+	$(PYTHON) -m pip install --quiet --disable-pip-version-check -e '.[test]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/mrpctl example
+
+test: $(STAMP)
+	$(PYTHON) -m pytest -q -n 2
+
+lint: $(STAMP)
+	$(PYTHON) -m pip install --quiet ruff
+	$(VENV)/bin/ruff check mrpctl tests examples bench
+	$(VENV)/bin/ruff format --check mrpctl tests examples bench
+
+bench: $(STAMP)
+	$(PYTHON) bench/design.py
+	$(PYTHON) bench/simulate.py
+
+clean:
+	rm -rf $(VENV) results build *.egg-info .pytest_cache

@@ -1,0 +1,36 @@
+"""Exception and warning classes raised by mrpctl."""
+
+from __future__ import annotations
+
+__all__ = [
+    "CodegenError",
+    "DimensionError",
+    "InertiaWarning",
+    "MrpctlError",
+    "SolverError",
+    "SpecificationError",
+]
+
+
+class MrpctlError(Exception):
+    """Base class of every error raised by mrpctl."""
+
+
+class DimensionError(MrpctlError, ValueError):
+    """An array argument has the wrong shape ("expected (n, m) but found (p, q)")."""
+
+
+class SpecificationError(MrpctlError, ValueError):
+    """An argument has the right shape but breaks a rule (NaN, sign, range, definiteness)."""
+
+
+class SolverError(MrpctlError, RuntimeError):
+    """A numerical solver failed in a way that cannot be reported as a result."""
+
+
+class CodegenError(MrpctlError, RuntimeError):
+    """Generating, compiling or loading CasADi code failed."""
+
+
+class InertiaWarning(UserWarning):
+    """An inertia is valid (symmetric positive definite) but not physically realisable."""

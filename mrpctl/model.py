@@ -1,0 +1,146 @@
+"""The plant as CasADi expressions: the only place the attitude dynamics are written.
+
+State x = [σ; ω/4] ∈ R⁶ (paper Eq. 6), torque input u ∈ R³ (N m):
+
+    ẋ = A x + B u + f(x)                                 (paper Eqs. 6-7)
+    σ̇ = ¼ B(σ) ω,    J ω̇ = −ω × J ω + u                   (paper Eq. 3)
+
+with A = [[0, I₃], [0, 0]], B = [0; ¼ J⁻¹] and
+f(x) = [(B(x₁) − I₃) x₂; −4 J⁻¹ [x₂×] J x₂].
+
+The direct form (σ̇, ω̇) is written once here; f is derived from it as
+f(x) = ẋ(x, 0) − A x, so the split and the dynamics cannot disagree.
+
+The gain convention (see ``design/conventions.md``): u = K x with
+K = [4 J K₁, 4 J K₂] ∈ R³ˣ⁶, so that B K = [[0, 0], [K₁, K₂]] and the linearised
+loop is σ̈ = K₁ σ + K₂ σ̇ (paper Eq. pd_design).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from mrpctl._validation import finite_array, readonly
+from mrpctl.mrp import b_matrix_expr, skew_expr
+from mrpctl.spacecraft import Spacecraft
+
+__all__ = [
+    "INPUT_SIZE",
+    "STATE_SIZE",
+    "PlantModel",
+    "dynamics_expr",
+    "gain_from_pd",
+    "gain_matrix",
+    "pd_from_gain",
+    "plant_model",
+    "state",
+    "state_parts",
+]
+
+STATE_SIZE = 6
+INPUT_SIZE = 3
+
+
+def dynamics_expr(spacecraft: Spacecraft, x: Any, u: Any) -> Any:
+    """ẋ for x = [σ; ω/4] and torque u, as a CasADi expression (SX or MX).
+
+    σ̇ = ¼ B(σ) ω and ω̇ = J⁻¹ (−ω × J ω + u), then ẋ = [σ̇; ω̇/4].
+    """
+    inertia = ca.DM(spacecraft.inertia)
+    inertia_inverse = ca.DM(spacecraft.inertia_inverse)
+    sigma = x[0:3]
+    omega = 4 * x[3:6]
+    sigma_dot = b_matrix_expr(sigma) @ omega / 4
+    omega_dot = inertia_inverse @ (-skew_expr(omega) @ (inertia @ omega) + u)
+    return ca.vertcat(sigma_dot, omega_dot / 4)
+
+
+@dataclass(frozen=True, eq=False)
+class PlantModel:
+    """The plant of one spacecraft as named CasADi Functions and the paper's split.
+
+    Attributes
+    ----------
+    spacecraft : Spacecraft
+        The spacecraft whose inertia J enters the dynamics.
+    dynamics : casadi.Function
+        ``dynamics(x, u) -> xdot``: ẋ = A x + B u + f(x).
+    nonlinearity : casadi.Function
+        ``f(x) -> f``: the paper's f(x) of Eq. 7.
+    A : numpy.ndarray
+        (6, 6) constant matrix [[0, I₃], [0, 0]].
+    B : numpy.ndarray
+        (6, 3) constant matrix [0; ¼ J⁻¹].
+    """
+
+    spacecraft: Spacecraft
+    dynamics: ca.Function = field(repr=False)
+    nonlinearity: ca.Function = field(repr=False)
+    A: np.ndarray = field(repr=False)
+    B: np.ndarray = field(repr=False)
+
+    def closed_loop_matrices(self, K: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(A, A_d) = (A, B K) of the loop linearised at x = 0: ẋ = A x + A_d x(t − τ)."""
+        return self.A, readonly(self.B @ gain_matrix(K))
+
+
+def plant_model(spacecraft: Spacecraft) -> PlantModel:
+    """Build the CasADi plant of ``spacecraft`` (cheap: a few SX nodes)."""
+    if not isinstance(spacecraft, Spacecraft):
+        raise TypeError(f"spacecraft must be a mrpctl.Spacecraft, got {type(spacecraft).__name__}")
+    x = ca.SX.sym("x", STATE_SIZE)
+    u = ca.SX.sym("u", INPUT_SIZE)
+    xdot = dynamics_expr(spacecraft, x, u)
+    a_matrix = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
+    b_matrix = np.vstack((np.zeros((3, 3)), spacecraft.inertia_inverse / 4.0))
+    drift = ca.substitute(xdot, u, ca.DM.zeros(INPUT_SIZE)) - ca.DM(a_matrix) @ x
+    return PlantModel(
+        spacecraft=spacecraft,
+        dynamics=ca.Function("dynamics", [x, u], [xdot], ["x", "u"], ["xdot"]),
+        nonlinearity=ca.Function("f", [x], [ca.simplify(drift)], ["x"], ["f"]),
+        A=readonly(a_matrix),
+        B=readonly(b_matrix),
+    )
+
+
+def state(sigma: Any, omega: Any) -> np.ndarray:
+    """x = [σ; ω/4] from σ (..., 3) and ω (..., 3) in rad/s; shape (..., 6)."""
+    sigma = finite_array("sigma", sigma, (None, 3))
+    omega = finite_array("omega", omega, (None, 3))
+    sigma, omega = np.broadcast_arrays(sigma, omega)
+    return np.concatenate((sigma, omega / 4.0), axis=-1)
+
+
+def state_parts(x: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(σ, ω) from x = [σ; ω/4], shape (..., 6); ω in rad/s."""
+    x = finite_array("x", x, (None, STATE_SIZE))
+    return x[..., 0:3], 4.0 * x[..., 3:6]
+
+
+def gain_matrix(K: Any) -> np.ndarray:
+    """Check that K is a finite (3, 6) feedback gain acting on x = [σ; ω/4]."""
+    return finite_array("K", K, (INPUT_SIZE, STATE_SIZE))
+
+
+def gain_from_pd(spacecraft: Spacecraft, K1: Any, K2: Any) -> np.ndarray:
+    """K = [4 J K₁, 4 J K₂] from the loop gains of σ̈ = K₁ σ + K₂ σ̇ (each 3×3 or 3-vector)."""
+    k1 = _block("K1", K1)
+    k2 = _block("K2", K2)
+    return 4.0 * spacecraft.inertia @ np.hstack((k1, k2))
+
+
+def pd_from_gain(spacecraft: Spacecraft, K: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(K₁, K₂) = J⁻¹ K / 4 split into its σ and σ̇ blocks (the inverse of :func:`gain_from_pd`)."""
+    loop = spacecraft.inertia_inverse @ gain_matrix(K) / 4.0
+    return loop[:, 0:3], loop[:, 3:6]
+
+
+def _block(name: str, value: Any) -> np.ndarray:
+    array = finite_array(name, value)
+    if array.shape == (3,):
+        return np.diag(array)
+    return finite_array(name, array, (3, 3))
