@@ -27,7 +27,7 @@ def finite_array(name: str, value: Any, shape: tuple[int | None, ...] | None = N
     if shape is not None:
         if shape and shape[0] is None:
             tail = shape[1:]
-            ok = array.ndim >= len(tail) and array.shape[array.ndim - len(tail):] == tail
+            ok = array.ndim >= len(tail) and array.shape[array.ndim - len(tail) :] == tail
             expected = "(..., " + ", ".join(str(s) for s in tail) + ")"
         else:
             ok = array.shape == shape

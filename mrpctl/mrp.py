@@ -101,7 +101,7 @@ def _sigma_dot_function() -> ca.Function:
 def skew(v: Any) -> np.ndarray:
     """The cross-product matrix [v×], shape (..., 3, 3), so that [v×] w = v × w."""
     v = finite_array("v", v, (None, 3))
-    out = np.zeros(v.shape + (3,))
+    out = np.zeros((*v.shape, 3))
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
     out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
     out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
@@ -139,9 +139,9 @@ def _eval_mapped(function: ca.Function, *args: np.ndarray) -> np.ndarray:
     flat = [np.ascontiguousarray(a.reshape(n, 3).T) for a in args]
     rows, cols = function.size_out(0)
     if n == 0:
-        return np.zeros(lead + (rows, cols))
+        return np.zeros((*lead, rows, cols))
     out = np.asarray(function.map(n)(*flat))
-    return out.reshape(rows, n, cols).transpose(1, 0, 2).reshape(lead + (rows, cols))
+    return out.reshape(rows, n, cols).transpose(1, 0, 2).reshape((*lead, rows, cols))
 
 
 def b_matrix(sigma: Any) -> np.ndarray:
@@ -202,15 +202,18 @@ def from_dcm(dcm: Any) -> np.ndarray:
     if np.any(np.abs(gram - np.eye(3)) > 1e-6) or np.any(np.linalg.det(c) < 0):
         raise SpecificationError("dcm must be a proper rotation matrix (C^T C = I, det C = +1) to 1e-6")
     trace = np.trace(c, axis1=-2, axis2=-1)
-    squares = np.stack(
-        (
-            1.0 + trace,
-            1.0 + 2.0 * c[..., 0, 0] - trace,
-            1.0 + 2.0 * c[..., 1, 1] - trace,
-            1.0 + 2.0 * c[..., 2, 2] - trace,
-        ),
-        axis=-1,
-    ) / 4.0
+    squares = (
+        np.stack(
+            (
+                1.0 + trace,
+                1.0 + 2.0 * c[..., 0, 0] - trace,
+                1.0 + 2.0 * c[..., 1, 1] - trace,
+                1.0 + 2.0 * c[..., 2, 2] - trace,
+            ),
+            axis=-1,
+        )
+        / 4.0
+    )
     pick = np.argmax(squares, axis=-1)
     # Products 4 β_i β_j from the symmetric and antisymmetric parts of [BN].
     p01 = c[..., 1, 2] - c[..., 2, 1]

@@ -68,9 +68,13 @@ def summary() -> str:
             f"  plant         {SPACECRAFT}",
             "  state         x = [sigma; omega/4] in R^6, u = K x(t - tau)",
             f"  gain K        [{GAIN_SIGMA:g} I3, {GAIN_OMEGA:g} I3] (3x6, on x)",
-            f"  initial state Phi = {angle:.4f} deg about body x -> sigma0 = {INITIAL_SIGMA.tolist()}, "
-            f"omega0 = {INITIAL_OMEGA.tolist()} rad/s",
+            f"  initial state Phi = {angle:.4f} deg about body x -> sigma0 = {_vector(INITIAL_SIGMA)}, "
+            f"omega0 = {_vector(INITIAL_OMEGA)} rad/s",
             f"  delay         tau = {TAU:g} s, measured at {MEASUREMENT_RATE:g} Hz",
             f"  boundary layer eps = {BOUNDARY_LAYER_EPS:g}",
         )
     )
+
+
+def _vector(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:.4f}" for v in values) + "]"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+
 import numpy as np
 
 from mrpctl._validation import finite_array, readonly
@@ -57,15 +58,12 @@ class Spacecraft:
         scale = max(float(np.max(np.abs(matrix))), 1e-300)
         asymmetry = float(np.max(np.abs(matrix - matrix.T)))
         if asymmetry > _SYMMETRY_RTOL * scale:
-            raise SpecificationError(
-                f"inertia must be symmetric: max |J - J^T| = {asymmetry:.3g} kg m^2"
-            )
+            raise SpecificationError(f"inertia must be symmetric: max |J - J^T| = {asymmetry:.3g} kg m^2")
         matrix = 0.5 * (matrix + matrix.T)
         eigenvalues = np.linalg.eigvalsh(matrix)
         if eigenvalues[0] <= 0.0:
             raise SpecificationError(
-                "inertia must be positive definite: smallest eigenvalue is "
-                f"{eigenvalues[0]:.6g} kg m^2"
+                f"inertia must be positive definite: smallest eigenvalue is {eigenvalues[0]:.6g} kg m^2"
             )
         j1, j2, j3 = eigenvalues
         if j3 > j1 + j2 * (1.0 + 1e-12):
@@ -111,4 +109,3 @@ class Spacecraft:
         if self.is_diagonal:
             return "Spacecraft J = diag(" + ", ".join(f"{v:g}" for v in np.diag(self.inertia)) + ") kg m^2"
         return f"Spacecraft J = {self.inertia.tolist()} kg m^2"
-
