@@ -1,0 +1,96 @@
+"""Shared helpers of the design package: system checks, read-only arrays, the guarded Clarabel call."""
+
+from __future__ import annotations
+
+import logging
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mrpctl._validation import finite_array
+from mrpctl.errors import DimensionError, SpecificationError
+
+_LOG = logging.getLogger(__name__)
+
+#: cvxpy statuses that carry a usable solution (only "optimal": "optimal_inaccurate" never certifies).
+OPTIMAL = "optimal"
+
+
+def system_matrices(A: Any, A_d: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Check (A, A_d) of ẋ = A x + A_d x(t − τ): finite, square, same shape; return float64 copies."""
+    a = finite_array("A", A)
+    if a.ndim == 0:
+        a = a.reshape(1, 1)
+    if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] == 0:
+        raise DimensionError(f"A: expected a square (n, n) matrix but found shape {a.shape}")
+    a_d = finite_array("A_d", A_d)
+    if a_d.ndim == 0:
+        a_d = a_d.reshape(1, 1)
+    if a_d.shape != a.shape:
+        raise DimensionError(f"A_d: expected shape {a.shape} (the shape of A) but found {a_d.shape}")
+    return np.array(a, dtype=float), np.array(a_d, dtype=float)
+
+
+def order_value(order: Any) -> int:
+    """Check the Bessel-Legendre order N (0 = Jensen, 1 = Wirtinger)."""
+    if isinstance(order, bool) or not isinstance(order, (int, np.integer)):
+        raise SpecificationError(f"order must be an integer N >= 0 (0 Jensen, 1 Wirtinger), got {order!r}")
+    if order < 0 or order > 10:
+        raise SpecificationError(f"order must satisfy 0 <= N <= 10, got {order}")
+    return int(order)
+
+
+def frozen(array: Any, *, dtype: Any = float) -> np.ndarray:
+    """A read-only copy of ``array`` keeping complex values when ``dtype`` is complex."""
+    out = np.array(array, dtype=dtype, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+def is_panic(exc: BaseException) -> bool:
+    """True for the ``pyo3_runtime.PanicException`` raised when Clarabel's Rust core panics."""
+    return type(exc).__name__ == "PanicException"
+
+
+@dataclass(frozen=True)
+class SolveOutcome:
+    """What one guarded solve returned: cvxpy status (or error text) and the wall time (s)."""
+
+    status: str
+    time: float
+    error: str = ""
+
+    @property
+    def optimal(self) -> bool:
+        return self.status == OPTIMAL and not self.error
+
+
+def solve(problem: Any) -> SolveOutcome:
+    """Solve a cvxpy problem with Clarabel; errors and Rust panics become an outcome, never an exception.
+
+    ``warm_start=False``: warm starts through Clarabel's update path gave spurious solver errors during
+    bisection.
+    """
+    import cvxpy as cp
+
+    start = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            # "Solution may be inaccurate": the status says so, and inaccurate never certifies.
+            warnings.simplefilter("ignore", UserWarning)
+            problem.solve(solver=cp.CLARABEL, warm_start=False)
+    except cp.error.SolverError as exc:
+        _LOG.debug("Clarabel failed: %s", exc)
+        return SolveOutcome("solver_error", time.perf_counter() - start, f"SolverError: {exc}")
+    except (ArithmeticError, np.linalg.LinAlgError) as exc:
+        _LOG.debug("Clarabel failed: %s", exc)
+        return SolveOutcome("solver_error", time.perf_counter() - start, f"{type(exc).__name__}: {exc}")
+    except BaseException as exc:
+        if not is_panic(exc):
+            raise
+        _LOG.warning("Clarabel panicked: %s", exc)
+        return SolveOutcome("solver_error", time.perf_counter() - start, f"PanicException: {exc}")
+    return SolveOutcome(str(problem.status), time.perf_counter() - start)

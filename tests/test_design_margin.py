@@ -1,0 +1,143 @@
+"""Exact delay margin: analytic margins, literature values and an independent spectral method."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mrpctl import paper
+from mrpctl.design import delay_margin, linearized_loop
+from mrpctl.errors import DimensionError, SpecificationError
+
+BENCH_A = np.array([[-2.0, 0.0], [0.0, -0.9]])
+BENCH_AD = np.array([[-1.0, 0.0], [-1.0, -1.0]])
+# Gu, Kharitonov & Chen (2003), Example: unstable without delay, stable for 0.10017 < tau < 1.71785.
+GU_A = np.array([[0.0, 1.0], [-2.0, 0.1]])
+GU_AD = np.array([[0.0, 0.0], [1.0, 0.0]])
+
+
+def _cheb(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Trefethen's Chebyshev differentiation matrix on the m + 1 points cos(j pi / m)."""
+    x = np.cos(np.pi * np.arange(m + 1) / m)
+    c = np.hstack([2.0, np.ones(m - 1), 2.0]) * (-1.0) ** np.arange(m + 1)
+    dx = x[:, None] - x[None, :]
+    d = np.outer(c, 1.0 / c) / (dx + np.eye(m + 1))
+    return d - np.diag(d.sum(axis=1)), x
+
+
+def rightmost_root(a: np.ndarray, a_d: np.ndarray, tau: float, m: int = 40) -> float:
+    """Real part of the rightmost characteristic root by spectral discretisation of the
+    infinitesimal generator (Breda, Maset & Vermiglio 2005): independent of the crossing method."""
+    a = np.atleast_2d(a)
+    a_d = np.atleast_2d(a_d)
+    n = a.shape[0]
+    d, _ = _cheb(m)
+    gen = np.kron(d * (2.0 / tau), np.eye(n))  # theta = tau (x - 1) / 2, row j = theta_j
+    gen[:n, :] = 0.0
+    gen[:n, :n] = a
+    gen[:n, m * n :] = a_d
+    return float(np.max(np.linalg.eigvals(gen).real))
+
+
+@pytest.mark.parametrize(("a", "b"), [(0.0, -1.0), (-0.5, -2.0), (0.5, -1.5), (1.0, -3.0)])
+def test_scalar_margin_matches_analytic_formula(a: float, b: float) -> None:
+    # xdot = a x + b x(t - tau), b < -|a|: tau* = arccos(-a/b) / sqrt(b^2 - a^2).
+    expected = math.acos(-a / b) / math.sqrt(b * b - a * a)
+    result = delay_margin(a, b)
+    assert result.stable_without_delay
+    assert result.margin == pytest.approx(expected, rel=1e-10)
+    assert result.crossings[0].frequency == pytest.approx(math.sqrt(b * b - a * a), rel=1e-10)
+
+
+def test_pure_delay_integrator_is_pi_over_two() -> None:
+    assert delay_margin(0.0, -1.0).margin == pytest.approx(math.pi / 2, rel=1e-12)
+
+
+def test_classic_benchmark_margin_and_spectral_cross_check() -> None:
+    result = delay_margin(BENCH_A, BENCH_AD)
+    assert result.margin == pytest.approx(6.1725, abs=1e-4)  # literature: 6.1725
+    assert rightmost_root(BENCH_A, BENCH_AD, result.margin * (1 - 1e-3)) < 0.0
+    assert rightmost_root(BENCH_A, BENCH_AD, result.margin * (1 + 1e-3)) > 0.0
+    assert rightmost_root(BENCH_A, BENCH_AD, result.margin) == pytest.approx(0.0, abs=1e-8)
+
+
+def test_paper_margin_analytic_per_axis_and_singular_delay_matrix() -> None:
+    loop = linearized_loop(paper.SPACECRAFT, paper.GAIN)
+    assert np.linalg.matrix_rank(loop.A_d) == 3
+    result = loop.delay_margin()
+    # Per axis s^2 + (b s + a) e^{-s tau} = 0: omega^4 = a^2 + b^2 omega^2, tau = atan2(b omega, a) / omega.
+    analytic = []
+    for inertia in paper.INERTIA:
+        a = -paper.GAIN_SIGMA / (4 * inertia)
+        b = -paper.GAIN_OMEGA / (4 * inertia)
+        omega = math.sqrt((b * b + math.sqrt(b**4 + 4 * a * a)) / 2)
+        analytic.append(math.atan2(b * omega, a) / omega)
+    assert result.margin == pytest.approx(min(analytic), rel=1e-9)
+    assert int(np.argmin(analytic)) == 2  # the J = 80 axis sets it
+    assert result.margin == pytest.approx(1.5555, abs=1e-4)
+    assert sorted(c.delay for c in result.crossings) == pytest.approx(sorted(analytic), rel=1e-9)
+    assert rightmost_root(loop.A, loop.A_d, result.margin * 0.999) < 0.0
+    assert rightmost_root(loop.A, loop.A_d, result.margin * 1.001) > 0.0
+
+
+def test_stability_interval_of_a_system_unstable_without_delay() -> None:
+    result = delay_margin(GU_A, GU_AD)
+    assert not result.stable_without_delay
+    assert result.margin == 0.0
+    assert len(result.stable_intervals) == 1
+    lo, hi = result.stable_intervals[0]
+    assert lo == pytest.approx(0.10017, abs=1e-5)
+    assert hi == pytest.approx(1.71785, abs=1e-5)
+    for tau, stable in [
+        (0.05, False),
+        (0.5, True),
+        (1.5, True),
+        (2.0, False),
+        (lo * 0.99, False),
+        (hi * 1.01, False),
+    ]:
+        assert (rightmost_root(GU_A, GU_AD, tau) < 0.0) is stable
+        assert result.is_stable(tau) is stable
+
+
+def test_delay_independent_and_never_stable_systems() -> None:
+    independent = delay_margin(-2.0 * np.eye(2), 0.5 * np.eye(2))
+    assert independent.delay_independent
+    assert independent.stable_intervals == ((0.0, math.inf),)
+    assert rightmost_root(-2.0 * np.eye(2), 0.5 * np.eye(2), 50.0) < 0.0
+    never = delay_margin(np.eye(2), np.zeros((2, 2)))
+    assert not never.stable_for_some_delay
+    assert "unstable for every delay" in never.reason
+    singular = delay_margin([[0.0, 1.0], [0.0, 0.0]], [[0.0, 0.0], [0.0, -1.0]])
+    assert not singular.stable_for_some_delay
+    assert "singular" in singular.reason
+    assert "stable" in str(independent)
+
+
+def test_random_margins_agree_with_spectral_method(rng: np.random.Generator) -> None:
+    checked = 0
+    while checked < 10:
+        a = rng.normal(size=(3, 3)) - 1.5 * np.eye(3)
+        a_d = rng.normal(size=(3, 3))
+        result = delay_margin(a, a_d)
+        if not result.stable_without_delay or math.isinf(result.margin):
+            continue
+        tau = result.margin
+        assert rightmost_root(a, a_d, tau * (1 - 1e-4), m=60) < 0.0
+        assert rightmost_root(a, a_d, tau * (1 + 1e-4), m=60) > 0.0
+        checked += 1
+
+
+@pytest.mark.parametrize(
+    ("a", "a_d", "error", "match"),
+    [
+        (np.zeros((2, 3)), np.zeros((2, 3)), DimensionError, "A: expected a square"),
+        (np.zeros((2, 2)), np.zeros((3, 3)), DimensionError, "A_d: expected shape"),
+        (np.array([[np.nan, 0.0], [0.0, 1.0]]), np.eye(2), SpecificationError, "A must be finite"),
+    ],
+)
+def test_bad_input(a: np.ndarray, a_d: np.ndarray, error: type, match: str) -> None:
+    with pytest.raises(error, match=match):
+        delay_margin(a, a_d)
