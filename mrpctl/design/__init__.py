@@ -23,6 +23,7 @@ from mrpctl.design.lmi import (
 )
 from mrpctl.design.loop import LinearizedLoop, linearized_loop
 from mrpctl.design.margin import Crossing, DelayMargin, delay_margin
+from mrpctl.design.synthesis import LMISynthesis, PDSynthesis, SynthesisStatus, synthesize_lmi, synthesize_pd
 
 __all__ = [
     "JENSEN",
@@ -35,10 +36,13 @@ __all__ = [
     "DelayCertification",
     "DelayMargin",
     "GainAnalysis",
+    "LMISynthesis",
     "LinearizedLoop",
     "PDGains",
+    "PDSynthesis",
     "Positivity",
     "SearchStatus",
+    "SynthesisStatus",
     "analyze_gains",
     "certify",
     "criterion_name",
@@ -47,4 +51,6 @@ __all__ = [
     "lmi_blocks",
     "max_certified_delay",
     "pd_gains",
+    "synthesize_lmi",
+    "synthesize_pd",
 ]
