@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,11 +48,13 @@ __all__ = [
     "HISTORY_KINDS",
     "SETTLING_OMEGA",
     "SETTLING_SIGMA",
+    "BatchResult",
     "ClosedLoopFunctions",
     "SimulationResult",
     "closed_loop_functions",
     "delay_samples",
     "simulate",
+    "simulate_batch",
 ]
 
 logger = logging.getLogger(__name__)
@@ -826,4 +830,234 @@ def simulate(
         n=n,
         common=common,
         x0=x0,
+    )
+
+
+# ======================================================================= batches
+@dataclass(frozen=True, eq=False)
+class BatchResult:
+    """Metrics of many closed-loop runs (one entry per run, in input order).
+
+    Attributes
+    ----------
+    x0 : numpy.ndarray
+        (N, 6) initial states.
+    K : numpy.ndarray
+        (N, 3, 6) gains.
+    tau : numpy.ndarray
+        (N,) delays (s).
+    rules : tuple of SwitchingRule
+        The rule of each run.
+    switch_count : numpy.ndarray
+        (N,) number of switches.
+    first_switch_time, last_switch_time : numpy.ndarray
+        (N,) times of the first and last switch (s); NaN when a run never switched.
+    sign_flips : numpy.ndarray
+        (N, 3) torque sign changes per axis.
+    settling_time : numpy.ndarray
+        (N,) settling time (s), NaN when the run did not settle.
+    converged, diverged : numpy.ndarray
+        (N,) booleans.
+    max_sigma : numpy.ndarray
+        (N,) max |σ| over the run.
+    runs : tuple of SimulationResult or None
+        The full runs when ``trajectories=True`` was asked for.
+    rate, t_final, substeps, history
+        The shared inputs.
+    """
+
+    x0: np.ndarray = field(repr=False)
+    K: np.ndarray = field(repr=False)
+    tau: np.ndarray = field(repr=False)
+    rules: tuple[SwitchingRule, ...] = field(repr=False)
+    switch_count: np.ndarray = field(repr=False)
+    first_switch_time: np.ndarray = field(repr=False)
+    last_switch_time: np.ndarray = field(repr=False)
+    sign_flips: np.ndarray = field(repr=False)
+    settling_time: np.ndarray = field(repr=False)
+    converged: np.ndarray = field(repr=False)
+    diverged: np.ndarray = field(repr=False)
+    max_sigma: np.ndarray = field(repr=False)
+    rate: float
+    t_final: float
+    substeps: int
+    history: Any = field(repr=False)
+    runs: tuple[SimulationResult, ...] | None = field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.switch_count)
+
+    def __str__(self) -> str:
+        n = len(self)
+        switching = self.last_switch_time[np.isfinite(self.last_switch_time)]
+        latest = f"{switching.max():.3f} s" if switching.size else "none"
+        rules = sorted({str(rule) for rule in self.rules})
+        return "\n".join(
+            (
+                f"Batch of {n} runs over {self.t_final:g} s at {self.rate:g} Hz, "
+                f"tau in [{self.tau.min():g}, {self.tau.max():g}] s",
+                "  rule         " + "; ".join(rules),
+                f"  converged    {int(self.converged.sum())}/{n}, diverged {int(self.diverged.sum())}",
+                f"  switches     median {np.median(self.switch_count):g}, max {self.switch_count.max()}, "
+                f"latest switch {latest}",
+                f"  max |sigma|  {self.max_sigma.max():.6f}",
+            )
+        )
+
+
+def _broadcast(name: str, count: int, n: int) -> None:
+    if count not in (1, n):
+        raise DimensionError(f"{name}: expected 1 or {n} entries (one per run) but found {count}")
+
+
+def simulate_batch(
+    spacecraft: Spacecraft,
+    K: Any,
+    x0: Any,
+    *,
+    tau: Any,
+    rule: SwitchingRule | Sequence[SwitchingRule],
+    t_final: float,
+    rate: float = 1000.0,
+    history: Any = "constant",
+    substeps: int = 1,
+    trajectories: bool = False,
+    threads: int | None = None,
+) -> BatchResult:
+    """Simulate many runs at once with CasADi ``map(N, "thread", threads)``.
+
+    Any of ``x0``, ``K``, ``tau`` and ``rule`` may be given once (shared) or once per run.
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The plant.
+    K : array_like
+        (3, 6) or (N, 3, 6) gains on x = [σ; ω/4].
+    x0 : array_like
+        (6,) or (N, 6) initial states x = [σ; ω/4].
+    tau : float or array_like, keyword-only
+        Delay(s) (s), each a whole number of periods 1/rate; runs with equal delays share
+        one compiled engine.
+    rule : SwitchingRule or sequence of SwitchingRule, keyword-only
+        One rule, or one per run, all of the same class (their parameters, such as ε,
+        may differ).
+    t_final, rate, history, substeps
+        As in :func:`simulate`; ``history`` is shared by all runs (an array is allowed
+        only when all runs have the same delay).
+    trajectories : bool, keyword-only
+        Also return every run as a :class:`SimulationResult` (memory: about 80 bytes per
+        sample and run).
+    threads : int, keyword-only
+        Worker threads; default: the CPUs available to this process.
+
+    Returns
+    -------
+    BatchResult
+    """
+    spacecraft = _spacecraft(spacecraft)
+    states = finite_array("x0", x0, (None, STATE_SIZE)).reshape(-1, STATE_SIZE)
+    gains = finite_array("K", K)
+    if gains.shape == (INPUT_SIZE, STATE_SIZE):
+        gains = gains[None]
+    if gains.ndim != 3 or gains.shape[1:] != (INPUT_SIZE, STATE_SIZE):
+        raise DimensionError(f"K: expected shape (3, 6) or (N, 3, 6) but found {np.shape(K)}")
+    delays = np.atleast_1d(np.asarray(tau, dtype=float))
+    if delays.ndim != 1:
+        raise DimensionError(f"tau: expected a scalar or shape (N,) but found {delays.shape}")
+    rules = (rule,) if isinstance(rule, SwitchingRule) else tuple(rule)
+    if not rules:
+        raise SpecificationError("rule: give a switching rule or a non-empty sequence of rules")
+    for each in rules:
+        _rule(each)
+    if len({type(each) for each in rules}) != 1:
+        raise SpecificationError(
+            "rule: all rules of a batch must be of the same class (their parameters may differ), got "
+            + ", ".join(sorted({type(each).__name__ for each in rules}))
+        )
+    n_runs = max(len(states), len(gains), len(delays), len(rules))
+    for name, count in (("x0", len(states)), ("K", len(gains)), ("tau", len(delays)), ("rule", len(rules))):
+        _broadcast(name, count, n_runs)
+    states = np.broadcast_to(states, (n_runs, STATE_SIZE))
+    gains = np.broadcast_to(gains, (n_runs, INPUT_SIZE, STATE_SIZE))
+    delays = np.broadcast_to(delays, (n_runs,))
+    rules = rules * n_runs if len(rules) == 1 else rules
+    rate = positive_scalar("rate", rate)
+    samples_by_run = [delay_samples(value, rate) for value in delays]
+    t_final, n = _samples(t_final, rate)
+    substeps = _substeps(substeps)
+    if threads is None:
+        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise SpecificationError(f"threads must be an integer >= 1, got {threads!r}")
+    if not isinstance(history, str) and len(set(samples_by_run)) > 1:
+        raise SpecificationError("history: an array history needs all runs to have the same tau")
+
+    stats = np.empty((n_runs, _STATS_SIZE))
+    runs: list[SimulationResult | None] = [None] * n_runs
+    for d in sorted(set(samples_by_run)):
+        members = [i for i, value in enumerate(samples_by_run) if value == d]
+        engine = _engine(spacecraft, rules[members[0]], d, 1.0 / rate, substeps)
+        blocks = -(-n // engine.block_samples)
+        blocks_history = [_history(history, states[i], d) for i in members]
+        mapped = engine.horizon(blocks, trajectories).map(len(members), "thread", threads)
+        out = mapped(
+            states[members].T,
+            np.array([[rules[i].initial_memory(delay_samples=d) for i in members]]),
+            np.tile(_initial_stats(n)[:, None], (1, len(members))),
+            np.hstack([block for block, _ in blocks_history]),
+            np.hstack([gains[i] for i in members]),
+            np.array([rules[i].parameters() for i in members]).T,
+        )
+        out = out if isinstance(out, (list, tuple)) else [out]
+        group_stats = np.asarray(out[0]).T
+        stats[members] = group_stats
+        if trajectories:
+            total = blocks * engine.block_samples
+            measurements, u, switched = (np.asarray(value) for value in out[1:4])
+            for j, i in enumerate(members):
+                columns = slice(j * total, (j + 1) * total)
+                runs[i] = _result(
+                    metrics=_Metrics.from_stats(group_stats[j]),
+                    measurements=measurements[:, columns].T,
+                    u=u[:, columns].T,
+                    switched=switched[0, columns],
+                    n=n,
+                    common=dict(
+                        spacecraft=spacecraft,
+                        K=readonly(gains[i]),
+                        tau=float(delays[i]),
+                        rate=rate,
+                        delay_samples=d,
+                        rule=rules[i],
+                        history=blocks_history[j][1],
+                        substeps=substeps,
+                        t_final=t_final,
+                    ),
+                    x0=states[i],
+                )
+    metrics = [_Metrics.from_stats(row) for row in stats]
+    diverged = np.array([m.diverged_index >= 0 for m in metrics])
+    settle = np.array([m.unsettled_index + 1 for m in metrics], dtype=float)
+    settled = ~diverged & (settle < n)
+    first = np.array([m.first_switch_index for m in metrics], dtype=float)
+    last = np.array([m.last_switch_index for m in metrics], dtype=float)
+    return BatchResult(
+        x0=readonly(states),
+        K=readonly(gains),
+        tau=readonly(delays),
+        rules=tuple(rules),
+        switch_count=_frozen([m.switch_count for m in metrics], np.int64),
+        first_switch_time=readonly(np.where(first >= 0, first / rate, np.nan)),
+        last_switch_time=readonly(np.where(last >= 0, last / rate, np.nan)),
+        sign_flips=_frozen([m.sign_flips for m in metrics], np.int64).reshape(n_runs, 3),
+        settling_time=readonly(np.where(settled, settle / rate, np.nan)),
+        converged=_frozen(settled, bool),
+        diverged=_frozen(diverged, bool),
+        max_sigma=readonly([m.max_sigma for m in metrics]),
+        rate=rate,
+        t_final=t_final,
+        substeps=substeps,
+        history=history if isinstance(history, str) else readonly(history),
+        runs=tuple(runs) if trajectories else None,
     )
