@@ -1,0 +1,424 @@
+"""Export the closed loop's CasADi Functions: ``.casadi`` files, C source and header, shared library.
+
+:func:`export` writes one folder for a given spacecraft, gain K, delay τ, measurement
+rate and switching rule::
+
+    out_dir/
+        dynamics.casadi  controller.casadi  rule.casadi  step.casadi  sample.casadi  chunk.casadi
+        mrpctl_model.c   mrpctl_model.h     one C translation unit holding every Function
+        libmrpctl_model.so                  gcc -O2 -shared -fPIC (only when a compiler is found)
+        manifest.json                       versions, parameters, ports, SHA-256 content hash
+
+The Functions are those of :func:`mrpctl.simulate.closed_loop_functions`, with the
+same named ports (x = [σ; ω/4], u in N m; K, J and the rule's parameters are constants
+inside them). The ``.casadi`` files keep the plain names (``step``, ``rule``, ...); in the
+C code and the shared library every symbol carries the prefix ``mrpctl_``
+(``mrpctl_step``, ``mrpctl_step_work``, ``mrpctl_step_SZ_W``, ...; CasADi's own helpers
+become ``mrpctl__...``), so the generated code links next to other CasADi code. See
+``design/export.md`` for calling the export from C, Python and MATLAB.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import subprocess
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+
+from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, find_compiler
+from mrpctl.errors import CodegenError, SpecificationError
+from mrpctl.simulate import ClosedLoopFunctions, closed_loop_functions
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import SwitchingRule
+
+__all__ = [
+    "C_PREFIX",
+    "EXPORTED_FUNCTIONS",
+    "HEADER_NAME",
+    "LIBRARY_NAME",
+    "MANIFEST_NAME",
+    "SOURCE_NAME",
+    "ExportResult",
+    "content_hash",
+    "export",
+]
+
+logger = logging.getLogger(__name__)
+
+#: Prefix of every symbol in the generated C code and the shared library.
+C_PREFIX = "mrpctl_"
+#: The generated C source and header (one translation unit for all Functions).
+SOURCE_NAME = "mrpctl_model.c"
+HEADER_NAME = "mrpctl_model.h"
+#: The shared library built from :data:`SOURCE_NAME`.
+LIBRARY_NAME = "libmrpctl_model.so"
+#: The manifest (not covered by the content hash it holds).
+MANIFEST_NAME = "manifest.json"
+#: Exported Functions, in the order they appear in the C code and the manifest.
+EXPORTED_FUNCTIONS = ("dynamics", "controller", "rule", "step", "sample", "chunk")
+#: Version of the manifest layout.
+MANIFEST_FORMAT_VERSION = 1
+
+# Code-generation options: the same number types as mrpctl._compile, plus a header and the prefix.
+_CODEGEN_OPTIONS = {
+    "with_header": True,
+    "prefix": C_PREFIX,
+    "casadi_real": "double",
+    "casadi_int": "long long int",
+}
+
+_DESCRIPTIONS = {
+    "dynamics": "xdot = A x + B u + f(x): the plant, x = [sigma; omega/4], u in N m",
+    "controller": "u = K x_meas (N m)",
+    "rule": "shadow-set switching rule at one sample: x_next is x with sigma possibly replaced "
+    "by its shadow; x_meas is the delayed measurement m_{k-d} (x itself when d = 0)",
+    "step": "x_next = x after one measurement period h = 1/rate, RK4 with `substeps` substeps, u held",
+    "sample": "one measurement period: rule, record x_meas = m_k, u = K m_{k-d}, step; "
+    "x_delayed is m_{k-d} (unused when d = 0)",
+    "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's "
+    "measurements m_{k-d}, ..., m_{k-1} (oldest first)",
+}
+
+
+# =============================================================================== result
+@dataclass(frozen=True)
+class ExportResult:
+    """What :func:`export` wrote.
+
+    Attributes
+    ----------
+    folder : pathlib.Path
+        The export folder.
+    files : tuple of pathlib.Path
+        Every file written, the manifest last.
+    library : pathlib.Path or None
+        The shared library, or None when it was not built.
+    skipped_reason : str or None
+        Why the shared library was not built (None when it was).
+    manifest : dict
+        The content of ``manifest.json`` (a copy; the file is the reference).
+    """
+
+    folder: Path
+    files: tuple[Path, ...] = field(repr=False)
+    library: Path | None
+    skipped_reason: str | None
+    manifest: dict[str, Any] = field(repr=False, compare=False)
+
+    @property
+    def compiled(self) -> bool:
+        """True when the shared library was built."""
+        return self.library is not None
+
+    @property
+    def content_hash(self) -> str:
+        """SHA-256 over the written files except the manifest (see :func:`content_hash`)."""
+        return self.manifest["content_hash"]["value"]
+
+    def __str__(self) -> str:
+        parameters = self.manifest["parameters"]
+        names = ", ".join(self.manifest["functions"])
+        library = LIBRARY_NAME if self.library is not None else f"not built: {self.skipped_reason}"
+        return "\n".join(
+            (
+                f"CasADi export in {self.folder}",
+                f"  loop       tau = {parameters['tau']:g} s = {parameters['delay_samples']} samples at "
+                f"{parameters['rate']:g} Hz, rule {parameters['rule']['str']}",
+                f"  Functions  {names} (.casadi; C symbols {C_PREFIX}<name>)",
+                f"  C code     {SOURCE_NAME}, {HEADER_NAME}",
+                f"  library    {library}",
+                f"  manifest   {MANIFEST_NAME}, content sha256 {self.content_hash[:16]}...",
+            )
+        )
+
+
+# =============================================================================== export
+def export(
+    spacecraft: Spacecraft,
+    K: Any,
+    out_dir: str | os.PathLike[str],
+    *,
+    tau: float,
+    rule: SwitchingRule,
+    rate: float = 1000.0,
+    substeps: int = 1,
+    overwrite: bool = False,
+    compile: bool = True,
+) -> ExportResult:
+    """Write the closed loop's CasADi Functions to ``out_dir`` as ``.casadi`` files, C code and a library.
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The plant (inertia J in kg m²).
+    K : array_like
+        (3, 6) gain on x = [σ; ω/4] (N m): u = K x(t − τ).
+    out_dir : path-like
+        The export folder; created (with its parents) if missing. It must be empty or
+        missing unless ``overwrite`` is true.
+    tau : float, keyword-only
+        Delay τ (s), a whole number d of measurement periods 1/rate.
+    rule : SwitchingRule, keyword-only
+        The shadow-set switching rule, e.g. ``OnDelayed()``.
+    rate : float, keyword-only
+        Measurement rate (Hz), default 1000; ``step`` integrates over h = 1/rate.
+    substeps : int, keyword-only
+        RK4 substeps per measurement period in ``step``, default 1.
+    overwrite : bool, keyword-only
+        Allow a non-empty ``out_dir``: the files of a previous export (the names listed
+        in the module docstring) are replaced and the library removed if not rebuilt;
+        other files are left as they are. Default False.
+    compile : bool, keyword-only
+        Build the shared library when a C compiler is found (default True).
+
+    Returns
+    -------
+    ExportResult
+        The folder, the files, the library (or None and the reason) and the manifest.
+
+    Raises
+    ------
+    SpecificationError, DimensionError
+        On invalid loop parameters, or when ``out_dir`` is a non-empty folder and
+        ``overwrite`` is false, or is an existing file.
+    CodegenError
+        When ``out_dir`` cannot be created or written, or the compiler fails.
+
+    Warns
+    -----
+    CompilerWarning
+        When ``compile`` is true but no C compiler is found: every other file is
+        written and the library is skipped.
+    """
+    overwrite = _flag("overwrite", overwrite)
+    compile = _flag("compile", compile)
+    closed = closed_loop_functions(spacecraft, K, tau=tau, rule=rule, rate=rate, substeps=substeps)
+    folder = _prepare_folder(out_dir, overwrite)
+    functions = {name: closed.functions()[name] for name in EXPORTED_FUNCTIONS}
+
+    written: list[Path] = []
+    for name, function in functions.items():
+        path = folder / f"{name}.casadi"
+        _write(path, lambda path=path, function=function: function.save(str(path)))
+        written.append(path)
+    written += _write_c_code(folder, functions)
+
+    library, reason = _build_library(folder, compile)
+    if library is not None:
+        written.append(library)
+
+    manifest = _manifest(closed, functions, folder, written, library, reason)
+    manifest_path = folder / MANIFEST_NAME
+    _write(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
+    written.append(manifest_path)
+    logger.info("exported %d Functions to %s", len(functions), folder)
+    return ExportResult(
+        folder=folder, files=tuple(written), library=library, skipped_reason=reason, manifest=manifest
+    )
+
+
+def content_hash(folder: str | os.PathLike[str], names: Any) -> str:
+    """SHA-256 of the files ``names`` in ``folder``, as the manifest's ``content_hash``.
+
+    The hash of the text ``sha256sum`` prints for the files in byte-wise sorted name
+    order (one line ``<hex digest>  <name>`` per file), so that in a shell
+    ``cd folder && sha256sum $(LC_ALL=C ls | grep -vx manifest.json) | sha256sum``
+    gives the same value.
+    """
+    folder = Path(folder)
+    lines = [f"{_file_digest(folder / name)}  {name}\n" for name in sorted(names)]
+    return hashlib.sha256("".join(lines).encode()).hexdigest()
+
+
+# ============================================================================== helpers
+def _flag(name: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise SpecificationError(f"{name} must be True or False, got {value!r}")
+    return value
+
+
+def _export_names() -> tuple[str, ...]:
+    names = [f"{name}.casadi" for name in EXPORTED_FUNCTIONS]
+    return (*names, SOURCE_NAME, HEADER_NAME, LIBRARY_NAME, MANIFEST_NAME)
+
+
+def _prepare_folder(out_dir: Any, overwrite: bool) -> Path:
+    try:
+        folder = Path(out_dir)
+    except TypeError as exc:
+        raise SpecificationError(f"out_dir must be a path, got {out_dir!r}") from exc
+    if folder.exists() and not folder.is_dir():
+        raise SpecificationError(f"out_dir {str(folder)!r} exists and is not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        present = sorted(entry.name for entry in folder.iterdir())
+    except OSError as exc:
+        raise CodegenError(f"cannot create the export folder out_dir {str(folder)!r}: {exc}") from exc
+    if present and not overwrite:
+        shown = ", ".join(present[:5]) + (", ..." if len(present) > 5 else "")
+        raise SpecificationError(
+            f"out_dir {str(folder)!r} is not empty ({len(present)} entries: {shown}); "
+            "choose an empty or new folder, or pass overwrite=True to replace a previous export"
+        )
+    for name in _export_names():
+        if name in present:
+            path = folder / name
+            _write(path, path.unlink)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise CodegenError(f"the export folder out_dir {str(folder)!r} is not writable")
+    return folder
+
+
+def _write(path: Path, action: Any) -> None:
+    """Run ``action`` (which writes ``path``), turning failures into a CodegenError naming the file."""
+    try:
+        action()
+    except (OSError, RuntimeError) as exc:
+        raise CodegenError(f"cannot write {path}: {exc}") from exc
+
+
+def _write_c_code(folder: Path, functions: Mapping[str, ca.Function]) -> list[Path]:
+    """One .c/.h pair; each Function is wrapped under the name ``mrpctl_<name>`` (same arithmetic)."""
+    generator = ca.CodeGenerator(SOURCE_NAME, _CODEGEN_OPTIONS)
+    for name, function in functions.items():
+        symbols = function.mx_in()
+        generator.add(
+            ca.Function(
+                C_PREFIX + name, symbols, function.call(symbols), function.name_in(), function.name_out()
+            )
+        )
+    _write(folder / SOURCE_NAME, lambda: generator.generate(str(folder) + os.sep))
+    return [folder / SOURCE_NAME, folder / HEADER_NAME]
+
+
+def _build_library(folder: Path, compile: bool) -> tuple[Path | None, str | None]:
+    """Compile the C source into the shared library; (None, reason) when skipped."""
+    if not compile:
+        return None, "compile=False was given"
+    compiler = find_compiler()
+    if compiler is None:
+        reason = (
+            f"no C compiler found ($CC, gcc, cc): {LIBRARY_NAME} was not built; the .casadi files and "
+            f"the C source {SOURCE_NAME}/{HEADER_NAME} were written (compile them with "
+            f"gcc {' '.join(DEFAULT_FLAGS)} {SOURCE_NAME} -o {LIBRARY_NAME} -lm)"
+        )
+        warnings.warn(reason, CompilerWarning, stacklevel=3)
+        return None, reason
+    library = folder / LIBRARY_NAME
+    command = [compiler, *DEFAULT_FLAGS, SOURCE_NAME, "-o", LIBRARY_NAME, "-lm"]
+    try:
+        done = subprocess.run(command, cwd=folder, capture_output=True, text=True, check=False)
+    except OSError as exc:
+        raise CodegenError(f"could not run the C compiler {compiler}: {exc}") from exc
+    if done.returncode != 0:
+        raise CodegenError(
+            f"{Path(compiler).name} failed (exit {done.returncode}) on {folder / SOURCE_NAME}:\n"
+            + done.stderr[-4000:]
+        )
+    logger.debug("built %s with %s", library, " ".join(command))
+    return library, None
+
+
+def _compiler_description() -> dict[str, Any]:
+    compiler = find_compiler()
+    if compiler is None:
+        return {"path": None, "version": None}
+    try:
+        done = subprocess.run(
+            [compiler, "--version"], capture_output=True, text=True, check=False, timeout=30
+        )
+        version = done.stdout.splitlines()[0] if done.stdout else None
+    except (OSError, subprocess.SubprocessError):
+        version = None
+    return {"path": compiler, "version": version}
+
+
+def _ports(function: ca.Function, inputs: bool) -> list[dict[str, Any]]:
+    count = function.n_in() if inputs else function.n_out()
+    ports = []
+    for i in range(count):
+        name = function.name_in(i) if inputs else function.name_out(i)
+        rows, columns = function.size_in(i) if inputs else function.size_out(i)
+        ports.append({"name": name, "shape": [int(rows), int(columns)]})
+    return ports
+
+
+def _manifest(
+    closed: ClosedLoopFunctions,
+    functions: Mapping[str, ca.Function],
+    folder: Path,
+    written: list[Path],
+    library: Path | None,
+    reason: str | None,
+) -> dict[str, Any]:
+    import mrpctl  # the package version; imported here because mrpctl may import this module
+
+    rule = closed.rule
+    names = [path.name for path in written]
+    return {
+        "format": "mrpctl-export",
+        "format_version": MANIFEST_FORMAT_VERSION,
+        "mrpctl_version": mrpctl.__version__,
+        "casadi_version": ca.__version__,
+        "state": "x = [sigma; omega/4] (6): MRPs sigma (dimensionless), body rate omega (rad/s)",
+        "input": "u (3): control torque (N m), u = K x_meas",
+        "parameters": {
+            "tau": closed.tau,
+            "rate": closed.rate,
+            "period": closed.period,
+            "delay_samples": closed.delay_samples,
+            "substeps": closed.substeps,
+            "K": closed.K.tolist(),
+            "J": closed.spacecraft.inertia.tolist(),
+            "rule": {
+                "class": type(rule).__name__,
+                "label": rule.label,
+                "str": str(rule),
+                "parameters": list(rule.parameters()),
+            },
+            "initial_memory": closed.initial_memory,
+        },
+        "functions": {
+            name: {
+                "file": f"{name}.casadi",
+                "c_symbol": C_PREFIX + name,
+                "description": _DESCRIPTIONS[name],
+                "inputs": _ports(function, True),
+                "outputs": _ports(function, False),
+            }
+            for name, function in functions.items()
+        },
+        "c": {
+            "source": SOURCE_NAME,
+            "header": HEADER_NAME,
+            "symbol_prefix": C_PREFIX,
+            "casadi_real": _CODEGEN_OPTIONS["casadi_real"],
+            "casadi_int": _CODEGEN_OPTIONS["casadi_int"],
+            "library": LIBRARY_NAME if library is not None else None,
+            "library_skipped_reason": reason,
+            "compiler": _compiler_description() if library is not None else None,
+            "flags": [*DEFAULT_FLAGS, "-lm"],
+        },
+        "files": {name: _file_digest(folder / name) for name in sorted(names)},
+        "content_hash": {
+            "algorithm": "sha256",
+            "covers": "every file listed in 'files' (all written files except manifest.json)",
+            "value": content_hash(folder, names),
+        },
+    }
+
+
+def _file_digest(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
