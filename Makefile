@@ -16,6 +16,7 @@ $(STAMP): pyproject.toml | $(PYTHON)
 
 demo: $(STAMP)
 	$(VENV)/bin/mrpctl example
+	$(VENV)/bin/mrpctl reproduce --out results
 
 test: $(STAMP)
 	$(PYTHON) -m pytest -q -n 2
