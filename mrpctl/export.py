@@ -220,9 +220,7 @@ def export(
     _write(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
     written.append(manifest_path)
     logger.info("exported %d Functions to %s", len(functions), folder)
-    return ExportResult(
-        folder=folder, files=tuple(written), library=library, skipped_reason=reason, manifest=manifest
-    )
+    return ExportResult(folder=folder, files=tuple(written), library=library, skipped_reason=reason, manifest=manifest)
 
 
 def content_hash(folder: str | os.PathLike[str], names: Any) -> str:
@@ -291,9 +289,7 @@ def _write_c_code(folder: Path, functions: Mapping[str, ca.Function]) -> list[Pa
     for name, function in functions.items():
         symbols = function.mx_in()
         generator.add(
-            ca.Function(
-                C_PREFIX + name, symbols, function.call(symbols), function.name_in(), function.name_out()
-            )
+            ca.Function(C_PREFIX + name, symbols, function.call(symbols), function.name_in(), function.name_out())
         )
     _write(folder / SOURCE_NAME, lambda: generator.generate(str(folder) + os.sep))
     return [folder / SOURCE_NAME, folder / HEADER_NAME]
@@ -320,8 +316,7 @@ def _build_library(folder: Path, compile: bool) -> tuple[Path | None, str | None
         raise CodegenError(f"could not run the C compiler {compiler}: {exc}") from exc
     if done.returncode != 0:
         raise CodegenError(
-            f"{Path(compiler).name} failed (exit {done.returncode}) on {folder / SOURCE_NAME}:\n"
-            + done.stderr[-4000:]
+            f"{Path(compiler).name} failed (exit {done.returncode}) on {folder / SOURCE_NAME}:\n" + done.stderr[-4000:]
         )
     logger.debug("built %s with %s", library, " ".join(command))
     return library, None
@@ -332,9 +327,7 @@ def _compiler_description() -> dict[str, Any]:
     if compiler is None:
         return {"path": None, "version": None}
     try:
-        done = subprocess.run(
-            [compiler, "--version"], capture_output=True, text=True, check=False, timeout=30
-        )
+        done = subprocess.run([compiler, "--version"], capture_output=True, text=True, check=False, timeout=30)
         version = done.stdout.splitlines()[0] if done.stdout else None
     except (OSError, subprocess.SubprocessError):
         version = None

@@ -82,9 +82,7 @@ def _random_inputs(function: ca.Function, rng: np.random.Generator) -> list[np.n
     return inputs
 
 
-def _max_difference(
-    reference: ca.Function, other: ca.Function, rng: np.random.Generator, draws: int
-) -> float:
+def _max_difference(reference: ca.Function, other: ca.Function, rng: np.random.Generator, draws: int) -> float:
     worst = 0.0
     for _ in range(draws):
         inputs = _random_inputs(reference, rng)
