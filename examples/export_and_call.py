@@ -17,15 +17,15 @@ from pathlib import Path
 import casadi
 import numpy as np
 
-import mrpctl.export
 from mrpctl import paper
+from mrpctl.export import export
 from mrpctl.switching import NoSwitching
 
 
 def main() -> None:
     with tempfile.TemporaryDirectory(prefix="mrpctl-export-") as tmp:
         folder = Path(tmp) / "paper"
-        result = mrpctl.export.export(
+        result = export(
             paper.SPACECRAFT,
             paper.GAIN,
             folder,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import runpy
 import subprocess
@@ -273,7 +274,8 @@ def test_invalid_loop_is_refused_before_writing(tmp_path):
 
 
 def test_no_compiler_writes_sources_and_warns(tmp_path, monkeypatch):
-    monkeypatch.setattr("mrpctl.export.find_compiler", lambda: None)
+    # The module itself (the package may also bind the name mrpctl.export to the function).
+    monkeypatch.setattr(importlib.import_module("mrpctl.export"), "find_compiler", lambda: None)
     with pytest.warns(CompilerWarning, match="no C compiler found"):
         result = _export(tmp_path / "nocc", OTHER)
     assert result.library is None and not result.compiled
