@@ -109,9 +109,7 @@ def test_coupled_gain_reports_poles_only(rng: np.random.Generator) -> None:
     assert not coupled.decoupled
     a, a_d = plant_model(spacecraft).closed_loop_matrices(k)
     np.testing.assert_allclose(np.sort_complex(coupled.poles), np.sort_complex(np.linalg.eigvals(a + a_d)))
-    assert coupled.overdamped == bool(
-        np.all(np.abs(coupled.poles.imag) < 1e-9) and np.all(coupled.poles.real < 0)
-    )
+    assert coupled.overdamped == bool(np.all(np.abs(coupled.poles.imag) < 1e-9) and np.all(coupled.poles.real < 0))
     assert "coupled" in str(coupled)
 
 

@@ -33,9 +33,7 @@ GU_AD = np.array([[0.0, 0.0], [1.0, 0.0]])
 
 # Seuret & Gouaisbaut (2013) Table 1 and (2015) Table 1: maximal delays for the classic benchmark,
 # with P > 0 as in those papers.
-@pytest.mark.parametrize(
-    ("order", "literature"), [(JENSEN, 4.472), (WIRTINGER, 6.059), (2, 6.166), (3, 6.172)]
-)
+@pytest.mark.parametrize(("order", "literature"), [(JENSEN, 4.472), (WIRTINGER, 6.059), (2, 6.166), (3, 6.172)])
 def test_classic_benchmark_reproduces_literature(order: int, literature: float) -> None:
     result = max_certified_delay(BENCH_A, BENCH_AD, order=order, positivity=Positivity.STRICT)
     assert result.status is SearchStatus.CERTIFIED

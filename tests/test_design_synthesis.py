@@ -73,9 +73,7 @@ def test_synthesize_pd_bad_input() -> None:
         synthesize_pd(paper.SPACECRAFT, 0.5, zeta=-1.0)
 
 
-@pytest.mark.parametrize(
-    ("order", "alpha"), [(JENSEN, 0.0), (JENSEN, 0.2), (WIRTINGER, 0.0), (WIRTINGER, 0.3)]
-)
+@pytest.mark.parametrize(("order", "alpha"), [(JENSEN, 0.0), (JENSEN, 0.2), (WIRTINGER, 0.0), (WIRTINGER, 0.3)])
 def test_synthesize_lmi_gains_are_stable_with_the_decay_rate(order: int, alpha: float) -> None:
     tau = paper.TAU
     result = synthesize_lmi(paper.SPACECRAFT, tau, decay_rate=alpha, order=order)

@@ -116,8 +116,7 @@ def pd_gains(
         raise SpecificationError(f"zeta must be > 0 on every axis, got {z}")
     if np.any(z < 1.0) and not allow_underdamped:
         raise SpecificationError(
-            f"zeta must be >= 1 for an overdamped loop, got {z}; "
-            "pass allow_underdamped=True to accept zeta < 1"
+            f"zeta must be >= 1 for an overdamped loop, got {z}; pass allow_underdamped=True to accept zeta < 1"
         )
     k1 = -np.diag(w**2)
     k2 = -np.diag(2.0 * z * w)
@@ -224,9 +223,7 @@ class GainAnalysis:
         if self.axes:
             lines.extend(f"  {a}" for a in self.axes)
         else:
-            lines.append(
-                "  axes coupled (K1, K2 not diagonal); poles " + ", ".join(_pole_text(p) for p in self.poles)
-            )
+            lines.append("  axes coupled (K1, K2 not diagonal); poles " + ", ".join(_pole_text(p) for p in self.poles))
         return "\n".join(lines)
 
 

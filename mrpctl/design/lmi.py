@@ -209,11 +209,7 @@ class DelayCertification:
     def __str__(self) -> str:
         if not self.certified:
             return f"{criterion_name(self.order)}: {self.status.value} ({self.reason})"
-        span = (
-            f"tau <= {self.upper:.6g} s"
-            if self.lower == 0.0
-            else f"tau in [{self.lower:.6g}, {self.upper:.6g}] s"
-        )
+        span = f"tau <= {self.upper:.6g} s" if self.lower == 0.0 else f"tau in [{self.lower:.6g}, {self.upper:.6g}] s"
         return (
             f"{criterion_name(self.order)}: certified for {span} "
             f"({self.solves} solves, {self.solve_time:.3f} s; {self.reason})"
@@ -344,9 +340,7 @@ class _AnalysisProblem:
     means certified.
     """
 
-    def __init__(
-        self, n: int, order: int, positivity: Positivity, values: dict[str, Any] | None = None
-    ) -> None:
+    def __init__(self, n: int, order: int, positivity: Positivity, values: dict[str, Any] | None = None) -> None:
         import cvxpy as cp
 
         self.n, self.order = n, order
@@ -554,9 +548,7 @@ def _certify(
     worst = min(margins, key=lambda m: m.relative)
     if worst.relative >= margin_tol:
         status = CertificateStatus.CERTIFIED
-        reason = (
-            f"every block positive definite; smallest relative margin {worst.relative:.3g} ({worst.name})"
-        )
+        reason = f"every block positive definite; smallest relative margin {worst.relative:.3g} ({worst.name})"
     else:
         status = CertificateStatus.NOT_CERTIFIED
         reason = (
@@ -640,9 +632,7 @@ def max_certified_delay(
     exact = delay_margin(a, a_d)
     search = _Search(a, a_d, order, margin_tol, parametric, positivity)
     if not exact.stable_intervals:
-        return search.result(
-            SearchStatus.NOT_CERTIFIED, math.nan, math.nan, None, f"exact analysis: {exact.reason}"
-        )
+        return search.result(SearchStatus.NOT_CERTIFIED, math.nan, math.nan, None, f"exact analysis: {exact.reason}")
     for lo_exact, hi_exact in exact.stable_intervals:
         if lo_exact >= limit:
             break

@@ -93,9 +93,7 @@ class LinearizedLoop:
             if key not in cache:
                 cache[key] = _certify(a_i, a_d_i, tau, order, margin_tol, True, positivity)
             certs.append(cache[key])
-        return self._assemble(
-            certs, tau, order, positivity, margin_tol, sum(c.solve_time for c in cache.values())
-        )
+        return self._assemble(certs, tau, order, positivity, margin_tol, sum(c.solve_time for c in cache.values()))
 
     def max_certified_delay(
         self,
@@ -195,9 +193,7 @@ class LinearizedLoop:
                             p[b * n + idx[k], d * n + idx[m]] = c.P[b * 2 + k, d * 2 + m]
             s[np.ix_(idx, idx)] = c.S
             r[np.ix_(idx, idx)] = c.R
-        margins = _block_margins(
-            lmi_blocks(self.A, self.A_d, tau, p, s, r, order=order, positivity=positivity)
-        )
+        margins = _block_margins(lmi_blocks(self.A, self.A_d, tau, p, s, r, order=order, positivity=positivity))
         worst = min(margins, key=lambda m: m.relative)
         ok = worst.relative >= margin_tol
         return Certificate(
@@ -212,8 +208,7 @@ class LinearizedLoop:
                 f"per-axis certificates assembled and re-verified on the 6x6 LMI; smallest relative margin "
                 f"{worst.relative:.3g} ({worst.name})"
                 if ok
-                else f"assembled 6x6 block {worst.name!r} has relative margin {worst.relative:.3g} "
-                f"< {margin_tol:g}"
+                else f"assembled 6x6 block {worst.name!r} has relative margin {worst.relative:.3g} < {margin_tol:g}"
             ),
             **base,
         )

@@ -42,9 +42,7 @@ class Crossing:
 
     def __str__(self) -> str:
         way = "destabilising" if self.direction > 0 else "stabilising"
-        return (
-            f"omega = {self.frequency:.6g} rad/s at tau = {self.delay:.6g} s (+k {self.period:.6g} s), {way}"
-        )
+        return f"omega = {self.frequency:.6g} rad/s at tau = {self.delay:.6g} s (+k {self.period:.6g} s), {way}"
 
 
 @dataclass(frozen=True)
@@ -89,9 +87,7 @@ class DelayMargin:
 
     def __str__(self) -> str:
         lines = [f"exact delay margin {self.margin:.6g} s ({self.reason})"]
-        if self.stable_intervals and not (
-            len(self.stable_intervals) == 1 and self.stable_intervals[0][0] == 0.0
-        ):
+        if self.stable_intervals and not (len(self.stable_intervals) == 1 and self.stable_intervals[0][0] == 0.0):
             spans = ", ".join(f"({lo:.6g}, {hi:.6g})" for lo, hi in self.stable_intervals)
             lines.append(f"  stable for tau in {spans} s")
         lines.extend(f"  crossing {c}" for c in self.crossings)
@@ -315,8 +311,6 @@ def _switch_horizon(unstable0: int, crossings: list[Crossing]) -> float:
     if rate <= 0.0:
         return last_start + 200.0 * longest
     # count(τ) >= unstable0 + Σ_up 2((τ − τ₀)/T) − Σ_down 2((τ − τ₀)/T + 1) > 0 once τ exceeds:
-    offset = (
-        sum(c.delay * c.frequency for c in up) / math.pi - sum(c.delay * c.frequency for c in down) / math.pi
-    )
+    offset = sum(c.delay * c.frequency for c in up) / math.pi - sum(c.delay * c.frequency for c in down) / math.pi
     bound = (2.0 * len(down) + 2.0 * len(up) - unstable0 + offset) / (rate / math.pi)
     return max(last_start, bound) + longest

@@ -432,15 +432,8 @@ def synthesize_lmi(
         eps_grid = tau * np.logspace(-1.5, 1.5, 9)
     else:
         eps_grid = np.atleast_1d(np.asarray(epsilons, dtype=float))
-        if (
-            eps_grid.ndim != 1
-            or eps_grid.size == 0
-            or not np.all(np.isfinite(eps_grid))
-            or np.any(eps_grid <= 0)
-        ):
-            raise SpecificationError(
-                f"epsilons must be a non-empty list of finite values > 0, got {epsilons!r}"
-            )
+        if eps_grid.ndim != 1 or eps_grid.size == 0 or not np.all(np.isfinite(eps_grid)) or np.any(eps_grid <= 0):
+            raise SpecificationError(f"epsilons must be a non-empty list of finite values > 0, got {epsilons!r}")
     gain = math.exp(alpha * tau)
     if spacecraft.is_diagonal:
         # Per axis, in (σᵢ, ωᵢ/4): ẋ = [[0, 1], [0, 0]] x + [0; 1] v with v = uᵢ / (4Jᵢ), and
@@ -450,9 +443,7 @@ def synthesize_lmi(
         b_s = gain * np.array([[0.0], [1.0]])
         where = "the per-axis loop"
     else:
-        a_s = np.block(
-            [[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]]
-        ) + alpha * np.eye(6)
+        a_s = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]]) + alpha * np.eye(6)
         b_s = gain * np.vstack((np.zeros((3, 3)), spacecraft.inertia_inverse / 4.0))
         where = "the 6x6 loop"
     k_part, eps, solves, text = _synthesize_pair(a_s, b_s, tau, order, eps_grid)
