@@ -30,6 +30,7 @@ import math
 import os
 import threading
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -103,8 +104,7 @@ def delay_samples(tau: Any, rate: Any) -> int:
 def _rule(rule: Any) -> SwitchingRule:
     if not isinstance(rule, SwitchingRule):
         raise SpecificationError(
-            "rule must be a switching rule such as mrpctl.switching.OnDelayed(), "
-            f"got {type(rule).__name__}: {rule!r}"
+            f"rule must be a switching rule such as mrpctl.switching.OnDelayed(), got {type(rule).__name__}: {rule!r}"
         )
     return rule
 
@@ -129,9 +129,7 @@ def _history(history: Any, x0: np.ndarray, d: int) -> tuple[np.ndarray, Any]:
             return np.tile(x0[:, None], (1, columns)), history
         if history == "zero-input":
             return np.zeros((STATE_SIZE, columns)), history
-        raise SpecificationError(
-            f"history must be one of {HISTORY_KINDS} or an array of shape (d, 6), got {history!r}"
-        )
+        raise SpecificationError(f"history must be one of {HISTORY_KINDS} or an array of shape (d, 6), got {history!r}")
     array = finite_array("history", history)
     if array.shape != (d, STATE_SIZE):
         raise DimensionError(
@@ -166,9 +164,7 @@ def _step_function(spacecraft: Spacecraft, period: float, substeps: int) -> ca.F
     return ca.Function("step", [x, u], [z], ["x", "u"], ["x_next"])
 
 
-def _core_function(
-    spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int
-) -> ca.Function:
+def _core_function(spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> ca.Function:
     """One sample with K and the rule parameters as inputs (pure SX).
 
     ``core(x, memory, x_delayed, K, parameters) -> (x_next, memory_next, x_meas, u, switched)``.
@@ -180,9 +176,7 @@ def _core_function(
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
     seen_by_rule = x_delayed if d > 0 else x
-    x_meas, memory_next, switched = rule.expressions(
-        x, seen_by_rule, memory, delay_samples=d, parameters=parameters
-    )
+    x_meas, memory_next, switched = rule.expressions(x, seen_by_rule, memory, delay_samples=d, parameters=parameters)
     u = gain @ (x_delayed if d > 0 else x_meas)
     x_next = step(x_meas, u)
     return ca.Function(
@@ -450,9 +444,7 @@ def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function
 class _Engine:
     """A compiled block for one structure (spacecraft, d, h, rule class, substeps)."""
 
-    def __init__(
-        self, spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int
-    ) -> None:
+    def __init__(self, spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> None:
         self.d = d
         self.history_columns = max(d, 1)
         core = _core_function(spacecraft, rule, d, period, substeps)
@@ -474,16 +466,28 @@ class _Engine:
         gain: np.ndarray,
         parameters: np.ndarray,
         blocks: int,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """One run over ``blocks`` blocks: (stats, measurements (n, 6), u (n, 3), switched (n,))."""
+        trajectories: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+        """One run over ``blocks`` blocks: (stats, measurements (n, 6), u (n, 3), switched (n,)).
+
+        Compiled engines call the library directly (ctypes, no copies, GIL released);
+        without a compiler the CasADi horizon runs in the virtual machine. With
+        ``trajectories=False`` only the statistics are returned (the others are None).
+        """
         total = blocks * self.block_samples
         if self.direct is None:
-            out = self.horizon(blocks, True)(x0, memory0, stats0, history0, gain, parameters)
+            out = self.horizon(blocks, trajectories)(x0, memory0, stats0, history0, gain, parameters)
+            if not trajectories:
+                return np.asarray(out).ravel(), None, None, None
             stats, measurements, u, switched = (np.asarray(value) for value in out)
             return stats.ravel(), measurements.T, u.T, switched.ravel()
-        measurements = np.empty((total, STATE_SIZE))
-        u = np.empty((total, INPUT_SIZE))
-        switched = np.empty(total)
+        if trajectories:
+            measurements = np.empty((total, STATE_SIZE))
+            u = np.empty((total, INPUT_SIZE))
+            switched = np.empty(total)
+        else:
+            measurements = u = switched = None
+            histories = [np.empty((self.history_columns, STATE_SIZE)) for _ in range(2)]
         gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
         parameters = np.ascontiguousarray(parameters, dtype=float)
         state = [np.array(x0, dtype=float), np.array([memory0], dtype=float), np.array(stats0, dtype=float)]
@@ -491,14 +495,18 @@ class _Engine:
         history = np.ascontiguousarray(history0.T)  # (columns, 6): column-major 6 x columns
         length, columns = self.block_samples, self.history_columns
         for b in range(blocks):
-            rows = slice(b * length, (b + 1) * length)
-            self.direct(
-                [state[0], state[1], state[2], history, gain_cm, parameters],
-                [spare[0], spare[1], spare[2], None, measurements[rows], u[rows], switched[rows]],
-            )
+            if trajectories:
+                rows = slice(b * length, (b + 1) * length)
+                outputs = [spare[0], spare[1], spare[2], None, measurements[rows], u[rows], switched[rows]]
+            else:
+                outputs = [spare[0], spare[1], spare[2], histories[b % 2], None, None, None]
+            self.direct([state[0], state[1], state[2], history, gain_cm, parameters], outputs)
             state, spare = spare, state
             if self.d > 0:
-                history = measurements[(b + 1) * length - columns : (b + 1) * length]
+                if trajectories:
+                    history = measurements[(b + 1) * length - columns : (b + 1) * length]
+                else:
+                    history = histories[b % 2]
         return state[2], measurements, u, switched
 
     def horizon(self, blocks: int, trajectories: bool) -> ca.Function:
@@ -905,6 +913,70 @@ class BatchResult:
         )
 
 
+def _run_group(
+    engine: _Engine,
+    blocks: int,
+    n: int,
+    states: np.ndarray,
+    gains: np.ndarray,
+    rules: Sequence[SwitchingRule],
+    members: list[int],
+    histories: list[tuple[np.ndarray, Any]],
+    memories: list[float],
+    trajectories: bool,
+    threads: int,
+) -> list[tuple[np.ndarray, Any, Any, Any]]:
+    """Runs of one delay: a thread pool over the compiled library, or CasADi ``map`` in the VM.
+
+    CasADi's ``map(N, "thread")`` evaluates a ``casadi.external`` serially in the CasADi
+    build we use (measured: CPU time equal to wall time), while ctypes releases the GIL,
+    so compiled runs go through a thread pool; the virtual machine uses CasADi's map.
+    """
+    if engine.direct is not None:
+
+        def one(j: int) -> tuple[np.ndarray, Any, Any, Any]:
+            i = members[j]
+            return engine.run(
+                states[i],
+                memories[j],
+                _initial_stats(n),
+                histories[j][0],
+                gains[i],
+                np.array(rules[i].parameters()),
+                blocks,
+                trajectories,
+            )
+
+        if threads == 1 or len(members) == 1:
+            return [one(j) for j in range(len(members))]
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            return list(pool.map(one, range(len(members))))
+    mapped = engine.horizon(blocks, trajectories).map(len(members), "thread", threads)
+    out = mapped(
+        states[members].T,
+        np.array([memories]),
+        np.tile(_initial_stats(n)[:, None], (1, len(members))),
+        np.hstack([block for block, _ in histories]),
+        np.hstack([gains[i] for i in members]),
+        np.array([rules[i].parameters() for i in members]).T,
+    )
+    out = out if isinstance(out, (list, tuple)) else [out]
+    stats = np.asarray(out[0]).T
+    if not trajectories:
+        return [(row, None, None, None) for row in stats]
+    total = blocks * engine.block_samples
+    measurements, u, switched = (np.asarray(value) for value in out[1:4])
+    return [
+        (
+            stats[j],
+            measurements[:, j * total : (j + 1) * total].T,
+            u[:, j * total : (j + 1) * total].T,
+            switched[0, j * total : (j + 1) * total],
+        )
+        for j in range(len(members))
+    ]
+
+
 def _broadcast(name: str, count: int, n: int) -> None:
     if count not in (1, n):
         raise DimensionError(f"{name}: expected 1 or {n} entries (one per run) but found {count}")
@@ -924,7 +996,11 @@ def simulate_batch(
     trajectories: bool = False,
     threads: int | None = None,
 ) -> BatchResult:
-    """Simulate many runs at once with CasADi ``map(N, "thread", threads)``.
+    """Simulate many runs at once on several threads.
+
+    Compiled runs are spread over a thread pool that calls the generated library
+    directly; in CasADi's virtual machine (no C compiler) CasADi ``map(N, "thread",
+    threads)`` is used.
 
     Any of ``x0``, ``K``, ``tau`` and ``rule`` may be given once (shared) or once per run.
 
@@ -1000,28 +1076,19 @@ def simulate_batch(
         engine = _engine(spacecraft, rules[members[0]], d, 1.0 / rate, substeps)
         blocks = -(-n // engine.block_samples)
         blocks_history = [_history(history, states[i], d) for i in members]
-        mapped = engine.horizon(blocks, trajectories).map(len(members), "thread", threads)
-        out = mapped(
-            states[members].T,
-            np.array([[rules[i].initial_memory(delay_samples=d) for i in members]]),
-            np.tile(_initial_stats(n)[:, None], (1, len(members))),
-            np.hstack([block for block, _ in blocks_history]),
-            np.hstack([gains[i] for i in members]),
-            np.array([rules[i].parameters() for i in members]).T,
+        memories = [rules[i].initial_memory(delay_samples=d) for i in members]
+        outs = _run_group(
+            engine, blocks, n, states, gains, rules, members, blocks_history, memories, trajectories, threads
         )
-        out = out if isinstance(out, (list, tuple)) else [out]
-        group_stats = np.asarray(out[0]).T
+        group_stats = np.array([out[0] for out in outs])
         stats[members] = group_stats
         if trajectories:
-            total = blocks * engine.block_samples
-            measurements, u, switched = (np.asarray(value) for value in out[1:4])
             for j, i in enumerate(members):
-                columns = slice(j * total, (j + 1) * total)
                 runs[i] = _result(
                     metrics=_Metrics.from_stats(group_stats[j]),
-                    measurements=measurements[:, columns].T,
-                    u=u[:, columns].T,
-                    switched=switched[0, columns],
+                    measurements=outs[j][1],
+                    u=outs[j][2],
+                    switched=outs[j][3],
                     n=n,
                     common=dict(
                         spacecraft=spacecraft,

@@ -13,16 +13,14 @@ from mrpctl import _compile, paper
 from mrpctl import simulate as simulate_module
 from mrpctl._compile import CompilerWarning, cache_dir, compile_function, generate_code
 from mrpctl.errors import CodegenError
-from mrpctl.simulate import simulate
+from mrpctl.simulate import simulate, simulate_batch
 from mrpctl.switching import OnDelayed
 
 
 def _function(scale: float = 2.0) -> ca.Function:
     x = ca.SX.sym("x", 3)
     y = ca.SX.sym("y", 2, 2)
-    return ca.Function(
-        "toy", [x, y], [scale * ca.sin(x), y @ y, ca.sum1(x)], ["x", "y"], ["s", "yy", "total"]
-    )
+    return ca.Function("toy", [x, y], [scale * ca.sin(x), y @ y, ca.sum1(x)], ["x", "y"], ["s", "yy", "total"])
 
 
 def test_compile_once_then_reuse(tmp_path: Path) -> None:
@@ -89,9 +87,7 @@ def test_compiler_failure_is_a_codegen_error(monkeypatch: pytest.MonkeyPatch, tm
         compile_function(_function(7.0), directory=tmp_path)
 
 
-def test_no_compiler_falls_back_to_the_virtual_machine(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
-) -> None:
+def test_no_compiler_falls_back_to_the_virtual_machine(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     function = _function()
     monkeypatch.setattr(_compile, "find_compiler", lambda: None)
     with pytest.warns(CompilerWarning, match="virtual machine"):
@@ -104,14 +100,19 @@ def test_simulation_in_the_virtual_machine_matches_compiled(monkeypatch: pytest.
     arguments = dict(tau=0.004, rule=OnDelayed(), t_final=0.9, substeps=3)
     x0 = np.array([0.98, 0.05, 0.0, 0.12, 0.01, 0.0])
     compiled = simulate(paper.SPACECRAFT, paper.GAIN, x0, **arguments)
+    compiled_batch = simulate_batch(paper.SPACECRAFT, paper.GAIN, [x0, -x0], **arguments)
     simulate_module._clear_engines()
     try:
         monkeypatch.setattr(_compile, "find_compiler", lambda: None)
         with pytest.warns(CompilerWarning):
             interpreted = simulate(paper.SPACECRAFT, paper.GAIN, x0, **arguments)
+            batch = simulate_batch(paper.SPACECRAFT, paper.GAIN, [x0, -x0], trajectories=True, **arguments)
     finally:
         simulate_module._clear_engines()
     assert compiled.switch_count > 0
     np.testing.assert_array_equal(interpreted.switch_indices, compiled.switch_indices)
     np.testing.assert_allclose(interpreted.sigma, compiled.sigma, rtol=0, atol=1e-13)
     np.testing.assert_array_equal(interpreted.sign_flips, compiled.sign_flips)
+    np.testing.assert_array_equal(batch.switch_count, compiled_batch.switch_count)
+    np.testing.assert_array_equal(batch.runs[0].switch_indices, compiled.switch_indices)
+    np.testing.assert_allclose(batch.runs[0].sigma, compiled.sigma, rtol=0, atol=1e-13)
