@@ -1,13 +1,36 @@
-"""mrpctl: delayed-feedback attitude control with MRP shadow-set switching."""
+"""mrpctl: delayed-feedback attitude control with MRP shadow-set switching.
+
+The flow: a :class:`Spacecraft` and gains K go to :mod:`mrpctl.design` (PD gains, LMI
+certificates, the exact delay margin, synthesis), to :func:`simulate` (the sampled
+nonlinear closed loop with a switching rule, generated as C through CasADi), to
+:mod:`mrpctl.plots` and to :mod:`mrpctl.export`. cvxpy is imported on the first LMI
+solve and matplotlib only by :mod:`mrpctl.plots`.
+"""
 
 from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
-from mrpctl import errors, model, mrp, paper
-from mrpctl.errors import MrpctlError
+from mrpctl import design, errors, model, mrp, paper
+from mrpctl.errors import (
+    CodegenError,
+    DimensionError,
+    InertiaWarning,
+    MrpctlError,
+    SolverError,
+    SpecificationError,
+)
 from mrpctl.model import PlantModel, plant_model
+from mrpctl.scenario import Scenario, load_scenario
+from mrpctl.simulate import (
+    BatchResult,
+    ClosedLoopFunctions,
+    SimulationResult,
+    closed_loop_functions,
+    simulate_batch,
+)
 from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 try:
     __version__ = version("mrpctl")
@@ -15,13 +38,32 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 __all__ = [
+    "BatchResult",
+    "BoundaryLayer",
+    "ClosedLoopFunctions",
+    "CodegenError",
+    "DelayAware",
+    "DimensionError",
+    "InertiaWarning",
     "MrpctlError",
+    "NoSwitching",
+    "OnCurrent",
+    "OnDelayed",
     "PlantModel",
+    "Scenario",
+    "SimulationResult",
+    "SolverError",
     "Spacecraft",
+    "SpecificationError",
+    "SwitchingRule",
     "__version__",
+    "closed_loop_functions",
+    "design",
     "errors",
+    "load_scenario",
     "model",
     "mrp",
     "paper",
     "plant_model",
+    "simulate_batch",
 ]

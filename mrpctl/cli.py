@@ -222,6 +222,8 @@ def _export(args: argparse.Namespace) -> int:
     from mrpctl.export import export
 
     scenario = _apply_overrides(load_scenario(args.scenario), args)
+    if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
+        raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")
     result = export(
         scenario.spacecraft,
         scenario.K,

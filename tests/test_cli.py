@@ -99,3 +99,26 @@ def test_user_errors_are_one_line(argv: list[str], message: str, capsys: pytest.
     err = capsys.readouterr().err
     assert err.startswith("mrpctl: error:") and message in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_design_synthesizes_certified_gains(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["design", "--inertia", "140", "100", "80", "--tau", "0.5", "--order", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "tau = 0.5 s" in out and "verified" in out and "omega_n" in out
+    assert "gain analysis" in out
+
+
+def test_design_rejects_underdamped_request(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["design", "--inertia", "140", "100", "80", "--tau", "0.5", "--zeta", "0.5"]) == USER_ERROR
+    assert "zeta" in capsys.readouterr().err
+
+
+def test_export_writes_folder_and_refuses_to_overwrite(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "export"
+    assert main(["export", str(FIG4), "--out", str(out), "--no-compile"]) == 0
+    assert (out / "manifest.json").exists() and (out / "step.casadi").exists()
+    assert not (out / "libmrpctl_model.so").exists()
+    capsys.readouterr()
+    assert main(["export", str(FIG4), "--out", str(out)]) == USER_ERROR
+    assert "--overwrite" in capsys.readouterr().err
+    assert main(["export", str(FIG4), "--out", str(out), "--overwrite", "--no-compile"]) == 0

@@ -116,3 +116,15 @@ def test_coupled_gain_reports_poles_only(rng: np.random.Generator) -> None:
 def test_analyze_gains_bad_shape(spacecraft: Spacecraft) -> None:
     with pytest.raises(DimensionError, match="K: expected shape"):
         analyze_gains(spacecraft, np.zeros((3, 3)))
+
+
+def test_critically_damped_design_stays_overdamped_after_round_trip() -> None:
+    """ζ = 1 gains must not read as underdamped because of rounding in K -> (K1, K2)."""
+
+    for omega_n in (0.1, 1.29477, 3.7):
+        gains = pd_gains(paper.SPACECRAFT, zeta=1.0, omega_n=omega_n)
+        analysis = analyze_gains(paper.SPACECRAFT, gains.K)
+        assert analysis.overdamped
+        for axis in analysis.axes:
+            assert np.all(axis.poles.imag == 0.0)
+            assert np.allclose(axis.poles.real, -omega_n, rtol=1e-9)

@@ -19,6 +19,10 @@ __all__ = ["AxisDamping", "GainAnalysis", "PDGains", "analyze_gains", "pd_gains"
 _DIAGONAL_RTOL = 1e-12
 
 
+#: Relative tolerance on ζ = 1 (critical damping) and on a vanishing discriminant.
+_ZETA_TOL = 1e-9
+
+
 @dataclass(frozen=True)
 class PDGains:
     """PD gains of the linearised loop σ̈ = K₁ σ + K₂ σ̇ (paper Eq. pd_design) and the gain K.
@@ -163,8 +167,12 @@ class AxisDamping:
 
     @property
     def overdamped(self) -> bool:
-        """True when stable with ζ >= 1 (real poles)."""
-        return self.stable and bool(self.zeta >= 1.0)
+        """True when stable with ζ >= 1 (real poles; ζ = 1, critical damping, counts).
+
+        ζ is compared with a relative tolerance of 1e-9 so that gains designed for ζ = 1
+        stay critically damped after the round trip K -> (K₁, K₂).
+        """
+        return self.stable and bool(self.zeta >= 1.0 - _ZETA_TOL)
 
     def __str__(self) -> str:
         kind = "overdamped" if self.overdamped else ("underdamped" if self.stable else "unstable")
@@ -287,8 +295,12 @@ def _axis_damping(i: int, k1: float, k2: float) -> AxisDamping:
 
 
 def _axis_poles(a: float, b: float) -> np.ndarray:
-    """Roots of s² + b s + a, ordered by real part."""
-    return np.sort_complex(np.roots([1.0, b, a]).astype(complex))
+    """Roots of s² + b s + a, ordered by real part (a double root where b² − 4a is rounding)."""
+    discriminant = b * b - 4.0 * a
+    if abs(discriminant) <= 4.0 * _ZETA_TOL * max(b * b, abs(a)):
+        discriminant = 0.0
+    root = np.sqrt(complex(discriminant))
+    return np.sort_complex(np.array([(-b - root) / 2.0, (-b + root) / 2.0], dtype=complex))
 
 
 def _is_diagonal(m: np.ndarray) -> bool:
