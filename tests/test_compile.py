@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import threading
 from pathlib import Path
 
@@ -10,11 +11,13 @@ import numpy as np
 import pytest
 
 from mrpctl import _compile, paper
-from mrpctl import simulate as simulate_module
 from mrpctl._compile import CompilerWarning, cache_dir, compile_function, generate_code
 from mrpctl.errors import CodegenError
 from mrpctl.simulate import simulate, simulate_batch
 from mrpctl.switching import OnDelayed
+
+# The module, not the function that mrpctl/__init__.py re-exports under the same name.
+simulate_module = importlib.import_module("mrpctl.simulate")
 
 
 def _function(scale: float = 2.0) -> ca.Function:
