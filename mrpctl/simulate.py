@@ -378,7 +378,7 @@ def _engine_sample(core: ca.Function, d: int) -> ca.Function:
         flips,
         ca.if_else(counted, u, u_prev),
         ca.if_else(ca.logic_and(counted, unsettled), k, stats[_S_UNSETTLED]),
-        ca.if_else(counted, ca.fmax(stats[_S_MAX_SIGMA], ca.sqrt(sigma_squared)), stats[_S_MAX_SIGMA]),
+        ca.if_else(counted, ca.fmax(stats[_S_MAX_SIGMA], sigma_squared), stats[_S_MAX_SIGMA]),  # max |σ|²
         ca.if_else(ca.logic_and(counted, ca.logic_not(ok)), k, stats[_S_DIVERGED]),
     )
     return ca.Function(
@@ -599,7 +599,7 @@ class _Metrics:
             last_switch_index=round(stats[_S_LAST]),
             sign_flips=np.rint(stats[_S_FLIPS]).astype(np.int64),
             unsettled_index=round(stats[_S_UNSETTLED]),
-            max_sigma=float(stats[_S_MAX_SIGMA]),
+            max_sigma=math.sqrt(stats[_S_MAX_SIGMA]),
             diverged_index=round(stats[_S_DIVERGED]),
         )
 
