@@ -133,7 +133,9 @@ def floor_time(n: int, d: int) -> tuple[float, float, float]:
         path = Path(folder)
         (path / "floor.c").write_text(source)
         compiler = _compile.find_compiler() or "gcc"
-        flags = [flag for flag in _compile.DEFAULT_FLAGS if flag not in ("-shared", "-fPIC")]
+        flags = [
+            flag for flag in _compile.DEFAULT_FLAGS if flag not in ("-shared", "-fPIC", "-fno-semantic-interposition")
+        ]
         subprocess.run([compiler, *flags, "floor.c", "-o", "floor", "-lm"], cwd=path, check=True)
         out = subprocess.run([str(path / "floor")], capture_output=True, text=True, check=True).stdout.split()
     return float(out[0]), float(out[1]), float(out[2])

@@ -2,7 +2,7 @@
 
 :func:`compile_function` generates C with :class:`casadi.CodeGenerator`, hashes the
 code together with the compiler and its flags, compiles it once with
-``gcc -O3 -ffp-contract=off -shared -fPIC`` (no ``-ffast-math``, no ``-march=native``,
+``gcc -O3 -ffp-contract=off -fno-semantic-interposition -shared -fPIC`` (no ``-ffast-math``, no ``-march=native``,
 no fused multiply-add contraction: IEEE arithmetic in the order CasADi wrote it, so the
 results are the same bits as CasADi's virtual machine up to libm, on any machine) and loads it with
 :func:`casadi.external`. A second call with the same code compiles nothing.
@@ -40,8 +40,10 @@ from mrpctl.errors import CodegenError
 __all__ = [
     "DEFAULT_FLAGS",
     "CFunction",
+    "CSession",
     "CompiledFunction",
     "CompilerWarning",
+    "address",
     "cache_dir",
     "compile_function",
     "find_compiler",
@@ -52,8 +54,9 @@ logger = logging.getLogger(__name__)
 
 #: Flags used by default: optimised, position independent, IEEE-exact (no fast-math, no FMA
 #: contraction). -O3 rather than -O2: it inlines the sample function into the unrolled
-#: mapaccum and runs the simulator about 1.4 times faster (bench/simulate.py).
-DEFAULT_FLAGS: tuple[str, ...] = ("-O3", "-ffp-contract=off", "-shared", "-fPIC")
+#: mapaccum and runs the simulator about 1.4 times faster; -fno-semantic-interposition
+#: lets -fPIC code inline as well (another 1.4x; measured on the paper's case).
+DEFAULT_FLAGS: tuple[str, ...] = ("-O3", "-ffp-contract=off", "-fno-semantic-interposition", "-shared", "-fPIC")
 
 _CODEGEN_OPTIONS = {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"}
 
@@ -218,7 +221,11 @@ def _build(code: str, library: Path, compiler: str, flags: tuple[str, ...]) -> f
 
 
 _INT = ctypes.c_longlong  # matches the "casadi_int" code-generation option
-_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
+
+
+def address(array: np.ndarray) -> int:
+    """The address of a contiguous NumPy array's data (for :class:`CFunction` calls)."""
+    return int(array.__array_interface__["data"][0])
 
 
 class CFunction:
@@ -227,8 +234,8 @@ class CFunction:
     Inputs and outputs are NumPy float64 arrays holding the dense nonzeros in
     column-major order (a C-ordered (n, m) array is an m × n CasADi matrix); ``None``
     passes a null pointer (input: zeros; output: not written). The GIL is released
-    during the call, so several threads may call one CFunction at once (each call
-    uses its own work arrays).
+    during the call, so several threads may call one CFunction at once, each through its
+    own :meth:`session` (work arrays).
     """
 
     def __init__(self, library: Path, name: str) -> None:
@@ -236,13 +243,7 @@ class CFunction:
         self._library = ctypes.CDLL(str(library))
         self._eval = getattr(self._library, name)
         self._eval.restype = ctypes.c_int
-        self._eval.argtypes = [
-            ctypes.POINTER(_DOUBLE_P),
-            ctypes.POINTER(_DOUBLE_P),
-            ctypes.POINTER(_INT),
-            _DOUBLE_P,
-            ctypes.c_int,
-        ]
+        self._eval.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
         work = getattr(self._library, name + "_work")
         sizes = [_INT() for _ in range(4)]
         if work(*[ctypes.byref(size) for size in sizes]) != 0:
@@ -255,17 +256,35 @@ class CFunction:
         count.restype = _INT
         self.n_out = int(count())
 
+    def session(self) -> CSession:
+        """Work arrays for a sequence of calls from one thread."""
+        return CSession(self)
+
     def __call__(self, inputs: list[Any], outputs: list[Any]) -> None:
-        """Evaluate; ``inputs``/``outputs`` are lists of contiguous float64 arrays or None."""
-        arg = (_DOUBLE_P * max(self.sz_arg, 1))()
-        res = (_DOUBLE_P * max(self.sz_res, 1))()
+        """Evaluate once; ``inputs``/``outputs`` are lists of contiguous float64 arrays or None."""
+        self.session()(
+            [None if value is None else address(value) for value in inputs],
+            [None if value is None else address(value) for value in outputs],
+        )
+
+
+class CSession:
+    """Pointer and work arrays of one :class:`CFunction`, reused across calls (one thread)."""
+
+    def __init__(self, function: CFunction) -> None:
+        self._function = function
+        self._eval = function._eval
+        self._arg = (ctypes.c_void_p * max(function.sz_arg, 1))()
+        self._res = (ctypes.c_void_p * max(function.sz_res, 1))()
+        self._iw = (_INT * max(function.sz_iw, 1))()
+        self._w = (ctypes.c_double * max(function.sz_w, 1))()
+
+    def __call__(self, inputs: list[int | None], outputs: list[int | None]) -> None:
+        """Evaluate on data addresses (see :func:`address`); None is a null pointer."""
+        arg, res = self._arg, self._res
         for i, value in enumerate(inputs):
-            if value is not None:
-                arg[i] = value.ctypes.data_as(_DOUBLE_P)
+            arg[i] = value
         for i, value in enumerate(outputs):
-            if value is not None:
-                res[i] = value.ctypes.data_as(_DOUBLE_P)
-        iw = (_INT * max(self.sz_iw, 1))()
-        w = np.empty(max(self.sz_w, 1))
-        if self._eval(arg, res, iw, w.ctypes.data_as(_DOUBLE_P), 0) != 0:
-            raise CodegenError(f"evaluation of the compiled function {self.name} failed")
+            res[i] = value
+        if self._eval(arg, res, self._iw, self._w, 0) != 0:
+            raise CodegenError(f"evaluation of the compiled function {self._function.name} failed")

@@ -37,7 +37,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl._compile import CompiledFunction, compile_function
+from mrpctl._compile import CompiledFunction, address, compile_function
 from mrpctl._validation import finite_array, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix, plant_model
@@ -487,27 +487,46 @@ class _Engine:
             switched = np.empty(total)
         else:
             measurements = u = switched = None
-            histories = [np.empty((self.history_columns, STATE_SIZE)) for _ in range(2)]
         gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
         parameters = np.ascontiguousarray(parameters, dtype=float)
-        state = [np.array(x0, dtype=float), np.array([memory0], dtype=float), np.array(stats0, dtype=float)]
-        spare = [np.empty(STATE_SIZE), np.empty(MEMORY_SIZE), np.empty(_STATS_SIZE)]
-        history = np.ascontiguousarray(history0.T)  # (columns, 6): column-major 6 x columns
+        buffers = [np.zeros(STATE_SIZE + MEMORY_SIZE + _STATS_SIZE) for _ in range(2)]
+        buffers[0][:STATE_SIZE] = x0
+        buffers[0][STATE_SIZE] = memory0
+        buffers[0][STATE_SIZE + MEMORY_SIZE :] = stats0
+        history0 = np.ascontiguousarray(history0.T)  # (columns, 6): column-major 6 x columns
+        step = 8  # bytes per double
+        places = [address(buffer) for buffer in buffers]
+        state = [(place, place + step * STATE_SIZE, place + step * (STATE_SIZE + MEMORY_SIZE)) for place in places]
+        fixed = [address(gain_cm), address(parameters)]
+        history = address(history0)
         length, columns = self.block_samples, self.history_columns
+        if trajectories:
+            bases = (address(measurements), address(u), address(switched))
+        else:
+            spare_histories = [np.empty((columns, STATE_SIZE)) for _ in range(2)]
+            spare_places = [address(buffer) for buffer in spare_histories]
+        session = self.direct.session()
         for b in range(blocks):
+            now, nxt = state[b % 2], state[(b + 1) % 2]
             if trajectories:
-                rows = slice(b * length, (b + 1) * length)
-                outputs = [spare[0], spare[1], spare[2], None, measurements[rows], u[rows], switched[rows]]
+                first = b * length
+                outputs = [
+                    *nxt,
+                    None,
+                    bases[0] + step * STATE_SIZE * first,
+                    bases[1] + step * INPUT_SIZE * first,
+                    bases[2] + step * first,
+                ]
             else:
-                outputs = [spare[0], spare[1], spare[2], histories[b % 2], None, None, None]
-            self.direct([state[0], state[1], state[2], history, gain_cm, parameters], outputs)
-            state, spare = spare, state
+                outputs = [*nxt, spare_places[b % 2], None, None, None]
+            session([*now, history, *fixed], outputs)
             if self.d > 0:
                 if trajectories:
-                    history = measurements[(b + 1) * length - columns : (b + 1) * length]
+                    history = bases[0] + step * STATE_SIZE * ((b + 1) * length - columns)
                 else:
-                    history = histories[b % 2]
-        return state[2], measurements, u, switched
+                    history = spare_places[b % 2]
+        final = buffers[blocks % 2]
+        return final[STATE_SIZE + MEMORY_SIZE :].copy(), measurements, u, switched
 
     def horizon(self, blocks: int, trajectories: bool) -> ca.Function:
         """The chain of ``blocks`` blocks as a CasADi Function (for the virtual machine and ``map``).
@@ -575,6 +594,12 @@ def _initial_stats(n: int) -> np.ndarray:
 
 
 # ======================================================================= results
+def _sealed(array: np.ndarray) -> np.ndarray:
+    """Make an array (or a view of a buffer) that this module allocated read-only, without a copy."""
+    array.setflags(write=False)
+    return array
+
+
 def _frozen(values: Any, dtype: Any) -> np.ndarray:
     array = np.array(values, dtype=dtype, copy=True)
     array.setflags(write=False)
@@ -736,10 +761,10 @@ def _result(
         settle_index = metrics.unsettled_index + 1
         settling = settle_index / rate if settle_index < n else None
     return SimulationResult(
-        t=readonly(t),
-        sigma=readonly(measurements[:, 0:3]),
-        omega=readonly(4.0 * measurements[:, 3:6]),
-        u=readonly(u[:valid]),
+        t=_sealed(t),
+        sigma=_sealed(measurements[:, 0:3]),
+        omega=_sealed(4.0 * measurements[:, 3:6]),
+        u=_sealed(u[:valid]),
         switch_indices=_frozen(indices, np.int64),
         switch_times=readonly(indices / rate),
         sign_flips=_frozen(metrics.sign_flips, np.int64),
