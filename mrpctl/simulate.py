@@ -756,7 +756,7 @@ def _result(
     indices = np.flatnonzero(switched[:valid] > 0.5)
     if diverged:
         settling = None
-        logger.warning("run diverged at t = %.4f s (|sigma| or |omega| > %g)", t[-1], DIVERGENCE_BOUND)
+        logger.info("run diverged at t = %.4f s (|sigma| or |omega| > %g)", t[-1], DIVERGENCE_BOUND)
     else:
         settle_index = metrics.unsettled_index + 1
         settling = settle_index / rate if settle_index < n else None
