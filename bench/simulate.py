@@ -131,7 +131,9 @@ def build_floor(n: int, d: int, folder: Path) -> Path:
     )
     (folder / "floor.c").write_text(source)
     compiler = _compile.find_compiler() or "gcc"
-    flags = [flag for flag in _compile.DEFAULT_FLAGS if flag not in ("-shared", "-fPIC", "-fno-semantic-interposition")]
+    flags = [
+        flag for flag in _compile.SIMULATION_FLAGS if flag not in ("-shared", "-fPIC", "-fno-semantic-interposition")
+    ]
     subprocess.run([compiler, *flags, "floor.c", "-o", "floor", "-lm"], cwd=folder, check=True)
     return folder / "floor"
 

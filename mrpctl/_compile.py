@@ -2,9 +2,10 @@
 
 :func:`compile_function` generates C with :class:`casadi.CodeGenerator`, hashes the
 code together with the compiler and its flags, compiles it once with
-``gcc -O3 -ffp-contract=off -fno-semantic-interposition -shared -fPIC`` (no ``-ffast-math``, no ``-march=native``,
-no fused multiply-add contraction: IEEE arithmetic in the order CasADi wrote it, so the
-results are the same bits as CasADi's virtual machine up to libm, on any machine) and loads it with
+``gcc -O2 -shared -fPIC`` by default (:data:`DEFAULT_FLAGS`; the simulator uses
+:data:`SIMULATION_FLAGS`, -O3 without FMA contraction). Never ``-ffast-math`` nor
+``-march=native``: IEEE arithmetic in the order CasADi wrote it, the same bits on every
+machine with the same compiler. and loads it with
 :func:`casadi.external`. A second call with the same code compiles nothing.
 
 The cache directory is ``$MRPCTL_CACHE_DIR`` if set, else ``~/.cache/mrpctl``. Libraries
@@ -39,6 +40,7 @@ from mrpctl.errors import CodegenError
 
 __all__ = [
     "DEFAULT_FLAGS",
+    "SIMULATION_FLAGS",
     "CFunction",
     "CSession",
     "CompiledFunction",
@@ -52,11 +54,14 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-#: Flags used by default: optimised, position independent, IEEE-exact (no fast-math, no FMA
-#: contraction). -O3 rather than -O2: it inlines the sample function into the unrolled
-#: mapaccum and runs the simulator about 1.4 times faster; -fno-semantic-interposition
-#: lets -fPIC code inline as well (another 1.4x; measured on the paper's case).
-DEFAULT_FLAGS: tuple[str, ...] = ("-O3", "-ffp-contract=off", "-fno-semantic-interposition", "-shared", "-fPIC")
+#: Flags used by default (and by the export module): optimised, position independent,
+#: IEEE-exact (no fast-math, no -march=native).
+DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-shared", "-fPIC")
+#: Flags of the simulator's engine: -O3 inlines the sample function into the unrolled
+#: mapaccum (1.4x faster), -fno-semantic-interposition lets -fPIC code inline as well
+#: (another 1.4x), -ffp-contract=off forbids fused multiply-adds so that the arithmetic
+#: stays the IEEE sequence CasADi wrote on every architecture (measured on the paper's case).
+SIMULATION_FLAGS: tuple[str, ...] = ("-O3", "-ffp-contract=off", "-fno-semantic-interposition", "-shared", "-fPIC")
 
 _CODEGEN_OPTIONS = {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"}
 

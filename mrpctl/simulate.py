@@ -37,7 +37,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl._compile import CompiledFunction, address, compile_function
+from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
 from mrpctl._validation import finite_array, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix, plant_model
@@ -451,7 +451,7 @@ class _Engine:
         sample = _engine_sample(core, d)
         name = f"mrpctl_block_{type(rule).__name__.lower()}_d{d}_s{substeps}"
         block, self.block_samples = _block_function(sample, d, name)
-        self.compiled: CompiledFunction = compile_function(block)
+        self.compiled: CompiledFunction = compile_function(block, flags=SIMULATION_FLAGS)
         self.block = self.compiled.function
         self.direct = self.compiled.direct()
         self._horizons: dict[tuple[int, bool], ca.Function] = {}
