@@ -6,6 +6,7 @@ import argparse
 import csv
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -38,8 +39,6 @@ def _gain_from_args(args: argparse.Namespace) -> np.ndarray:
 
 
 def _apply_overrides(scenario: Scenario, args: argparse.Namespace) -> Scenario:
-    from dataclasses import replace
-
     changes: dict[str, Any] = {}
     if getattr(args, "rule", None) is not None:
         changes["rule"] = rule_from_name(args.rule, eps=args.eps, alpha=args.alpha)
@@ -246,6 +245,16 @@ def _add_rule_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--alpha", type=float, help="switching threshold >= 1 (with --rule delay-aware)")
 
 
+def _add_run_options(parser: argparse.ArgumentParser, *, plot: str, csv: str) -> None:
+    """Overrides of a scenario's rule, delay, horizon and history, and the output files."""
+    _add_rule_options(parser)
+    parser.add_argument("--tau", type=float, help="override the delay (s)")
+    parser.add_argument("--t-final", type=float, help="override the horizon (s)")
+    parser.add_argument("--history", choices=("constant", "zero-input"), help="override the history")
+    parser.add_argument("--plot", type=Path, help=plot)
+    parser.add_argument("--csv", type=Path, help=csv)
+
+
 def _add_gain_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--inertia",
@@ -294,12 +303,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     simulate = commands.add_parser("simulate", help="simulate a scenario file")
     simulate.add_argument("scenario", type=Path, help="scenario TOML (see examples/scenarios)")
-    _add_rule_options(simulate)
-    simulate.add_argument("--tau", type=float, help="override the delay (s)")
-    simulate.add_argument("--t-final", type=float, help="override the horizon (s)")
-    simulate.add_argument("--history", choices=("constant", "zero-input"), help="override the history")
-    simulate.add_argument("--plot", type=Path, help="write sigma, omega, u against t to this PNG")
-    simulate.add_argument("--csv", type=Path, help="write the trajectory to this CSV")
+    _add_run_options(
+        simulate, plot="write sigma, omega, u against t to this PNG", csv="write the trajectory to this CSV"
+    )
     simulate.set_defaults(handler=_simulate)
 
     sweep = commands.add_parser("sweep", help="batch runs over eps, tau or random tumbling initial states")
@@ -309,12 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--count", type=int, default=50, help="number of tumbling states (default 50)")
     sweep.add_argument("--seed", type=int, default=0, help="seed of the tumbling states (default 0)")
     sweep.add_argument("--chunk", type=int, default=25, help="runs per batch call (progress granularity)")
-    _add_rule_options(sweep)
-    sweep.add_argument("--tau", type=float, help="override the delay (s)")
-    sweep.add_argument("--t-final", type=float, help="override the horizon (s)")
-    sweep.add_argument("--history", choices=("constant", "zero-input"), help="override the history")
-    sweep.add_argument("--plot", type=Path, help="write the sweep plot to this PNG")
-    sweep.add_argument("--csv", type=Path, help="write the table to this CSV")
+    _add_run_options(sweep, plot="write the sweep plot to this PNG", csv="write the table to this CSV")
     sweep.set_defaults(handler=_sweep)
 
     export = commands.add_parser("export", help="export the closed loop as CasADi functions and C code")
