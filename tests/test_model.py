@@ -48,10 +48,7 @@ def test_dynamics_equal_direct_form_and_split(spacecraft: Spacecraft, rng: np.ra
         split = model.A @ x + model.B @ u + np.asarray(model.nonlinearity(x)).ravel()
         assert np.max(np.abs(split - xdot)) < 1e-12
         # The printed f(x) of the paper agrees with the direct form.
-        assert (
-            np.max(np.abs(_paper_f(spacecraft.inertia, x) - np.asarray(model.nonlinearity(x)).ravel()))
-            < 1e-12
-        )
+        assert np.max(np.abs(_paper_f(spacecraft.inertia, x) - np.asarray(model.nonlinearity(x)).ravel())) < 1e-12
 
 
 def test_jacobian_at_origin_is_a_and_b(spacecraft: Spacecraft) -> None:

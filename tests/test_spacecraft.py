@@ -51,9 +51,7 @@ def test_non_symmetric_rejected() -> None:
 
 
 def test_indefinite_rejected_with_eigenvalue() -> None:
-    with pytest.raises(
-        SpecificationError, match=r"inertia must be positive definite: smallest eigenvalue is -5"
-    ):
+    with pytest.raises(SpecificationError, match=r"inertia must be positive definite: smallest eigenvalue is -5"):
         Spacecraft([10.0, -5.0, 10.0])
     with pytest.raises(SpecificationError, match="positive definite"):
         Spacecraft([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])

@@ -13,9 +13,7 @@ from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, 
 RULES = [NoSwitching(), OnCurrent(), OnDelayed(), BoundaryLayer(0.05), DelayAware(), DelayAware(1.2)]
 
 
-def expected_switch(
-    rule: SwitchingRule, sigma: np.ndarray, sigma_meas: np.ndarray, since: float, d: int
-) -> bool:
+def expected_switch(rule: SwitchingRule, sigma: np.ndarray, sigma_meas: np.ndarray, since: float, d: int) -> bool:
     """The rules as stated in the issue, on norms (not squared norms)."""
     current = np.linalg.norm(sigma)
     delayed = np.linalg.norm(sigma_meas)
