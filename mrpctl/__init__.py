@@ -14,6 +14,7 @@ from importlib.metadata import PackageNotFoundError, version
 from mrpctl import design, errors, model, mrp, paper
 from mrpctl.errors import (
     CodegenError,
+    CompilerWarning,
     DimensionError,
     InertiaWarning,
     MrpctlError,
@@ -42,6 +43,7 @@ __all__ = [
     "BoundaryLayer",
     "ClosedLoopFunctions",
     "CodegenError",
+    "CompilerWarning",
     "DelayAware",
     "DimensionError",
     "InertiaWarning",

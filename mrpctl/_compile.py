@@ -36,7 +36,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl.errors import CodegenError
+from mrpctl.errors import CodegenError, CompilerWarning
 
 __all__ = [
     "DEFAULT_FLAGS",
@@ -64,10 +64,6 @@ DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-shared", "-fPIC")
 SIMULATION_FLAGS: tuple[str, ...] = ("-O3", "-ffp-contract=off", "-fno-semantic-interposition", "-shared", "-fPIC")
 
 _CODEGEN_OPTIONS = {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"}
-
-
-class CompilerWarning(UserWarning):
-    """No C compiler was found: CasADi's (slower) virtual machine is used instead."""
 
 
 @dataclass(frozen=True)

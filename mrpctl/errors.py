@@ -4,6 +4,7 @@ from __future__ import annotations
 
 __all__ = [
     "CodegenError",
+    "CompilerWarning",
     "DimensionError",
     "InertiaWarning",
     "MrpctlError",
@@ -34,3 +35,7 @@ class CodegenError(MrpctlError, RuntimeError):
 
 class InertiaWarning(UserWarning):
     """An inertia is valid (symmetric positive definite) but not physically realisable."""
+
+
+class CompilerWarning(UserWarning):
+    """No C compiler was found: sources are written or CasADi's (slower) virtual machine is used."""
