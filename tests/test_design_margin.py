@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import math
 
+import control
 import numpy as np
 import pytest
 
 from mrpctl import paper
 from mrpctl.design import delay_margin, linearized_loop
 from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.model import pd_from_gain
 
 BENCH_A = np.array([[-2.0, 0.0], [0.0, -0.9]])
 BENCH_AD = np.array([[-1.0, 0.0], [-1.0, -1.0]])
@@ -141,3 +143,16 @@ def test_random_margins_agree_with_spectral_method(rng: np.random.Generator) -> 
 def test_bad_input(a: np.ndarray, a_d: np.ndarray, error: type, match: str) -> None:
     with pytest.raises(error, match=match):
         delay_margin(a, a_d)
+
+
+def test_per_axis_margins_match_python_control_phase_margin() -> None:
+    """Independent check: delay margin = phase margin / crossover of L(s) = -(K2 s + K1)/s^2 (python-control)."""
+    k1, k2 = pd_from_gain(paper.SPACECRAFT, paper.GAIN)
+    loop = linearized_loop(paper.SPACECRAFT, paper.GAIN)
+    margins = []
+    for i, (a, a_d) in enumerate(loop.axes):
+        _, phase_margin_deg, _, crossover = control.margin(control.tf([-k2[i, i], -k1[i, i]], [1.0, 0.0, 0.0]))
+        expected = math.radians(phase_margin_deg) / crossover
+        margins.append(expected)
+        assert delay_margin(a, a_d).margin == pytest.approx(expected, rel=1e-9)
+    assert loop.delay_margin().margin == pytest.approx(min(margins), rel=1e-9)
