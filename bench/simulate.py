@@ -268,7 +268,7 @@ def main() -> int:
                 np.tile(x0[:, None], (1, engine.history_columns)),
                 np.asarray(paper.GAIN),
                 np.zeros(1),
-                -(-n // engine.block_samples),
+                n,
             )
 
         floor_ms, engine_ms, simulate_ms = np.inf, np.inf, np.inf

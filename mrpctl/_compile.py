@@ -140,6 +140,7 @@ def compile_function(
     *,
     flags: tuple[str, ...] = DEFAULT_FLAGS,
     directory: str | os.PathLike[str] | None = None,
+    appendix: str = "",
 ) -> CompiledFunction:
     """Compile ``function`` to a shared library (or reuse the cached one) and load it.
 
@@ -151,6 +152,10 @@ def compile_function(
         Compiler flags; the default is :data:`DEFAULT_FLAGS`.
     directory : path-like, optional, keyword-only
         Cache directory; default :func:`cache_dir`.
+    appendix : str, keyword-only
+        C source appended to the generated code (part of the hash), e.g. a driver loop
+        that calls the generated function; load its exported symbols from
+        :attr:`CompiledFunction.library` with ctypes.
 
     Returns
     -------
@@ -173,7 +178,7 @@ def compile_function(
             stacklevel=2,
         )
         return CompiledFunction(function=function, compiled=False, library=None, compile_seconds=0.0)
-    code = generate_code(function)
+    code = generate_code(function) + appendix
     digest = hashlib.sha256(
         "\n".join((code, _compiler_identity(compiler), " ".join(flags), ca.__version__)).encode()
     ).hexdigest()[:20]

@@ -25,6 +25,7 @@ sign flips, settling, max |σ|, divergence) are accumulated inside the generated
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import math
 import os
@@ -39,7 +40,7 @@ import numpy as np
 
 from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
 from mrpctl._validation import finite_array, nonnegative_scalar, positive_scalar, readonly
-from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix, plant_model
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, SwitchingRule
@@ -344,7 +345,7 @@ def closed_loop_functions(
 
 
 # ======================================================================= the engine
-def _engine_sample(core: ca.Function, d: int) -> ca.Function:
+def _engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.Function:
     """The core sample plus the divergence guard and the metric accumulators (pure SX)."""
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", MEMORY_SIZE)
@@ -382,7 +383,7 @@ def _engine_sample(core: ca.Function, d: int) -> ca.Function:
         ca.if_else(ca.logic_and(counted, ca.logic_not(ok)), k, stats[_S_DIVERGED]),
     )
     return ca.Function(
-        "engine_sample",
+        name,
         [x, memory, stats, x_delayed, gain, parameters],
         [x_next, memory_next, stats_next, x_meas, u, switched],
         ["x", "memory", "stats", "x_delayed", "K", "parameters"],
@@ -441,21 +442,103 @@ def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function
     return block, samples
 
 
+# The horizon loop around the generated sample (appended to CasADi's C code of the sample).
+# It only moves pointers: x, memory and stats alternate between two buffers; the sample writes
+# m_k, u_k and the switch flag straight into the result arrays, and reads m_{k-d} from them (or
+# from the history for k < d). Without trajectories, m_k goes to a ring of d + 1 columns and
+# u_k, the flag are not written. The arithmetic is the sample's, unchanged.
+_DRIVER_C = r"""
+/* mrpctl: the whole horizon of n samples in one call. */
+CASADI_SYMBOL_EXPORT int %(name)s_run(const casadi_real* state0, const casadi_real* history,
+    const casadi_real* gain, const casadi_real* parameters, long long n, long long d,
+    casadi_real* measurements, casadi_real* u, casadi_real* switched, casadi_real* ring,
+    casadi_real* state_end) {
+  const casadi_real* arg[%(sz_arg)d];
+  casadi_real* res[%(sz_res)d];
+  casadi_int iw[%(sz_iw)d];
+  casadi_real w[%(sz_w)d];
+  casadi_real buffers[2][%(state)d];
+  long long k, slot = 0, delayed_slot = 0;
+  int i;
+  for (i = 0; i < %(state)d; ++i) buffers[0][i] = state0[i];
+  arg[4] = gain;
+  arg[5] = parameters;
+  for (k = 0; k < n; ++k) {
+    casadi_real* now = buffers[k & 1];
+    casadi_real* next = buffers[(k + 1) & 1];
+    arg[0] = now;
+    arg[1] = now + %(x)d;
+    arg[2] = now + %(x_memory)d;
+    res[0] = next;
+    res[1] = next + %(x)d;
+    res[2] = next + %(x_memory)d;
+    if (measurements) {
+      arg[3] = k < d ? history + 6 * k : measurements + 6 * (k - d);
+      res[3] = measurements + 6 * k;
+      res[4] = u + 3 * k;
+      res[5] = switched + k;
+    } else {
+      arg[3] = k < d ? history + 6 * k : ring + 6 * delayed_slot;
+      res[3] = ring + 6 * slot;
+      res[4] = 0;
+      res[5] = 0;
+      if (++slot > d) slot = 0;
+      if (k >= d && ++delayed_slot > d) delayed_slot = 0;
+    }
+    if (d == 0) arg[3] = history;
+    if (%(name)s(arg, res, iw, w, 0)) return 1;
+  }
+  for (i = 0; i < %(state)d; ++i) state_end[i] = buffers[n & 1][i];
+  return 0;
+}
+"""
+
+
 class _Engine:
-    """A compiled block for one structure (spacecraft, d, h, rule class, substeps)."""
+    """The engine for one structure (spacecraft, d, h, rule class, substeps).
+
+    Compiled: the sample plus :data:`_DRIVER_C`, one C call per run. Without a compiler: a
+    block of about 500 samples (an MX ``mapaccum`` of chunks) chained by CasADi's virtual machine.
+    """
 
     def __init__(self, spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> None:
         self.d = d
         self.history_columns = max(d, 1)
         core = _core_function(spacecraft, rule, d, period, substeps)
-        sample = _engine_sample(core, d)
-        name = f"mrpctl_block_{type(rule).__name__.lower()}_d{d}_s{substeps}"
-        block, self.block_samples = _block_function(sample, d, name)
-        self.compiled: CompiledFunction = compile_function(block, flags=SIMULATION_FLAGS)
-        self.block = self.compiled.function
-        self.direct = self.compiled.direct()
+        label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}"
+        sample = _engine_sample(core, d, f"mrpctl_sample_{label}")
+        driver = _DRIVER_C % dict(
+            name=sample.name(),
+            sz_arg=max(sample.sz_arg(), 6),
+            sz_res=max(sample.sz_res(), 6),
+            sz_iw=max(sample.sz_iw(), 1),
+            sz_w=max(sample.sz_w(), 1),
+            state=STATE_SIZE + MEMORY_SIZE + _STATS_SIZE,
+            x=STATE_SIZE,
+            x_memory=STATE_SIZE + MEMORY_SIZE,
+        )
+        self.compiled: CompiledFunction = compile_function(sample, flags=SIMULATION_FLAGS, appendix=driver)
+        self._run_c = None
+        self.block = None
+        self.block_samples = 0
+        if self.compiled.compiled:
+            self._library = ctypes.CDLL(str(self.compiled.library))
+            self._run_c = getattr(self._library, sample.name() + "_run")
+            self._run_c.restype = ctypes.c_int
+            self._run_c.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_longlong] * 2 + [ctypes.c_void_p] * 5
+        else:
+            self.block, self.block_samples = _block_function(sample, d, f"mrpctl_block_{label}")
         self._horizons: dict[tuple[int, bool], ca.Function] = {}
         self._lock = threading.Lock()
+
+    @property
+    def compiled_code(self) -> bool:
+        """True when runs call the compiled library (one C call per run)."""
+        return self._run_c is not None
+
+    def blocks(self, n: int) -> int:
+        """Blocks of the virtual machine's chain covering n samples (0 for compiled code)."""
+        return -(-n // self.block_samples) if self.block_samples else 0
 
     def run(
         self,
@@ -465,68 +548,51 @@ class _Engine:
         history0: np.ndarray,
         gain: np.ndarray,
         parameters: np.ndarray,
-        blocks: int,
+        n: int,
         trajectories: bool = True,
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
-        """One run over ``blocks`` blocks: (stats, measurements (n, 6), u (n, 3), switched (n,)).
+        """One run of n samples: (stats, measurements (>= n, 6), u (>= n, 3), switched (>= n,)).
 
-        Compiled engines call the library directly (ctypes, no copies, GIL released);
-        without a compiler the CasADi horizon runs in the virtual machine. With
-        ``trajectories=False`` only the statistics are returned (the others are None).
+        Compiled engines make one C call (ctypes, no copies, GIL released); without a
+        compiler the CasADi horizon runs in the virtual machine (the arrays are then padded
+        to whole blocks). With ``trajectories=False`` only the statistics are returned.
         """
-        total = blocks * self.block_samples
-        if self.direct is None:
-            out = self.horizon(blocks, trajectories)(x0, memory0, stats0, history0, gain, parameters)
+        if self._run_c is None:
+            out = self.horizon(self.blocks(n), trajectories)(x0, memory0, stats0, history0, gain, parameters)
             if not trajectories:
                 return np.asarray(out).ravel(), None, None, None
             stats, measurements, u, switched = (np.asarray(value) for value in out)
             return stats.ravel(), measurements.T, u.T, switched.ravel()
-        if trajectories:
-            measurements = np.empty((total, STATE_SIZE))
-            u = np.empty((total, INPUT_SIZE))
-            switched = np.empty(total)
-        else:
-            measurements = u = switched = None
+        state = np.empty(STATE_SIZE + MEMORY_SIZE + _STATS_SIZE)
+        state[:STATE_SIZE] = x0
+        state[STATE_SIZE] = memory0
+        state[STATE_SIZE + MEMORY_SIZE :] = stats0
+        history0 = np.ascontiguousarray(history0.T)  # (columns, 6): column-major 6 x columns
         gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
         parameters = np.ascontiguousarray(parameters, dtype=float)
-        buffers = [np.zeros(STATE_SIZE + MEMORY_SIZE + _STATS_SIZE) for _ in range(2)]
-        buffers[0][:STATE_SIZE] = x0
-        buffers[0][STATE_SIZE] = memory0
-        buffers[0][STATE_SIZE + MEMORY_SIZE :] = stats0
-        history0 = np.ascontiguousarray(history0.T)  # (columns, 6): column-major 6 x columns
-        step = 8  # bytes per double
-        places = [address(buffer) for buffer in buffers]
-        state = [(place, place + step * STATE_SIZE, place + step * (STATE_SIZE + MEMORY_SIZE)) for place in places]
-        fixed = [address(gain_cm), address(parameters)]
-        history = address(history0)
-        length, columns = self.block_samples, self.history_columns
+        end = np.empty_like(state)
         if trajectories:
-            bases = (address(measurements), address(u), address(switched))
+            measurements = np.empty((n, STATE_SIZE))
+            u = np.empty((n, INPUT_SIZE))
+            switched = np.empty(n)
+            pointers = (address(measurements), address(u), address(switched), None)
         else:
-            spare_histories = [np.empty((columns, STATE_SIZE)) for _ in range(2)]
-            spare_places = [address(buffer) for buffer in spare_histories]
-        session = self.direct.session()
-        for b in range(blocks):
-            now, nxt = state[b % 2], state[(b + 1) % 2]
-            if trajectories:
-                first = b * length
-                outputs = [
-                    *nxt,
-                    None,
-                    bases[0] + step * STATE_SIZE * first,
-                    bases[1] + step * INPUT_SIZE * first,
-                    bases[2] + step * first,
-                ]
-            else:
-                outputs = [*nxt, spare_places[b % 2], None, None, None]
-            session([*now, history, *fixed], outputs)
-            if self.d > 0:
-                if trajectories:
-                    history = bases[0] + step * STATE_SIZE * ((b + 1) * length - columns)
-                else:
-                    history = spare_places[b % 2]
-        final = buffers[blocks % 2]
-        return final[STATE_SIZE + MEMORY_SIZE :].copy(), measurements, u, switched
+            measurements = u = switched = None
+            ring = np.empty((self.d + 1, STATE_SIZE))
+            pointers = (None, None, None, address(ring))
+        status = self._run_c(
+            address(state),
+            address(history0),
+            address(gain_cm),
+            address(parameters),
+            n,
+            self.d,
+            *pointers,
+            address(end),
+        )
+        if status != 0:
+            raise CodegenError(f"evaluation of the compiled engine {self.compiled.library} failed")
+        return end[STATE_SIZE + MEMORY_SIZE :], measurements, u, switched
 
     def horizon(self, blocks: int, trajectories: bool) -> ca.Function:
         """The chain of ``blocks`` blocks as a CasADi Function (for the virtual machine and ``map``).
@@ -834,7 +900,6 @@ def simulate(
     history_block, history_value = _history(history, x0, d)
 
     engine = _engine(spacecraft, rule, d, 1.0 / rate, substeps)
-    blocks = -(-n // engine.block_samples)
     stats, measurements, u, switched = engine.run(
         x0,
         rule.initial_memory(delay_samples=d),
@@ -842,7 +907,7 @@ def simulate(
         history_block,
         gain,
         np.array(rule.parameters()),
-        blocks,
+        n,
     )
     common = dict(
         spacecraft=spacecraft,
@@ -940,7 +1005,6 @@ class BatchResult:
 
 def _run_group(
     engine: _Engine,
-    blocks: int,
     n: int,
     states: np.ndarray,
     gains: np.ndarray,
@@ -957,7 +1021,7 @@ def _run_group(
     build we use (measured: CPU time equal to wall time), while ctypes releases the GIL,
     so compiled runs go through a thread pool; the virtual machine uses CasADi's map.
     """
-    if engine.direct is not None:
+    if engine.compiled_code:
 
         def one(j: int) -> tuple[np.ndarray, Any, Any, Any]:
             i = members[j]
@@ -968,7 +1032,7 @@ def _run_group(
                 histories[j][0],
                 gains[i],
                 np.array(rules[i].parameters()),
-                blocks,
+                n,
                 trajectories,
             )
 
@@ -976,6 +1040,7 @@ def _run_group(
             return [one(j) for j in range(len(members))]
         with ThreadPoolExecutor(max_workers=threads) as pool:
             return list(pool.map(one, range(len(members))))
+    blocks = engine.blocks(n)
     mapped = engine.horizon(blocks, trajectories).map(len(members), "thread", threads)
     out = mapped(
         states[members].T,
@@ -1099,12 +1164,9 @@ def simulate_batch(
     for d in sorted(set(samples_by_run)):
         members = [i for i, value in enumerate(samples_by_run) if value == d]
         engine = _engine(spacecraft, rules[members[0]], d, 1.0 / rate, substeps)
-        blocks = -(-n // engine.block_samples)
         blocks_history = [_history(history, states[i], d) for i in members]
         memories = [rules[i].initial_memory(delay_samples=d) for i in members]
-        outs = _run_group(
-            engine, blocks, n, states, gains, rules, members, blocks_history, memories, trajectories, threads
-        )
+        outs = _run_group(engine, n, states, gains, rules, members, blocks_history, memories, trajectories, threads)
         group_stats = np.array([out[0] for out in outs])
         stats[members] = group_stats
         if trajectories:
