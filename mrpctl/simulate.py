@@ -527,7 +527,8 @@ class _Engine:
             self._run_c.restype = ctypes.c_int
             self._run_c.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_longlong] * 2 + [ctypes.c_void_p] * 5
         else:
-            self.block, self.block_samples = _block_function(sample, d, f"mrpctl_block_{label}")
+            block, self.block_samples = _block_function(sample, d, f"mrpctl_block_{label}")
+            self.block = block.expand()  # one SX Function: no MX layers per sample in the VM
         self._horizons: dict[tuple[int, bool], ca.Function] = {}
         self._lock = threading.Lock()
 
