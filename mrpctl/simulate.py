@@ -15,12 +15,12 @@ number of substeps. For k − d < 0 the measurements come from the history: ``"c
 until the first measurement arrives and no rule fires on it) or a (d, 6) array
 m_{−d}, …, m_{−1} given by the user.
 
-Engine: one sample is a pure SX Function; a chunk of d samples is its
-``Function.mapaccum`` (method of steps: the d delayed measurements a chunk needs are the
-previous chunk's output); a block of about 500 samples (a ``mapaccum`` of chunks) is
-compiled to C by :mod:`mrpctl._compile` and cached on disk; the horizon is a chain of
-blocks evaluated by CasADi without returning to Python. Metrics (switch count, torque
-sign flips, settling, max |σ|, divergence) are accumulated inside the generated code.
+Engine: one sample is a pure SX Function (with the divergence guard and the metric
+accumulators: switch count, torque sign flips, settling, max |σ|, divergence); CasADi
+generates its C code, to which a fixed loop over the whole horizon is appended, compiled
+by :mod:`mrpctl._compile` and cached on disk: a run is one C call. Without a compiler a
+block of about 500 samples (a ``mapaccum`` of chunks of d samples, method of steps),
+expanded to SX, is chained in CasADi's virtual machine.
 """
 
 from __future__ import annotations
