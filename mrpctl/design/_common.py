@@ -94,3 +94,9 @@ def solve(problem: Any) -> SolveOutcome:
         _LOG.warning("Clarabel panicked: %s", exc)
         return SolveOutcome("solver_error", time.perf_counter() - start, f"PanicException: {exc}")
     return SolveOutcome(str(problem.status), time.perf_counter() - start)
+
+
+def is_diagonal(m: np.ndarray) -> bool:
+    """True when the off-diagonal entries of ``m`` are at most 1e-12 of its largest entry."""
+    off = m - np.diag(np.diag(m))
+    return bool(np.max(np.abs(off)) <= 1e-12 * max(1e-300, float(np.max(np.abs(m)))))

@@ -9,14 +9,12 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import finite_array
-from mrpctl.design._common import frozen
+from mrpctl.design._common import frozen, is_diagonal
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, plant_model
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = ["AxisDamping", "GainAnalysis", "PDGains", "analyze_gains", "pd_gains"]
-
-_DIAGONAL_RTOL = 1e-12
 
 
 #: Relative tolerance on ζ = 1 (critical damping) and on a vanishing discriminant.
@@ -266,7 +264,7 @@ def analyze_gains(spacecraft: Spacecraft, K: Any) -> GainAnalysis:
     a, a_d = pm.closed_loop_matrices(k)
     poles = np.sort_complex(np.linalg.eigvals(a + a_d))
     axes: tuple[AxisDamping, ...] = ()
-    if _is_diagonal(k1) and _is_diagonal(k2):
+    if is_diagonal(k1) and is_diagonal(k2):
         axes = tuple(_axis_damping(i, float(k1[i, i]), float(k2[i, i])) for i in range(3))
     return GainAnalysis(
         spacecraft=spacecraft,
@@ -301,11 +299,6 @@ def _axis_poles(a: float, b: float) -> np.ndarray:
         discriminant = 0.0
     root = np.sqrt(complex(discriminant))
     return np.sort_complex(np.array([(-b - root) / 2.0, (-b + root) / 2.0], dtype=complex))
-
-
-def _is_diagonal(m: np.ndarray) -> bool:
-    off = m - np.diag(np.diag(m))
-    return bool(np.max(np.abs(off)) <= _DIAGONAL_RTOL * max(1.0, float(np.max(np.abs(m)))))
 
 
 def _per_axis(name: str, value: Any) -> np.ndarray:

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import positive_scalar
-from mrpctl.design._common import frozen, order_value
+from mrpctl.design._common import frozen, is_diagonal, order_value
 from mrpctl.design.lmi import (
     DEFAULT_MARGIN_TOL,
     Certificate,
@@ -235,12 +235,7 @@ def linearized_loop(spacecraft: Spacecraft, K: Any) -> LinearizedLoop:
     a, a_d = plant_model(spacecraft).closed_loop_matrices(k)
     k1, k2 = pd_from_gain(spacecraft, k)
     axes: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
-    if _diagonal(k1) and _diagonal(k2):
+    if is_diagonal(k1) and is_diagonal(k2):
         a_axis = frozen([[0.0, 1.0], [0.0, 0.0]])
         axes = tuple((a_axis, frozen([[0.0, 0.0], [k1[i, i], k2[i, i]]])) for i in range(3))
     return LinearizedLoop(spacecraft=spacecraft, K=frozen(k), A=frozen(a), A_d=frozen(a_d), axes=axes)
-
-
-def _diagonal(m: np.ndarray) -> bool:
-    off = m - np.diag(np.diag(m))
-    return bool(np.max(np.abs(off)) <= 1e-12 * max(1e-300, float(np.max(np.abs(m)))))
