@@ -18,8 +18,11 @@ demo: $(STAMP)
 	$(VENV)/bin/mrpctl example
 	$(VENV)/bin/mrpctl reproduce --out results
 
+# One BLAS thread per xdist worker: two workers on two cores, no oversubscription.
+BLAS1 := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+
 test: $(STAMP)
-	$(PYTHON) -m pytest -q -n 2
+	$(BLAS1) $(PYTHON) -m pytest -q -n 2
 
 lint: $(STAMP)
 	$(PYTHON) -m pip install --quiet ruff

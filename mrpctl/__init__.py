@@ -18,7 +18,6 @@ from mrpctl.errors import (
     DimensionError,
     InertiaWarning,
     MrpctlError,
-    SolverError,
     SpecificationError,
 )
 from mrpctl.model import PlantModel, plant_model
@@ -54,7 +53,6 @@ __all__ = [
     "PlantModel",
     "Scenario",
     "SimulationResult",
-    "SolverError",
     "Spacecraft",
     "SpecificationError",
     "SwitchingRule",

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mrpctl.errors import DimensionError, SpecificationError
+
+if TYPE_CHECKING:
+    from mrpctl.spacecraft import Spacecraft
 
 
 def _shape_text(shape: tuple[int | None, ...] | tuple[Any, ...]) -> str:
@@ -21,8 +24,15 @@ def finite_array(name: str, value: Any, shape: tuple[int | None, ...] | None = N
     (for example ``(None, 3)`` accepts (3,), (n, 3), (n, m, 3)).
     """
     try:
-        array = np.asarray(value, dtype=float)
+        raw = np.asarray(value)
+        if np.iscomplexobj(raw):
+            raise SpecificationError(f"{name} must be real: found complex entries (dtype {raw.dtype})")
+        if raw.dtype == bool or (raw.dtype == object and _has_bool(raw)):
+            raise SpecificationError(f"{name} must be numeric, got booleans {value!r}")
+        array = np.asarray(raw, dtype=float)
     except (TypeError, ValueError) as exc:
+        if isinstance(exc, SpecificationError):
+            raise
         raise SpecificationError(f"{name} must be numeric, got {value!r}") from exc
     if shape is not None:
         if shape and shape[0] is None:
@@ -39,8 +49,16 @@ def finite_array(name: str, value: Any, shape: tuple[int | None, ...] | None = N
     return array
 
 
+def _has_bool(array: np.ndarray) -> bool:
+    return any(isinstance(item, bool | np.bool_) for item in array.ravel().tolist())
+
+
 def finite_scalar(name: str, value: Any) -> float:
-    """Return ``value`` as a finite float."""
+    """Return ``value`` as a finite real float (booleans and complex numbers are refused)."""
+    if isinstance(value, bool | np.bool_):
+        raise SpecificationError(f"{name} must be a real number, got the boolean {value!r}")
+    if isinstance(value, complex | np.complexfloating) or (isinstance(value, np.ndarray) and np.iscomplexobj(value)):
+        raise SpecificationError(f"{name} must be a real number, got the complex value {value!r}")
     try:
         number = float(value)
     except (TypeError, ValueError) as exc:
@@ -66,8 +84,37 @@ def nonnegative_scalar(name: str, value: Any) -> float:
     return number
 
 
-def readonly(array: np.ndarray) -> np.ndarray:
-    """Return a read-only copy of ``array`` (for frozen result objects)."""
-    out = np.array(array, dtype=float, copy=True)
+def readonly(array: Any, dtype: Any = float) -> np.ndarray:
+    """Return a read-only copy of ``array`` as ``dtype`` (for frozen result objects)."""
+    out = np.array(array, dtype=dtype, copy=True)
     out.setflags(write=False)
     return out
+
+
+def sealed(array: np.ndarray) -> np.ndarray:
+    """Make an array that the caller allocated read-only in place (no copy) and return it."""
+    array.setflags(write=False)
+    return array
+
+
+def check_spacecraft(value: Any, name: str = "spacecraft") -> Spacecraft:
+    """Return ``value`` if it is a :class:`mrpctl.Spacecraft`, else raise SpecificationError naming ``name``."""
+    from mrpctl.spacecraft import Spacecraft
+
+    if not isinstance(value, Spacecraft):
+        raise SpecificationError(
+            f"{name} must be a mrpctl.Spacecraft (e.g. Spacecraft([140, 100, 80])), got {type(value).__name__}"
+        )
+    return value
+
+
+def integer(name: str, value: Any, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    """Return ``value`` as an int (booleans refused) within [minimum, maximum]."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer):
+        raise SpecificationError(f"{name} must be an integer, got {value!r}")
+    number = int(value)
+    if minimum is not None and number < minimum:
+        raise SpecificationError(f"{name} must be >= {minimum}, got {number}")
+    if maximum is not None and number > maximum:
+        raise SpecificationError(f"{name} must be <= {maximum}, got {number}")
+    return number

@@ -8,7 +8,6 @@ __all__ = [
     "DimensionError",
     "InertiaWarning",
     "MrpctlError",
-    "SolverError",
     "SpecificationError",
 ]
 
@@ -23,10 +22,6 @@ class DimensionError(MrpctlError, ValueError):
 
 class SpecificationError(MrpctlError, ValueError):
     """An argument has the right shape but breaks a rule (NaN, sign, range, definiteness)."""
-
-
-class SolverError(MrpctlError, RuntimeError):
-    """A numerical solver failed in a way that cannot be reported as a result."""
 
 
 class CodegenError(MrpctlError, RuntimeError):
