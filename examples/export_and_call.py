@@ -18,7 +18,7 @@ import casadi
 import numpy as np
 
 from mrpctl import paper
-from mrpctl.export import export
+from mrpctl import export
 from mrpctl.switching import NoSwitching
 
 
