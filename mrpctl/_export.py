@@ -290,6 +290,8 @@ def _check_folder(folder: Path, overwrite: bool) -> None:
             present = sorted(entry.name for entry in folder.iterdir())
         except OSError as exc:
             raise CodegenError(f"cannot read the export folder out_dir {str(folder)!r}: {exc}") from exc
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise CodegenError(f"the export folder out_dir {str(folder)!r} is not writable")
         if present and not overwrite:
             shown = ", ".join(present[:5]) + (", ..." if len(present) > 5 else "")
             raise SpecificationError(

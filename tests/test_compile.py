@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import importlib
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -14,6 +16,7 @@ import textwrap
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -47,7 +50,7 @@ def _function(scale: float = 2.0) -> ca.Function:
 def test_compile_once_then_reuse(tmp_path: Path) -> None:
     function = _function()
     first = compile_function(function, directory=tmp_path)
-    assert first.compiled and first.compile_seconds > 0 and first.library.exists()
+    assert first.compiled and first.compile_seconds > 0 and first.library is not None and first.library.exists()
     second = compile_function(function, directory=tmp_path)
     assert second.library == first.library and second.compile_seconds == 0.0
     x, y = np.array([0.1, -0.2, 0.3]), np.array([[1.0, 2.0], [3.0, 4.0]])
@@ -106,7 +109,8 @@ def test_no_compiler_falls_back_to_the_virtual_machine(monkeypatch: pytest.Monke
 
 
 def test_simulation_in_the_virtual_machine_matches_compiled(monkeypatch: pytest.MonkeyPatch) -> None:
-    arguments = dict(tau=0.02, rule=OnDelayed(), t_final=0.9, substeps=2)  # the structure of test_simulate
+    # The structure of test_simulate.
+    arguments: dict[str, Any] = dict(tau=0.02, rule=OnDelayed(), t_final=0.9, substeps=2)
     x0 = np.array([0.98, 0.05, 0.0, 0.12, 0.01, 0.0])
     compiled = simulate(paper.SPACECRAFT, paper.GAIN, x0, **arguments)
     compiled_batch = simulate_batch(paper.SPACECRAFT, paper.GAIN, [x0, -x0], **arguments)
@@ -123,6 +127,7 @@ def test_simulation_in_the_virtual_machine_matches_compiled(monkeypatch: pytest.
     np.testing.assert_allclose(interpreted.sigma, compiled.sigma, rtol=0, atol=1e-13)
     np.testing.assert_array_equal(interpreted.sign_flips, compiled.sign_flips)
     np.testing.assert_array_equal(batch.switch_count, compiled_batch.switch_count)
+    assert batch.runs is not None
     np.testing.assert_array_equal(batch.runs[0].switch_indices, compiled.switch_indices)
     np.testing.assert_allclose(batch.runs[0].sigma, compiled.sigma, rtol=0, atol=1e-13)
 
@@ -259,6 +264,43 @@ def test_leftovers_of_killed_builds_are_removed(tmp_path: Path, monkeypatch: pyt
     compile_function(_function(23.0), directory=cache)
     assert [path for path in removed if path.exists()] == []
     assert [path for path in kept if not path.exists()] == []
+
+
+def test_a_compile_killed_by_sigterm_is_cleaned_up_by_the_next(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    cache, started = tmp_path / "cache", tmp_path / "started"
+    hanging = _script(
+        tmp_path / "hanging_cc",
+        f"""\
+        if [ "$1" = "--version" ]; then echo "hanging-cc 1.0"; exit 0; fi
+        echo $$ > {started}.tmp && mv {started}.tmp {started}
+        exec sleep 120
+        """,
+    )
+    code = "from mrpctl._compile import compile_source; compile_source('int answer = 42;', 'killed', directory=DIR)"
+    child = subprocess.Popen(
+        [sys.executable, "-c", code.replace("DIR", repr(str(cache)))], env={**os.environ, "CC": str(hanging)}
+    )
+    try:
+        for _ in range(1200):  # the child is compiling once the fake compiler has started (at most 60 s)
+            if started.exists() or child.poll() is not None:
+                break
+            time.sleep(0.05)
+        assert started.exists(), "the fake compiler never started"
+        child.send_signal(signal.SIGTERM)
+        assert child.wait(timeout=60) == -signal.SIGTERM
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+        if started.exists():  # the fake compiler runs in its own session: end it
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(int(started.read_text()), signal.SIGKILL)
+    left = [path.name for path in cache.iterdir() if path.name.startswith("build-")]
+    assert left == [f"build-{child.pid}-" + left[0].rsplit("-", 1)[1]]  # what SIGTERM left behind
+    monkeypatch.delenv("CC", raising=False)
+    library = compile_source("int answer = 42;", "killed", directory=cache)
+    assert ctypes.c_int.in_dll(ctypes.CDLL(str(library)), "answer").value == 42
+    assert not [path for path in cache.iterdir() if path.name.startswith("build-") or path.name.endswith(".part")]
 
 
 # ================================================================== timeout and $CC
