@@ -6,6 +6,7 @@ import hashlib
 import json
 import os
 import runpy
+import shutil
 import subprocess
 import warnings
 from pathlib import Path
@@ -284,9 +285,9 @@ def _fail_on_second_rename(monkeypatch):
     "failure",
     ["write_c_code", "manifest_interrupted", "second_rename"],
 )
-def test_interrupted_overwrite_keeps_the_old_export(failure, tmp_path, monkeypatch):
+def test_interrupted_overwrite_keeps_the_old_export(failure, paper_export, tmp_path, monkeypatch):
     folder = tmp_path / "previous"
-    _export(folder, OTHER, compile=False)
+    shutil.copytree(paper_export.folder, folder)  # a whole export, with its library when there is a compiler
     (folder / "notes.txt").write_text("mine")
     (folder / "plots").mkdir()
     (folder / "plots" / "a.txt").write_text("also mine")
@@ -294,14 +295,14 @@ def test_interrupted_overwrite_keeps_the_old_export(failure, tmp_path, monkeypat
     if failure == "write_c_code":
         monkeypatch.setattr(export_module, "_write_c_code", _raise(CodegenError("cannot write: disk full")))
         expected: type[BaseException] = CodegenError
-    elif failure == "manifest_interrupted":  # Ctrl-C after the library was built
+    elif failure == "manifest_interrupted":  # Ctrl-C once every other file is written
         monkeypatch.setattr(export_module, "_manifest", _raise(KeyboardInterrupt()))
         expected = KeyboardInterrupt
     else:
         _fail_on_second_rename(monkeypatch)
         expected = CodegenError
     with pytest.raises(expected):
-        _export(folder, OTHER, overwrite=True, compile=failure == "manifest_interrupted")
+        _export(folder, OTHER, overwrite=True, compile=False)
     assert _snapshot(folder) == before  # the old export and the user's files, byte for byte
     assert sorted(path.name for path in tmp_path.iterdir()) == ["previous"]  # no temporary folder left
 
