@@ -476,8 +476,13 @@ def _cached_library(
                 stacklevel=3,
             )
         for stale in (library, _checksum_path(library)):
-            with contextlib.suppress(FileNotFoundError):
-                stale.unlink()
+            try:
+                stale.unlink(missing_ok=True)
+            except OSError as exc:
+                raise CodegenError(
+                    f"cannot delete {stale} to rebuild it: {exc}; delete it by hand, or set MRPCTL_CACHE_DIR "
+                    "to a writable folder"
+                ) from exc
         _clean(folder)
         build = folder / f"build-{os.getpid()}-{secrets.token_hex(4)}"
         try:
@@ -496,14 +501,18 @@ def _cached_library(
 
 @contextlib.contextmanager
 def _locked(path: Path) -> Iterator[None]:
-    """An exclusive ``flock`` on ``path`` (released by the kernel if the process dies)."""
-    if fcntl is None:  # pragma: no cover - not on Linux
+    """An exclusive ``flock`` on ``path`` (released by the kernel if the process dies).
+
+    In a read-only cache no lock can be taken and none is needed to load a verified library
+    (a build there fails with its own error)."""
+    try:
+        handle = os.open(path, os.O_RDWR | os.O_CREAT, 0o644) if fcntl is not None else -1
+    except OSError as exc:
+        logger.debug("no lock %s (%s): reading the cache without it", path, exc)
+        handle = -1
+    if handle < 0:
         yield
         return
-    try:
-        handle = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    except OSError as exc:
-        raise CodegenError(f"cannot create the lock file {path}: {exc}") from exc
     try:
         fcntl.flock(handle, fcntl.LOCK_EX)
         yield
