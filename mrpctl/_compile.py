@@ -111,7 +111,7 @@ TIMEOUT_VARIABLE = "MRPCTL_COMPILE_TIMEOUT"
 STALE_SECONDS = 86400.0
 
 _CODEGEN_OPTIONS: dict[str, Any] = {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"}
-_CASADI_VERSION: str = ca.__version__  # type: ignore[attr-defined]
+_CASADI_VERSION: str = vars(ca)["__version__"]  # (CasADi's stubs do not declare it)
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _PID_TAG = re.compile(r"(?:^build-|\.)(\d+)-[0-9a-f]+(?:\.part)?$")
 _CHECKSUM_SUFFIX = ".sha256"

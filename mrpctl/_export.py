@@ -490,7 +490,7 @@ def _manifest(
         "format": "mrpctl-export",
         "format_version": MANIFEST_FORMAT_VERSION,
         "mrpctl_version": mrpctl.__version__,
-        "casadi_version": ca.__version__,  # type: ignore[attr-defined]
+        "casadi_version": vars(ca)["__version__"],
         "state": "x = [sigma; omega/4] (6): MRPs sigma (dimensionless), body rate omega (rad/s)",
         "input": "u (3): control torque (N m), u = K x_meas",
         "parameters": {
