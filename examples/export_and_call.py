@@ -17,8 +17,7 @@ from pathlib import Path
 import casadi
 import numpy as np
 
-from mrpctl import paper
-from mrpctl.export import export
+from mrpctl import export, paper
 from mrpctl.switching import NoSwitching
 
 

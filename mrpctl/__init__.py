@@ -12,6 +12,7 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 from mrpctl import design, errors, model, mrp, paper
+from mrpctl._export import ExportResult, export
 from mrpctl.errors import (
     CodegenError,
     CompilerWarning,
@@ -45,6 +46,7 @@ __all__ = [
     "CompilerWarning",
     "DelayAware",
     "DimensionError",
+    "ExportResult",
     "InertiaWarning",
     "MrpctlError",
     "NoSwitching",
@@ -60,6 +62,7 @@ __all__ = [
     "closed_loop_functions",
     "design",
     "errors",
+    "export",
     "load_scenario",
     "model",
     "mrp",

@@ -1,33 +1,61 @@
-"""Compile CasADi Functions to C shared libraries, cached on disk by a hash of the code.
+"""Compile C code to shared libraries: one compiler call, an on-disk cache that checks what it loads.
 
-:func:`compile_function` generates C with :class:`casadi.CodeGenerator`, hashes the
-code together with the compiler and its flags, compiles it once with
-``gcc -O2 -shared -fPIC`` by default (:data:`DEFAULT_FLAGS`; the simulator uses
-:data:`SIMULATION_FLAGS`, -O3 without FMA contraction). Never ``-ffast-math`` nor
-``-march=native``: IEEE arithmetic in the order CasADi wrote it, the same bits on every
-machine with the same compiler. and loads it with
-:func:`casadi.external`. A second call with the same code compiles nothing.
+:func:`compile_function` generates C from a CasADi Function with
+:class:`casadi.CodeGenerator`, compiles it (or reuses the cached library) and loads it with
+:func:`casadi.external`; :func:`compile_source` does the same for C source that is not a
+CasADi Function and returns the library's path (load it with :mod:`ctypes`). Both go
+through :func:`build_library`, the one place the compiler runs; :mod:`mrpctl._export`
+builds its shared library with it too.
 
-The cache directory is ``$MRPCTL_CACHE_DIR`` if set, else ``~/.cache/mrpctl``. Libraries
-are written to a temporary file in that directory and renamed into place, so parallel
-processes (pytest-xdist workers) may compile the same code at the same time safely.
+Flags: ``-O2 -shared -fPIC`` by default (:data:`DEFAULT_FLAGS`); the simulator uses
+:data:`SIMULATION_FLAGS` (-O3 without FMA contraction). Never ``-ffast-math`` nor
+``-march=native``: IEEE arithmetic in the order CasADi wrote it, so that the same code
+gives the same bits on every machine with the same compiler.
 
-When no C compiler is found (``$CC``, then ``gcc``, then ``cc``), the Function is
-returned as it is, to be evaluated by CasADi's virtual machine, with a
-:class:`CompilerWarning`.
+The compiler is ``$CC`` when that variable is set (a program name or path, without
+arguments; if it cannot be found a :class:`CodegenError` says so, and how to unset it),
+else ``gcc``, else ``cc``. Without any, :func:`compile_function` returns the Function for
+CasADi's virtual machine with a :class:`CompilerWarning`. Each compiler call is bounded by a
+timeout (:data:`DEFAULT_TIMEOUT` = 600 s, ``$MRPCTL_COMPILE_TIMEOUT``, or the ``timeout``
+keyword): past it the compiler and its children are killed and a :class:`CodegenError`
+names the compiler and the limit.
+
+The cache
+---------
+The directory is ``$MRPCTL_CACHE_DIR`` if set, else ``~/.cache/mrpctl``. A library is named
+``<name>_<hash>.so``, the hash covering the code, the compiler and its version, the flags
+and CasADi's version. Beside it, ``<name>_<hash>.so.sha256`` records its size and SHA-256;
+it is written (atomically) after the library is in place. Before a library is loaded its
+size and checksum are verified: a truncated one (which would kill the interpreter with a
+bus error when loaded), a garbage one, or one without a checksum file is deleted and
+rebuilt with a :class:`CacheWarning`.
+
+Builds run in a private folder ``build-<pid>-<random>`` inside the cache directory, and the
+library is written to ``<name>_<hash>.so.<pid>-<random>.part`` and renamed into place, so a
+reader never sees half a library. A per-library lock file (``flock``) serialises processes
+and threads compiling the same code: the second waits and then finds the library built.
+Each build first removes ``.part`` files and build folders left by killed processes (their
+pid is dead, or they are older than a day), and ``mrpctl-build-*`` folders of older mrpctl
+versions in the temporary directory that are older than a day.
 """
 
 from __future__ import annotations
 
-import ctypes
+import contextlib
 import hashlib
+import json
 import logging
+import math
 import os
+import re
+import secrets
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -36,25 +64,38 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl.errors import CodegenError, CompilerWarning
+from mrpctl._validation import positive_scalar
+from mrpctl.errors import CacheWarning, CodegenError, CompilerWarning, SpecificationError
+
+try:  # POSIX; without it (Windows) compiles of the same code are not serialised
+    import fcntl
+except ImportError:  # pragma: no cover - not on Linux
+    fcntl = None  # type: ignore[assignment]
 
 __all__ = [
     "DEFAULT_FLAGS",
+    "DEFAULT_TIMEOUT",
     "SIMULATION_FLAGS",
-    "CFunction",
-    "CSession",
+    "STALE_SECONDS",
+    "TIMEOUT_VARIABLE",
+    "CacheWarning",
     "CompiledFunction",
     "CompilerWarning",
+    "abandoned",
     "address",
+    "build_library",
     "cache_dir",
     "compile_function",
+    "compile_source",
+    "compile_timeout",
+    "compiler_version",
     "find_compiler",
     "generate_code",
 ]
 
 logger = logging.getLogger(__name__)
 
-#: Flags used by default (and by the export module): optimised, position independent,
+#: Flags used by default (and by the export): optimised, position independent,
 #: IEEE-exact (no fast-math, no -march=native).
 DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-shared", "-fPIC")
 #: Flags of the simulator's engine: -O3 inlines the sample function into the unrolled
@@ -62,8 +103,18 @@ DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-shared", "-fPIC")
 #: (another 1.4x), -ffp-contract=off forbids fused multiply-adds so that the arithmetic
 #: stays the IEEE sequence CasADi wrote on every architecture (measured on the paper's case).
 SIMULATION_FLAGS: tuple[str, ...] = ("-O3", "-ffp-contract=off", "-fno-semantic-interposition", "-shared", "-fPIC")
+#: Default limit of one compiler call (s).
+DEFAULT_TIMEOUT = 600.0
+#: Environment variable overriding :data:`DEFAULT_TIMEOUT` (seconds).
+TIMEOUT_VARIABLE = "MRPCTL_COMPILE_TIMEOUT"
+#: Age (s) after which a leftover ``.part`` file or build folder is removed even if its pid lives.
+STALE_SECONDS = 86400.0
 
-_CODEGEN_OPTIONS = {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"}
+_CODEGEN_OPTIONS: dict[str, Any] = {"with_header": False, "casadi_real": "double", "casadi_int": "long long int"}
+_CASADI_VERSION: str = vars(ca)["__version__"]  # (CasADi's stubs do not declare it)
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_PID_TAG = re.compile(r"(?:^build-|\.)(\d+)-[0-9a-f]+(?:\.part)?$")
+_CHECKSUM_SUFFIX = ".sha256"
 
 
 @dataclass(frozen=True)
@@ -87,12 +138,6 @@ class CompiledFunction:
     library: Path | None
     compile_seconds: float
 
-    def direct(self) -> CFunction | None:
-        """A :class:`CFunction` calling the library without CasADi (None for the virtual machine)."""
-        if self.library is None:
-            return None
-        return CFunction(self.library, self.function.name())
-
     def __str__(self) -> str:
         if not self.compiled:
             return f"{self.function.name()}: CasADi virtual machine (not compiled)"
@@ -100,6 +145,7 @@ class CompiledFunction:
         return f"{self.function.name()}: {self.library} ({how})"
 
 
+# ================================================================ compiler and settings
 def cache_dir() -> Path:
     """The directory of compiled libraries: ``$MRPCTL_CACHE_DIR`` or ``~/.cache/mrpctl``."""
     configured = os.environ.get("MRPCTL_CACHE_DIR")
@@ -109,30 +155,232 @@ def cache_dir() -> Path:
 
 
 def find_compiler() -> str | None:
-    """Path of the C compiler: ``$CC`` if set and found, else ``gcc``, else ``cc``; None if none."""
-    candidates = [os.environ.get("CC"), "gcc", "cc"]
-    for candidate in candidates:
-        if candidate:
-            found = shutil.which(candidate)
-            if found:
-                return found
+    """Path of the C compiler: ``$CC`` if set, else ``gcc``, else ``cc``; None if there is none.
+
+    Raises
+    ------
+    CodegenError
+        If ``$CC`` is set (non-empty) but names no executable program: it is never
+        silently replaced by another compiler.
+    """
+    configured = os.environ.get("CC", "").strip()
+    if configured:
+        found = shutil.which(configured)
+        if found is None:
+            raise CodegenError(
+                f"the environment variable CC={configured!r} names no executable C compiler "
+                "(not found on PATH, or not executable; CC must be one program, without arguments): "
+                "set CC to an installed compiler, or unset it (`unset CC`) to use gcc or cc"
+            )
+        return found
+    for candidate in ("gcc", "cc"):
+        found = shutil.which(candidate)
+        if found:
+            return found
     return None
 
 
-@lru_cache(maxsize=8)
-def _compiler_identity(compiler: str) -> str:
+def compile_timeout(timeout: float | None = None) -> float:
+    """The limit (s) of one compiler call: ``timeout``, else ``$MRPCTL_COMPILE_TIMEOUT``, else 600 s."""
+    if timeout is not None:
+        return positive_scalar("timeout", timeout)
+    configured = os.environ.get(TIMEOUT_VARIABLE, "").strip()
+    if not configured:
+        return DEFAULT_TIMEOUT
     try:
-        done = subprocess.run([compiler, "--version"], capture_output=True, text=True, check=False, timeout=30)
-    except (OSError, subprocess.SubprocessError):
-        return compiler
-    return compiler + "\n" + done.stdout.splitlines()[0] if done.stdout else compiler
+        value = float(configured)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0.0):
+        raise SpecificationError(
+            f"the environment variable {TIMEOUT_VARIABLE} must be a positive number of seconds, got {configured!r}"
+        )
+    return value
 
 
+def compiler_version(compiler: str, *, timeout: float | None = None) -> str | None:
+    """The first line ``compiler --version`` prints (None if it prints nothing or cannot run)."""
+    return _compiler_version(compiler, compile_timeout(timeout))
+
+
+@lru_cache(maxsize=8)
+def _compiler_version(compiler: str, timeout: float) -> str | None:
+    try:
+        done = _run([compiler, "--version"], cwd=None, timeout=timeout, compiler=compiler)
+    except CodegenError as exc:
+        if "did not finish" in str(exc):
+            raise
+        return None
+    lines = done.stdout.splitlines()
+    return lines[0] if lines else None
+
+
+def _run(command: list[str], *, cwd: Path | None, timeout: float, compiler: str) -> subprocess.CompletedProcess[str]:
+    """Run the compiler in its own process group; on timeout or interruption kill the whole group."""
+    try:
+        process = subprocess.Popen(
+            command,
+            cwd=cwd,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+    except OSError as exc:
+        raise CodegenError(f"could not run the C compiler {compiler}: {exc}") from exc
+    with process:
+        try:
+            stdout, stderr = process.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            _kill_group(process)
+            raise CodegenError(
+                f"the C compiler {compiler} did not finish within the timeout of {timeout:g} s and was "
+                f"killed; raise the limit with the timeout keyword or ${TIMEOUT_VARIABLE} (seconds)"
+            ) from None
+        except BaseException:  # KeyboardInterrupt, SystemExit: the compiler must not outlive us
+            _kill_group(process)
+            raise
+    return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
+
+
+def _kill_group(process: subprocess.Popen[str]) -> None:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(process.pid, signal.SIGKILL)
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        process.communicate(timeout=10.0)
+
+
+# ===================================================================== the one build
+def build_library(
+    source: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    *,
+    compiler: str | None = None,
+    flags: tuple[str, ...] = DEFAULT_FLAGS,
+    timeout: float | None = None,
+) -> float:
+    """Compile the C file ``source`` into the shared library ``output``, atomically.
+
+    The compiler runs in the folder of ``source`` (``compiler *flags source -o part -lm``),
+    writes ``<output>.<pid>-<random>.part`` and that file is renamed to ``output``: a reader
+    never sees half a library, and an interruption leaves ``output`` as it was.
+
+    Parameters
+    ----------
+    source : path-like
+        The C translation unit.
+    output : path-like
+        The library to write (replaced if present).
+    compiler : str, optional, keyword-only
+        The compiler; default :func:`find_compiler`.
+    flags : tuple of str, keyword-only
+        Compiler flags; default :data:`DEFAULT_FLAGS`.
+    timeout : float, optional, keyword-only
+        Limit of the compiler call (s); default :func:`compile_timeout`.
+
+    Returns
+    -------
+    float
+        Wall time of the compilation (s).
+
+    Raises
+    ------
+    CodegenError
+        If there is no compiler, it fails, it exceeds the timeout, or the output cannot be written.
+    """
+    limit = compile_timeout(timeout)
+    flags = _flags(flags)
+    if compiler is None:
+        compiler = find_compiler()
+        if compiler is None:
+            raise CodegenError("no C compiler found ($CC, gcc, cc): install gcc, or set CC to a C compiler")
+    source, output = Path(source), Path(output)
+    partial = output.with_name(f"{output.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+    start = time.perf_counter()
+    try:
+        done = _run(
+            [compiler, *flags, source.name, "-o", str(partial.absolute()), "-lm"],
+            cwd=source.parent,
+            timeout=limit,
+            compiler=compiler,
+        )
+        if done.returncode != 0:
+            raise CodegenError(
+                f"the C compiler {compiler} failed (exit {done.returncode}) on {source}:\n" + done.stderr[-4000:]
+            )
+        try:
+            os.replace(partial, output)
+        except OSError as exc:
+            raise CodegenError(f"cannot write the library {output}: {exc}") from exc
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            partial.unlink()
+    seconds = time.perf_counter() - start
+    logger.debug("built %s with %s in %.2f s", output, compiler, seconds)
+    return seconds
+
+
+def _flags(flags: object) -> tuple[str, ...]:
+    if not isinstance(flags, tuple | list) or not all(isinstance(flag, str) for flag in flags):
+        raise SpecificationError(f"flags must be a tuple of strings, got {flags!r}")
+    return tuple(flags)
+
+
+# ======================================================================== the cache
 def generate_code(function: ca.Function) -> str:
     """The C source of ``function`` (and everything it calls) as one string."""
     generator = ca.CodeGenerator(function.name() + ".c", _CODEGEN_OPTIONS)
     generator.add(function)
     return generator.dump()
+
+
+def compile_source(
+    code: str,
+    name: str,
+    *,
+    flags: tuple[str, ...] = DEFAULT_FLAGS,
+    directory: str | os.PathLike[str] | None = None,
+    timeout: float | None = None,
+) -> Path:
+    """Compile the C source ``code`` to a cached shared library and return its path.
+
+    The same cache as :func:`compile_function` (same hashing, validation and repair); load
+    the library with :mod:`ctypes`.
+
+    Parameters
+    ----------
+    code : str
+        One C translation unit.
+    name : str
+        Stem of the library's file name (a C identifier, e.g. the main function's name).
+    flags : tuple of str, keyword-only
+        Compiler flags; default :data:`DEFAULT_FLAGS`.
+    directory : path-like, optional, keyword-only
+        Cache directory; default :func:`cache_dir`.
+    timeout : float, optional, keyword-only
+        Limit of the compiler call (s); default :func:`compile_timeout`.
+
+    Returns
+    -------
+    pathlib.Path
+        The verified library ``<directory>/<name>_<hash>.so``.
+
+    Raises
+    ------
+    SpecificationError
+        If ``code`` is not a string or ``name`` not a C identifier.
+    CodegenError
+        If no compiler is found (there is no fallback for plain C), it fails or times out,
+        or the cache directory cannot be written.
+    """
+    if not isinstance(code, str):
+        raise SpecificationError(f"code must be C source as a str, got {type(code).__name__}")
+    compiler = find_compiler()
+    if compiler is None:
+        raise CodegenError(f"no C compiler found ($CC, gcc, cc) to compile {name!r}: install gcc, or set CC")
+    library, _ = _cached_library(code, name, compiler, flags, directory, timeout)
+    return library
 
 
 def compile_function(
@@ -141,6 +389,7 @@ def compile_function(
     flags: tuple[str, ...] = DEFAULT_FLAGS,
     directory: str | os.PathLike[str] | None = None,
     appendix: str = "",
+    timeout: float | None = None,
 ) -> CompiledFunction:
     """Compile ``function`` to a shared library (or reuse the cached one) and load it.
 
@@ -156,6 +405,8 @@ def compile_function(
         C source appended to the generated code (part of the hash), e.g. a driver loop
         that calls the generated function; load its exported symbols from
         :attr:`CompiledFunction.library` with ctypes.
+    timeout : float, optional, keyword-only
+        Limit of the compiler call (s); default :func:`compile_timeout`.
 
     Returns
     -------
@@ -166,7 +417,12 @@ def compile_function(
     Raises
     ------
     CodegenError
-        If the compiler is present but fails, or the library cannot be loaded.
+        If ``$CC`` names no compiler, the compiler fails or times out, or the library cannot be loaded.
+
+    Warns
+    -----
+    CacheWarning
+        When the cached library was truncated, corrupt or had no checksum (it is rebuilt).
     """
     name = function.name()
     compiler = find_compiler()
@@ -178,18 +434,7 @@ def compile_function(
             stacklevel=2,
         )
         return CompiledFunction(function=function, compiled=False, library=None, compile_seconds=0.0)
-    code = generate_code(function) + appendix
-    digest = hashlib.sha256(
-        "\n".join((code, _compiler_identity(compiler), " ".join(flags), ca.__version__)).encode()
-    ).hexdigest()[:20]
-    folder = Path(directory) if directory is not None else cache_dir()
-    library = folder / f"{name}_{digest}.so"
-    seconds = 0.0
-    if library.exists():
-        logger.debug("cache hit for %s: %s", name, library)
-    else:
-        seconds = _build(code, library, compiler, flags)
-        logger.info("compiled %s in %.2f s -> %s", name, seconds, library)
+    library, seconds = _cached_library(generate_code(function) + appendix, name, compiler, flags, directory, timeout)
     try:
         loaded = ca.external(name, str(library))
     except RuntimeError as exc:
@@ -197,100 +442,186 @@ def compile_function(
     return CompiledFunction(function=loaded, compiled=True, library=library, compile_seconds=seconds)
 
 
-def _build(code: str, library: Path, compiler: str, flags: tuple[str, ...]) -> float:
+def _cached_library(
+    code: str,
+    name: str,
+    compiler: str,
+    flags: tuple[str, ...],
+    directory: str | os.PathLike[str] | None,
+    timeout: float | None,
+) -> tuple[Path, float]:
+    """The verified cached library of ``code`` (built if missing or bad) and the seconds spent building."""
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise SpecificationError(f"name must be a C identifier (letters, digits, _), got {name!r}")
+    flags = _flags(flags)
+    limit = compile_timeout(timeout)
+    identity = compiler + ("\n" + version if (version := _compiler_version(compiler, limit)) else "")
+    key = "\n".join((code, identity, " ".join(flags), _CASADI_VERSION))
+    digest = hashlib.sha256(key.encode()).hexdigest()[:20]
+    folder = Path(directory) if directory is not None else cache_dir()
     try:
-        library.parent.mkdir(parents=True, exist_ok=True)
+        folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise CodegenError(f"cannot create the cache directory {library.parent}: {exc}") from exc
-    start = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="mrpctl-build-") as build:
-        source = Path(build) / (library.stem + ".c")
-        source.write_text(code)
-        handle, partial = tempfile.mkstemp(prefix=library.stem + ".", suffix=".so.part", dir=library.parent)
-        os.close(handle)
-        try:
-            done = subprocess.run(
-                [compiler, *flags, str(source), "-o", partial, "-lm"],
-                capture_output=True,
-                text=True,
-                check=False,
+        raise CodegenError(f"cannot create the cache directory {folder}: {exc}") from exc
+    library = folder / f"{name}_{digest}.so"
+    with _locked(folder / f"{name}_{digest}.lock"):
+        problem = _verify(library)
+        if problem is None:
+            logger.debug("cache hit for %s: %s", name, library)
+            return library, 0.0
+        if problem:
+            warnings.warn(
+                f"the cached library {library} is unusable ({problem}); it was deleted and is being rebuilt",
+                CacheWarning,
+                stacklevel=3,
             )
-            if done.returncode != 0:
+        for stale in (library, _checksum_path(library)):
+            try:
+                stale.unlink(missing_ok=True)
+            except OSError as exc:
                 raise CodegenError(
-                    f"{Path(compiler).name} failed (exit {done.returncode}) on {source.name}:\n" + done.stderr[-4000:]
-                )
-            os.replace(partial, library)
+                    f"cannot delete {stale} to rebuild it: {exc}; delete it by hand, or set MRPCTL_CACHE_DIR "
+                    "to a writable folder"
+                ) from exc
+        _clean(folder)
+        build = folder / f"build-{os.getpid()}-{secrets.token_hex(4)}"
+        try:
+            build.mkdir()
+            source = build / f"{library.stem}.c"
+            source.write_text(code)
+            seconds = build_library(source, library, compiler=compiler, flags=flags, timeout=limit)
+            _write_checksum(library, build)
+        except OSError as exc:
+            raise CodegenError(f"cannot build {library.name} in the cache directory {folder}: {exc}") from exc
         finally:
-            if os.path.exists(partial):
-                os.unlink(partial)
-    return time.perf_counter() - start
+            shutil.rmtree(build, ignore_errors=True)
+    logger.info("compiled %s in %.2f s -> %s", name, seconds, library)
+    return library, seconds
 
 
-_INT = ctypes.c_longlong  # matches the "casadi_int" code-generation option
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """An exclusive ``flock`` on ``path`` (released by the kernel if the process dies).
+
+    In a read-only cache no lock can be taken and none is needed to load a verified library
+    (a build there fails with its own error)."""
+    try:
+        handle = os.open(path, os.O_RDWR | os.O_CREAT, 0o644) if fcntl is not None else -1
+    except OSError as exc:
+        logger.debug("no lock %s (%s): reading the cache without it", path, exc)
+        handle = -1
+    if handle < 0:
+        yield
+        return
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(handle)  # closing releases the lock
 
 
-def address(array: np.ndarray) -> int:
-    """The address of a contiguous NumPy array's data (for :class:`CFunction` calls)."""
-    return int(array.__array_interface__["data"][0])
+def _checksum_path(library: Path) -> Path:
+    return library.with_name(library.name + _CHECKSUM_SUFFIX)
 
 
-class CFunction:
-    """Call a generated CasADi function through ctypes on NumPy buffers (no copies).
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
-    Inputs and outputs are NumPy float64 arrays holding the dense nonzeros in
-    column-major order (a C-ordered (n, m) array is an m × n CasADi matrix); ``None``
-    passes a null pointer (input: zeros; output: not written). The GIL is released
-    during the call, so several threads may call one CFunction at once, each through its
-    own :meth:`session` (work arrays).
+
+def _write_checksum(library: Path, build: Path) -> None:
+    """Write ``<library>.sha256`` (size and SHA-256) atomically, after the library is in place."""
+    record = {"library": library.name, "size": library.stat().st_size, "sha256": _file_sha256(library)}
+    partial = build / (library.name + _CHECKSUM_SUFFIX)
+    partial.write_text(json.dumps(record) + "\n")
+    os.replace(partial, _checksum_path(library))
+
+
+def _verify(library: Path) -> str | None:
+    """None if ``library`` matches its checksum file; "" if neither exists; else what is wrong."""
+    checksum = _checksum_path(library)
+    if not library.exists():
+        return ""  # not built yet (a lone checksum file is removed before the build)
+    try:
+        record = json.loads(checksum.read_text())
+        size, expected = int(record["size"]), str(record["sha256"])
+    except FileNotFoundError:
+        return f"no checksum file {checksum.name}"
+    except (OSError, ValueError, TypeError, KeyError) as exc:
+        return f"unreadable checksum file {checksum.name}: {exc}"
+    try:
+        found = library.stat().st_size
+        if found != size:
+            return f"{found} bytes where {size} were written: truncated or replaced"
+        if _file_sha256(library) != expected:
+            return "its SHA-256 differs from the one recorded when it was built"
+    except OSError as exc:
+        return f"cannot be read: {exc}"
+    return None
+
+
+# ==================================================================== stale leftovers
+def _pid_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    except OSError:
+        return True
+    return True
+
+
+def abandoned(path: Path, pid: int | None, *, now: float | None = None) -> bool:
+    """True if ``path``, written by process ``pid`` (None: unknown), is a leftover.
+
+    A leftover's writer is dead, or it is older than :data:`STALE_SECONDS` (a day: the pid
+    may have been reused, or belong to another machine sharing the folder).
     """
-
-    def __init__(self, library: Path, name: str) -> None:
-        self.name = name
-        self._library = ctypes.CDLL(str(library))
-        self._eval = getattr(self._library, name)
-        self._eval.restype = ctypes.c_int
-        self._eval.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
-        work = getattr(self._library, name + "_work")
-        sizes = [_INT() for _ in range(4)]
-        if work(*[ctypes.byref(size) for size in sizes]) != 0:
-            raise CodegenError(f"{name}_work failed in {library}")
-        self.sz_arg, self.sz_res, self.sz_iw, self.sz_w = (int(size.value) for size in sizes)
-        count = getattr(self._library, name + "_n_in")
-        count.restype = _INT
-        self.n_in = int(count())
-        count = getattr(self._library, name + "_n_out")
-        count.restype = _INT
-        self.n_out = int(count())
-
-    def session(self) -> CSession:
-        """Work arrays for a sequence of calls from one thread."""
-        return CSession(self)
-
-    def __call__(self, inputs: list[Any], outputs: list[Any]) -> None:
-        """Evaluate once; ``inputs``/``outputs`` are lists of contiguous float64 arrays or None."""
-        self.session()(
-            [None if value is None else address(value) for value in inputs],
-            [None if value is None else address(value) for value in outputs],
-        )
+    try:
+        age = (time.time() if now is None else now) - path.lstat().st_mtime
+    except OSError:
+        return False
+    if age > STALE_SECONDS:
+        return True
+    return pid is not None and not _pid_alive(pid)
 
 
-class CSession:
-    """Pointer and work arrays of one :class:`CFunction`, reused across calls (one thread)."""
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink()
+    logger.info("removed the leftover %s", path)
 
-    def __init__(self, function: CFunction) -> None:
-        self._function = function
-        self._eval = function._eval
-        self._arg = (ctypes.c_void_p * max(function.sz_arg, 1))()
-        self._res = (ctypes.c_void_p * max(function.sz_res, 1))()
-        self._iw = (_INT * max(function.sz_iw, 1))()
-        self._w = (ctypes.c_double * max(function.sz_w, 1))()
 
-    def __call__(self, inputs: list[int | None], outputs: list[int | None]) -> None:
-        """Evaluate on data addresses (see :func:`address`); None is a null pointer."""
-        arg, res = self._arg, self._res
-        for i, value in enumerate(inputs):
-            arg[i] = value
-        for i, value in enumerate(outputs):
-            res[i] = value
-        if self._eval(arg, res, self._iw, self._w, 0) != 0:
-            raise CodegenError(f"evaluation of the compiled function {self._function.name} failed")
+def _clean(folder: Path) -> None:
+    """Remove ``.part`` files and build folders of dead processes (or older than a day)."""
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        if not (entry.name.endswith(".part") or entry.name.startswith("build-")):
+            continue
+        match = _PID_TAG.search(entry.name)
+        if abandoned(entry, int(match.group(1)) if match else None):
+            _remove(entry)
+    # Build folders of mrpctl versions that compiled in the temporary directory.
+    with contextlib.suppress(OSError):
+        for entry in Path(tempfile.gettempdir()).glob("mrpctl-build-*"):
+            if entry.is_dir() and entry.lstat().st_uid == os.getuid() and abandoned(entry, None):
+                _remove(entry)
+
+
+# ========================================================================= ctypes help
+def address(array: np.ndarray) -> int:
+    """The address of a contiguous NumPy array's data (to pass as a pointer through ctypes)."""
+    return int(array.__array_interface__["data"][0])

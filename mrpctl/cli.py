@@ -218,7 +218,7 @@ def _paper_base() -> Scenario:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from mrpctl.export import export
+    from mrpctl._export import export
 
     scenario = _apply_overrides(load_scenario(args.scenario), args)
     if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 __all__ = [
+    "CacheWarning",
     "CodegenError",
     "CompilerWarning",
     "DimensionError",
@@ -34,3 +35,7 @@ class InertiaWarning(UserWarning):
 
 class CompilerWarning(UserWarning):
     """No C compiler was found: sources are written or CasADi's (slower) virtual machine is used."""
+
+
+class CacheWarning(UserWarning):
+    """A cached compiled library was truncated, corrupt or unchecked: it is deleted and rebuilt."""

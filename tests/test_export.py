@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import hashlib
-import importlib
 import json
+import os
 import runpy
+import shutil
 import subprocess
 import warnings
 from pathlib import Path
@@ -15,10 +16,10 @@ import numpy as np
 import pytest
 
 import mrpctl
+from mrpctl import _export as export_module
 from mrpctl import paper
 from mrpctl._compile import CompilerWarning, find_compiler
-from mrpctl.errors import CodegenError, SpecificationError
-from mrpctl.export import (
+from mrpctl._export import (
     C_PREFIX,
     EXPORTED_FUNCTIONS,
     HEADER_NAME,
@@ -28,6 +29,7 @@ from mrpctl.export import (
     ExportResult,
     export,
 )
+from mrpctl.errors import CodegenError, SpecificationError
 from mrpctl.simulate import closed_loop_functions, simulate
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import DelayAware, NoSwitching, OnDelayed
@@ -255,6 +257,112 @@ def test_non_empty_folder_is_refused_and_overwrite_replaces(tmp_path):
     assert first.manifest["files"][SOURCE_NAME] == second.manifest["files"][SOURCE_NAME]
 
 
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(path.relative_to(folder)): path.read_bytes() for path in sorted(folder.rglob("*")) if path.is_file()}
+
+
+def _raise(error: BaseException):
+    def fail(*args, **kwargs):
+        raise error
+
+    return fail
+
+
+def _fail_on_second_rename(monkeypatch):
+    calls = []
+    original = os.rename
+
+    def rename(source, destination):
+        calls.append(source)
+        if len(calls) == 2:  # the old folder is aside; putting the new one in fails
+            raise OSError(28, "No space left on device")
+        original(source, destination)
+
+    monkeypatch.setattr(export_module.os, "rename", rename)
+
+
+@pytest.mark.parametrize(
+    "failure",
+    ["write_c_code", "manifest_interrupted", "second_rename"],
+)
+def test_interrupted_overwrite_keeps_the_old_export(failure, paper_export, tmp_path, monkeypatch):
+    folder = tmp_path / "previous"
+    shutil.copytree(paper_export.folder, folder)  # a whole export, with its library when there is a compiler
+    (folder / "notes.txt").write_text("mine")
+    (folder / "plots").mkdir()
+    (folder / "plots" / "a.txt").write_text("also mine")
+    before = _snapshot(folder)
+    if failure == "write_c_code":
+        monkeypatch.setattr(export_module, "_write_c_code", _raise(CodegenError("cannot write: disk full")))
+        expected: type[BaseException] = CodegenError
+    elif failure == "manifest_interrupted":  # Ctrl-C once every other file is written
+        monkeypatch.setattr(export_module, "_manifest", _raise(KeyboardInterrupt()))
+        expected = KeyboardInterrupt
+    else:
+        _fail_on_second_rename(monkeypatch)
+        expected = CodegenError
+    with pytest.raises(expected):
+        _export(folder, OTHER, overwrite=True, compile=False)
+    assert _snapshot(folder) == before  # the old export and the user's files, byte for byte
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["previous"]  # no temporary folder left
+
+
+def test_overwrite_swaps_the_folder_and_carries_other_files_over(tmp_path):
+    folder = tmp_path / "out"
+    first = _export(folder, OTHER, compile=False)
+    (folder / "notes.txt").write_text("mine")
+    (folder / "plots").mkdir()
+    (folder / "plots" / "a.txt").write_text("also mine")
+    (folder / "link").symlink_to("notes.txt")
+    folder.chmod(0o750)
+    second = _export(folder, PAPER, overwrite=True, compile=False)
+    assert (folder / "notes.txt").read_text() == "mine" and (folder / "plots" / "a.txt").read_text() == "also mine"
+    assert os.readlink(folder / "link") == "notes.txt"
+    assert (folder.stat().st_mode & 0o777) == 0o750
+    assert second.manifest["parameters"]["tau"] == PAPER["tau"] != first.manifest["parameters"]["tau"]
+    assert json.loads((folder / MANIFEST_NAME).read_text()) == second.manifest
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["out"]
+
+
+def test_leftovers_of_a_killed_export_are_cleaned_or_restored(tmp_path):
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    folder = tmp_path / "out"
+    staging = tmp_path / f".out.export-{dead.pid}-0a1b2c3d"  # killed while writing
+    staging.mkdir()
+    (staging / "step.casadi").write_text("half")
+    aside = tmp_path / f".out.replaced-{dead.pid}-0a1b2c3d"  # killed between the two renames
+    aside.mkdir()
+    (aside / MANIFEST_NAME).write_text("{}")
+    with pytest.raises(SpecificationError, match="is not empty"):  # the old export is back: not replaced
+        _export(folder, OTHER, compile=False)
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["out"]
+    assert (folder / MANIFEST_NAME).read_text() == "{}"
+
+
+def test_export_into_the_working_directory(tmp_path, monkeypatch):
+    """The current directory cannot be renamed away: its files are replaced one by one, the manifest last."""
+    folder = tmp_path / "here"
+    _export(folder, OTHER, compile=False)
+    (folder / "notes.txt").write_text("mine")
+    monkeypatch.chdir(folder)
+    result = _export(Path("."), PAPER, overwrite=True, compile=False)
+    assert Path.cwd() == folder.resolve() and (Path(".") / "notes.txt").read_text() == "mine"
+    assert json.loads(Path(MANIFEST_NAME).read_text()) == result.manifest
+    names = {path.name for path in folder.iterdir()}
+    assert names == {path.name for path in result.files} | {"notes.txt"}  # no staging folder left
+
+
+def test_overwrite_through_a_symbolic_link_keeps_the_link(tmp_path):
+    real = tmp_path / "real"
+    _export(real, OTHER, compile=False)
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    result = _export(link, PAPER, overwrite=True, compile=False)
+    assert link.is_symlink() and result.folder == link
+    assert json.loads((real / MANIFEST_NAME).read_text())["parameters"]["tau"] == PAPER["tau"]
+
+
 def test_unwritable_folder(tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
@@ -274,8 +382,7 @@ def test_invalid_loop_is_refused_before_writing(tmp_path):
 
 
 def test_no_compiler_writes_sources_and_warns(tmp_path, monkeypatch):
-    # The module itself (the package may also bind the name mrpctl.export to the function).
-    monkeypatch.setattr(importlib.import_module("mrpctl.export"), "find_compiler", lambda: None)
+    monkeypatch.setattr(export_module, "find_compiler", lambda: None)
     with pytest.warns(CompilerWarning, match="no C compiler found"):
         result = _export(tmp_path / "nocc", OTHER)
     assert result.library is None and not result.compiled

@@ -20,11 +20,15 @@ become ``mrpctl__...``), so the generated code links next to other CasADi code. 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
 import os
-import subprocess
+import re
+import secrets
+import shutil
+import stat
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -33,7 +37,7 @@ from typing import Any
 
 import casadi as ca
 
-from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, find_compiler
+from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_library, compiler_version, find_compiler
 from mrpctl.errors import CodegenError, SpecificationError
 from mrpctl.simulate import ClosedLoopFunctions, closed_loop_functions
 from mrpctl.spacecraft import Spacecraft
@@ -68,7 +72,7 @@ EXPORTED_FUNCTIONS = ("dynamics", "controller", "rule", "step", "sample", "chunk
 MANIFEST_FORMAT_VERSION = 1
 
 # Code-generation options: the same number types as mrpctl._compile, plus a header and the prefix.
-_CODEGEN_OPTIONS = {
+_CODEGEN_OPTIONS: dict[str, Any] = {
     "with_header": True,
     "prefix": C_PREFIX,
     "casadi_real": "double",
@@ -155,6 +159,10 @@ def export(
 ) -> ExportResult:
     """Write the closed loop's CasADi Functions to ``out_dir`` as ``.casadi`` files, C code and a library.
 
+    Everything is written into a temporary sibling folder first, which then replaces
+    ``out_dir`` in one rename (the old folder is renamed aside first and removed last): an
+    error or Ctrl-C at any point leaves ``out_dir`` as it was, and never half an export.
+
     Parameters
     ----------
     spacecraft : Spacecraft
@@ -173,9 +181,10 @@ def export(
     substeps : int, keyword-only
         RK4 substeps per measurement period in ``step``, default 1.
     overwrite : bool, keyword-only
-        Allow a non-empty ``out_dir``: the files of a previous export (the names listed
-        in the module docstring) are replaced and the library removed if not rebuilt;
-        other files are left as they are. Default False.
+        Allow a non-empty ``out_dir``: the previous export in it (the names listed in the
+        module docstring) is replaced as a whole, a library that is not rebuilt disappears,
+        and other files and folders in it are carried over into the new folder unchanged.
+        Default False.
     compile : bool, keyword-only
         Build the shared library when a C compiler is found (default True).
 
@@ -190,7 +199,8 @@ def export(
         On invalid loop parameters, or when ``out_dir`` is a non-empty folder and
         ``overwrite`` is false, or is an existing file.
     CodegenError
-        When ``out_dir`` cannot be created or written, or the compiler fails.
+        When ``out_dir`` cannot be created or written, ``$CC`` names no compiler, or the
+        compiler fails or times out.
 
     Warns
     -----
@@ -201,26 +211,42 @@ def export(
     overwrite = _flag("overwrite", overwrite)
     compile = _flag("compile", compile)
     closed = closed_loop_functions(spacecraft, K, tau=tau, rule=rule, rate=rate, substeps=substeps)
-    folder = _prepare_folder(out_dir, overwrite)
+    folder = _path(out_dir)
+    target = Path(os.path.realpath(folder))  # a symbolic link stays, its target is replaced
+    _clean_leftovers(target)  # first: it may put back a folder that a killed export had moved aside
+    _check_folder(folder, overwrite)
     functions = {name: closed.functions()[name] for name in EXPORTED_FUNCTIONS}
-
-    written: list[Path] = []
-    for name, function in functions.items():
-        path = folder / f"{name}.casadi"
-        _write(path, lambda path=path, function=function: function.save(str(path)))
-        written.append(path)
-    written += _write_c_code(folder, functions)
-
-    library, reason = _build_library(folder, compile)
-    if library is not None:
-        written.append(library)
-
-    manifest = _manifest(closed, functions, folder, written, library, reason)
-    manifest_path = folder / MANIFEST_NAME
-    _write(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
-    written.append(manifest_path)
+    in_place = _in_place(target)
+    staging = _staging_folder(target, in_place)
+    try:
+        names: list[str] = []
+        for name, function in functions.items():
+            path = staging / f"{name}.casadi"
+            _write(path, lambda path=path, function=function: function.save(str(path)))
+            names.append(path.name)
+        names += _write_c_code(staging, functions)
+        compiler, reason = _build_library(staging, compile)
+        if compiler is not None:
+            names.append(LIBRARY_NAME)
+        manifest = _manifest(closed, functions, staging, names, compiler, reason)
+        manifest_path = staging / MANIFEST_NAME
+        _write(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
+        names.append(MANIFEST_NAME)
+        if in_place:
+            _publish_in_place(staging, target, names)
+        else:
+            _publish(staging, target)
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
     logger.info("exported %d Functions to %s", len(functions), folder)
-    return ExportResult(folder=folder, files=tuple(written), library=library, skipped_reason=reason, manifest=manifest)
+    return ExportResult(
+        folder=folder,
+        files=tuple(folder / name for name in names),
+        library=folder / LIBRARY_NAME if compiler is not None else None,
+        skipped_reason=reason,
+        manifest=manifest,
+    )
 
 
 def content_hash(folder: str | os.PathLike[str], names: Any) -> str:
@@ -248,31 +274,154 @@ def _export_names() -> tuple[str, ...]:
     return (*names, SOURCE_NAME, HEADER_NAME, LIBRARY_NAME, MANIFEST_NAME)
 
 
-def _prepare_folder(out_dir: Any, overwrite: bool) -> Path:
+def _path(out_dir: Any) -> Path:
     try:
-        folder = Path(out_dir)
+        return Path(out_dir)
     except TypeError as exc:
         raise SpecificationError(f"out_dir must be a path, got {out_dir!r}") from exc
+
+
+def _check_folder(folder: Path, overwrite: bool) -> None:
+    """Refuse ``folder`` if it is a file, or a non-empty folder without ``overwrite``."""
     if folder.exists() and not folder.is_dir():
         raise SpecificationError(f"out_dir {str(folder)!r} exists and is not a folder")
+    if folder.is_dir():
+        try:
+            present = sorted(entry.name for entry in folder.iterdir())
+        except OSError as exc:
+            raise CodegenError(f"cannot read the export folder out_dir {str(folder)!r}: {exc}") from exc
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise CodegenError(f"the export folder out_dir {str(folder)!r} is not writable")
+        if present and not overwrite:
+            shown = ", ".join(present[:5]) + (", ..." if len(present) > 5 else "")
+            raise SpecificationError(
+                f"out_dir {str(folder)!r} is not empty ({len(present)} entries: {shown}); "
+                "choose an empty or new folder, or pass overwrite=True to replace a previous export"
+            )
+
+
+def _in_place(target: Path) -> bool:
+    """True when ``target`` cannot be swapped: the working directory (or above it), a mount point,
+    or its parent is not writable. Files are then replaced one by one inside it."""
+    if not target.is_dir():
+        return False
+    cwd = Path(os.path.realpath(os.getcwd()))
+    if cwd == target or target in cwd.parents or os.path.ismount(target):
+        return True
+    return not os.access(target.parent, os.W_OK | os.X_OK)
+
+
+def _staging_folder(target: Path, in_place: bool) -> Path:
+    """A new private folder beside ``target`` (inside it when in place); leftovers are cleaned first."""
+    tag = f"{os.getpid()}-{secrets.token_hex(4)}"
+    if in_place:
+        home, staging = target, target / f"{_IN_PLACE_PREFIX}{tag}"
+    else:
+        home, staging = target.parent, target.parent / f".{target.name}{_NEW_INFIX}{tag}"
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        present = sorted(entry.name for entry in folder.iterdir())
+        home.mkdir(parents=True, exist_ok=True)
+        staging.mkdir()
     except OSError as exc:
-        raise CodegenError(f"cannot create the export folder out_dir {str(folder)!r}: {exc}") from exc
-    if present and not overwrite:
-        shown = ", ".join(present[:5]) + (", ..." if len(present) > 5 else "")
-        raise SpecificationError(
-            f"out_dir {str(folder)!r} is not empty ({len(present)} entries: {shown}); "
-            "choose an empty or new folder, or pass overwrite=True to replace a previous export"
-        )
-    for name in _export_names():
-        if name in present:
-            path = folder / name
-            _write(path, path.unlink)
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise CodegenError(f"the export folder out_dir {str(folder)!r} is not writable")
-    return folder
+        raise CodegenError(f"cannot create the export folder out_dir {str(target)!r}: {exc}") from exc
+    return staging
+
+
+_NEW_INFIX = ".export-"
+_OLD_INFIX = ".replaced-"
+_IN_PLACE_PREFIX = ".mrpctl-export-"
+
+
+def _clean_leftovers(target: Path) -> None:
+    """Remove staging folders of killed exports; put back a folder a killed export had moved aside."""
+    patterns = [(target.parent, re.compile(rf"\.{re.escape(target.name)}(\.export-|\.replaced-)(\d+)-[0-9a-f]+"))]
+    if target.is_dir():
+        patterns.append((target, re.compile(r"\.mrpctl-export-()(\d+)-[0-9a-f]+")))
+    for home, pattern in patterns:
+        try:
+            entries = list(home.iterdir())
+        except OSError:
+            continue
+        for entry in entries:
+            match = pattern.fullmatch(entry.name)
+            if match is None or not abandoned(entry, int(match.group(2))):
+                continue
+            if match.group(1) == _OLD_INFIX and not os.path.lexists(target):
+                try:
+                    os.rename(entry, target)  # killed between the two renames of the swap: restore
+                except OSError as exc:
+                    logger.warning("could not restore %s from %s: %s", target, entry, exc)
+                else:
+                    logger.warning("restored %s from %s, left by an interrupted export", target, entry)
+            else:
+                shutil.rmtree(entry, ignore_errors=True)
+                logger.info("removed %s, left by an interrupted export", entry)
+
+
+def _carry_over(old: Path, staging: Path) -> None:
+    """Hard-link (or copy) the entries of ``old`` that export did not write into ``staging``."""
+    ours = set(_export_names())
+    for entry in old.iterdir():
+        if entry.name in ours or entry.name.startswith(_IN_PLACE_PREFIX):
+            continue
+        destination = staging / entry.name
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.copytree(entry, destination, symlinks=True, copy_function=_link_or_copy)
+        elif entry.is_symlink():
+            os.symlink(os.readlink(entry), destination)
+        else:
+            _link_or_copy(str(entry), str(destination))
+
+
+def _link_or_copy(source: str, destination: str) -> None:
+    try:
+        os.link(source, destination)
+    except OSError:
+        shutil.copy2(source, destination)
+
+
+def _publish(staging: Path, target: Path) -> None:
+    """Swap ``staging`` in as ``target``: old folder renamed aside, new one renamed in, old one removed."""
+    if not os.path.lexists(target):
+        _swap_rename(staging, target, target)
+        return
+    try:
+        _carry_over(target, staging)
+        os.chmod(staging, stat.S_IMODE(target.stat().st_mode))
+    except OSError as exc:
+        raise CodegenError(f"cannot carry the other files of out_dir {str(target)!r} over: {exc}") from exc
+    aside = target.parent / f".{target.name}{_OLD_INFIX}{os.getpid()}-{secrets.token_hex(4)}"
+    _swap_rename(target, aside, target)
+    try:
+        _swap_rename(staging, target, target)
+    except BaseException:
+        os.rename(aside, target)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
+
+
+def _swap_rename(source: Path, destination: Path, target: Path) -> None:
+    try:
+        os.rename(source, destination)
+    except OSError as exc:
+        raise CodegenError(f"cannot put the export in place at out_dir {str(target)!r}: {exc}") from exc
+
+
+def _publish_in_place(staging: Path, target: Path, names: list[str]) -> None:
+    """Replace the export's files in ``target`` one by one (each atomically), the manifest last.
+
+    The old manifest goes first, so that a folder interrupted half-way has none."""
+    try:
+        with contextlib.suppress(FileNotFoundError):
+            (target / MANIFEST_NAME).unlink()
+        for name in names:
+            if name != MANIFEST_NAME:
+                os.replace(staging / name, target / name)
+        for name in set(_export_names()) - set(names):
+            with contextlib.suppress(FileNotFoundError):
+                (target / name).unlink()
+        os.replace(staging / MANIFEST_NAME, target / MANIFEST_NAME)
+    except OSError as exc:
+        raise CodegenError(f"cannot write the export into out_dir {str(target)!r}: {exc}") from exc
 
 
 def _write(path: Path, action: Any) -> None:
@@ -283,7 +432,7 @@ def _write(path: Path, action: Any) -> None:
         raise CodegenError(f"cannot write {path}: {exc}") from exc
 
 
-def _write_c_code(folder: Path, functions: Mapping[str, ca.Function]) -> list[Path]:
+def _write_c_code(folder: Path, functions: Mapping[str, ca.Function]) -> list[str]:
     """One .c/.h pair; each Function is wrapped under the name ``mrpctl_<name>`` (same arithmetic)."""
     generator = ca.CodeGenerator(SOURCE_NAME, _CODEGEN_OPTIONS)
     for name, function in functions.items():
@@ -292,11 +441,11 @@ def _write_c_code(folder: Path, functions: Mapping[str, ca.Function]) -> list[Pa
             ca.Function(C_PREFIX + name, symbols, function.call(symbols), function.name_in(), function.name_out())
         )
     _write(folder / SOURCE_NAME, lambda: generator.generate(str(folder) + os.sep))
-    return [folder / SOURCE_NAME, folder / HEADER_NAME]
+    return [SOURCE_NAME, HEADER_NAME]
 
 
-def _build_library(folder: Path, compile: bool) -> tuple[Path | None, str | None]:
-    """Compile the C source into the shared library; (None, reason) when skipped."""
+def _build_library(folder: Path, compile: bool) -> tuple[str | None, str | None]:
+    """Compile the C source into the shared library: (compiler, None), or (None, reason) when skipped."""
     if not compile:
         return None, "compile=False was given"
     compiler = find_compiler()
@@ -308,30 +457,12 @@ def _build_library(folder: Path, compile: bool) -> tuple[Path | None, str | None
         )
         warnings.warn(reason, CompilerWarning, stacklevel=3)
         return None, reason
-    library = folder / LIBRARY_NAME
-    command = [compiler, *DEFAULT_FLAGS, SOURCE_NAME, "-o", LIBRARY_NAME, "-lm"]
-    try:
-        done = subprocess.run(command, cwd=folder, capture_output=True, text=True, check=False)
-    except OSError as exc:
-        raise CodegenError(f"could not run the C compiler {compiler}: {exc}") from exc
-    if done.returncode != 0:
-        raise CodegenError(
-            f"{Path(compiler).name} failed (exit {done.returncode}) on {folder / SOURCE_NAME}:\n" + done.stderr[-4000:]
-        )
-    logger.debug("built %s with %s", library, " ".join(command))
-    return library, None
+    build_library(folder / SOURCE_NAME, folder / LIBRARY_NAME, compiler=compiler, flags=DEFAULT_FLAGS)
+    return compiler, None
 
 
-def _compiler_description() -> dict[str, Any]:
-    compiler = find_compiler()
-    if compiler is None:
-        return {"path": None, "version": None}
-    try:
-        done = subprocess.run([compiler, "--version"], capture_output=True, text=True, check=False, timeout=30)
-        version = done.stdout.splitlines()[0] if done.stdout else None
-    except (OSError, subprocess.SubprocessError):
-        version = None
-    return {"path": compiler, "version": version}
+def _compiler_description(compiler: str) -> dict[str, Any]:
+    return {"path": compiler, "version": compiler_version(compiler)}
 
 
 def _ports(function: ca.Function, inputs: bool) -> list[dict[str, Any]]:
@@ -348,19 +479,18 @@ def _manifest(
     closed: ClosedLoopFunctions,
     functions: Mapping[str, ca.Function],
     folder: Path,
-    written: list[Path],
-    library: Path | None,
+    names: list[str],
+    compiler: str | None,
     reason: str | None,
 ) -> dict[str, Any]:
     import mrpctl  # the package version; imported here because mrpctl may import this module
 
     rule = closed.rule
-    names = [path.name for path in written]
     return {
         "format": "mrpctl-export",
         "format_version": MANIFEST_FORMAT_VERSION,
         "mrpctl_version": mrpctl.__version__,
-        "casadi_version": ca.__version__,
+        "casadi_version": vars(ca)["__version__"],
         "state": "x = [sigma; omega/4] (6): MRPs sigma (dimensionless), body rate omega (rad/s)",
         "input": "u (3): control torque (N m), u = K x_meas",
         "parameters": {
@@ -395,9 +525,9 @@ def _manifest(
             "symbol_prefix": C_PREFIX,
             "casadi_real": _CODEGEN_OPTIONS["casadi_real"],
             "casadi_int": _CODEGEN_OPTIONS["casadi_int"],
-            "library": LIBRARY_NAME if library is not None else None,
+            "library": LIBRARY_NAME if compiler is not None else None,
             "library_skipped_reason": reason,
-            "compiler": _compiler_description() if library is not None else None,
+            "compiler": _compiler_description(compiler) if compiler is not None else None,
             "flags": [*DEFAULT_FLAGS, "-lm"],
         },
         "files": {name: _file_digest(folder / name) for name in sorted(names)},
