@@ -24,7 +24,7 @@ from typing import IO, TYPE_CHECKING, Any, TextIO
 import numpy as np
 
 from mrpctl import __version__, paper
-from mrpctl._validation import finite_array, integer
+from mrpctl._validation import finite_array, integer, positive_scalar
 from mrpctl.errors import DimensionError, MrpctlError, SpecificationError
 from mrpctl.scenario import (
     RULE_NAMES,
@@ -409,13 +409,14 @@ def _design(args: argparse.Namespace) -> int:
         for option, value in (("--rate", args.rate), ("--t-final", args.t_final), ("--rule", args.rule)):
             if value is not None:
                 raise SpecificationError(f"{option} applies only with --toml (it goes into the written scenario)")
-    elif args.eps is not None or args.alpha is not None:
-        raise SpecificationError("--eps and --alpha apply only with --toml and --rule")
+        if args.eps is not None or args.alpha is not None:
+            raise SpecificationError("--eps and --alpha apply only with --toml and --rule")
     if args.zeta < 1.0 and not args.allow_underdamped:
         raise SpecificationError(
             f"--zeta {args.zeta:g} is underdamped (zeta < 1: the response overshoots); "
             "pass --allow-underdamped to design it anyway"
         )
+    positive_scalar("--tau", args.tau)
     spacecraft = _spacecraft_from(args.inertia)
     toml_path = None if args.toml is None else Path(args.toml)
     rate = 1000.0 if args.rate is None else args.rate

@@ -95,16 +95,6 @@ class Scenario:
     substeps: int = 1
     description: str = ""
 
-    @property
-    def samples(self) -> int:
-        """Measurement instants of a run, n = floor(t_final · rate) + 1 (as in :func:`~mrpctl.simulate.simulate`)."""
-        return math.floor(self.t_final * self.rate + 1e-9) + 1
-
-    @property
-    def delay_samples(self) -> int:
-        """d = τ · rate, the delay in measurement periods (a whole number, checked on construction)."""
-        return round(self.tau * self.rate)
-
     def with_rule(self, rule: SwitchingRule) -> Scenario:
         """The same scenario with another switching rule."""
         return replace(self, rule=rule)

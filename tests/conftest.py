@@ -27,3 +27,23 @@ def paper_reproduction(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, 
 
     out = tmp_path_factory.mktemp("results")
     return out, reproduce(out)
+
+
+@pytest.fixture
+def blank_figures(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Stand-in for ``reproduction._figures``: a blank PNG per figure name.
+
+    For tests of writing, refusing and overwriting the reproduction's files; the real figures
+    (about 10 s to render) are checked once, on :func:`paper_reproduction`.
+    """
+    from matplotlib.figure import Figure
+
+    from mrpctl.reproduction import FIGURE_FILES
+
+    def figures(results: dict, out: Path) -> list[Path]:
+        assert "paper_fig4_on_delayed" in results
+        for name in FIGURE_FILES:
+            Figure(figsize=(1, 1)).savefig(out / name)
+        return [out / name for name in FIGURE_FILES]
+
+    monkeypatch.setattr("mrpctl.reproduction._figures", figures)

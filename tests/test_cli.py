@@ -18,6 +18,7 @@ import pytest
 from mrpctl import __version__, paper
 from mrpctl.cli import EXIT_BROKEN_PIPE, EXIT_DIVERGED, USER_ERROR, main
 from mrpctl.scenario import load_scenario, shipped_scenarios
+from mrpctl.switching import BoundaryLayer
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenarios"
 FIG4 = EXAMPLES / "paper_fig4_on_delayed.toml"
@@ -95,6 +96,20 @@ def test_simulate_without_a_file(capsys: pytest.CaptureFixture[str]) -> None:
     assert data["scenario"]["K"] == k.tolist() and data["scenario"]["rule"] == "none"
     assert data["scenario"]["sigma0"] == [0.1, 0.0, 0.0] and data["scenario"]["omega0"] == [0.0, 0.01, 0.0]
     assert data["result"]["tau"] == 0.2 and data["result"]["switch_count"] == 0
+
+
+def test_simulate_run_overrides(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["simulate", "delay_aware", "--rate", "500", "--substeps", "2", "--history", "zero-input", "--t-final", "1"]
+    assert main([*argv, "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert (data["scenario"]["rate"], data["scenario"]["substeps"], data["scenario"]["history"]) == (
+        500.0,
+        2,
+        "zero-input",
+    )
+    assert data["result"]["rate"] == 500.0
+    assert main(["simulate", "delay_aware", "--substeps", "0"]) == USER_ERROR
+    _one_line_error(capsys, "--substeps must be >= 1")
 
 
 def test_fail_on_divergence(capsys: pytest.CaptureFixture[str]) -> None:
@@ -189,7 +204,8 @@ def test_sweep_progress_on_a_terminal(monkeypatch: pytest.MonkeyPatch, capsys: p
 def test_sweep_tumble_csv_and_ranges(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     table = tmp_path / "t.csv"
     argv = ["sweep", "tumble", "--count", "4", "--seed", "2", "--rule", "delay-aware", "--t-final", "5"]
-    argv += ["--angle-range", "120", "130", "--rate-range", "0.1", "0.2", "--csv", str(table), "--json"]
+    argv += ["--angle-range", "120", "130", "--rate-range", "0.1", "0.2", "--cross-rate", "0", "--csv", str(table)]
+    argv += ["--json"]
     assert main(argv) == 0
     data = json.loads(capsys.readouterr().out)
     assert len(data["runs"]) == 4 and data["diverged"] == 0
@@ -199,6 +215,9 @@ def test_sweep_tumble_csv_and_ranges(tmp_path: Path, capsys: pytest.CaptureFixtu
         sigma = np.array([float(row[f"sigma0_{i}"]) for i in (1, 2, 3)])
         angle = np.degrees(4 * np.arctan(np.linalg.norm(sigma)))
         assert 120.0 <= angle <= 130.0
+        omega = np.array([float(row[f"omega0_{i}_rad_s"]) for i in (1, 2, 3)])
+        assert np.linalg.norm(np.cross(omega, sigma)) <= 1e-12 * np.linalg.norm(sigma)  # --cross-rate 0
+        assert 0.1 <= np.linalg.norm(omega) <= 0.2
         assert row["diverged"] == "False"
 
 
@@ -242,6 +261,8 @@ def test_flags_that_do_not_apply(argv: list[str], message: str, capsys: pytest.C
         (["simulate", str(FIG4), "--t-final", "1", "--plot", "x.jpg2000"], "unknown image format 'jpg2000'"),
         (["sweep", "eps", "--values", "0.1", "--plot", "x.jpg2000"], "unknown image format"),
         (["design", "--inertia", "140", "100", "80", "--tau", "0.5", "--zeta", "0.7"], "--allow-underdamped"),
+        (["design", "--inertia", "140", "100", "80", "--tau", "nan"], "--tau must be finite"),
+        (["design", "--inertia", "140", "100", "80", "--tau", "0"], "--tau must be > 0"),
     ],
 )
 def test_user_errors_are_one_line(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -347,6 +368,12 @@ def test_design_verify_simulate_flow(tmp_path: Path, monkeypatch: pytest.MonkeyP
         assert run["result"]["converged"] is True
     assert main(["design", "--inertia", "12", "15", "9", "--tau", "0.2", "--toml", "s.toml"]) == USER_ERROR
     _one_line_error(capsys, "--toml s.toml already exists", "--overwrite")
+    argv = ["design", "--inertia", "12", "15", "9", "--tau", "0.2", "--toml", "s.toml", "--overwrite", "--order", "1"]
+    argv += ["--rule", "boundary-layer", "--eps", "0.01", "--t-final", "5", "--rate", "500"]
+    assert main(argv) == 0
+    again = load_scenario("s.toml")
+    assert again.rule == BoundaryLayer(eps=0.01)
+    assert (again.t_final, again.rate, again.tau) == (5.0, 500.0, 0.2)
 
 
 def test_init_writes_a_runnable_starter(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -366,7 +393,11 @@ def test_init_writes_a_runnable_starter(tmp_path: Path, capsys: pytest.CaptureFi
 
 
 def test_reproduce_refuses_and_overwrites(
-    paper_reproduction, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    paper_reproduction,
+    blank_figures: None,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
     """The session's runs (conftest) go through `mrpctl reproduce`; a user's claims.md is kept without --overwrite."""
     _, computed = paper_reproduction
@@ -376,20 +407,7 @@ def test_reproduce_refuses_and_overwrites(
         calls.append(t_final)
         return computed
 
-    def blank_figures(results: dict, out: Path) -> list[Path]:
-        # Rendering the eight 60 s figures is test_reproduction's job (and takes ~10 s); here the CLI's
-        # refusal, overwrite and atomic write are tested, so a blank image stands in for each figure.
-        from matplotlib.figure import Figure
-
-        from mrpctl.reproduction import FIGURE_FILES
-
-        assert "paper_fig4_on_delayed" in results
-        for name in FIGURE_FILES:
-            Figure(figsize=(1, 1)).savefig(out / name)
-        return [out / name for name in FIGURE_FILES]
-
     monkeypatch.setattr("mrpctl.reproduction.run_reproduction", shared)
-    monkeypatch.setattr("mrpctl.reproduction._figures", blank_figures)
     out = tmp_path / "results"
     assert main(["reproduce", "--out", str(out)]) == 0
     assert (out / "claims.md").exists() and (out / "fig5_on_delayed_zoom.png").read_bytes()[:4] == b"\x89PNG"

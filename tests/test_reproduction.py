@@ -54,7 +54,9 @@ def test_existing_outputs_are_refused_before_any_run(tmp_path: Path, monkeypatch
     assert (tmp_path / "claims.md").read_text(encoding="utf-8") == "my own notes\n"
 
 
-def test_interrupted_write_keeps_old_files(reproduction, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_interrupted_write_keeps_old_files(
+    reproduction, blank_figures: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Ctrl-C while writing: the old claims.md and summary.json survive whole, no staging folder stays."""
     _, result = reproduction
     out = tmp_path / "results"
@@ -66,13 +68,13 @@ def test_interrupted_write_keeps_old_files(reproduction, tmp_path: Path, monkeyp
     def interrupted(*_: object) -> str:
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("mrpctl.reproduction._claims_markdown", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        write_reproduction(result, out, overwrite=True)
+    with monkeypatch.context() as patch:
+        patch.setattr("mrpctl.reproduction._claims_markdown", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            write_reproduction(result, out, overwrite=True)
     assert (out / "claims.md").read_text(encoding="utf-8") == "old claims.md\n"
     assert (out / "summary.json").read_text(encoding="utf-8") == "old summary.json\n"
     assert sorted(os.listdir(tmp_path)) == ["results"]
-    monkeypatch.undo()
     written = write_reproduction(result, out, overwrite=True)
     assert isinstance(written, Reproduction) and len(written.files) == len(OUTPUT_FILES)
     assert json.loads((out / "summary.json").read_text(encoding="utf-8"))["runs"]
