@@ -174,14 +174,18 @@ def _check_plot_path(path: Path | None) -> None:
 
 
 def _save_plot(figure: Any, path: Path) -> Path:
-    """Render ``figure`` to ``path`` atomically (temp file + os.replace), format from the suffix."""
-    import matplotlib.pyplot as plt
+    """Write ``figure`` with :func:`mrpctl.plots.save_figure` to a temporary sibling, then ``os.replace`` it."""
+    from mrpctl import plots
 
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".partial{path.suffix}", dir=path.parent)
+    os.close(handle)
     try:
-        with _atomic_output(path, "wb") as stream:
-            figure.savefig(stream, format=path.suffix.lower().lstrip("."), dpi=110)
+        plots.save_figure(figure, name)
+        os.replace(name, path)
     finally:
-        plt.close(figure)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(name)
     return path
 
 

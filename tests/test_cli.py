@@ -315,8 +315,18 @@ def test_design_full_inertia_and_underdamped(capsys: pytest.CaptureFixture[str])
     w = data["omega_n"]
     k1, k2 = -(w**2) * np.eye(3), -2 * 0.7 * w * np.eye(3)
     assert np.allclose(data["K"], 4 * j @ np.hstack((k1, k2)), rtol=1e-12, atol=1e-12)
-    assert main([*argv, "--allow-underdamped"]) == 0
-    assert "underdamped" in capsys.readouterr().out
+    assert np.allclose(data["zeta"], 0.7, rtol=1e-12)
+
+
+def test_damping_words() -> None:
+    from mrpctl.cli import _damping_kind
+
+    assert _damping_kind(1.0) == _damping_kind(1.0 + 1e-12) == "critically damped"
+    assert (_damping_kind(0.7), _damping_kind(1.2), _damping_kind(float("nan"))) == (
+        "underdamped",
+        "overdamped",
+        "no restoring gain",
+    )
 
 
 def test_design_without_gains_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
