@@ -77,6 +77,24 @@ def test_simulate_writes_plot_and_csv(tmp_path: Path, capsys: pytest.CaptureFixt
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv", "run.png"]  # no temporary file left
 
 
+def test_interrupted_csv_keeps_the_old_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C while the CSV is written: exit 130, the old file intact, no temporary file left."""
+    table = tmp_path / "run.csv"
+    table.write_text("old\n", encoding="utf-8")
+
+    def interrupted(stream: io.TextIOBase, *_: object, **__: object) -> None:
+        stream.write("0,0.93,")  # half a row, then Ctrl-C
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(np, "savetxt", interrupted)
+    assert main(["simulate", "delay_aware", "--t-final", "0.1", "--csv", str(table)]) == 130
+    assert capsys.readouterr().err == "mrpctl: interrupted\n"
+    assert table.read_text(encoding="utf-8") == "old\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["run.csv"]
+
+
 def test_simulate_json_and_shipped_name(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["simulate", "paper_fig4_on_delayed", "--t-final", "2", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
