@@ -117,16 +117,20 @@ def _check_history_fits(scenario: Scenario) -> None:
         )
 
 
-def _check_sweep_fits(base: Scenario, count: int, taus: Sequence[float]) -> None:
-    """Refuse, before starting, a sweep that would not fit in memory or would not end within about a day."""
+def _check_sweep_fits(base: Scenario, count: int, taus: Sequence[float], chunk: int) -> None:
+    """Refuse, before starting, a sweep that would not fit in memory or would not end within about a day.
+
+    Kept: one table row per run, and the d-sample histories of the ``chunk`` runs of one batch call.
+    """
     samples = base.t_final * base.rate + 1.0
     delayed = max(taus) * base.rate + 1.0
-    need = BYTES_PER_SWEEP_RUN * count + BYTES_PER_DELAY_SAMPLE * delayed * 100
+    need = BYTES_PER_SWEEP_RUN * count + BYTES_PER_DELAY_SAMPLE * delayed * min(chunk, count)
     limit = _memory_limit()
     if need > limit:
         raise SpecificationError(
-            f"{count} runs would keep about {_size(need)}, more than the {_size(limit)} allowed (half of this "
-            "machine's memory); choose a smaller --count, or split the sweep with --seed"
+            f"{count} runs with delays up to {max(taus):g} s at {base.rate:g} Hz would keep about {_size(need)}, "
+            f"more than the {_size(limit)} allowed (half of this machine's memory); choose a smaller --count "
+            "(split the sweep with --seed) or shorter delays"
         )
     total = samples * count
     if total > MAX_SWEEP_SAMPLES:
@@ -671,7 +675,7 @@ def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, s
     if args.values:
         raise SpecificationError("--values does not apply to 'sweep tumble': use --count, --angle-range, --rate-range")
     count = integer("--count", 50 if args.count is None else args.count, minimum=1)
-    _check_sweep_fits(base, count, [base.tau])
+    _check_sweep_fits(base, count, [base.tau], integer("--chunk", args.chunk, minimum=1))
     states = tumbling_states(
         count,
         seed=0 if args.seed is None else args.seed,
@@ -688,9 +692,9 @@ def _sweep(args: argparse.Namespace) -> int:
     base = load_scenario(args.scenario) if args.scenario else _paper_base()
     base = _apply_overrides(base, args)
     _check_plot_path(args.plot)
-    values, label, runs = _sweep_runs(args, base)
-    _check_sweep_fits(base, len(runs), [r.get("tau", base.tau) for r in runs])
     chunk = integer("--chunk", args.chunk, minimum=1)
+    values, label, runs = _sweep_runs(args, base)
+    _check_sweep_fits(base, len(runs), [r.get("tau", base.tau) for r in runs], chunk)
     rows: list[tuple[Any, ...]] = []
     with _progress(len(runs), f"sweep {args.parameter}") as bar:
         for start in range(0, len(runs), chunk):

@@ -275,6 +275,8 @@ def test_flags_that_do_not_apply(argv: list[str], message: str, capsys: pytest.C
         (["sweep", "tumble", "--seed", "-1", "--count", "2"], "seed must be >= 0, got -1"),
         (["sweep", "tumble", "--count", "1000000000000"], "choose a smaller --count"),
         (["sweep", "tumble", "--count", "2", "--t-final", "1e12"], "choose a shorter --t-final"),
+        (["sweep", "tau", "--values", "0.5", "1e15"], "delays up to 1e+15 s at 1000 Hz would keep about"),
+        (["sweep", "tumble", "--chunk", "0"], "--chunk must be >= 1"),
         (["simulate", str(FIG4), "--t-final", "1e12"], "choose a shorter --t-final"),
         (["simulate", str(FIG4), "--t-final", "1", "--plot", "x.jpg2000"], "unknown image format 'jpg2000'"),
         (["sweep", "eps", "--values", "0.1", "--plot", "x.jpg2000"], "unknown image format"),
