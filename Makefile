@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml | $(PYTHON)
 
 demo: $(STAMP)
 	$(VENV)/bin/mrpctl example
-	$(VENV)/bin/mrpctl reproduce --out results
+	$(VENV)/bin/mrpctl reproduce --out results --overwrite
 
 # One BLAS thread per xdist worker: two workers on two cores, no oversubscription.
 BLAS1 := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1

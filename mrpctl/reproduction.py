@@ -5,6 +5,9 @@ from __future__ import annotations
 import enum
 import json
 import math
+import os
+import shutil
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -14,16 +17,20 @@ import numpy as np
 
 from mrpctl import paper
 from mrpctl._validation import positive_scalar
+from mrpctl.errors import SpecificationError
 from mrpctl.scenario import Scenario
 from mrpctl.simulate import SimulationResult
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 __all__ = [
+    "OUTPUT_FILES",
     "Claim",
     "Reproduction",
     "Verdict",
     "paper_scenarios",
     "reproduce",
+    "run_reproduction",
+    "write_reproduction",
 ]
 
 #: Window (s) at the end of a run in which a switch counts as "still switching".
@@ -36,6 +43,19 @@ SWITCH_TIME_TOLERANCE = 0.0005
 ZOOM_WINDOW = 0.1
 #: The LMI order used for the certificate claim (Bessel-Legendre N = 3).
 CERTIFICATE_ORDER = 3
+#: The figures written by :func:`write_reproduction`, in order.
+FIGURE_FILES = (
+    "fig2_tau0_on_current.png",
+    "fig3_on_current.png",
+    "fig4_on_delayed.png",
+    "fig5_on_delayed_zoom.png",
+    "fig6_no_switching.png",
+    "fig7_boundary_layer.png",
+    "delay_aware.png",
+    "eps_study.png",
+)
+#: Every file :func:`write_reproduction` writes into its folder (nothing else is touched there).
+OUTPUT_FILES = (*FIGURE_FILES, "claims.md", "summary.json")
 
 
 class Verdict(enum.Enum):
@@ -61,11 +81,25 @@ class Claim:
 
 @dataclass(frozen=True, eq=False)
 class Reproduction:
-    """The outcome of :func:`reproduce`: the runs, the claims and the written files."""
+    """The outcome of :func:`reproduce`: the runs, the claims and the written files.
+
+    Attributes
+    ----------
+    results : dict of str to SimulationResult
+        Every run, by name.
+    claims : tuple of Claim
+        The claims table.
+    files : tuple of Path
+        The files written (empty when nothing was written).
+    design : dict
+        The design measurements of the claims (damping ratios, exact margin, certificate),
+        as written to ``summary.json``.
+    """
 
     results: dict[str, SimulationResult] = field(repr=False)
     claims: tuple[Claim, ...]
     files: tuple[Path, ...]
+    design: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @property
     def agreeing(self) -> int:
@@ -369,7 +403,7 @@ def _claims_markdown(claims: tuple[Claim, ...], runs: dict[str, dict[str, Any]])
 def _figures(results: dict[str, SimulationResult], out: Path) -> list[Path]:
     from mrpctl import plots
 
-    specs: list[tuple[str, Callable[[], Any]]] = [
+    makers: list[tuple[str, Callable[[], Any]]] = [
         ("fig2_tau0_on_current.png", lambda: plots.plot_response(results["paper_fig2_tau0_on_current"])),
         ("fig3_on_current.png", lambda: plots.plot_response(results["paper_fig3_on_current"])),
         ("fig4_on_delayed.png", lambda: plots.plot_response(results["paper_fig4_on_delayed"])),
@@ -389,7 +423,7 @@ def _figures(results: dict[str, SimulationResult], out: Path) -> list[Path]:
         ("delay_aware.png", lambda: plots.plot_response(results["delay_aware"])),
     ]
     eps_runs = [results[f"eps_{eps:g}"] for eps in paper.EPS_STUDY]
-    specs.append(
+    makers.append(
         (
             "eps_study.png",
             lambda: plots.plot_sweep(
@@ -402,24 +436,21 @@ def _figures(results: dict[str, SimulationResult], out: Path) -> list[Path]:
             ),
         )
     )
-    return [plots.save_figure(make(), out / name) for name, make in specs]
+    return [plots.save_figure(make(), out / name) for name, make in makers]
 
 
-def reproduce(out_dir: str | Path | None = None, *, t_final: float = 60.0) -> Reproduction:
-    """Run every scenario of paper sections IV-V, the eps study and the delay-aware rule.
+def run_reproduction(*, t_final: float = 60.0) -> Reproduction:
+    """Run every scenario of paper sections IV-V, the eps study and the delay-aware rule (nothing written).
 
     Parameters
     ----------
-    out_dir : path, optional
-        Folder for the figures (PNG), ``claims.md`` and ``summary.json``; nothing is
-        written when it is None.
     t_final : float, keyword-only
         Horizon of every run (s), default 60.
 
     Returns
     -------
     Reproduction
-        The runs, the claims table and the written files.
+        The runs and the claims table; ``files`` is empty.
     """
     scenarios = paper_scenarios(t_final=t_final)
     results = {name: scenario.simulate() for name, scenario in scenarios.items()}
@@ -431,17 +462,58 @@ def reproduce(out_dir: str | Path | None = None, *, t_final: float = 60.0) -> Re
         results[f"eps_{eps:g}"] = fig7.with_rule(BoundaryLayer(eps=eps)).simulate()
     design_claims, design_summary = _design_claims()
     claims = (*design_claims, *_simulation_claims(results))
-    runs = {name: _run_summary(result) for name, result in results.items()}
-    files: list[Path] = []
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        files += _figures(results, out)
-        claims_path = out / "claims.md"
-        claims_path.write_text(_claims_markdown(claims, runs), encoding="utf-8")
-        summary_path = out / "summary.json"
+    return Reproduction(results=results, claims=claims, files=(), design=design_summary)
+
+
+def _check_out(out: Path, overwrite: bool) -> None:
+    if out.exists() and not out.is_dir():
+        raise SpecificationError(f"out_dir {out} exists and is not a folder")
+    existing = [name for name in OUTPUT_FILES if (out / name).exists()]
+    if existing and not overwrite:
+        raise SpecificationError(
+            f"out_dir {out} already holds {', '.join(existing)}; choose a new folder or pass overwrite=True "
+            "(mrpctl reproduce --overwrite) to replace them"
+        )
+
+
+def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overwrite: bool = False) -> Reproduction:
+    """Write the figures, ``claims.md`` and ``summary.json`` of ``reproduction`` into ``out_dir``.
+
+    Everything is first written into a temporary sibling folder; then the folder is renamed
+    into place (when ``out_dir`` does not exist) or each file is moved in with ``os.replace``.
+    An interruption (Ctrl-C, an error) leaves ``out_dir`` as it was, apart from files already
+    replaced whole; other files in ``out_dir`` are never touched.
+
+    Parameters
+    ----------
+    reproduction : Reproduction
+        From :func:`run_reproduction`.
+    out_dir : path
+        Output folder (created when missing).
+    overwrite : bool, keyword-only
+        Replace files of :data:`OUTPUT_FILES` already in ``out_dir`` (default False: refuse).
+
+    Returns
+    -------
+    Reproduction
+        ``reproduction`` with ``files`` set to the written paths.
+
+    Raises
+    ------
+    SpecificationError
+        If ``out_dir`` already holds one of :data:`OUTPUT_FILES` and ``overwrite`` is False,
+        or is not a folder.
+    """
+    out = Path(out_dir)
+    _check_out(out, overwrite)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    try:
+        _figures(reproduction.results, staging)
+        runs = {name: _run_summary(result) for name, result in reproduction.results.items()}
+        (staging / "claims.md").write_text(_claims_markdown(reproduction.claims, runs), encoding="utf-8")
         summary = {
-            "design": design_summary,
+            "design": reproduction.design,
             "claims": [
                 {
                     "source": c.source,
@@ -449,10 +521,49 @@ def reproduce(out_dir: str | Path | None = None, *, t_final: float = 60.0) -> Re
                     "measurement": c.measurement,
                     "verdict": c.verdict.value,
                 }
-                for c in claims
+                for c in reproduction.claims
             ],
             "runs": runs,
         }
-        summary_path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-        files += [claims_path, summary_path]
-    return Reproduction(results=results, claims=claims, files=tuple(files))
+        (staging / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        if not out.exists():
+            os.replace(staging, out)
+        else:
+            _check_out(out, overwrite)  # again: something may have appeared while computing
+            for name in OUTPUT_FILES:
+                os.replace(staging / name, out / name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return replace(reproduction, files=tuple(out / name for name in OUTPUT_FILES))
+
+
+def reproduce(out_dir: str | Path | None = None, *, t_final: float = 60.0, overwrite: bool = False) -> Reproduction:
+    """Run every scenario of paper sections IV-V, the eps study and the delay-aware rule, and write the results.
+
+    Parameters
+    ----------
+    out_dir : path, optional
+        Folder for the figures (PNG), ``claims.md`` and ``summary.json``; nothing is
+        written when it is None. Written atomically by :func:`write_reproduction`.
+    t_final : float, keyword-only
+        Horizon of every run (s), default 60.
+    overwrite : bool, keyword-only
+        Replace the output files already in ``out_dir`` (default False: refuse before computing).
+
+    Returns
+    -------
+    Reproduction
+        The runs, the claims table and the written files.
+
+    Raises
+    ------
+    SpecificationError
+        If ``out_dir`` already holds an output file and ``overwrite`` is False (checked
+        before anything is computed).
+    """
+    if out_dir is not None:
+        _check_out(Path(out_dir), overwrite)
+    reproduction = run_reproduction(t_final=t_final)
+    if out_dir is None:
+        return reproduction
+    return write_reproduction(reproduction, out_dir, overwrite=overwrite)

@@ -5,21 +5,34 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field, replace
+from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mrpctl._validation import finite_array, finite_scalar, positive_scalar, readonly
-from mrpctl.errors import SpecificationError
-from mrpctl.model import gain_from_pd, gain_matrix, state
+from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
+from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 if TYPE_CHECKING:
     from mrpctl.simulate import SimulationResult
 
-__all__ = ["RULE_NAMES", "Scenario", "load_scenario", "parse_scenario", "rule_from_name", "tumbling_states"]
+__all__ = [
+    "RULE_NAMES",
+    "STARTER_SCENARIO",
+    "Scenario",
+    "load_scenario",
+    "parse_scenario",
+    "resolve_scenario",
+    "rule_from_name",
+    "rule_name",
+    "scenario_toml",
+    "shipped_scenarios",
+    "tumbling_states",
+]
 
 #: The names a scenario file or the command line may give a switching rule.
 RULE_NAMES = {
@@ -136,6 +149,14 @@ def rule_from_name(name: str, *, eps: float | None = None, alpha: float | None =
     return RULE_NAMES[name]()
 
 
+def rule_name(rule: SwitchingRule) -> str:
+    """The scenario-file name of ``rule`` (the inverse of :func:`rule_from_name`)."""
+    for name, cls in RULE_NAMES.items():
+        if type(rule) is cls:
+            return name
+    raise SpecificationError(f"rule {rule!r} has no scenario-file name; use one of {sorted(RULE_NAMES)}")
+
+
 def _check_keys(table: str, data: dict[str, Any], allowed: set[str]) -> None:
     unknown = sorted(set(data) - allowed)
     if unknown:
@@ -161,10 +182,23 @@ def _gain(spacecraft: Spacecraft, gains: dict[str, Any]) -> np.ndarray:
     if forms[0] == ("K",):
         return gain_matrix(gains["K"])
     if forms[0] == ("k_sigma", "k_omega"):
-        k_sigma = finite_scalar("k_sigma", gains["k_sigma"])
-        k_omega = finite_scalar("k_omega", gains["k_omega"])
-        return np.hstack((k_sigma * np.eye(3), k_omega * np.eye(3)))
-    return gain_from_pd(spacecraft, gains["K1"], gains["K2"])
+        k_sigma = _per_axis("k_sigma", gains["k_sigma"], matrix=False)
+        k_omega = _per_axis("k_omega", gains["k_omega"], matrix=False)
+        return np.hstack((k_sigma, k_omega))
+    return gain_from_pd(spacecraft, _per_axis("K1", gains["K1"]), _per_axis("K2", gains["K2"]))
+
+
+def _per_axis(name: str, value: Any, *, matrix: bool = True) -> np.ndarray:
+    """A 3×3 block from a scalar (times I₃), 3 per-axis values (diagonal) or, if ``matrix``, a 3×3 matrix."""
+    array = finite_array(name, value)
+    if array.ndim == 0:
+        return float(array) * np.eye(3)
+    if array.shape == (3,):
+        return np.diag(array)
+    if matrix and array.shape == (3, 3):
+        return array
+    expected = "a scalar, 3 per-axis values or a 3x3 matrix" if matrix else "a scalar or 3 per-axis values"
+    raise DimensionError(f"{name}: expected {expected} but found shape {array.shape}")
 
 
 def _initial_state(initial: dict[str, Any]) -> np.ndarray:
@@ -207,15 +241,13 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
     for key in ("t_final", "tau"):
         if key not in data:
             raise SpecificationError(f"scenario needs {key} (s)")
-    tau = finite_scalar("tau", data["tau"])
-    if tau < 0:
-        raise SpecificationError(f"tau must be >= 0, got {tau}")
+    tau = nonnegative_scalar("tau", data["tau"])
+    rate = positive_scalar("rate", data.get("rate", 1000.0))
+    _check_delay(tau, rate)
     history = data.get("history", "constant")
     if history not in ("constant", "zero-input"):
         raise SpecificationError(f"history must be 'constant' or 'zero-input', got {history!r}")
-    substeps = data.get("substeps", 1)
-    if not isinstance(substeps, int) or substeps < 1:
-        raise SpecificationError(f"substeps must be an integer >= 1, got {substeps!r}")
+    substeps = integer("substeps", data.get("substeps", 1), minimum=1)
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
@@ -224,24 +256,167 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
         tau=tau,
         rule=rule,
         t_final=positive_scalar("t_final", data["t_final"]),
-        rate=positive_scalar("rate", data.get("rate", 1000.0)),
+        rate=rate,
         history=history,
         substeps=substeps,
         description=str(data.get("description", "")),
     )
 
 
+def _check_delay(tau: float, rate: float) -> None:
+    """τ · rate must be a whole number of measurement periods (as :func:`~mrpctl.simulate.simulate` requires)."""
+    samples = tau * rate
+    if not math.isfinite(samples) or abs(samples - round(samples)) > 1e-9 * max(1.0, abs(samples)):
+        raise SpecificationError(
+            f"tau * rate must be a whole number of measurement periods: tau = {tau!r} s and rate = {rate!r} Hz "
+            f"give {samples!r}; choose tau as a multiple of 1/rate"
+        )
+
+
+def shipped_scenarios() -> dict[str, Path]:
+    """The scenario files shipped with mrpctl (package data ``mrpctl/scenarios/*.toml``), by name.
+
+    ``examples/scenarios`` in the source tree is a link to the same folder. The command line
+    accepts these names wherever it takes a scenario file (``mrpctl simulate paper_fig4_on_delayed``).
+    """
+    folder = Path(str(resources.files("mrpctl").joinpath("scenarios")))
+    return {path.stem: path for path in sorted(folder.glob("*.toml"))}
+
+
+def resolve_scenario(name_or_path: str | Path) -> Path:
+    """The file of a scenario given as a path or as the name of a shipped scenario (see :func:`shipped_scenarios`).
+
+    An existing file wins over a shipped name; a name that is neither raises a
+    :class:`~mrpctl.errors.SpecificationError` listing the shipped names.
+    """
+    path = Path(name_or_path)
+    if path.exists():
+        return path
+    shipped = shipped_scenarios()
+    key = path.name.removesuffix(".toml")
+    if path.parent == Path(".") and key in shipped:
+        return shipped[key]
+    raise SpecificationError(f"scenario file not found: {path} (shipped scenario names: {', '.join(shipped)})")
+
+
 def load_scenario(path: str | Path) -> Scenario:
-    """Read a scenario TOML file (see ``examples/*.toml``)."""
-    path = Path(path)
+    """Read a scenario TOML file (UTF-8), or a shipped scenario by name (see :func:`resolve_scenario`)."""
+    path = resolve_scenario(path)
     try:
         with path.open("rb") as handle:
             data = tomllib.load(handle)
     except FileNotFoundError as exc:
         raise SpecificationError(f"scenario file not found: {path}") from exc
+    except IsADirectoryError as exc:
+        raise SpecificationError(f"scenario {path} is a folder, not a TOML file") from exc
+    except UnicodeDecodeError as exc:
+        raise SpecificationError(
+            f"scenario file {path} is not UTF-8 text (TOML files must be UTF-8): byte {exc.start} "
+            f"is {exc.object[exc.start : exc.start + 1]!r}"
+        ) from exc
     except tomllib.TOMLDecodeError as exc:
         raise SpecificationError(f"scenario file {path} is not valid TOML: {exc}") from exc
     return parse_scenario(data, name=path.stem)
+
+
+def _toml_value(value: Any) -> str:
+    """A float, a string or a (nested) list of floats as TOML, floats to full precision (repr)."""
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(float(value))
+
+
+def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
+    """The scenario as a TOML file that :func:`load_scenario` reads back to the same scenario.
+
+    Floats are written with ``repr`` (shortest round-trip form), so K, J and x0 come back
+    bit for bit; the gain is written as the full 3×6 K, with the per-axis loop gains
+    K₁, K₂ as a comment when they are diagonal.
+    """
+    k1, k2 = pd_from_gain(scenario.spacecraft, scenario.K)
+    inertia = scenario.spacecraft.inertia
+    inertia_value = np.diag(inertia) if scenario.spacecraft.is_diagonal else inertia
+    sigma0, omega0 = scenario.x0[:3], 4.0 * scenario.x0[3:]
+    lines = [f"# {line}" if line else "#" for line in comment.splitlines()]
+    lines += [
+        f"name = {_toml_value(scenario.name)}",
+        f"description = {_toml_value(scenario.description)}",
+        f"tau = {_toml_value(scenario.tau)}          # measurement delay (s)",
+        f"rate = {_toml_value(scenario.rate)}        # measurement rate (Hz)",
+        f"t_final = {_toml_value(scenario.t_final)}     # horizon (s)",
+        f"history = {_toml_value(scenario.history)}",
+        f"substeps = {scenario.substeps}",
+        "",
+        "[spacecraft]",
+        f"inertia = {_toml_value(inertia_value)}  # kg m^2",
+        "",
+        "[gains]",
+        "# u = K x(t - tau) on x = [sigma; omega/4], K = [4 J K1, 4 J K2] (N m), row by row",
+    ]
+    if np.array_equal(k1, np.diag(np.diag(k1))) and np.array_equal(k2, np.diag(np.diag(k2))):
+        lines.append(f"# per axis: K1 = {_toml_value(np.diag(k1))} (1/s^2), K2 = {_toml_value(np.diag(k2))} (1/s)")
+    lines.append("K = [")
+    lines += [f"    {_toml_value(row)}," for row in scenario.K]
+    lines += [
+        "]",
+        "",
+        "[initial]",
+        f"sigma = {_toml_value(sigma0)}",
+        f"omega = {_toml_value(omega0)}  # rad/s, body frame",
+        "",
+        "[rule]",
+        f"type = {_toml_value(rule_name(scenario.rule))}",
+    ]
+    if isinstance(scenario.rule, BoundaryLayer):
+        lines.append(f"eps = {_toml_value(scenario.rule.eps)}")
+    if isinstance(scenario.rule, DelayAware):
+        lines.append(f"alpha = {_toml_value(scenario.rule.alpha)}")
+    return "\n".join(lines) + "\n"
+
+
+#: The commented starter scenario written by ``mrpctl init``.
+STARTER_SCENARIO = """\
+# mrpctl scenario: one closed-loop run. Run it with `mrpctl simulate THIS.toml`,
+# certify its gains with `mrpctl verify THIS.toml`. Units: SI, radians (angles in degrees
+# only where the key says _deg). Unknown keys are an error naming the key.
+name = "my_spacecraft"
+description = "starter scenario written by mrpctl init"
+tau = 0.2          # measurement delay tau (s); a whole number of periods 1/rate
+rate = 1000.0      # measurement rate (Hz)
+t_final = 60.0     # horizon (s)
+history = "constant"  # measurements before t = 0: "constant" (= x0) or "zero-input"
+substeps = 1       # RK4 substeps per measurement period
+
+[spacecraft]
+# Principal inertias J = diag(J1, J2, J3), or a full symmetric 3x3 matrix (kg m^2).
+inertia = [12.0, 15.0, 9.0]
+
+[gains]
+# u = K x(t - tau) on x = [sigma; omega/4]. Give exactly one of:
+#   K = [[...6 values...], [...], [...]]      the full 3x6 gain (N m)
+#   k_sigma, k_omega                          K = [k_sigma I3, k_omega I3]; scalars or 3 per-axis values
+#   K1, K2                                    loop gains of sigma'' = K1 sigma + K2 sigma' (K = [4 J K1, 4 J K2]);
+#                                             scalars, 3 per-axis values or 3x3 matrices
+# `mrpctl design --inertia 12 15 9 --tau 0.2 --toml s.toml` writes certified gains.
+# These are critically damped (zeta = 1) at omega_n = 0.8 rad/s: K1 = -0.64, K2 = -1.6.
+K1 = -0.64
+K2 = -1.6
+
+[initial]
+# Either sigma = [s1, s2, s3] (MRPs), or principal_angle_deg and axis.
+principal_angle_deg = 170.0
+axis = [1.0, 0.0, 0.0]
+omega = [0.3, 0.0, 0.0]  # body rates (rad/s)
+
+[rule]
+# Shadow-set switching: "none", "on-current" (|sigma(t)| >= 1), "on-delayed" (|sigma(t - tau)| >= 1),
+# "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1).
+type = "delay-aware"
+"""
 
 
 def tumbling_states(
@@ -266,8 +441,9 @@ def tumbling_states(
     numpy.ndarray
         (count, 6) states, reproducible for a given ``seed``.
     """
-    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
-        raise SpecificationError(f"count must be an integer >= 1, got {count!r}")
+    count = integer("count", count, minimum=1)
+    seed = integer("seed", seed, minimum=0)
+    cross_rate = nonnegative_scalar("cross_rate", cross_rate)
     low, high = (finite_scalar("angle_deg", a) for a in angle_deg)
     if not 0.0 <= low <= high < 360.0:
         raise SpecificationError(f"angle_deg must satisfy 0 <= low <= high < 360, got {angle_deg}")

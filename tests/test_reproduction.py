@@ -3,20 +3,23 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+from pathlib import Path
 
 import pytest
 
 from mrpctl import paper
-from mrpctl.reproduction import Verdict, reproduce
+from mrpctl.errors import SpecificationError
+from mrpctl.reproduction import OUTPUT_FILES, Reproduction, Verdict, reproduce, write_reproduction
 
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture(scope="module")
-def reproduction(tmp_path_factory: pytest.TempPathFactory):
-    out = tmp_path_factory.mktemp("results")
-    return out, reproduce(out)
+@pytest.fixture
+def reproduction(paper_reproduction):
+    """The session's reproduction (tests/conftest.py): computed once, shared with test_cli."""
+    return paper_reproduction
 
 
 def test_every_figure_and_table_is_written(reproduction) -> None:
@@ -35,6 +38,47 @@ def test_every_figure_and_table_is_written(reproduction) -> None:
         assert figure in names
         assert (out / figure).read_bytes()[:4] == b"\x89PNG"
     assert {"claims.md", "summary.json"} <= names
+    assert tuple(p.name for p in result.files) == OUTPUT_FILES
+    assert not [p for p in out.parent.iterdir() if ".partial-" in p.name]  # no staging folder left
+
+
+def test_existing_outputs_are_refused_before_any_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    (tmp_path / "claims.md").write_text("my own notes\n", encoding="utf-8")
+
+    def no_runs(**_: object) -> None:
+        raise AssertionError("reproduce() computed before refusing")
+
+    monkeypatch.setattr("mrpctl.reproduction.run_reproduction", no_runs)
+    with pytest.raises(SpecificationError, match=r"already holds claims.md.*overwrite"):
+        reproduce(tmp_path)
+    assert (tmp_path / "claims.md").read_text(encoding="utf-8") == "my own notes\n"
+
+
+def test_interrupted_write_keeps_old_files(
+    reproduction, blank_figures: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C while writing: the old claims.md and summary.json survive whole, no staging folder stays."""
+    _, result = reproduction
+    out = tmp_path / "results"
+    out.mkdir()
+    for name in ("claims.md", "summary.json"):
+        (out / name).write_text(f"old {name}\n", encoding="utf-8")
+    (out / "notes.txt").write_text("user file\n", encoding="utf-8")
+
+    def interrupted(*_: object) -> str:
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr("mrpctl.reproduction._claims_markdown", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            write_reproduction(result, out, overwrite=True)
+    assert (out / "claims.md").read_text(encoding="utf-8") == "old claims.md\n"
+    assert (out / "summary.json").read_text(encoding="utf-8") == "old summary.json\n"
+    assert sorted(os.listdir(tmp_path)) == ["results"]
+    written = write_reproduction(result, out, overwrite=True)
+    assert isinstance(written, Reproduction) and len(written.files) == len(OUTPUT_FILES)
+    assert json.loads((out / "summary.json").read_text(encoding="utf-8"))["runs"]
+    assert (out / "notes.txt").read_text(encoding="utf-8") == "user file\n"  # other files untouched
 
 
 def test_claims_carry_numbers(reproduction) -> None:

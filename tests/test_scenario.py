@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -10,10 +11,22 @@ import pytest
 from mrpctl import mrp, paper
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.reproduction import paper_scenarios
-from mrpctl.scenario import load_scenario, parse_scenario, rule_from_name, tumbling_states
+from mrpctl.scenario import (
+    STARTER_SCENARIO,
+    load_scenario,
+    parse_scenario,
+    resolve_scenario,
+    rule_from_name,
+    scenario_toml,
+    shipped_scenarios,
+    tumbling_states,
+)
+from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenarios"
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples" / "scenarios"
+PACKAGE = ROOT / "mrpctl" / "scenarios"
 
 
 def _minimal() -> dict:
@@ -41,6 +54,24 @@ def test_shipped_files_equal_builtin_scenarios(name: str) -> None:
     assert from_file.history == builtin.history == "constant"
 
 
+def test_examples_are_the_package_data_files() -> None:
+    """One copy: examples/scenarios is the package-data folder mrpctl/scenarios (shipped in the wheel)."""
+    assert EXAMPLES.resolve() == PACKAGE.resolve()
+    shipped = shipped_scenarios()
+    assert set(shipped) == set(paper_scenarios()) == {p.stem for p in PACKAGE.glob("*.toml")}
+    assert all(path.resolve().parent == PACKAGE.resolve() for path in shipped.values())
+
+
+def test_shipped_names_resolve(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert resolve_scenario("paper_fig4_on_delayed") == shipped_scenarios()["paper_fig4_on_delayed"]
+    assert resolve_scenario("paper_fig4_on_delayed.toml") == shipped_scenarios()["paper_fig4_on_delayed"]
+    (tmp_path / "paper_fig4_on_delayed.toml").write_text("x = 1\n", encoding="utf-8")
+    assert resolve_scenario("paper_fig4_on_delayed.toml") == Path("paper_fig4_on_delayed.toml")  # a file wins
+    with pytest.raises(SpecificationError, match=r"not found: nope.*shipped scenario names: delay_aware"):
+        load_scenario("nope")
+
+
 def test_initial_attitude_forms_agree() -> None:
     by_angle = parse_scenario(
         {
@@ -61,6 +92,61 @@ def test_gain_forms_agree() -> None:
     k_loop = parse_scenario({**_minimal(), "gains": {"K1": k1, "K2": k2}}).K
     assert np.array_equal(k_full, k_scalar)
     assert np.max(np.abs(k_loop - k_full)) < 1e-12
+
+
+def test_per_axis_and_scalar_gains() -> None:
+    """k_sigma/k_omega per axis, and K1/K2 as scalars, per axis or matrices, against K built by hand."""
+    inertia = np.array([12.0, 15.0, 9.0])
+    base = {**_minimal(), "spacecraft": {"inertia": inertia.tolist()}}
+    per_axis = parse_scenario({**base, "gains": {"k_sigma": [-1.0, -2.0, -3.0], "k_omega": [-4.0, -5.0, -6.0]}}).K
+    expected = np.zeros((3, 6))
+    for i in range(3):
+        expected[i, i], expected[i, 3 + i] = -(i + 1.0), -(i + 4.0)
+    assert np.array_equal(per_axis, expected)
+    scalar = parse_scenario({**base, "gains": {"K1": -0.64, "K2": -1.6}}).K
+    by_hand = np.zeros((3, 6))
+    for i in range(3):
+        by_hand[i, i], by_hand[i, 3 + i] = 4.0 * inertia[i] * -0.64, 4.0 * inertia[i] * -1.6
+    assert np.max(np.abs(scalar - by_hand)) <= 1e-15 * np.max(np.abs(by_hand))
+    vector = parse_scenario({**base, "gains": {"K1": [-0.64] * 3, "K2": (-1.6 * np.eye(3)).tolist()}}).K
+    assert np.array_equal(vector, scalar)
+    with pytest.raises(DimensionError, match="k_sigma: expected a scalar or 3 per-axis values"):
+        parse_scenario({**base, "gains": {"k_sigma": [-1.0, -2.0], "k_omega": -1.0}})
+
+
+def test_written_scenario_reads_back_bit_for_bit() -> None:
+    """scenario_toml -> parse: J (full 3x3), K, x0 and the rule come back exactly."""
+    rng = np.random.default_rng(5)
+    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    inertia = rotation @ np.diag([12.0, 15.0, 9.0]) @ rotation.T
+    inertia = (inertia + inertia.T) / 2
+    scenario = paper_scenarios()["paper_fig7_boundary_layer"]
+    from dataclasses import replace
+
+    scenario = replace(
+        scenario,
+        name="random",
+        spacecraft=Spacecraft(inertia),
+        K=rng.normal(size=(3, 6)) * 100,
+        x0=rng.normal(size=6) / 3,
+        tau=0.2,
+        substeps=2,
+    )
+    text = scenario_toml(scenario, comment="line one\nline two")
+    assert text.startswith("# line one\n# line two\n")
+    back = parse_scenario(tomllib.loads(text), name="other")
+    assert back.name == "random" and back.spacecraft == scenario.spacecraft
+    assert np.array_equal(back.K, scenario.K) and np.array_equal(back.x0[:3], scenario.x0[:3])
+    assert np.max(np.abs(back.x0 - scenario.x0)) <= 1e-16
+    assert back.rule == BoundaryLayer(eps=paper.BOUNDARY_LAYER_EPS)
+    assert (back.tau, back.rate, back.t_final, back.substeps) == (0.2, 1000.0, 60.0, 2)
+
+
+def test_starter_scenario_loads() -> None:
+    starter = parse_scenario(tomllib.loads(STARTER_SCENARIO))
+    k = np.diag(4.0 * np.array([12.0, 15.0, 9.0]))
+    assert np.max(np.abs(starter.K - np.hstack((-0.64 * k, -1.6 * k)))) < 1e-12
+    assert starter.rule == DelayAware() and starter.tau == 0.2
 
 
 def test_rule_names() -> None:
@@ -87,7 +173,14 @@ def test_rule_names() -> None:
         ({"tau": float("nan")}, "tau must be finite"),
         ({"t_final": 0.0}, "t_final must be > 0"),
         ({"history": "sometimes"}, "history must be"),
-        ({"substeps": 0}, "substeps must be an integer >= 1"),
+        ({"substeps": 0}, "substeps must be >= 1"),
+        ({"substeps": True}, "substeps must be an integer"),
+        ({"tau": True}, "tau must be a real number, got the boolean"),
+        ({"t_final": False}, "t_final must be a real number, got the boolean"),
+        ({"rate": True}, "rate must be a real number, got the boolean"),
+        ({"tau": 0.0005}, r"tau \* rate must be a whole number"),
+        ({"gains": {"k_sigma": True, "k_omega": -1.0}}, "k_sigma must be numeric, got booleans"),
+        ({"rule": {"type": "boundary-layer", "eps": True}}, "eps must be a real number, got the boolean"),
         ({"gains": {"k_sigma": -1.0}}, r"\[gains\] must give exactly one of"),
         ({"gains": {"k_sigma": -1.0, "k_omega": -1.0, "K": np.zeros((3, 6)).tolist()}}, "exactly one"),
         ({"initial": {"omega": [0, 0, 0]}}, "either sigma or"),
@@ -115,6 +208,12 @@ def test_missing_and_invalid_files(tmp_path: Path) -> None:
     bad.write_text("tau = [", encoding="utf-8")
     with pytest.raises(SpecificationError, match="not valid TOML"):
         load_scenario(bad)
+    latin1 = tmp_path / "latin1.toml"
+    latin1.write_bytes('description = "J = 140 kg m\u00b2"\n'.encode("latin-1"))
+    with pytest.raises(SpecificationError, match=r"latin1.toml is not UTF-8 text .*b'\\xb2'"):
+        load_scenario(latin1)
+    with pytest.raises(SpecificationError, match="is a folder"):
+        load_scenario(tmp_path)
 
 
 def test_tumbling_states_are_reproducible_and_tumble() -> None:
@@ -131,3 +230,15 @@ def test_tumbling_states_are_reproducible_and_tumble() -> None:
     assert np.all(across <= 0.05 + 1e-12)
     with pytest.raises(SpecificationError, match="count"):
         tumbling_states(0)
+    with pytest.raises(SpecificationError, match="seed must be >= 0, got -1"):
+        tumbling_states(3, seed=-1)
+
+
+def test_tumbling_ranges_are_settable() -> None:
+    states = tumbling_states(100, seed=1, angle_deg=(90.0, 100.0), rate=(2.0, 3.0), cross_rate=0.0)
+    sigma, omega = states[:, :3], 4 * states[:, 3:]
+    angle = np.degrees(4 * np.arctan(np.linalg.norm(sigma, axis=1)))
+    assert np.all((angle >= 90.0 - 1e-9) & (angle <= 100.0 + 1e-9))
+    axis = sigma / np.linalg.norm(sigma, axis=1, keepdims=True)
+    assert np.allclose(np.cross(omega, axis), 0.0, atol=1e-12)  # no cross rate
+    assert np.all((np.linalg.norm(omega, axis=1) >= 2.0) & (np.linalg.norm(omega, axis=1) <= 3.0))
