@@ -11,10 +11,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
 from mrpctl._validation import positive_scalar
-from mrpctl.design._common import OPTIMAL, frozen, order_value, solve, system_matrices
+from mrpctl.design._common import OPTIMAL, balancing, frozen, order_value, similarity, solve, system_matrices
 from mrpctl.errors import SpecificationError
 
 __all__ = [
@@ -468,14 +467,8 @@ def unit_delay_system(a: np.ndarray, a_d: np.ndarray, tau: float) -> tuple[np.nd
     T is the diagonal power-of-two balancing of |τA| + |τA_d| (exact in floating point), so the
     normalised problem is the same for c·(A, A_d) at τ/c and is well scaled for τ from 1e-4 to 1e3 s.
     """
-    mag = np.abs(tau * a) + np.abs(tau * a_d)
-    if a.shape[0] > 1 and np.any(mag - np.diag(np.diag(mag))):
-        _, (scale, _) = scipy.linalg.matrix_balance(mag, permute=False, separate=True)
-        scale = np.clip(np.asarray(scale, dtype=float), 2.0**-60, 2.0**60)
-    else:
-        scale = np.ones(a.shape[0])
-    inv = 1.0 / scale
-    return tau * (inv[:, None] * a * scale[None, :]), tau * (inv[:, None] * a_d * scale[None, :]), scale
+    scale = balancing(tau * a, tau * a_d)
+    return tau * similarity(a, scale), tau * similarity(a_d, scale), scale
 
 
 def _xi_scaling(scale: np.ndarray, tau: float, order: int) -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 import scipy.linalg
 
 from mrpctl._validation import integer
-from mrpctl.design._common import system_matrices
+from mrpctl.design._common import balancing, similarity, system_matrices
 
 __all__ = ["Crossing", "DelayMargin", "delay_margin"]
 
@@ -135,7 +135,8 @@ def delay_margin(A: Any, A_d: Any, *, max_events: int = DEFAULT_MAX_EVENTS) -> D
     u, v its left and right null vectors. Counting unstable roots from τ = 0 (the eigenvalues of
     A + A_d) across the sorted crossings gives the stable intervals.
 
-    Scale: the analysis runs on (A, A_d)/c with c = max(‖A‖₂, ‖A_d‖₂) (the delays of c·(A, A_d)
+    Scale: the analysis runs on the balanced (T⁻¹AT, T⁻¹A_dT)/c (T a power-of-two diagonal
+    similarity, c = max(‖T⁻¹AT‖₂, ‖T⁻¹A_dT‖₂)) (the delays of c·(A, A_d)
     are those of (A, A_d) divided by c), and every tolerance is relative: a crossing is accepted
     when the backward error σ_min(M(iω, τ₀)) / (ω + ‖A‖₂ + ‖A_d‖₂) is below 1e-10 after Newton
     refinement and ω/c > 1e-12; s = 0 is a root for every delay when
@@ -174,6 +175,8 @@ def delay_margin(A: Any, A_d: Any, *, max_events: int = DEFAULT_MAX_EVENTS) -> D
     a, a_d = system_matrices(A, A_d)
     max_events = integer("max_events", max_events, minimum=1)
     n = a.shape[0]
+    scale = balancing(a, a_d)  # a similarity: same roots, better conditioned (e.g. huge inertia)
+    a, a_d = similarity(a, scale), similarity(a_d, scale)
     c = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(a_d, 2)))
     singular = c == 0.0
     if not singular:
@@ -230,10 +233,6 @@ def delay_margin(A: Any, A_d: Any, *, max_events: int = DEFAULT_MAX_EVENTS) -> D
         reason=reason,
         resolved_to=sweep.resolved_to,
     )
-
-
-def _first_destabilising(crossings: list[Crossing]) -> float:
-    return min((c.delay for c in crossings if c.direction > 0), default=math.inf)
 
 
 def _frequency_at(crossings: list[Crossing], tau: float) -> float:
