@@ -607,7 +607,7 @@ def certify_checked(
         values = {"tau": 1.0, "A": a_u, "A_d": a_d_u, "tauA": a_u, "tauA_d": a_d_u}
         lmi = _AnalysisProblem(n, order, positivity, values)
     outcome = solve(lmi.problem)
-    base = {
+    base: dict[str, Any] = {
         "order": order,
         "tau": tau,
         "solver": "CLARABEL",
@@ -615,15 +615,15 @@ def certify_checked(
         "solver_status": outcome.status,
         "positivity": positivity,
     }
-    failed = {"status": CertificateStatus.SOLVER_FAILED, "P": None, "S": None, "R": None, "margins": ()}
+    failed: dict[str, Any] = {"status": CertificateStatus.SOLVER_FAILED, "P": None, "S": None, "R": None, "margins": ()}
     if outcome.error:
         return Certificate(**failed, solver_margin=math.nan, reason=outcome.error, **base)
-    values = [lmi.P.value, lmi.S.value, lmi.R.value, lmi.t.value]
-    if outcome.status != OPTIMAL or any(v is None for v in values):
+    solution = [lmi.P.value, lmi.S.value, lmi.R.value, lmi.t.value]
+    if outcome.status != OPTIMAL or any(v is None for v in solution):
         reason = f"solver status {outcome.status!r} is not 'optimal': no certificate"
         return Certificate(**failed, solver_margin=math.nan, reason=reason, **base)
-    p_u, s_u, r_u = (_sym(np.asarray(v, dtype=float)) for v in values[:3])
-    t_opt = float(values[3])
+    p_u, s_u, r_u = (_sym(np.asarray(v, dtype=float)) for v in solution[:3])
+    t_opt = float(solution[3])
     margins = block_margins(lmi_blocks(a_u, a_d_u, 1.0, p_u, s_u, r_u, order=order, positivity=positivity))
     p, s, r = (_sym(m) for m in from_unit_delay(p_u, s_u, r_u, scale, tau, order))
     worst = min(margins, key=lambda m: m.relative)
@@ -708,7 +708,7 @@ def max_certified_delay(
     if rtol >= 0.5:
         raise SpecificationError(f"rtol must be < 0.5, got {rtol}")
     margin_tol = positive_scalar("margin_tol", margin_tol)
-    scale = max(np.linalg.norm(a, 2), np.linalg.norm(a_d, 2), 1e-12)
+    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(a_d, 2)), 1e-12)
     limit = 1e3 / scale if tau_max is None else positive_scalar("tau_max", tau_max)
     exact = delay_margin(a, a_d)
     search = _Search(a, a_d, order, margin_tol, parametric, positivity)
@@ -814,7 +814,7 @@ class _Search:
     def seed(self, lo: float, hi: float) -> tuple[float, Certificate] | None:
         """A certified delay inside the exact stable interval (lo, hi), or None."""
         if lo == 0.0:
-            top = hi if math.isfinite(hi) else 1.0 / max(np.linalg.norm(self.a_d, 2), 1e-12)
+            top = hi if math.isfinite(hi) else 1.0 / max(float(np.linalg.norm(self.a_d, 2)), 1e-12)
             candidates = [top * f for f in (0.5, 0.1, 0.01, 1e-3)]
         else:
             top = hi if math.isfinite(hi) else 2.0 * lo

@@ -157,7 +157,7 @@ class LinearizedLoop:
         margin_tol: float,
         time: float,
     ) -> Certificate:
-        base = {
+        base: dict[str, Any] = {
             "order": order,
             "tau": tau,
             "solver": "CLARABEL",
@@ -184,6 +184,7 @@ class LinearizedLoop:
         s = np.zeros((n, n))
         r = np.zeros((n, n))
         for i, c in enumerate(certs):
+            assert c.P is not None and c.S is not None and c.R is not None  # certified above
             idx = (i, 3 + i)
             for b in range(blocks):
                 for d in range(blocks):

@@ -118,7 +118,7 @@ def _unit_axis(zeta: float) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=1)
 def _axis_a() -> np.ndarray:
-    plant = plant_model(Spacecraft([1.0, 1.0, 1.0]))
+    plant = plant_model(Spacecraft(np.ones(3)))
     # The (σ₁, ω₁/4) block of A is [[0, 1], [0, 0]]; in (σ, τσ̇) and t/τ it is the same matrix.
     return np.array(plant.A[np.ix_((0, 3), (0, 3))], dtype=float)
 
@@ -131,7 +131,7 @@ def _w_bound(zeta: float) -> float:
 @functools.lru_cache(maxsize=64)
 def _best_w(zeta: float) -> tuple[float, complex]:
     """The w = ωₙτ in (0, w_bound(ζ)) that minimises Re of the rightmost root, and that root."""
-    from scipy.optimize import minimize_scalar
+    from scipy.optimize import minimize_scalar  # type: ignore[import-untyped]
 
     bound = _w_bound(zeta)
     res = minimize_scalar(
@@ -153,7 +153,7 @@ def _best_w_zeta(zeta_min: float) -> tuple[float, float, complex]:
     it is compared with the 1-D optimum on the boundary ζ = zeta_min. The answer does not depend on
     the spacecraft or on τ, so it is computed once per process.
     """
-    from scipy.optimize import minimize
+    from scipy.optimize import minimize  # type: ignore[import-untyped]
 
     zeta_max = _ZETA_RANGE[1]
 
@@ -450,7 +450,8 @@ class LMISynthesis:
         )
         lines = [head, f"  {self.reason}"]
         if self.K is not None:
-            lines.append(f"  epsilon = {self.epsilon:.4g} s; exact delay margin {self.margin.margin:.6g} s")
+            margin = self.margin.margin if self.margin is not None else math.nan
+            lines.append(f"  epsilon = {self.epsilon:.4g} s; exact delay margin {margin:.6g} s")
             lines.append(f"  K = {np.array2string(self.K, precision=5, max_line_width=200)}")
         return "\n".join(lines)
 
