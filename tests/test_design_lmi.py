@@ -311,22 +311,26 @@ def test_complex_input_is_refused() -> None:
 
 
 def test_results_compare_by_identity_without_raising() -> None:
+    # Main: frozen dataclasses with eq=True over NumPy fields, so comparing two equal results raised
+    # "truth value of an array is ambiguous". Now == is identity and never raises.
     from mrpctl.design import analyze_gains, pd_gains, synthesize_lmi, synthesize_pd
 
-    loop = linearized_loop(paper.SPACECRAFT, paper.GAIN)
-    objects = [
-        certify(BENCH_A, BENCH_AD, 1.0, order=0),
-        max_certified_delay(BENCH_A, BENCH_AD, order=0, rtol=1e-2),
-        delay_margin(BENCH_A, BENCH_AD),
-        loop,
-        pd_gains(paper.SPACECRAFT, omega_n=0.5),
-        analyze_gains(paper.SPACECRAFT, paper.GAIN),
-        synthesize_pd(paper.SPACECRAFT, 0.5, order=0),
-        synthesize_lmi(paper.SPACECRAFT, 0.5, decay_rate=0.1, order=0),
-    ]
-    for obj in objects:
-        assert obj == obj
-        assert obj != copy.copy(obj)
+    def build() -> list[object]:
+        return [
+            certify(BENCH_A, BENCH_AD, 1.0, order=0),
+            max_certified_delay(BENCH_A, BENCH_AD, order=0, rtol=1e-2),
+            delay_margin(BENCH_A, BENCH_AD),
+            linearized_loop(paper.SPACECRAFT, paper.GAIN),
+            pd_gains(paper.SPACECRAFT, omega_n=0.5),
+            analyze_gains(paper.SPACECRAFT, paper.GAIN),
+            synthesize_pd(paper.SPACECRAFT, 0.5, order=0),
+            synthesize_lmi(paper.SPACECRAFT, 0.5, decay_rate=0.1, order=0),
+        ]
+
+    for one, two in zip(build(), build(), strict=True):
+        assert one == one
+        assert one != two
+        assert one != copy.copy(one)
 
 
 def test_no_private_cross_imports_and_dead_code_gone() -> None:
