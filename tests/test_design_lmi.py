@@ -239,8 +239,8 @@ def _thread_jobs() -> list[tuple[str, tuple, dict]]:
     for order, tau in ((0, 3.0), (1, 5.0), (2, 6.0), (3, 6.1)):
         jobs.append(("certify", (BENCH_A, BENCH_AD, tau), {"order": order}))
     for order in (0, 1, 2):
-        jobs.append(("max", (BENCH_A / 7.0, BENCH_AD / 7.0), {"order": order, "rtol": 1e-3}))
-    jobs.append(("max", (GU_A, GU_AD), {"order": 2, "rtol": 1e-3}))
+        jobs.append(("max", (BENCH_A / 7.0, BENCH_AD / 7.0), {"order": order, "rtol": 1e-2}))
+    jobs.append(("max", (GU_A, GU_AD), {"order": 2, "rtol": 1e-2}))
     jobs.append(("certify", (loop.A, loop.A_d, 1.2), {"order": 1}))
     jobs.append(("certify", (-2.0 * np.eye(2), 0.5 * np.eye(2), 40.0), {"order": 2}))
     jobs.append(("pd", (p.SPACECRAFT, 0.5), {"order": 1}))

@@ -66,8 +66,8 @@ class SynthesisStatus(enum.Enum):
 _SPECTRAL_NODES = 20
 #: Newton steps polishing the rightmost spectral roots on the quasi-polynomial.
 _POLISH_STEPS = 15
-#: Evaluations of the Nelder-Mead search over (w, ζ) (measured: 400 give w, ζ to 6e-5 relative, 800 to 1e-7).
-_NELDER_MEAD_EVALUATIONS = 500
+#: Evaluations of the Nelder-Mead search over (w, ζ) (measured: 400 give w, ζ to 3e-5-6e-5 relative, 800 to 1e-7).
+_NELDER_MEAD_EVALUATIONS = 400
 #: Range searched for ζ when ``zeta=None`` (the lower end is 1 without ``allow_underdamped``).
 _ZETA_RANGE = (0.2, 3.0)
 
@@ -163,7 +163,7 @@ def _best_w_zeta(zeta_min: float) -> tuple[float, float, complex]:
             return 1.0 + abs(w) + abs(z)  # outside: worse than any stable design (Re λ < 0)
         return pd_rightmost_root(w, z).real
 
-    grid = [(f * _w_bound(z), z) for z in np.linspace(zeta_min, zeta_max, 8) for f in (0.2, 0.4, 0.6, 0.8)]
+    grid = [(f * _w_bound(z), z) for z in np.linspace(zeta_min, zeta_max, 6) for f in (0.25, 0.5, 0.75)]
     start = min(grid, key=lambda p: objective(np.array(p)))
     simplex = [start, (start[0] * 0.8, start[1]), (start[0], min(start[1] + 0.15, zeta_max))]
     res = minimize(
