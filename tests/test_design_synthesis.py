@@ -71,6 +71,7 @@ def test_zeta_one_design_is_the_exact_decay_optimum_and_certified_below_it() -> 
     tau = paper.TAU
     result = synthesize_pd(paper.SPACECRAFT, tau, zeta=1.0)
     assert result.status is SynthesisStatus.SYNTHESIZED, str(result)
+    assert result.decay_certificate is not None
     assert result.certificate.certified and result.decay_certificate.certified
     assert result.zeta == 1.0 and "critically damped" in str(result)
     # Independent optimum: golden section on the Chebyshev spectral abscissa of the unit-delay loop.
@@ -122,6 +123,7 @@ def test_synthesize_pd_is_scale_invariant_in_tau() -> None:
     results = [synthesize_pd(paper.SPACECRAFT, tau, order=2) for tau in taus]
     for tau, r in zip(taus, results, strict=True):
         assert r.status is SynthesisStatus.SYNTHESIZED, (tau, str(r))
+        assert r.decay_certificate is not None
         assert r.certificate.certified and r.decay_certificate.certified
         assert r.margin.margin > tau
     w = [r.omega_n * tau for tau, r in zip(taus, results, strict=True)]
@@ -157,6 +159,7 @@ def test_synthesize_lmi_gains_are_stable_with_the_decay_rate(order: int, alpha: 
     tau = paper.TAU
     result = synthesize_lmi(paper.SPACECRAFT, tau, decay_rate=alpha, order=order)
     assert result.status is SynthesisStatus.SYNTHESIZED, str(result)
+    assert result.certificate is not None and result.decay_certificate is not None and result.margin is not None
     assert result.certificate.certified and result.decay_certificate.certified
     # Independent checks: analytic per-axis margin and the spectral abscissa of the 6x6 delayed loop.
     k1, k2 = pd_from_gain(paper.SPACECRAFT, result.K)
@@ -196,7 +199,7 @@ def test_synthesize_lmi_coupled_inertia_uses_the_full_loop() -> None:
     assert result.epsilon in (0.3, 0.6, 1.2)
     a, a_d = plant_model(spacecraft).closed_loop_matrices(result.K)
     assert rightmost_root(a, a_d, tau) < -0.1
-    assert result.margin.margin > tau
+    assert result.margin is not None and result.margin.margin > tau
 
 
 @pytest.mark.parametrize(

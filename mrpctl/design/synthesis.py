@@ -190,13 +190,13 @@ class PDSynthesis:
         The delay τ (s) the gains are designed and certified for.
     order : int
         Bessel-Legendre order N of the certificates.
-    gains : PDGains or None
+    gains : PDGains
         The PD gains (same ζ, ωₙ on every axis) whose exact rightmost characteristic root at τ is
-        leftmost (None when the inputs allowed no design).
-    certificate : Certificate or None
+        leftmost. Always present (check ``status`` for whether they were verified).
+    certificate : Certificate
         The LMI certificate of the 6×6 loop at τ under ``gains`` (exponential stability).
-    margin : DelayMargin or None
-        The exact delay margin of the loop under ``gains`` (> τ).
+    margin : DelayMargin
+        The exact delay margin of the loop under ``gains`` (> τ when verified).
     solves : int
         LMI solves used.
     reason : str
@@ -213,9 +213,9 @@ class PDSynthesis:
     status: SynthesisStatus
     tau: float
     order: int
-    gains: PDGains | None = field(repr=False)
-    certificate: Certificate | None = field(repr=False)
-    margin: DelayMargin | None = field(repr=False)
+    gains: PDGains = field(repr=False)
+    certificate: Certificate = field(repr=False)
+    margin: DelayMargin = field(repr=False)
     solves: int
     reason: str
     decay_rate: float = math.nan
@@ -229,13 +229,13 @@ class PDSynthesis:
 
     @property
     def omega_n(self) -> float:
-        """The natural frequency ωₙ (rad/s) of the design; nan when nothing was found."""
-        return float(self.gains.omega_n[0]) if self.gains is not None else math.nan
+        """The natural frequency ωₙ (rad/s) of the design."""
+        return float(self.gains.omega_n[0])
 
     @property
     def zeta(self) -> float:
-        """The damping ratio ζ of the design; nan when nothing was found."""
-        return float(self.gains.zeta[0]) if self.gains is not None else math.nan
+        """The damping ratio ζ of the design."""
+        return float(self.gains.zeta[0])
 
     @property
     def exact_decay_rate(self) -> float:
@@ -244,9 +244,7 @@ class PDSynthesis:
 
     def __str__(self) -> str:
         head = f"PD synthesis for tau = {self.tau:g} s ({criterion_name(self.order)}): {self.status.value}"
-        if self.gains is None:
-            return f"{head}\n  {self.reason}"
-        margin = self.margin.margin if self.margin is not None else math.nan
+        margin = self.margin.margin
         root = self.rightmost_root
         return (
             f"{head}\n  omega_n = {self.omega_n:.6g} rad/s (omega_n tau = {self.omega_n * self.tau:.6g}), "
