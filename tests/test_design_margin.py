@@ -156,3 +156,115 @@ def test_per_axis_margins_match_python_control_phase_margin() -> None:
         margins.append(expected)
         assert delay_margin(a, a_d).margin == pytest.approx(expected, rel=1e-9)
     assert loop.delay_margin().margin == pytest.approx(min(margins), rel=1e-9)
+
+
+# ---- issue 9: scale, stiffness, termination ----------------------------------------------------
+
+
+@pytest.mark.parametrize("c", [1e-8, 1e-6, 1e-4, 1e-2, 1e2, 1e4, 1e6, 1e8])
+def test_margin_of_scaled_system_is_margin_over_c(c: float) -> None:
+    # Time scaling: c (A, A_d) has the roots c s at the delays tau / c. Main answered "not Hurwitz,
+    # no delay stabilises" for c = 1e-8 (absolute eigenvalue tolerances).
+    for a, a_d in ((BENCH_A, BENCH_AD), (GU_A, GU_AD)):
+        ref = delay_margin(a, a_d)
+        scaled = delay_margin(c * a, c * a_d)
+        assert scaled.stable_without_delay is ref.stable_without_delay
+        assert scaled.margin * c == pytest.approx(ref.margin, rel=1e-9, abs=0.0)
+        assert len(scaled.stable_intervals) == len(ref.stable_intervals)
+        for (lo, hi), (lo_ref, hi_ref) in zip(scaled.stable_intervals, ref.stable_intervals, strict=True):
+            assert (lo * c, hi * c) == pytest.approx((lo_ref, hi_ref), rel=1e-9)
+
+
+def test_stiff_system_fast_mode_beside_slow_one() -> None:
+    # Block triangular: (s + 1e7 + 5e6 e^{-s tau}) (s + e^{-s tau}). The fast factor is stable for
+    # every delay (|5e6| < 1e7), the slow one is x' = -x(t - tau): margin pi / 2 exactly.
+    a = np.diag([-1e7, 0.0])
+    a_d = np.array([[-5e6, 0.0], [1.0, -1.0]])
+    result = delay_margin(a, a_d)
+    assert result.stable_without_delay
+    assert result.margin == pytest.approx(math.pi / 2, rel=1e-9)
+    assert result.complete
+    assert rightmost_root(a, a_d, 0.99 * math.pi / 2) < 0.0 < rightmost_root(a, a_d, 1.01 * math.pi / 2)
+
+
+def test_paper_loop_with_a_huge_inertia() -> None:
+    # mrpctl verify --inertia 1e9 1e9 1e9 answered margin 0 ("not Hurwitz") on main.
+    from mrpctl import Spacecraft
+
+    sc = Spacecraft([1e9, 1e9, 1e9])
+    loop = linearized_loop(sc, paper.GAIN)
+    result = loop.delay_margin()
+    k1, k2 = pd_from_gain(sc, paper.GAIN)
+    a, b = -k1[0, 0], -k2[0, 0]
+    omega = math.sqrt((b * b + math.sqrt(b**4 + 4 * a * a)) / 2)
+    assert result.margin == pytest.approx(math.atan2(b * omega, a) / omega, rel=1e-9)
+
+
+def test_slow_mode_beside_pure_delay_terminates_with_the_right_margin() -> None:
+    # Main grew past 4 GB in 10 s: the 1e-8 rad/s family pushed the sweep horizon to ~1e9 s.
+    a, a_d = np.zeros((2, 2)), np.diag([-1.0, -1e-8])
+    result = delay_margin(a, a_d)
+    assert result.margin == pytest.approx(math.pi / 2, rel=1e-12)
+    assert len(result.stable_intervals) == 1
+    assert result.stable_intervals[0] == pytest.approx((0.0, math.pi / 2), rel=1e-12)
+    assert result.complete
+    assert sorted(c.frequency for c in result.crossings) == pytest.approx([1e-8, 1.0], rel=1e-9)
+    assert rightmost_root(a, a_d, 0.99 * math.pi / 2) < 0.0 < rightmost_root(a, a_d, 1.01 * math.pi / 2)
+
+
+def test_rank_deficient_coupled_gain_terminates_with_the_right_answer() -> None:
+    # K = 1..18 (mrpctl verify --K $(seq 1 18)): main grew past 8 GB in 25 s.
+    loop = linearized_loop(paper.SPACECRAFT, np.arange(1.0, 19.0).reshape(3, 6))
+    result = loop.delay_margin()
+    assert result.margin == 0.0
+    assert not result.stable_for_some_delay
+    # s = 0 is a root at every delay: the spectral abscissa is >= 0 (up to its accuracy) everywhere.
+    for tau in (0.01, 0.5, 5.0):
+        assert rightmost_root(loop.A, loop.A_d, tau) > -1e-9
+
+
+def test_event_cap_gives_an_honest_partial_answer() -> None:
+    # Two destabilising families and one stabilising family at nearly the frequency of one of them:
+    # the count returns to zero only rarely. With a tiny cap the sweep must stop and say so.
+    result = delay_margin(GU_A, GU_AD, max_events=1)
+    assert not result.complete
+    assert math.isfinite(result.resolved_to)
+    assert "could not be determined beyond" in result.reason
+    full = delay_margin(GU_A, GU_AD)
+    assert full.complete
+    # The partial intervals agree with the full ones below resolved_to.
+    assert all(hi <= result.resolved_to for _, hi in result.stable_intervals)
+    with pytest.raises(SpecificationError, match="max_events"):
+        delay_margin(GU_A, GU_AD, max_events=0)
+
+
+def test_seeded_sweep_of_scaled_and_rank_deficient_systems(rng: np.random.Generator) -> None:
+    """Termination and correctness over scalings 1e-8..1e8 and rank-deficient delay matrices."""
+    checked = 0
+    for trial in range(60):
+        n = int(rng.integers(1, 4))
+        a = rng.normal(size=(n, n)) - rng.uniform(0.0, 2.0) * np.eye(n)
+        if trial % 3 == 0:  # rank-one delayed term
+            a_d = np.outer(rng.normal(size=n), rng.normal(size=n))
+        elif trial % 3 == 1 and n > 1:  # a zero row (an unactuated state)
+            a_d = rng.normal(size=(n, n))
+            a_d[0] = 0.0
+        else:
+            a_d = rng.normal(size=(n, n))
+        c = 10.0 ** rng.uniform(-8.0, 8.0)
+        ref = delay_margin(a, a_d)
+        scaled = delay_margin(c * a, c * a_d)
+        assert scaled.complete and ref.complete
+        assert scaled.stable_without_delay is ref.stable_without_delay
+        if math.isfinite(ref.margin):
+            assert scaled.margin * c == pytest.approx(ref.margin, rel=1e-7)
+        else:
+            assert math.isinf(scaled.margin)
+        if ref.stable_without_delay and math.isfinite(ref.margin):
+            tau = ref.margin
+            assert rightmost_root(a, a_d, tau * (1 - 1e-3), m=60) < 0.0
+            assert rightmost_root(a, a_d, tau * (1 + 1e-3), m=60) > 0.0
+            checked += 1
+        elif ref.delay_independent:
+            assert rightmost_root(a, a_d, 20.0, m=60) < 0.0
+    assert checked >= 10

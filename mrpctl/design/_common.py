@@ -34,6 +34,26 @@ def system_matrices(A: Any, A_d: Any) -> tuple[np.ndarray, np.ndarray]:
     return np.array(a, dtype=float), np.array(a_d, dtype=float)
 
 
+def balancing(a: np.ndarray, a_d: np.ndarray) -> np.ndarray:
+    """Diagonal of the power-of-two similarity T that balances |A| + |A_d| (exact in floating point).
+
+    T⁻¹AT, T⁻¹A_dT have the characteristic roots of (A, A_d) and, for LMIs, congruent certificates;
+    the balanced matrices are what the eigenvalue and LMI computations see (LAPACK gebal, scaling only).
+    """
+    import scipy.linalg  # type: ignore[import-untyped]
+
+    mag = np.abs(a) + np.abs(a_d)
+    if a.shape[0] == 1 or not np.any(mag - np.diag(np.diag(mag))):
+        return np.ones(a.shape[0])
+    _, (scale, _) = scipy.linalg.matrix_balance(mag, permute=False, separate=True)
+    return np.clip(np.asarray(scale, dtype=float), 2.0**-60, 2.0**60)
+
+
+def similarity(m: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """T⁻¹ M T for T = diag(scale)."""
+    return (1.0 / scale)[:, None] * m * scale[None, :]
+
+
 def order_value(order: Any) -> int:
     """Check the Bessel-Legendre order N (0 = Jensen, 1 = Wirtinger)."""
     if isinstance(order, bool) or not isinstance(order, (int, np.integer)):

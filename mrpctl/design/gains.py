@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import finite_array
+from mrpctl._validation import check_spacecraft, finite_array
 from mrpctl.design._common import frozen, is_diagonal
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, plant_model
@@ -21,7 +21,7 @@ __all__ = ["AxisDamping", "GainAnalysis", "PDGains", "analyze_gains", "pd_gains"
 _ZETA_TOL = 1e-9
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PDGains:
     """PD gains of the linearised loop σ̈ = K₁ σ + K₂ σ̇ (paper Eq. pd_design) and the gain K.
 
@@ -60,7 +60,8 @@ class PDGains:
         for i in range(3):
             poles = ", ".join(_pole_text(p) for p in self.poles[i])
             lines.append(
-                f"  axis {i + 1}: omega_n = {self.omega_n[i]:.6g} rad/s, zeta = {self.zeta[i]:.4g}, "
+                f"  axis {i + 1}: omega_n = {self.omega_n[i]:.6g} rad/s, zeta = {self.zeta[i]:.4g} "
+                f"({damping_kind(float(self.zeta[i]))}), "
                 f"K1 = {self.K1[i, i]:.6g}, K2 = {self.K2[i, i]:.6g}, poles {poles}"
             )
         lines.append(f"  K = [4 J K1, 4 J K2] = {np.array2string(self.K, precision=5, max_line_width=200)}")
@@ -108,8 +109,7 @@ def pd_gains(
     >>> float(g.K1[0, 0]), float(g.K2[0, 0]), float(g.K[0, 0])
     (-0.25, -1.0, -140.0)
     """
-    if not isinstance(spacecraft, Spacecraft):
-        raise TypeError(f"spacecraft must be a mrpctl.Spacecraft, got {type(spacecraft).__name__}")
+    spacecraft = check_spacecraft(spacecraft)
     z = _per_axis("zeta", zeta)
     w = _per_axis("omega_n", omega_n)
     if np.any(w <= 0.0):
@@ -133,7 +133,7 @@ def pd_gains(
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class AxisDamping:
     """Damping of one axis of σ̈ = K₁ σ + K₂ σ̇ with diagonal K₁, K₂.
 
@@ -173,7 +173,7 @@ class AxisDamping:
         return self.stable and bool(self.zeta >= 1.0 - _ZETA_TOL)
 
     def __str__(self) -> str:
-        kind = "overdamped" if self.overdamped else ("underdamped" if self.stable else "unstable")
+        kind = damping_kind(self.zeta) if self.stable else "unstable"
         poles = ", ".join(_pole_text(p) for p in self.poles)
         return (
             f"axis {self.axis}: K1 = {self.K1:.6g}, K2 = {self.K2:.6g}, omega_n = {self.omega_n:.6g} rad/s, "
@@ -181,7 +181,7 @@ class AxisDamping:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class GainAnalysis:
     """Result of :func:`analyze_gains`: damping of the delay-free linearised loop under a gain K.
 
@@ -224,7 +224,13 @@ class GainAnalysis:
         return self.stable and bool(np.all(np.abs(self.poles.imag) <= 1e-9 * scale))
 
     def __str__(self) -> str:
-        kind = "overdamped" if self.overdamped else ("stable, not overdamped" if self.stable else "unstable")
+        if not self.stable:
+            kind = "unstable"
+        elif self.axes:
+            kinds = {damping_kind(a.zeta) for a in self.axes}
+            kind = kinds.pop() if len(kinds) == 1 else "axes " + ", ".join(damping_kind(a.zeta) for a in self.axes)
+        else:
+            kind = "overdamped or critically damped" if self.overdamped else "stable, not overdamped"
         lines = [f"gain analysis for {self.spacecraft}: {kind} without delay"]
         if self.axes:
             lines.extend(f"  {a}" for a in self.axes)
@@ -256,8 +262,7 @@ def analyze_gains(spacecraft: Spacecraft, K: Any) -> GainAnalysis:
     >>> [round(a.zeta, 2) for a in analyze_gains(paper.SPACECRAFT, paper.GAIN).axes]
     [0.41, 0.49, 0.54]
     """
-    if not isinstance(spacecraft, Spacecraft):
-        raise TypeError(f"spacecraft must be a mrpctl.Spacecraft, got {type(spacecraft).__name__}")
+    spacecraft = check_spacecraft(spacecraft)
     k = gain_matrix(K)
     k1, k2 = pd_from_gain(spacecraft, k)
     pm = plant_model(spacecraft)
@@ -274,6 +279,15 @@ def analyze_gains(spacecraft: Spacecraft, K: Any) -> GainAnalysis:
         axes=axes,
         poles=frozen(poles, dtype=complex),
     )
+
+
+def damping_kind(zeta: float) -> str:
+    """ "critically damped" for ζ = 1 (to a relative 1e-9), "overdamped" above, "underdamped" below."""
+    if math.isnan(zeta):
+        return "no restoring gain"
+    if abs(zeta - 1.0) <= _ZETA_TOL:
+        return "critically damped"
+    return "overdamped" if zeta > 1.0 else "underdamped"
 
 
 def _axis_damping(i: int, k1: float, k2: float) -> AxisDamping:

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import enum
-import functools
 import logging
 import math
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import positive_scalar
-from mrpctl.design._common import OPTIMAL, frozen, order_value, solve, system_matrices
+from mrpctl.design._common import OPTIMAL, balancing, frozen, order_value, similarity, solve, system_matrices
 from mrpctl.errors import SpecificationError
 
 __all__ = [
@@ -68,7 +68,7 @@ class CertificateStatus(enum.Enum):
     SOLVER_FAILED = "solver failed"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class BlockMargin:
     """Smallest eigenvalue of one LMI block, sign chosen so that positive means satisfied.
 
@@ -87,7 +87,7 @@ class BlockMargin:
     relative: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Certificate:
     """Result of :func:`certify`: an LMI test of ẋ = A x + A_d x(t − τ) at one delay τ.
 
@@ -166,7 +166,7 @@ class SearchStatus(enum.Enum):
     NOT_CERTIFIED = "no delay certified"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class DelayCertification:
     """Result of :func:`max_certified_delay`: the certified delay interval of one criterion.
 
@@ -226,7 +226,7 @@ class DelayCertification:
 # --------------------------------------------------------------------------------------------
 
 
-def _legendre_rows(order: int) -> np.ndarray:
+def legendre_rows(order: int) -> np.ndarray:
     """Coefficients c_k (k = 0..N) with Δ_k = Σ_i c_k[i] ζ_i on the N+2 blocks of ζ."""
     rows = np.zeros((order + 1, order + 2))
     for k in range(order + 1):
@@ -240,7 +240,7 @@ def _legendre_rows(order: int) -> np.ndarray:
 
 def _structure(n: int, order: int) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
     """(E_0..E_N as (n, m) arrays, G0 = [I 0 0], G1 = [0 0 I_{Nn}]) for ζ of size m = (N+2)n."""
-    rows = _legendre_rows(order)
+    rows = legendre_rows(order)
     eye = np.eye(n)
     e_mats = [np.kron(rows[k], eye) for k in range(order + 1)]
     m = (order + 2) * n
@@ -249,10 +249,6 @@ def _structure(n: int, order: int) -> tuple[list[np.ndarray], np.ndarray, np.nda
     g1 = np.zeros((order * n, m))
     g1[:, 2 * n :] = np.eye(order * n)
     return e_mats, g0, g1
-
-
-def _bessel_weights(order: int, count: int) -> np.ndarray:
-    return np.array([2 * k + 1 for k in range(count)], dtype=float)
 
 
 def lmi_blocks(
@@ -319,7 +315,8 @@ def _sym(m: np.ndarray) -> np.ndarray:
     return 0.5 * (m + m.T)
 
 
-def _block_margins(blocks: dict[str, np.ndarray]) -> tuple[BlockMargin, ...]:
+def block_margins(blocks: dict[str, np.ndarray]) -> tuple[BlockMargin, ...]:
+    """λ_min and λ_min/‖block‖₂ of every block of :func:`lmi_blocks` (positive means satisfied)."""
     out = []
     for name, block in blocks.items():
         eig = float(np.linalg.eigvalsh(block)[0])
@@ -436,9 +433,89 @@ def _diag_blocks(S: Any, order: int) -> Any:
     return cp.bmat(rows)
 
 
-@functools.lru_cache(maxsize=64)
-def _compiled(n: int, order: int, positivity: Positivity) -> _AnalysisProblem:
-    return _AnalysisProblem(n, order, positivity)
+class PerThread:
+    """Compiled problems, one set per thread: a cvxpy Problem holds its Parameter values and its
+    solution in place, so two threads sharing one would read each other's answers."""
+
+    def __init__(self, build: Callable[..., Any]) -> None:
+        self._build = build
+        self._local = threading.local()
+        self._generation = 0
+
+    def __call__(self, *key: Any) -> Any:
+        store = getattr(self._local, "store", None)
+        if store is None or self._local.generation != self._generation:
+            store = self._local.store = {}
+            self._local.generation = self._generation
+        if key not in store:
+            store[key] = self._build(*key)
+        return store[key]
+
+    def cache_clear(self) -> None:
+        """Forget the compiled problems of every thread (they are rebuilt on the next call)."""
+        self._generation += 1
+
+
+#: ``_compiled(n, order, positivity)``: the analysis problem compiled once per (n, N) and per thread.
+_compiled = PerThread(_AnalysisProblem)
+
+
+def unit_delay_system(a: np.ndarray, a_d: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(τ T⁻¹AT, τ T⁻¹A_dT, diag of T): the system in normalised time t/τ (unit delay), balanced.
+
+    With y = T⁻¹x and t' = t/τ, ẋ = A x + A_d x(t − τ) becomes y' = τT⁻¹AT y + τT⁻¹A_dT y(t' − 1).
+    T is the diagonal power-of-two balancing of |τA| + |τA_d| (exact in floating point), so the
+    normalised problem is the same for c·(A, A_d) at τ/c and is well scaled for τ from 1e-4 to 1e3 s.
+    """
+    scale = balancing(tau * a, tau * a_d)
+    return tau * similarity(a, scale), tau * similarity(a_d, scale), scale
+
+
+def _xi_scaling(scale: np.ndarray, tau: float, order: int) -> np.ndarray:
+    """Diagonal of D T_b: ξ = [x; τΩ₀; ...] = D T_b ξ̃ with ξ̃ = [y; Ω̃₀; ...] of the unit-delay system."""
+    return np.concatenate([scale] + [tau * scale] * order)
+
+
+def from_unit_delay(
+    p: np.ndarray, s: np.ndarray, r: np.ndarray, scale: np.ndarray, tau: float, order: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Map a certificate (P̃, S̃, R̃) of :func:`unit_delay_system` back to (P, S, R) of (A, A_d) at τ.
+
+    V(x_t) = τ Ṽ(y_t'): P = τ (DT_b)⁻¹ P̃ (DT_b)⁻¹, S = T⁻¹ S̃ T⁻¹, R = T⁻¹ R̃ T⁻¹ (``design/lmi.md``).
+    """
+    d = 1.0 / _xi_scaling(scale, tau, order)
+    inv = 1.0 / scale
+    return tau * (d[:, None] * p * d[None, :]), inv[:, None] * s * inv[None, :], inv[:, None] * r * inv[None, :]
+
+
+def to_unit_delay(
+    p: np.ndarray, s: np.ndarray, r: np.ndarray, scale: np.ndarray, tau: float, order: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The inverse of :func:`from_unit_delay`."""
+    d = _xi_scaling(scale, tau, order)
+    return (d[:, None] * p * d[None, :]) / tau, scale[:, None] * s * scale[None, :], scale[:, None] * r * scale[None, :]
+
+
+def verified_margins(
+    a: np.ndarray,
+    a_d: np.ndarray,
+    tau: float,
+    p: np.ndarray,
+    s: np.ndarray,
+    r: np.ndarray,
+    *,
+    order: int,
+    positivity: Positivity,
+) -> tuple[BlockMargin, ...]:
+    """Block margins of (P, S, R) for (A, A_d) at τ, recomputed in float64 on the unit-delay system.
+
+    The blocks of the unit-delay system are congruent to those of the original one (the derivative
+    block is identical, the positivity block is (1/τ²)(DT_b)ᵀ(τP + D_S)(DT_b)), so positive
+    definiteness is the same; the unit-delay blocks are the well-scaled ones to test.
+    """
+    a_u, a_d_u, scale = unit_delay_system(a, a_d, tau)
+    p_u, s_u, r_u = to_unit_delay(p, s, r, scale, tau, order)
+    return block_margins(lmi_blocks(a_u, a_d_u, 1.0, p_u, s_u, r_u, order=order, positivity=positivity))
 
 
 def certify(
@@ -499,18 +576,19 @@ def certify(
     a, a_d = system_matrices(A, A_d)
     tau = positive_scalar("tau", tau)
     order = order_value(order)
-    positivity = _positivity(positivity)
+    positivity = check_positivity(positivity)
     margin_tol = positive_scalar("margin_tol", margin_tol)
-    return _certify(a, a_d, tau, order, margin_tol, parametric, positivity)
+    return certify_checked(a, a_d, tau, order, margin_tol, parametric, positivity)
 
 
-def _positivity(value: Any) -> Positivity:
+def check_positivity(value: Any) -> Positivity:
+    """Return ``value`` if it is a :class:`Positivity` member, else raise SpecificationError."""
     if not isinstance(value, Positivity):
         raise SpecificationError(f"positivity must be a Positivity member, got {value!r}")
     return value
 
 
-def _certify(
+def certify_checked(
     a: np.ndarray,
     a_d: np.ndarray,
     tau: float,
@@ -519,15 +597,17 @@ def _certify(
     parametric: bool,
     positivity: Positivity,
 ) -> Certificate:
+    """:func:`certify` on checked inputs: solved on :func:`unit_delay_system`, mapped back, re-verified."""
     n = a.shape[0]
+    a_u, a_d_u, scale = unit_delay_system(a, a_d, tau)
     if parametric:
         lmi = _compiled(n, order, positivity)
-        lmi.set(a, a_d, tau)
+        lmi.set(a_u, a_d_u, 1.0)
     else:
-        values = {"tau": tau, "A": a, "A_d": a_d, "tauA": tau * a, "tauA_d": tau * a_d}
+        values = {"tau": 1.0, "A": a_u, "A_d": a_d_u, "tauA": a_u, "tauA_d": a_d_u}
         lmi = _AnalysisProblem(n, order, positivity, values)
     outcome = solve(lmi.problem)
-    base = {
+    base: dict[str, Any] = {
         "order": order,
         "tau": tau,
         "solver": "CLARABEL",
@@ -535,16 +615,17 @@ def _certify(
         "solver_status": outcome.status,
         "positivity": positivity,
     }
-    failed = {"status": CertificateStatus.SOLVER_FAILED, "P": None, "S": None, "R": None, "margins": ()}
+    failed: dict[str, Any] = {"status": CertificateStatus.SOLVER_FAILED, "P": None, "S": None, "R": None, "margins": ()}
     if outcome.error:
         return Certificate(**failed, solver_margin=math.nan, reason=outcome.error, **base)
-    values = [lmi.P.value, lmi.S.value, lmi.R.value, lmi.t.value]
-    if outcome.status != OPTIMAL or any(v is None for v in values):
+    solution = [lmi.P.value, lmi.S.value, lmi.R.value, lmi.t.value]
+    if outcome.status != OPTIMAL or any(v is None for v in solution):
         reason = f"solver status {outcome.status!r} is not 'optimal': no certificate"
         return Certificate(**failed, solver_margin=math.nan, reason=reason, **base)
-    p, s, r = (_sym(np.asarray(v, dtype=float)) for v in values[:3])
-    t_opt = float(values[3])
-    margins = _block_margins(lmi_blocks(a, a_d, tau, p, s, r, order=order, positivity=positivity))
+    p_u, s_u, r_u = (_sym(np.asarray(v, dtype=float)) for v in solution[:3])
+    t_opt = float(solution[3])
+    margins = block_margins(lmi_blocks(a_u, a_d_u, 1.0, p_u, s_u, r_u, order=order, positivity=positivity))
+    p, s, r = (_sym(m) for m in from_unit_delay(p_u, s_u, r_u, scale, tau, order))
     worst = min(margins, key=lambda m: m.relative)
     if worst.relative >= margin_tol:
         status = CertificateStatus.CERTIFIED
@@ -622,12 +703,12 @@ def max_certified_delay(
 
     a, a_d = system_matrices(A, A_d)
     order = order_value(order)
-    positivity = _positivity(positivity)
+    positivity = check_positivity(positivity)
     rtol = positive_scalar("rtol", rtol)
     if rtol >= 0.5:
         raise SpecificationError(f"rtol must be < 0.5, got {rtol}")
     margin_tol = positive_scalar("margin_tol", margin_tol)
-    scale = max(np.linalg.norm(a, 2), np.linalg.norm(a_d, 2), 1e-12)
+    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(a_d, 2)), 1e-12)
     limit = 1e3 / scale if tau_max is None else positive_scalar("tau_max", tau_max)
     exact = delay_margin(a, a_d)
     search = _Search(a, a_d, order, margin_tol, parametric, positivity)
@@ -723,7 +804,7 @@ class _Search:
         self.time = 0.0
 
     def test(self, tau: float) -> Certificate:
-        cert = _certify(self.a, self.a_d, tau, self.order, self.margin_tol, self.parametric, self.positivity)
+        cert = certify_checked(self.a, self.a_d, tau, self.order, self.margin_tol, self.parametric, self.positivity)
         self.solves += 1
         self.time += cert.solve_time
         if cert.status is CertificateStatus.SOLVER_FAILED:
@@ -733,7 +814,7 @@ class _Search:
     def seed(self, lo: float, hi: float) -> tuple[float, Certificate] | None:
         """A certified delay inside the exact stable interval (lo, hi), or None."""
         if lo == 0.0:
-            top = hi if math.isfinite(hi) else 1.0 / max(np.linalg.norm(self.a_d, 2), 1e-12)
+            top = hi if math.isfinite(hi) else 1.0 / max(float(np.linalg.norm(self.a_d, 2)), 1e-12)
             candidates = [top * f for f in (0.5, 0.1, 0.01, 1e-3)]
         else:
             top = hi if math.isfinite(hi) else 2.0 * lo

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import positive_scalar
+from mrpctl._validation import check_spacecraft, positive_scalar
 from mrpctl.design._common import frozen, is_diagonal, order_value
 from mrpctl.design.lmi import (
     DEFAULT_MARGIN_TOL,
@@ -17,11 +17,10 @@ from mrpctl.design.lmi import (
     DelayCertification,
     Positivity,
     SearchStatus,
-    _block_margins,
-    _certify,
-    _positivity,
-    lmi_blocks,
+    certify_checked,
+    check_positivity,
     max_certified_delay,
+    verified_margins,
 )
 from mrpctl.design.margin import DelayMargin, delay_margin
 from mrpctl.model import gain_matrix, pd_from_gain, plant_model
@@ -30,7 +29,7 @@ from mrpctl.spacecraft import Spacecraft
 __all__ = ["LinearizedLoop", "linearized_loop"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class LinearizedLoop:
     """ẋ = A x + A_d x(t − τ) with A_d = B K: the delayed loop u = K x(t − τ) linearised at x = 0.
 
@@ -82,16 +81,16 @@ class LinearizedLoop:
         """
         tau = positive_scalar("tau", tau)
         order = order_value(order)
-        positivity = _positivity(positivity)
+        positivity = check_positivity(positivity)
         margin_tol = positive_scalar("margin_tol", margin_tol)
         if not self.split:
-            return _certify(self.A, self.A_d, tau, order, margin_tol, True, positivity)
+            return certify_checked(self.A, self.A_d, tau, order, margin_tol, True, positivity)
         cache: dict[bytes, Certificate] = {}
         certs = []
         for a_i, a_d_i in self.axes:
             key = a_d_i.tobytes()
             if key not in cache:
-                cache[key] = _certify(a_i, a_d_i, tau, order, margin_tol, True, positivity)
+                cache[key] = certify_checked(a_i, a_d_i, tau, order, margin_tol, True, positivity)
             certs.append(cache[key])
         return self._assemble(certs, tau, order, positivity, margin_tol, sum(c.solve_time for c in cache.values()))
 
@@ -158,7 +157,7 @@ class LinearizedLoop:
         margin_tol: float,
         time: float,
     ) -> Certificate:
-        base = {
+        base: dict[str, Any] = {
             "order": order,
             "tau": tau,
             "solver": "CLARABEL",
@@ -185,6 +184,7 @@ class LinearizedLoop:
         s = np.zeros((n, n))
         r = np.zeros((n, n))
         for i, c in enumerate(certs):
+            assert c.P is not None and c.S is not None and c.R is not None  # certified above
             idx = (i, 3 + i)
             for b in range(blocks):
                 for d in range(blocks):
@@ -193,7 +193,7 @@ class LinearizedLoop:
                             p[b * n + idx[k], d * n + idx[m]] = c.P[b * 2 + k, d * 2 + m]
             s[np.ix_(idx, idx)] = c.S
             r[np.ix_(idx, idx)] = c.R
-        margins = _block_margins(lmi_blocks(self.A, self.A_d, tau, p, s, r, order=order, positivity=positivity))
+        margins = verified_margins(self.A, self.A_d, tau, p, s, r, order=order, positivity=positivity)
         worst = min(margins, key=lambda m: m.relative)
         ok = worst.relative >= margin_tol
         return Certificate(
@@ -229,13 +229,13 @@ def linearized_loop(spacecraft: Spacecraft, K: Any) -> LinearizedLoop:
         With ``axes`` filled when K₁ = J⁻¹K_σ/4 and K₂ = J⁻¹K_ω/4 are diagonal (e.g. diagonal J and
         diagonal gain blocks): the 6×6 LMI then splits into three 2×2 LMIs with the same answer.
     """
-    if not isinstance(spacecraft, Spacecraft):
-        raise TypeError(f"spacecraft must be a mrpctl.Spacecraft, got {type(spacecraft).__name__}")
+    spacecraft = check_spacecraft(spacecraft)
     k = gain_matrix(K)
-    a, a_d = plant_model(spacecraft).closed_loop_matrices(k)
+    plant = plant_model(spacecraft)
+    a, a_d = plant.closed_loop_matrices(k)
     k1, k2 = pd_from_gain(spacecraft, k)
     axes: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
     if is_diagonal(k1) and is_diagonal(k2):
-        a_axis = frozen([[0.0, 1.0], [0.0, 0.0]])
+        a_axis = frozen(plant.A[np.ix_((0, 3), (0, 3))])  # the (σ₁, ω₁/4) block of the one model's A
         axes = tuple((a_axis, frozen([[0.0, 0.0], [k1[i, i], k2[i, i]]])) for i in range(3))
     return LinearizedLoop(spacecraft=spacecraft, K=frozen(k), A=frozen(a), A_d=frozen(a_d), axes=axes)
