@@ -25,7 +25,7 @@ def _run(args: list[str], cwd: Path, env: dict[str, str] | None = None) -> str:
 def test_wheel_works_outside_the_source_tree(tmp_path: Path) -> None:
     dist = tmp_path / "dist"
     _run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", str(ROOT), "-w", str(dist)],
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", str(ROOT), "-w", str(dist)],
         tmp_path,
     )
     (wheel,) = dist.glob("mrpctl-*.whl")
@@ -55,3 +55,13 @@ def test_wheel_works_outside_the_source_tree(tmp_path: Path) -> None:
     assert where.startswith(str(target)) and str(ROOT) not in where and "0.1.0" in where
     helped = _run([str(python), "-m", "mrpctl", "--help"], outside, env)
     assert "reproduce" in helped and "simulate" in helped
+    assert "tau = 0.5 s" in _run([str(python), "-m", "mrpctl", "example"], outside, env)
+    script = (
+        "from mrpctl import DelayAware, paper, plots\n"
+        "from mrpctl.simulate import simulate\n"
+        "run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.5, rule=DelayAware(), t_final=3.0)\n"
+        "plots.save_figure(plots.plot_response(run), 'run.png')\n"
+        "print(run.switch_count)\n"
+    )
+    assert _run([str(python), "-c", script], outside, env).strip() == "2"
+    assert (outside / "run.png").read_bytes()[:4] == b"\x89PNG"
