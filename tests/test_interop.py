@@ -208,3 +208,63 @@ def test_basilisk_mrp_feedback_module_agrees() -> None:
     sim.ConfigureStopTime(macros.sec2nano(0.1))
     sim.ExecuteSimulation()
     assert np.allclose(np.asarray(log.torqueRequestBody)[-1], np.asarray(paper.GAIN) @ x, rtol=1e-12)
+
+
+def test_basilisk_closed_loop_matches_an_undelayed_run() -> None:
+    """When Basilisk is installed: its spacecraft + attTrackingError + mrpFeedback loop with the mapped
+    gains follows mrpctl's tau = 0 run (OnCurrent: both switch at |sigma| = 1) over 10 s."""
+    pytest.importorskip("Basilisk")
+    from Basilisk.architecture import messaging
+    from Basilisk.fswAlgorithms import attTrackingError, inertial3D, mrpFeedback
+    from Basilisk.simulation import extForceTorque, simpleNav, spacecraft
+    from Basilisk.utilities import SimulationBaseClass, macros
+
+    from mrpctl import OnCurrent
+
+    t_final, period = 10.0, 1e-3
+    bsk = basilisk_mrp_feedback(paper.GAIN)
+    sigma0, omega0 = basilisk_state(paper.INITIAL_STATE)
+    sim = SimulationBaseClass.SimBaseClass()
+    sim.CreateNewProcess("process").addTask(sim.CreateNewTask("task", macros.sec2nano(period)))
+    body = spacecraft.Spacecraft()
+    body.ModelTag = "spacecraft"
+    body.hub.IHubPntBc_B = np.diag(paper.INERTIA).tolist()
+    body.hub.sigma_BNInit = sigma0.reshape(3, 1).tolist()
+    body.hub.omega_BN_BInit = omega0.reshape(3, 1).tolist()
+    torque = extForceTorque.ExtForceTorque()
+    torque.ModelTag = "torque"
+    body.addDynamicEffector(torque)
+    nav = simpleNav.SimpleNav()
+    nav.ModelTag = "nav"
+    nav.scStateInMsg.subscribeTo(body.scStateOutMsg)
+    reference = inertial3D.inertial3D()
+    reference.ModelTag = "reference"
+    reference.sigma_R0N = [0.0, 0.0, 0.0]
+    error = attTrackingError.attTrackingError()
+    error.ModelTag = "error"
+    error.attNavInMsg.subscribeTo(nav.attOutMsg)
+    error.attRefInMsg.subscribeTo(reference.attRefOutMsg)
+    control_module = mrpFeedback.mrpFeedback()
+    control_module.ModelTag = "mrpFeedback"
+    control_module.K, control_module.P, control_module.Ki = bsk.K, bsk.P, bsk.Ki
+    control_module.controlLawType = bsk.controlLawType
+    config = messaging.VehicleConfigMsgPayload()
+    config.ISCPntB_B = np.diag(paper.INERTIA).ravel().tolist()
+    config_msg = messaging.VehicleConfigMsg().write(config)
+    control_module.guidInMsg.subscribeTo(error.attGuidOutMsg)
+    control_module.vehConfigInMsg.subscribeTo(config_msg)
+    torque.cmdTorqueInMsg.subscribeTo(control_module.cmdTorqueOutMsg)
+    for priority, module in enumerate((control_module, error, reference, nav, torque, body), start=5):
+        sim.AddModelToTask("task", module, priority)
+    log = body.scStateOutMsg.recorder()
+    sim.AddModelToTask("task", log)
+    sim.InitializeSimulation()
+    sim.ConfigureStopTime(macros.sec2nano(t_final))
+    sim.ExecuteSimulation()
+    sigma_bsk = np.asarray(log.sigma_BN)
+
+    run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.0, rule=OnCurrent(), t_final=t_final)
+    assert sigma_bsk.shape == run.sigma.shape and run.switch_count == 1
+    away = np.abs(run.t - run.switch_times[0]) > 0.01  # the two switch within a few samples of each other
+    assert np.max(np.abs(sigma_bsk[away] - run.sigma[away])) < 2e-3
+    assert sigma_bsk[-1] == pytest.approx(run.sigma[-1], rel=1e-3, abs=1e-9)
