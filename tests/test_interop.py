@@ -5,7 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 
-import control
+import control  # type: ignore[import-untyped]
 import numpy as np
 import pytest
 
@@ -170,7 +170,9 @@ def test_basilisk_gain_mapping_gives_the_same_torque(rng: np.random.Generator) -
 
 
 def test_basilisk_refuses_per_axis_gains() -> None:
-    per_axis = pd_gains(Spacecraft([12, 15, 9]), zeta=1.0, omega_n=0.5).K  # k_sigma = 4 J K1: differs per axis
+    per_axis = pd_gains(
+        Spacecraft(np.array([12.0, 15.0, 9.0])), zeta=1.0, omega_n=0.5
+    ).K  # k_sigma = 4 J K1: differs per axis
     with pytest.raises(SpecificationError, match=r"scalar times I3.*per-axis"):
         basilisk_mrp_feedback(per_axis)
 
@@ -178,9 +180,9 @@ def test_basilisk_refuses_per_axis_gains() -> None:
 def test_basilisk_mrp_feedback_module_agrees() -> None:
     """When Basilisk is installed: its mrpFeedback torque equals mrpctl's u = K x on the paper's gains."""
     pytest.importorskip("Basilisk")
-    from Basilisk.architecture import messaging
-    from Basilisk.fswAlgorithms import mrpFeedback
-    from Basilisk.utilities import SimulationBaseClass, macros
+    from Basilisk.architecture import messaging  # type: ignore[import-untyped]
+    from Basilisk.fswAlgorithms import mrpFeedback  # type: ignore[import-untyped]
+    from Basilisk.utilities import SimulationBaseClass, macros  # type: ignore[import-untyped]
 
     bsk = basilisk_mrp_feedback(paper.GAIN)
     x = np.asarray(paper.INITIAL_STATE, dtype=float)
@@ -214,10 +216,10 @@ def test_basilisk_closed_loop_matches_an_undelayed_run() -> None:
     """When Basilisk is installed: its spacecraft + attTrackingError + mrpFeedback loop with the mapped
     gains follows mrpctl's tau = 0 run (OnCurrent: both switch at |sigma| = 1) over 10 s."""
     pytest.importorskip("Basilisk")
-    from Basilisk.architecture import messaging
-    from Basilisk.fswAlgorithms import attTrackingError, inertial3D, mrpFeedback
-    from Basilisk.simulation import extForceTorque, simpleNav, spacecraft
-    from Basilisk.utilities import SimulationBaseClass, macros
+    from Basilisk.architecture import messaging  # type: ignore[import-untyped]
+    from Basilisk.fswAlgorithms import attTrackingError, inertial3D, mrpFeedback  # type: ignore[import-untyped]
+    from Basilisk.simulation import extForceTorque, simpleNav, spacecraft  # type: ignore[import-untyped]
+    from Basilisk.utilities import SimulationBaseClass, macros  # type: ignore[import-untyped]
 
     from mrpctl import OnCurrent
 

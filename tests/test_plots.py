@@ -6,12 +6,15 @@ import hashlib
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
-from scipy.spatial.transform import Rotation
+from matplotlib.legend import Legend
+from matplotlib.patches import Rectangle
+from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
 from mrpctl import paper, plots, simulate_batch
 from mrpctl.design import linearized_loop
@@ -33,7 +36,21 @@ def result():
     )
 
 
-def _legend_is_outside(ax) -> bool:
+def _x(line: Any) -> np.ndarray:
+    return np.asarray(line.get_xdata(), dtype=float)
+
+
+def _y(line: Any) -> np.ndarray:
+    return np.asarray(line.get_ydata(), dtype=float)
+
+
+def _legend(ax: Any) -> Legend:
+    legend = ax.get_legend()
+    assert isinstance(legend, Legend)
+    return legend
+
+
+def _legend_is_outside(ax: Any) -> bool:
     fig = ax.get_figure()
     renderer = fig.canvas.get_renderer() if hasattr(fig.canvas, "get_renderer") else None
     if renderer is None:
@@ -41,7 +58,7 @@ def _legend_is_outside(ax) -> bool:
 
         renderer = FigureCanvasAgg(fig).get_renderer()
     fig.draw_without_rendering()
-    legend = ax.get_legend().get_window_extent(renderer)
+    legend = _legend(ax).get_window_extent(renderer)
     return legend.x0 >= ax.get_window_extent(renderer).x1
 
 
@@ -72,11 +89,11 @@ def test_response_figure_carries_the_run(result, tmp_path: Path) -> None:
     assert u_ax.get_xlabel() == "time t (s)"
     sigma1 = sigma_ax.lines[0]
     assert sigma1.get_label() == "σ₁"
-    assert np.array_equal(sigma1.get_xdata(), result.t)
-    assert np.array_equal(sigma1.get_ydata(), result.sigma[:, 0])
-    assert u_ax.lines[0].get_drawstyle() == "steps-post" and np.array_equal(u_ax.lines[0].get_ydata(), result.u[:, 0])
+    assert np.array_equal(_x(sigma1), result.t)
+    assert np.array_equal(_y(sigma1), result.sigma[:, 0])
+    assert u_ax.lines[0].get_drawstyle() == "steps-post" and np.array_equal(_y(u_ax.lines[0]), result.u[:, 0])
     markers = [line for line in sigma_ax.lines if line.get_label() == "switch"]
-    assert len(markers) == 1 and np.array_equal(markers[0].get_xdata(), result.switch_times)
+    assert len(markers) == 1 and np.array_equal(_x(markers[0]), result.switch_times)
     title = sigma_ax.get_title()
     assert str(result.switch_count) in title and "τ = 0.5 s" in title and "|σ| < 10⁻²" in title
     assert "sigma" not in title and "tau" not in title and "ε" not in title  # Greek, consistently
@@ -91,16 +108,18 @@ def test_zero_traces_are_named_not_drawn(result) -> None:
         labels = [line.get_label() for line in ax.lines]
         assert f"{symbol}₂" not in labels and f"{symbol}₃" not in labels
         assert f"{symbol}₂, {symbol}₃ ≡ 0" in labels
-        assert f"{symbol}₂, {symbol}₃ ≡ 0" in [t.get_text() for t in ax.get_legend().get_texts()]
+        assert f"{symbol}₂, {symbol}₃ ≡ 0" in [t.get_text() for t in _legend(ax).get_texts()]
 
 
 def test_legends_sit_outside_the_data(result) -> None:
-    fig = plots.plot_response(result)
-    assert all(_legend_is_outside(ax) for ax in fig.axes[:3])
+    response = plots.plot_response(result)
     sweep = plots.plot_sweep(
-        [1.0, 2.0], switch_count=[3, 4], settling_time=[1, 2], converged=[1, 1], parameter_label="x"
+        [1.0, 2.0], switch_count=[3, 4], settling_time=[1, 2], converged=[True, True], parameter_label="x"
     )
-    assert all(_legend_is_outside(ax) for ax in sweep.axes)
+    for ax in [*response.axes[:3], *sweep.axes]:  # anchored right of the axes, hanging from its top
+        anchor = _legend(ax).get_bbox_to_anchor()
+        assert anchor.x0 >= ax.bbox.x1 - 1e-9 and anchor.y1 == pytest.approx(ax.bbox.y1)
+    assert _legend_is_outside(plots.plot_attitude(result, window=(0.9, 1.0)).axes[0])  # rendered extent
 
 
 def test_dense_switch_cluster_gets_a_zoom_inset(result) -> None:
@@ -111,7 +130,7 @@ def test_dense_switch_cluster_gets_a_zoom_inset(result) -> None:
     lo, hi = inset.get_xlim()
     assert lo < result.switch_times[0] and result.switch_times[-1] < hi and hi - lo < 1.0
     ticks = next(line for line in inset.lines if line.get_marker() == "|")
-    assert len(ticks.get_xdata()) == result.switch_count == 114
+    assert len(_x(ticks)) == result.switch_count == 114
     assert inset.lines[0].get_drawstyle() == "steps-post"
     assert not plots.plot_response(result, inset=False).axes[0].child_axes
 
@@ -120,12 +139,12 @@ def test_attitude_zoom_draws_samples_as_steps_with_markers(result) -> None:
     fig = plots.plot_attitude(result, window=(0.9, 1.2))
     (ax,) = fig.axes
     sigma1 = ax.lines[0]
-    times = sigma1.get_xdata()
+    times = _x(sigma1)
     assert times.min() >= 0.9 and times.max() <= 1.2
     assert sigma1.get_drawstyle() == "steps-post" and sigma1.get_marker() == "."
     keep = (result.t >= 0.9) & (result.t <= 1.2)
-    assert np.array_equal(sigma1.get_ydata(), result.sigma[keep, 0])
-    switches = next(line for line in ax.lines if line.get_label() == "switch").get_xdata()
+    assert np.array_equal(_y(sigma1), result.sigma[keep, 0])
+    switches = _x(next(line for line in ax.lines if line.get_label() == "switch"))
     expected = result.switch_times[(result.switch_times >= 0.9) & (result.switch_times <= 1.2)]
     assert np.array_equal(switches, expected) and len(expected) > 0
     assert ax.get_xlim() == (0.9, 1.2)
@@ -156,14 +175,14 @@ def test_sweep_shows_failures_log_counts_and_sorts() -> None:
         parameter_label="boundary layer thickness eps (-)",
     )
     count_ax, settle_ax, peak_ax = fig.axes
-    assert list(count_ax.lines[0].get_xdata()) == [0.001, 0.005, 0.05, 0.2]
-    assert list(count_ax.lines[0].get_ydata()) == [26, 114, 901, 1881]
+    assert list(_x(count_ax.lines[0])) == [0.001, 0.005, 0.05, 0.2]
+    assert list(_y(count_ax.lines[0])) == [26, 114, 901, 1881]
     assert count_ax.get_yscale() == "log"
     failed = next(line for line in settle_ax.lines if line.get_label() == "did not settle")
-    assert list(failed.get_xdata()) == [0.001]  # drawn as a failure, not dropped
-    assert list(settle_ax.lines[0].get_xdata()) == [0.005, 0.05, 0.2]
+    assert list(_x(failed)) == [0.001]  # drawn as a failure, not dropped
+    assert list(_x(settle_ax.lines[0])) == [0.005, 0.05, 0.2]
     assert peak_ax.get_yscale() == "linear" and "max |σ|" in peak_ax.get_ylabel()  # 1.02-7.07: under a decade
-    assert list(next(line for line in peak_ax.lines if line.get_marker() == "x").get_xdata()) == [0.001]
+    assert list(_x(next(line for line in peak_ax.lines if line.get_marker() == "x"))) == [0.001]
     assert peak_ax.get_xscale() == "log" and peak_ax.get_xlabel() == "boundary layer thickness ε (-)"
     assert "|ω| < 10⁻³ rad/s" in count_ax.get_title()
 
@@ -181,12 +200,12 @@ def test_tau_sweep_marks_the_exact_margin() -> None:
     )
     fig = plots.plot_batch(batch, margin=margin)
     for ax in fig.axes:
-        lines = [line for line in ax.lines if line.get_label().startswith("exact margin τ*")]
-        assert len(lines) == 1 and np.all(np.asarray(lines[0].get_xdata()) == margin)
+        lines = [line for line in ax.lines if str(line.get_label()).startswith("exact margin τ*")]
+        assert len(lines) == 1 and np.all(np.asarray(_x(lines[0])) == margin)
     assert fig.axes[-1].get_xlabel() == "delay τ (s)"
-    assert "1.5555" in fig.axes[0].get_legend().get_texts()[-1].get_text()
+    assert "1.5555" in _legend(fig.axes[0]).get_texts()[-1].get_text()
     with pytest.raises(SpecificationError, match="margin"):
-        plots.plot_sweep([1.0], switch_count=[1], settling_time=[1], converged=[1], parameter_label="x", margin=-1.0)
+        plots.plot_sweep([1.0], switch_count=[1], settling_time=[1], converged=[True], parameter_label="x", margin=-1.0)
 
 
 def test_monte_carlo_is_distributions_and_scatter_against_the_initial_state(rng: np.random.Generator) -> None:
@@ -197,7 +216,7 @@ def test_monte_carlo_is_distributions_and_scatter_against_the_initial_state(rng:
     batch = simulate_batch(paper.SPACECRAFT, paper.GAIN, x0, tau=paper.TAU, rule=OnDelayed(), t_final=3.0)
     fig = plots.plot_monte_carlo(batch)
     hist_ax, cdf_ax, scatter_ax = fig.axes[:3]
-    assert sum(p.get_height() for p in hist_ax.patches) == n
+    assert sum(p.get_height() for p in hist_ax.patches if isinstance(p, Rectangle)) == n
     assert "settling time" in cdf_ax.get_xlabel() and cdf_ax.get_ylim()[1] <= 1.05
     points = np.vstack([c.get_offsets() for c in scatter_ax.collections])
     angle = np.degrees(Rotation.from_mrp(sigma).magnitude())  # independent: scipy's principal angle
@@ -210,7 +229,7 @@ def test_monte_carlo_is_distributions_and_scatter_against_the_initial_state(rng:
 def test_save_figure_is_atomic(tmp_path: Path) -> None:
     target = tmp_path / "old.png"
     target.write_bytes(b"old image")
-    fig = plots.plot_sweep([1.0], switch_count=[1], settling_time=[1], converged=[1], parameter_label="x")
+    fig = plots.plot_sweep([1.0], switch_count=[1], settling_time=[1], converged=[True], parameter_label="x")
     with pytest.raises(ValueError, match=r"[Ff]ormat"):
         plots.save_figure(fig, tmp_path / "old.notaformat")
     assert target.read_bytes() == b"old image"
