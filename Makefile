@@ -42,4 +42,4 @@ docs: $(STAMP)
 
 # The wheel installed into a fresh venv outside the source tree; `python -m mrpctl --help` runs from it.
 wheel-check: $(STAMP)
-	$(PYTHON) -m pytest -q -p no:xdist tests/test_package.py
+	$(BLAS1) MRPCTL_WHEEL_TEST=1 $(PYTHON) -m pytest -q -p no:xdist tests/test_package.py

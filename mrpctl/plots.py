@@ -555,12 +555,15 @@ def render_rgba(fig: Figure, *, dpi: int = 80) -> np.ndarray:
     """The figure rendered by Agg as an (h, w, 4) uint8 array (for image regression tests)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    previous = fig.canvas
+    previous, previous_dpi = fig.canvas, fig.get_dpi()
     canvas = FigureCanvasAgg(fig)
     fig.set_dpi(dpi)
-    canvas.draw()
-    image = np.asarray(canvas.buffer_rgba()).copy()
-    fig.set_canvas(previous)
+    try:
+        canvas.draw()
+        image = np.asarray(canvas.buffer_rgba()).copy()
+    finally:
+        fig.set_dpi(previous_dpi)
+        fig.set_canvas(previous)
     return image
 
 

@@ -268,5 +268,5 @@ def test_basilisk_closed_loop_matches_an_undelayed_run() -> None:
     run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.0, rule=OnCurrent(), t_final=t_final)
     assert sigma_bsk.shape == run.sigma.shape and run.switch_count == 1
     away = np.abs(run.t - run.switch_times[0]) > 0.01  # the two switch within a few samples of each other
-    assert np.max(np.abs(sigma_bsk[away] - run.sigma[away])) < 2e-3
+    assert np.max(np.abs(sigma_bsk[away] - run.sigma[away])) < 1e-3  # measured 3.7e-4
     assert sigma_bsk[-1] == pytest.approx(run.sigma[-1], rel=1e-3, abs=1e-9)
