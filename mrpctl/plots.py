@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from mrpctl.errors import DimensionError, SpecificationError
@@ -292,11 +293,12 @@ def _count_scale(ax: Axes, counts: np.ndarray) -> None:
     if finite.size == 0:
         return
     positive = finite[finite > 0]
-    if positive.size and positive.max() >= 10 * max(positive.min(), 1.0):
-        if np.any(finite == 0):
-            ax.set_yscale("symlog", linthresh=1.0)
-        else:
-            ax.set_yscale("log")
+    if positive.size == 0:
+        return
+    if np.any(finite == 0) and positive.max() >= 10:
+        ax.set_yscale("symlog", linthresh=1.0)
+    elif positive.max() >= 10 * max(positive.min(), 1.0):
+        ax.set_yscale("log")
 
 
 def plot_sweep(
@@ -468,12 +470,22 @@ def plot_monte_carlo(batch: BatchResult, *, title: str | None = None, ax: Any = 
     failed = n - times.size
     axes[1].axhline(times.size / n, color=_FAIL_COLOR, linestyle=":", linewidth=1.0, label=f"{failed} did not settle")
     axes[1].set_ylim(0.0, 1.02)
+    axes[1].set_xlim(0.0, float(batch.t_final))
+    if not times.size:
+        axes[1].text(0.5, 0.5, f"no run settled in {batch.t_final:g} s", transform=axes[1].transAxes, ha="center")
     axes[1].set_xlabel("settling time (s)")
     axes[1].set_ylabel("fraction of runs settled (-)")
-    scatter = axes[2].scatter(angle[ok], count[ok], c=rate[ok], s=14, cmap="viridis", label="settled")
+    norm = Normalize(vmin=float(rate.min()), vmax=float(max(rate.max(), rate.min() + 1e-12)))
+    style = {"c": None, "cmap": "viridis", "norm": norm}
+    scatter = None
+    if ok.any():
+        scatter = axes[2].scatter(angle[ok], count[ok], s=14, label="settled", **{**style, "c": rate[ok]})
     if (~ok).any():
-        axes[2].scatter(angle[~ok], count[~ok], marker="x", color=_FAIL_COLOR, s=30, label="did not settle")
-    if rate.size and rate.max() > rate.min():
+        failures = axes[2].scatter(
+            angle[~ok], count[~ok], marker="x", s=30, label="did not settle", **{**style, "c": rate[~ok]}
+        )
+        scatter = scatter or failures
+    if scatter is not None and rate.max() > rate.min():
         fig.colorbar(scatter, ax=axes[2], label="initial rate |ω₀| (rad/s)", location="bottom", shrink=0.6)
     axes[2].set_xlabel("initial principal angle Φ₀ (deg)")
     axes[2].set_ylabel("switch count (-)")

@@ -266,3 +266,18 @@ def test_sweep_pixels_match_the_reference() -> None:
     if reference is None:
         pytest.skip(f"pixel reference recorded for (matplotlib, FreeType) {sorted(_PIXEL_REFERENCE)}, not {versions}")
     assert hashlib.sha256(first.tobytes()).hexdigest() == reference
+
+
+def test_counts_with_zeros_use_a_symlog_axis() -> None:
+    fig = plots.plot_sweep(
+        [1.0, 2.0, 3.0],
+        switch_count=[0, 5, 30198],
+        settling_time=[1.0, 2.0, np.nan],
+        converged=[True, True, False],
+        parameter_label="x",
+    )
+    assert fig.axes[0].get_yscale() == "symlog"
+    flat = plots.plot_sweep(
+        [1.0, 2.0], switch_count=[1, 2], settling_time=[1, 2], converged=[True, True], parameter_label="x"
+    )
+    assert flat.axes[0].get_yscale() == "linear"
