@@ -5,7 +5,7 @@ VENV ?= .venv
 PYTHON := $(VENV)/bin/python
 STAMP := $(VENV)/.mrpctl-installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean docs wheel-check
 
 $(PYTHON):
 	python3 -m venv $(VENV)
@@ -35,3 +35,11 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) results build *.egg-info .pytest_cache
+
+# The documentation site (mkdocs-material + mkdocstrings) into site/, warnings are errors.
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict --site-dir site
+
+# The wheel installed into a fresh venv outside the source tree; `python -m mrpctl --help` runs from it.
+wheel-check: $(STAMP)
+	$(BLAS1) MRPCTL_WHEEL_TEST=1 $(PYTHON) -m pytest -q -p no:xdist tests/test_package.py

@@ -1,29 +1,118 @@
-"""Paper-style figures of simulations and sweeps: the only module that imports matplotlib."""
+"""Figures of simulations, sweeps and Monte Carlo batches: the only module that imports matplotlib.
+
+The functions build :class:`matplotlib.figure.Figure` objects and never select a backend,
+so they work headless (``save_figure`` renders through Agg) and in notebooks (the figure
+is displayed by the notebook's own backend). Every function takes ``ax=``: one
+``Axes`` for single-panel figures, a sequence of ``Axes`` for multi-panel ones (e.g. from
+``plt.subplots(3, 1)``), so figures can be composed with pyplot when the user asks for it.
+
+Conventions on every figure: legends sit outside the data (right of the axes),
+identically zero traces are not drawn but named in the legend ("σ₂, σ₃ ≡ 0"), sampled
+signals in zooms are drawn as steps with a marker per sample, runs that did not settle
+or diverged are drawn as failures, counts use logarithmic axes when they span a decade
+or more, and the settling tolerance is written in the caption.
+"""
 
 from __future__ import annotations
 
+import math
+import os
+import re
+import tempfile
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import matplotlib
-
-matplotlib.use("Agg")  # no screen is assumed; figures are written to files
-
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
+from mrpctl.errors import DimensionError, SpecificationError
+
 if TYPE_CHECKING:
-    from mrpctl.simulate import SimulationResult
+    from mrpctl.simulate import BatchResult, SimulationResult
 
-__all__ = ["plot_attitude", "plot_response", "plot_sweep", "save_figure"]
+__all__ = [
+    "SETTLING_CAPTION",
+    "plot_attitude",
+    "plot_batch",
+    "plot_monte_carlo",
+    "plot_response",
+    "plot_sweep",
+    "render_rgba",
+    "save_figure",
+]
 
-_AXIS_LABELS = ("1", "2", "3")
+_SUB = ("₁", "₂", "₃")
+_SWITCH_COLOR = "crimson"
+_FAIL_COLOR = "crimson"
+#: The settling tolerance of :class:`~mrpctl.simulate.SimulationResult` (|σ| < 1e-2, |ω| < 1e-3 rad/s).
+SETTLING_CAPTION = "settled: |σ| < 10⁻² and |ω| < 10⁻³ rad/s to the end"
+#: A cluster of at least this many switches in at most this fraction of the run gets a zoom inset.
+_INSET_MIN_SWITCHES = 10
+_INSET_MAX_FRACTION = 0.1
+_WORDS = {"eps": "ε", "tau": "τ", "sigma": "σ", "omega": "ω", "alpha": "α", "delta": "δ", "Phi": "Φ"}
+_WORD_RE = re.compile(r"\b(" + "|".join(_WORDS) + r")\b")
 
 
-def _mark_switches(ax: Any, switch_times: np.ndarray, *, label: bool = False) -> None:
+def _typeset(text: str) -> str:
+    """σ, τ, ε, ω typeset the same everywhere: ASCII names from callers and rules become Greek."""
+    return _WORD_RE.sub(lambda m: _WORDS[m.group(1)], text)
+
+
+# ------------------------------------------------------------------------------ axes plumbing
+def _new_axes(n: int, ax: Any, *, figsize: tuple[float, float], sharex: bool = True) -> tuple[Figure, list[Axes]]:
+    """The figure and ``n`` axes: the caller's ``ax`` (one Axes or a sequence) or a new Figure (no pyplot)."""
+    if ax is None:
+        fig = Figure(figsize=figsize, layout="constrained")
+        made = fig.subplots(n, 1, sharex=sharex, squeeze=False)[:, 0]
+        return fig, list(made)
+    axes = [ax] if isinstance(ax, Axes) else list(np.ravel(np.asarray(ax, dtype=object)))
+    if len(axes) != n or not all(isinstance(a, Axes) for a in axes):
+        raise DimensionError(f"ax must be {'one matplotlib Axes' if n == 1 else f'{n} matplotlib Axes'}, got {ax!r}")
+    owner: Any = axes[0].figure
+    while not isinstance(owner, Figure) and getattr(owner, "figure", None) is not None:  # a SubFigure
+        owner = owner.figure
+    if not isinstance(owner, Figure):  # pragma: no cover - an Axes always belongs to a Figure
+        raise SpecificationError("ax must belong to a matplotlib Figure")
+    return owner, axes
+
+
+def _legend_outside(ax: Axes, **kwargs: Any) -> None:
+    """Legend to the right of the axes, never over the data."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8, **kwargs)
+
+
+def _components(
+    ax: Axes, t: np.ndarray, values: np.ndarray, symbol: str, *, drawstyle: str = "default", marker: str | None = None
+) -> None:
+    """The three components of a vector signal; identically zero ones are named, not drawn."""
+    zero = [i for i in range(values.shape[1]) if not np.any(values[:, i])]
+    colors = ("C0", "C1", "C2")
+    for i in range(values.shape[1]):
+        if i in zero:
+            continue
+        ax.plot(
+            t,
+            values[:, i],
+            label=f"{symbol}{_SUB[i]}",
+            color=colors[i],
+            linewidth=1.0,
+            drawstyle=drawstyle,
+            marker=marker,
+            markersize=3.5,
+        )
+    if zero and len(zero) < values.shape[1]:
+        names = ", ".join(f"{symbol}{_SUB[i]}" for i in zero)
+        ax.plot([], [], " ", label=f"{names} ≡ 0")
+    elif zero:
+        ax.plot(t, np.zeros(len(t)), color="0.4", linewidth=1.0, label=f"{symbol}₁ = {symbol}₂ = {symbol}₃ ≡ 0")
+
+
+def _mark_switches(ax: Axes, switch_times: np.ndarray, *, label: bool = False) -> None:
     """A tick at the top of the axes at every switch instant (readable even for thousands)."""
     if len(switch_times) == 0:
         return
@@ -31,7 +120,7 @@ def _mark_switches(ax: Any, switch_times: np.ndarray, *, label: bool = False) ->
         switch_times,
         np.full(len(switch_times), 0.97),
         "|",
-        color="crimson",
+        color=_SWITCH_COLOR,
         markersize=7,
         markeredgewidth=0.8,
         transform=ax.get_xaxis_transform(),
@@ -39,13 +128,37 @@ def _mark_switches(ax: Any, switch_times: np.ndarray, *, label: bool = False) ->
     )
 
 
+def _status(result: SimulationResult) -> str:
+    if result.diverged:
+        return f"DIVERGED at t = {float(result.t[-1]):.3f} s"
+    if result.settling_time is not None:
+        return f"settled at {result.settling_time:.1f} s ({SETTLING_CAPTION.split(': ', 1)[1]})"
+    return f"did not settle in {result.t_final:g} s ({SETTLING_CAPTION.split(': ', 1)[1]})"
+
+
 def _title(result: SimulationResult) -> str:
     n = int(result.switch_count)
     switches = f"{n} shadow-set switch{'es' if n != 1 else ''}"
-    return textwrap.fill(f"{result.rule}, τ = {result.tau:g} s: {switches}", width=90)
+    return textwrap.fill(_typeset(f"{result.rule}, tau = {result.tau:g} s: {switches}; {_status(result)}"), width=95)
 
 
-def plot_response(result: SimulationResult, *, title: str | None = None) -> Figure:
+def _switch_cluster(result: SimulationResult) -> tuple[float, float] | None:
+    """The window of a dense switch cluster worth a zoom inset, or None."""
+    times = np.asarray(result.switch_times)
+    if len(times) < _INSET_MIN_SWITCHES:
+        return None
+    span = float(times[-1] - times[0])
+    duration = float(result.t[-1] - result.t[0]) if len(result.t) > 1 else 0.0
+    if duration <= 0.0 or span > _INSET_MAX_FRACTION * duration:
+        return None
+    pad = max(0.15 * span, 5.0 / result.rate)
+    return float(times[0]) - pad, float(times[-1]) + pad
+
+
+# ------------------------------------------------------------------------------ single runs
+def plot_response(
+    result: SimulationResult, *, title: str | None = None, ax: Any = None, inset: bool | None = None
+) -> Figure:
     """σ, ω and u against t, with the switch instants marked (paper Figs. 2-7).
 
     Parameters
@@ -53,46 +166,85 @@ def plot_response(result: SimulationResult, *, title: str | None = None) -> Figu
     result : SimulationResult
         A run of :func:`mrpctl.simulate.simulate`.
     title : str, optional
-        Figure title; by default the rule and the delay τ.
+        Figure title; by default the rule, the delay τ, the switch count and whether the run
+        settled (with the settling tolerance).
+    ax : sequence of 3 matplotlib.axes.Axes, optional
+        Axes for σ, ω and u; a new figure by default.
+    inset : bool, optional
+        Zoom inset on the σ panel around the switches. By default drawn when at least 10
+        switches fall in at most a tenth of the run (Fig. 7: 114 switches in 0.944-1.606 s).
 
     Returns
     -------
     matplotlib.figure.Figure
     """
-    fig, axes = plt.subplots(3, 1, figsize=(7.0, 7.5), sharex=True, constrained_layout=True)
+    fig, axes = _new_axes(3, ax, figsize=(8.0, 7.5))
     t = np.asarray(result.t)
+    sigma = np.asarray(result.sigma)
     series = (
-        (np.asarray(result.sigma), r"$\sigma_{i}$", "MRP σ (-)", "default"),
-        (np.asarray(result.omega), r"$\omega_{i}$", "angular rate ω (rad/s)", "default"),
-        (np.asarray(result.u), r"$u_{i}$", "torque u (N m)", "steps-post"),  # zero-order hold
+        (sigma, "σ", "MRP σ (-)", "default"),
+        (np.asarray(result.omega), "ω", "angular rate ω (rad/s)", "default"),
+        (np.asarray(result.u), "u", "torque u (N m)", "steps-post"),  # zero-order hold
     )
-    for ax, (values, label, ylabel, drawstyle) in zip(axes, series, strict=True):
-        times = t[: len(values)]
-        for i in range(3):
-            ax.plot(
-                times,
-                values[:, i],
-                label=label.replace("{i}", "{" + _AXIS_LABELS[i] + "}"),
-                linewidth=1.0,
-                drawstyle=drawstyle,
-            )
-        _mark_switches(ax, np.asarray(result.switch_times), label=ax is axes[0])
-        ax.set_ylabel(ylabel)
-        ax.grid(True, linewidth=0.3)
-        ax.legend(loc="upper right", fontsize=8, ncol=3)
-    norm = np.linalg.norm(np.asarray(result.sigma), axis=1)
+    switches = np.asarray(result.switch_times)
+    for panel, (values, symbol, ylabel, drawstyle) in zip(axes, series, strict=True):
+        _components(panel, t[: len(values)], values, symbol, drawstyle=drawstyle)
+        _mark_switches(panel, switches, label=panel is axes[0])
+        panel.set_ylabel(ylabel)
+        panel.grid(True, linewidth=0.3)
+    norm = np.linalg.norm(sigma, axis=1)
     axes[0].plot(t[: len(norm)], norm, color="k", linestyle="--", linewidth=0.8, label="|σ|")
-    axes[0].axhline(1.0, color="k", linewidth=0.4)
-    axes[0].legend(loc="upper right", fontsize=8, ncol=4)
+    axes[0].axhline(1.0, color="k", linewidth=0.4, label="|σ| = 1")
+    if result.diverged:
+        for panel in axes:
+            panel.axvline(float(t[-1]), color=_FAIL_COLOR, linewidth=1.2, linestyle=":", label="diverged")
+    elif result.settling_time is not None:
+        axes[0].axvline(result.settling_time, color="0.3", linewidth=0.8, linestyle="-.", label="settled")
+    for panel in axes:
+        _legend_outside(panel)
     axes[-1].set_xlabel("time t (s)")
-    axes[0].set_title(title or _title(result), fontsize=9)
+    axes[0].set_title(_typeset(title) if title else _title(result), fontsize=9)
+    window = _switch_cluster(result) if inset is None else (_switch_cluster(result) if inset else None)
+    if inset and window is None and len(switches):
+        window = (float(switches[0]) - 0.05, float(switches[-1]) + 0.05)
+    if window is not None:
+        _zoom_inset(axes[0], result, window)
     return fig
 
 
+def _zoom_inset(ax: Axes, result: SimulationResult, window: tuple[float, float]) -> Axes:
+    """An inset on ``ax`` showing the sampled σ around the switch cluster, as steps."""
+    t = np.asarray(result.t)
+    sigma = np.asarray(result.sigma)
+    keep = (t >= window[0]) & (t <= window[1])
+    inset = ax.inset_axes((0.45, 0.5, 0.53, 0.38))  # above the settled tail of σ
+    inset.set_label("switch cluster zoom")
+    for i in range(3):
+        if np.any(sigma[:, i]):
+            inset.plot(t[keep], sigma[keep, i], color=f"C{i}", linewidth=0.8, drawstyle="steps-post")
+    times = np.asarray(result.switch_times)
+    _mark_switches(inset, times[(times >= window[0]) & (times <= window[1])])
+    inset.set_xlim(*window)
+    inset.tick_params(labelsize=7)
+    inset.set_title(f"zoom: {len(times)} switches in {times[0]:.3f}-{times[-1]:.3f} s", fontsize=7)
+    inset.grid(True, linewidth=0.3)
+    ax.indicate_inset_zoom(inset, edgecolor="0.3")
+    return inset
+
+
 def plot_attitude(
-    result: SimulationResult, *, window: tuple[float, float] | None = None, title: str | None = None
+    result: SimulationResult,
+    *,
+    window: tuple[float, float] | None = None,
+    title: str | None = None,
+    ax: Any = None,
+    markers: bool | None = None,
 ) -> Figure:
     """σ against t over a time window, switch instants marked (the zoom of paper Fig. 5).
+
+    σ is a sampled signal (one value per measurement t_k = k h), so it is drawn as steps
+    that never join samples across a switch, with a marker per sample when the window
+    holds at most 2 000 samples (the 0.1 s zoom at 1 kHz holds 100).
 
     Parameters
     ----------
@@ -102,23 +254,51 @@ def plot_attitude(
         Time window in s; the whole run by default.
     title : str, optional
         Figure title.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw in; a new figure by default.
+    markers : bool, optional
+        One marker per sample; by default when the window holds at most 2 000 samples.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     t = np.asarray(result.t)
     sigma = np.asarray(result.sigma)
     start, stop = window if window is not None else (float(t[0]), float(t[-1]))
+    if not (math.isfinite(start) and math.isfinite(stop) and start < stop):
+        raise SpecificationError(f"window must be (start, stop) with start < stop in s, got {window!r}")
     keep = (t >= start) & (t <= stop)
-    fig, ax = plt.subplots(figsize=(7.0, 3.2), constrained_layout=True)
-    for i in range(3):
-        ax.plot(t[keep], sigma[keep, i], label=rf"$\sigma_{_AXIS_LABELS[i]}$", linewidth=1.0)
+    fig, (axis,) = _new_axes(1, ax, figsize=(8.0, 3.4))
+    with_markers = int(keep.sum()) <= 2000 if markers is None else markers
+    _components(axis, t[keep], sigma[keep], "σ", drawstyle="steps-post", marker="." if with_markers else None)
+    axis.plot(t[keep], np.linalg.norm(sigma[keep], axis=1), color="k", linestyle="--", linewidth=0.7, label="|σ|")
     switches = np.asarray(result.switch_times)
-    _mark_switches(ax, switches[(switches >= start) & (switches <= stop)], label=True)
-    ax.set_xlim(start, stop)
-    ax.set_xlabel("time t (s)")
-    ax.set_ylabel("MRP σ (-)")
-    ax.grid(True, linewidth=0.3)
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_title(title or _title(result), fontsize=9)
+    shown = switches[(switches >= start) & (switches <= stop)]
+    _mark_switches(axis, shown, label=True)
+    axis.set_xlim(start, stop)
+    axis.set_xlabel("time t (s)")
+    axis.set_ylabel("MRP σ (-)")
+    axis.grid(True, linewidth=0.3)
+    _legend_outside(axis)
+    caption = f"{len(shown)} switches in [{start:g}, {stop:g}] s, one step per sample (h = {1e3 / result.rate:g} ms)"
+    axis.set_title(_typeset(title) + "\n" + caption if title else _title(result) + "\n" + caption, fontsize=9)
     return fig
+
+
+# ------------------------------------------------------------------------------ sweeps and batches
+def _count_scale(ax: Axes, counts: np.ndarray) -> None:
+    """Log axis when the counts span a decade (symlog when zeros occur), linear otherwise."""
+    finite = counts[np.isfinite(counts)]
+    if finite.size == 0:
+        return
+    positive = finite[finite > 0]
+    if positive.size == 0:
+        return
+    if np.any(finite == 0) and positive.max() >= 10:
+        ax.set_yscale("symlog", linthresh=1.0)
+    elif positive.max() >= 10 * max(positive.min(), 1.0):
+        ax.set_yscale("log")
 
 
 def plot_sweep(
@@ -129,44 +309,301 @@ def plot_sweep(
     converged: Sequence[bool] | np.ndarray,
     parameter_label: str,
     title: str | None = None,
+    max_sigma: Sequence[float] | np.ndarray | None = None,
+    diverged: Sequence[bool] | np.ndarray | None = None,
+    margin: float | None = None,
+    ax: Any = None,
 ) -> Figure:
-    """Switch count, settling time and convergence against a swept parameter.
+    """Switch count, settling time and convergence (or max |σ|) against a swept parameter.
+
+    Runs that did not settle are drawn as failures (a red × at the top of the settling
+    panel, labelled), never dropped; counts get a log axis when they span a decade.
 
     Parameters
     ----------
     parameter : array_like
-        The swept values (ε, τ in s, or the run index of a Monte-Carlo).
+        The swept values (ε, or τ in s).
     switch_count, settling_time, converged : array_like
         One entry per run; settling time in s (NaN where the run did not settle).
     parameter_label : str
         Axis label with units.
+    title : str, optional
+        Figure title.
+    max_sigma : array_like, optional
+        max |σ| per run; replaces the converged yes/no panel when given.
+    diverged : array_like of bool, optional
+        Runs flagged diverged, marked apart from "did not settle".
+    margin : float, optional
+        The exact delay margin τ* (s), drawn as a vertical line on every panel (τ sweeps).
+    ax : sequence of 3 matplotlib.axes.Axes, optional
+        Axes for the three panels; a new figure by default.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     x = np.asarray(parameter, dtype=float)
     count = np.asarray(switch_count, dtype=float)
     settle = np.asarray(settling_time, dtype=float)
     ok = np.asarray(converged, dtype=bool)
+    n = x.shape[0] if x.ndim == 1 else -1
+    for name, values in (("switch_count", count), ("settling_time", settle), ("converged", ok)):
+        if values.shape != (n,):
+            raise DimensionError(f"{name} must have the shape of parameter ({n},), got {values.shape}")
+    bad = np.asarray(diverged, dtype=bool) if diverged is not None else np.zeros(n, dtype=bool)
+    if bad.shape != (n,):
+        raise DimensionError(f"diverged must have the shape of parameter ({n},), got {bad.shape}")
     order = np.argsort(x, kind="stable")
-    fig, axes = plt.subplots(3, 1, figsize=(6.5, 6.5), sharex=True, constrained_layout=True)
-    axes[0].plot(x[order], count[order], "o-", markersize=3)
+    x, count, settle, ok, bad = x[order], count[order], settle[order], ok[order], bad[order]
+    label = _typeset(parameter_label)
+    fig, axes = _new_axes(3, ax, figsize=(7.5, 6.5))
+    axes[0].plot(x, count, "o-", markersize=3, linewidth=0.8, label="switches")
     axes[0].set_ylabel("switch count (-)")
-    axes[1].plot(x[order], settle[order], "o-", markersize=3)
+    _count_scale(axes[0], count)
+    good = ok & np.isfinite(settle)
+    axes[1].plot(x[good], settle[good], "o-", markersize=3, linewidth=0.8, label="settling time")
+    failed = ~good & ~bad
+    if failed.any():
+        axes[1].plot(
+            x[failed],
+            np.full(int(failed.sum()), 0.93),
+            "x",
+            color=_FAIL_COLOR,
+            markersize=8,
+            markeredgewidth=1.5,
+            transform=axes[1].get_xaxis_transform(),
+            label="did not settle",
+        )
+    if bad.any():
+        axes[1].plot(
+            x[bad],
+            np.full(int(bad.sum()), 0.93),
+            "X",
+            color="k",
+            markersize=8,
+            transform=axes[1].get_xaxis_transform(),
+            label="diverged",
+        )
     axes[1].set_ylabel("settling time (s)")
-    axes[2].plot(x[order], ok[order].astype(float), "o", markersize=3)
-    axes[2].set_yticks([0, 1], ["no", "yes"])
-    axes[2].set_ylabel("converged")
-    axes[2].set_xlabel(parameter_label)
-    for ax in axes:
-        ax.grid(True, linewidth=0.3)
+    if max_sigma is not None:
+        peak = np.asarray(max_sigma, dtype=float)
+        if peak.shape != (n,):
+            raise DimensionError(f"max_sigma must have the shape of parameter ({n},), got {peak.shape}")
+        peak = peak[order]
+        axes[2].plot(x, peak, "o-", markersize=3, linewidth=0.8, label="max |σ|")
+        axes[2].plot(x[~ok], peak[~ok], "x", color=_FAIL_COLOR, markersize=8, markeredgewidth=1.5)
+        axes[2].axhline(1.0, color="k", linewidth=0.4, label="|σ| = 1")
+        axes[2].set_ylabel("max |σ| (-)")
+        if np.nanmax(peak) >= 10 * max(np.nanmin(peak), 1e-12):
+            axes[2].set_yscale("log")
+    else:
+        axes[2].plot(x[ok], np.ones(int(ok.sum())), "o", markersize=4, label="settled")
+        axes[2].plot(x[~ok], np.zeros(int((~ok).sum())), "x", color=_FAIL_COLOR, markersize=8, label="did not")
+        axes[2].set_yticks([0, 1], ["no", "yes"])
+        axes[2].set_ylim(-0.3, 1.3)
+        axes[2].set_ylabel("settled")
+    axes[2].set_xlabel(label)
+    if margin is not None:
+        if not (isinstance(margin, int | float) and margin > 0):
+            raise SpecificationError(f"margin must be a positive delay margin in s, got {margin!r}")
+        for panel in axes:
+            panel.axvline(
+                float(margin), color="k", linestyle="--", linewidth=1.0, label=f"exact margin τ* = {margin:.5g} s"
+            )
+    for panel in axes:
+        panel.grid(True, linewidth=0.3)
+        _legend_outside(panel)
     if np.all(x > 0) and x.size > 1 and x.max() / x.min() > 50:
         axes[2].set_xscale("log")
-    axes[0].set_title(title or f"sweep over {parameter_label}", fontsize=10)
+    axes[0].set_title((_typeset(title) if title else f"sweep over {label}") + f"\n{SETTLING_CAPTION}", fontsize=9)
     return fig
 
 
+def _initial_angle_and_rate(x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Principal angle Φ = 4 arctan|σ₀| (deg) and |ω₀| (rad/s) of (N, 6) initial states x = [σ; ω/4]."""
+    sigma = np.linalg.norm(x0[:, :3], axis=1)
+    return np.degrees(4.0 * np.arctan(sigma)), 4.0 * np.linalg.norm(x0[:, 3:], axis=1)
+
+
+def plot_monte_carlo(batch: BatchResult, *, title: str | None = None, ax: Any = None) -> Figure:
+    """A Monte Carlo batch as distributions: independent runs are not a line over run index.
+
+    Panels: a histogram of switch counts (log bins when they span a decade), the empirical
+    CDF of the settling time (runs that did not settle counted as failures: the CDF ends
+    below 1 and the shortfall is labelled), and the switch count against the initial
+    principal angle Φ₀ = 4 arctan|σ₀| and rate |ω₀| (colour), failures drawn as ×.
+
+    Parameters
+    ----------
+    batch : BatchResult
+        A batch of :func:`mrpctl.simulate.simulate_batch`.
+    title : str, optional
+        Figure title.
+    ax : sequence of 3 matplotlib.axes.Axes, optional
+        Axes for the histogram, the CDF and the scatter; a new figure by default.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    count = np.asarray(batch.switch_count, dtype=float)
+    settle = np.asarray(batch.settling_time, dtype=float)
+    ok = np.asarray(batch.converged, dtype=bool)
+    n = len(count)
+    if n == 0:
+        raise SpecificationError("batch must hold at least one run")
+    angle, rate = _initial_angle_and_rate(np.asarray(batch.x0, dtype=float))
+    fig, axes = _new_axes(3, ax, figsize=(7.5, 8.5), sharex=False)
+    top = max(float(count.max()), 1.0)
+    if top >= 10:
+        bins = np.unique(np.concatenate(([0.0], np.geomspace(1.0, top + 1.0, 25))))
+        axes[0].set_xscale("symlog", linthresh=1.0)
+    else:
+        bins = np.arange(-0.5, top + 1.5)
+    axes[0].hist(count, bins=bins.tolist(), color="C0", edgecolor="white", label=f"{n} runs")
+    axes[0].set_xlabel("switch count (-)")
+    axes[0].set_ylabel("runs (-)")
+    times = np.sort(settle[ok & np.isfinite(settle)])
+    fraction = np.arange(1, times.size + 1) / n
+    if times.size:
+        axes[1].step(np.concatenate(([0.0], times)), np.concatenate(([0.0], fraction)), where="post", label="settled")
+    failed = n - times.size
+    axes[1].axhline(times.size / n, color=_FAIL_COLOR, linestyle=":", linewidth=1.0, label=f"{failed} did not settle")
+    axes[1].set_ylim(0.0, 1.02)
+    axes[1].set_xlim(0.0, float(batch.t_final))
+    if not times.size:
+        axes[1].text(0.5, 0.5, f"no run settled in {batch.t_final:g} s", transform=axes[1].transAxes, ha="center")
+    axes[1].set_xlabel("settling time (s)")
+    axes[1].set_ylabel("fraction of runs settled (-)")
+    norm = Normalize(vmin=float(rate.min()), vmax=float(max(rate.max(), rate.min() + 1e-12)))
+    style = {"c": None, "cmap": "viridis", "norm": norm}
+    scatter = None
+    if ok.any():
+        scatter = axes[2].scatter(angle[ok], count[ok], s=14, label="settled", **{**style, "c": rate[ok]})
+    if (~ok).any():
+        failures = axes[2].scatter(
+            angle[~ok], count[~ok], marker="x", s=30, label="did not settle", **{**style, "c": rate[~ok]}
+        )
+        scatter = scatter or failures
+    if scatter is not None and rate.max() > rate.min():
+        fig.colorbar(scatter, ax=axes[2], label="initial rate |ω₀| (rad/s)", location="bottom", shrink=0.6)
+    axes[2].set_xlabel("initial principal angle Φ₀ (deg)")
+    axes[2].set_ylabel("switch count (-)")
+    _count_scale(axes[2], count)
+    for panel in axes:
+        panel.grid(True, linewidth=0.3)
+        _legend_outside(panel)
+    rules = "; ".join(sorted({str(r) for r in batch.rules}))
+    head = _typeset(title) if title else textwrap.fill(_typeset(f"{n} runs, {rules}"), width=95)
+    axes[0].set_title(f"{head}\n{SETTLING_CAPTION}", fontsize=9)
+    return fig
+
+
+def plot_batch(
+    batch: BatchResult,
+    *,
+    over: str | None = None,
+    margin: float | None = None,
+    title: str | None = None,
+    ax: Any = None,
+) -> Figure:
+    """A batch as the figure its inputs call for: a τ sweep, an ε sweep or a Monte Carlo.
+
+    Parameters
+    ----------
+    batch : BatchResult
+        A batch of :func:`mrpctl.simulate.simulate_batch`.
+    over : {"tau", "eps", "initial"}, optional
+        What varies across the runs; detected by default (τ when the delays differ, ε when
+        every rule is a BoundaryLayer and their ε differ, the initial state otherwise).
+    margin : float, optional
+        Exact delay margin τ* (s) to mark on τ sweeps, e.g.
+        ``linearized_loop(spacecraft, K).delay_margin().margin``.
+    title : str, optional
+        Figure title.
+    ax : sequence of 3 matplotlib.axes.Axes, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    tau = np.asarray(batch.tau, dtype=float)
+    eps = [getattr(r, "eps", None) for r in batch.rules]
+    if over is None:
+        if np.unique(tau).size > 1:
+            over = "tau"
+        elif all(e is not None for e in eps) and len(set(eps)) > 1:
+            over = "eps"
+        else:
+            over = "initial"
+    if over == "initial":
+        return plot_monte_carlo(batch, title=title, ax=ax)
+    if over == "tau":
+        values: Any = tau
+        label = "delay tau (s)"
+    elif over == "eps":
+        if any(e is None for e in eps):
+            raise SpecificationError("over='eps' needs every rule to be a BoundaryLayer(eps)")
+        values = np.asarray(eps, dtype=float)
+        label = "boundary layer thickness eps (-)"
+    else:
+        raise SpecificationError(f"over must be 'tau', 'eps' or 'initial', got {over!r}")
+    return plot_sweep(
+        values,
+        switch_count=batch.switch_count,
+        settling_time=batch.settling_time,
+        converged=batch.converged,
+        diverged=batch.diverged,
+        max_sigma=batch.max_sigma,
+        parameter_label=label,
+        margin=margin,
+        title=title,
+        ax=ax,
+    )
+
+
+# ------------------------------------------------------------------------------ output
+def render_rgba(fig: Figure, *, dpi: int = 80) -> np.ndarray:
+    """The figure rendered by Agg as an (h, w, 4) uint8 array (for image regression tests)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    previous, previous_dpi = fig.canvas, fig.get_dpi()
+    canvas = FigureCanvasAgg(fig)
+    fig.set_dpi(dpi)
+    try:
+        canvas.draw()
+        image = np.asarray(canvas.buffer_rgba()).copy()
+    finally:
+        fig.set_dpi(previous_dpi)
+        fig.set_canvas(previous)
+    return image
+
+
 def save_figure(fig: Figure, path: str | Path, *, dpi: int = 110) -> Path:
-    """Write ``fig`` to ``path`` (PNG by suffix) and close it; returns the path."""
+    """Write ``fig`` to ``path`` atomically (format by suffix, e.g. PNG) and release it.
+
+    The image is rendered into a temporary file next to ``path`` and moved over it, so an
+    interrupted run never leaves a half-written image or destroys an older one. Figures
+    made by pyplot are closed; figures made by this module need no closing.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    fmt = path.suffix.lstrip(".").lower() or "png"
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            fig.savefig(handle, dpi=dpi, format=fmt)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    if getattr(fig.canvas, "manager", None) is not None:  # made by pyplot: release it there
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
     return path
