@@ -13,21 +13,19 @@ from __future__ import annotations
 
 import json
 import os
-import platform
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mrpctl import BatchResult, SimulationResult
 from mrpctl._validation import integer, readonly
 from mrpctl.errors import SpecificationError
 
 if TYPE_CHECKING:
-    import pandas as pd
+    import pandas as pd  # type: ignore[import-untyped]
     import xarray as xr
-
-    from mrpctl.simulate import BatchResult, SimulationResult
 
 __all__ = ["FORMAT", "load", "metadata", "save", "to_pandas", "to_xarray", "write_csv"]
 
@@ -41,7 +39,7 @@ _STATE = ["sigma1", "sigma2", "sigma3", "omega1/4", "omega2/4", "omega3/4"]
 def _rule_fields(rule: Any) -> dict[str, Any]:
     from mrpctl.scenario import RULE_NAMES
 
-    names = {cls: name for name, cls in RULE_NAMES.items()}
+    names: dict[type, str] = {cls: name for name, cls in RULE_NAMES.items()}
     if type(rule) not in names:
         raise SpecificationError(f"rule: {type(rule).__name__} has no scenario name; it cannot be saved")
     return {"rule_type": names[type(rule)], "rule_parameter": float(rule.parameters()[0]), "rule": str(rule)}
@@ -60,28 +58,9 @@ def _rule(fields: dict[str, Any]) -> Any:
 
 
 def _versions() -> dict[str, str]:
-    import casadi
+    from mrpctl.campaign.store import versions
 
-    import mrpctl
-
-    return {
-        "mrpctl": mrpctl.__version__,
-        "numpy": np.__version__,
-        "casadi": casadi.__version__,
-        "python": platform.python_version(),
-    }
-
-
-def _is_run(result: Any) -> bool:
-    from mrpctl.simulate import SimulationResult
-
-    return isinstance(result, SimulationResult)
-
-
-def _is_batch(result: Any) -> bool:
-    from mrpctl.simulate import BatchResult
-
-    return isinstance(result, BatchResult)
+    return versions()
 
 
 def _run_dataset(result: SimulationResult) -> xr.Dataset:
@@ -91,7 +70,11 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
     switched = np.zeros(n, dtype=np.int8)
     switched[result.switch_indices] = 1
     data: dict[str, Any] = {
-        "sigma": (("time", "axis"), np.asarray(result.sigma), {"units": "1", "long_name": "MRP sigma (after the rule)"}),
+        "sigma": (
+            ("time", "axis"),
+            np.asarray(result.sigma),
+            {"units": "1", "long_name": "MRP sigma (after the rule)"},
+        ),
         "omega": (("time", "axis"), np.asarray(result.omega), {"units": "rad/s", "long_name": "body rate omega"}),
         "u": (("time", "axis"), np.asarray(result.u), {"units": "N m", "long_name": "torque held over [t_k, t_k+1)"}),
         "switched": (("time",), switched, {"long_name": "1 where sigma was replaced by its shadow"}),
@@ -140,7 +123,11 @@ def _batch_dataset(result: BatchResult) -> xr.Dataset:
     peak = getattr(result, "peak_torque", None)
     if peak is not None:
         data["peak_torque"] = (("run",), np.asarray(peak), {"units": "N m"})
-    attrs = {"rate": float(result.rate), "t_final": float(result.t_final), "substeps": int(result.substeps)}
+    attrs: dict[str, Any] = {
+        "rate": float(result.rate),
+        "t_final": float(result.t_final),
+        "substeps": int(result.substeps),
+    }
     attrs["history"] = result.history if isinstance(result.history, str) else "array"
     coords = {"run": np.arange(n), "axis": _AXES, "state": _STATE}
     return xr.Dataset(data, coords=coords, attrs=attrs)
@@ -154,9 +141,9 @@ def to_xarray(result: SimulationResult | BatchResult) -> xr.Dataset:
     in ``attrs``. A batch: the initial state ``sigma0``, ``omega0`` (rad/s), ``K``, ``tau``,
     the rule and every metric over ``run``.
     """
-    if _is_run(result):
+    if isinstance(result, SimulationResult):
         return _run_dataset(result)
-    if _is_batch(result):
+    if isinstance(result, BatchResult):
         return _batch_dataset(result)
     raise SpecificationError(f"result must be a SimulationResult or BatchResult, got {type(result).__name__}")
 
@@ -168,10 +155,10 @@ def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
     the inputs in ``DataFrame.attrs``. A batch: indexed by ``run``, columns for the initial
     state, τ, the rule and every metric.
     """
-    import pandas as pd
+    import pandas as pd  # type: ignore[import-untyped]
 
-    if _is_run(result):
-        run: SimulationResult = result  # type: ignore[assignment]
+    if isinstance(result, SimulationResult):
+        run = result
         switched = np.zeros(len(run.t), dtype=np.int8)
         switched[run.switch_indices] = 1
         columns: dict[str, Any] = {}
@@ -192,8 +179,8 @@ def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
             settling_time=run.settling_time,
         )
         return frame
-    if _is_batch(result):
-        batch: BatchResult = result  # type: ignore[assignment]
+    if isinstance(result, BatchResult):
+        batch = result
         x0 = np.asarray(batch.x0)
         columns = {}
         for i in range(3):
@@ -202,8 +189,15 @@ def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
             columns[f"omega0_{i + 1}"] = 4.0 * x0[:, 3 + i]
         columns["tau"] = np.asarray(batch.tau)
         columns["rule"] = [str(rule) for rule in batch.rules]
-        for name in ("switch_count", "first_switch_time", "last_switch_time", "settling_time", "converged",
-                     "diverged", "max_sigma"):
+        for name in (
+            "switch_count",
+            "first_switch_time",
+            "last_switch_time",
+            "settling_time",
+            "converged",
+            "diverged",
+            "max_sigma",
+        ):
             columns[name] = np.asarray(getattr(batch, name))
         peak = getattr(batch, "peak_torque", None)
         if peak is not None:
@@ -241,7 +235,7 @@ def save(result: SimulationResult, path: str | Path, *, seed: int | None = None)
     -------
     pathlib.Path
     """
-    if not _is_run(result):
+    if not isinstance(result, SimulationResult):
         raise SpecificationError(f"result must be a SimulationResult, got {type(result).__name__}")
     dataset = _run_dataset(result)
     dataset.attrs.update(format=FORMAT, versions=json.dumps(_versions(), sort_keys=True))
@@ -285,7 +279,6 @@ def metadata(path: str | Path) -> dict[str, Any]:
 
 def load(path: str | Path) -> SimulationResult:
     """Load a run written by :func:`save` (arrays read-only, as returned by the simulator)."""
-    from mrpctl.simulate import SimulationResult
     from mrpctl.spacecraft import Spacecraft
 
     dataset = _open(path)
@@ -341,10 +334,10 @@ def write_csv(result: SimulationResult, path: str | Path, *, every: int = 1) -> 
     -------
     pathlib.Path
     """
-    if not _is_run(result):
+    if not isinstance(result, SimulationResult):
         raise SpecificationError(f"result must be a SimulationResult, got {type(result).__name__}")
     every = integer("every", every, minimum=1)
-    import pandas as pd
+    import pandas as pd  # type: ignore[import-untyped]
 
     n = len(result.t)
     rows = np.arange(0, n, every)

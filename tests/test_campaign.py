@@ -59,7 +59,7 @@ def assert_bitwise_identical(a: xr.Dataset, b: xr.Dataset) -> None:
 
 
 def test_dataset_holds_inputs_metrics_and_spec(spec, reference):
-    out, dataset = reference
+    _out, dataset = reference
     assert dataset.sizes["run"] == 12
     assert set(METRICS) <= set(dataset.data_vars)
     assert {"sigma0", "omega0", "inertia", "tau", "gain_scale"} <= set(dataset.data_vars)
@@ -76,9 +76,15 @@ def test_metrics_equal_an_independent_simulate_batch_call(spec, reference):
     inputs = run_inputs(spec, 0, 12)
     for i in (0, 7, 11):
         batch = simulate_batch(
-            Spacecraft(inputs.inertia[i]), inputs.gain_scale[i] * spec.base.K, inputs.x0[i],
-            tau=float(inputs.tau[i]), rule=spec.base.rule, t_final=spec.base.t_final, rate=spec.base.rate,
-            trajectories=True, threads=1,
+            Spacecraft(inputs.inertia[i]),
+            inputs.gain_scale[i] * spec.base.K,
+            inputs.x0[i],
+            tau=float(inputs.tau[i]),
+            rule=spec.base.rule,
+            t_final=spec.base.t_final,
+            rate=spec.base.rate,
+            trajectories=True,
+            threads=1,
         )
         run = batch.runs[0]
         assert int(dataset["switch_count"][i]) == run.switch_count
@@ -130,6 +136,7 @@ def test_resume_refuses_another_campaign_or_chunk(spec, reference):
         run_campaign(other, out)
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_equals_local(spec, reference, tmp_path):
     """2 worker processes of a Dask LocalCluster store the same dataset, bit for bit."""
     pytest.importorskip("distributed")
@@ -195,7 +202,7 @@ def test_report_table_figures_and_worst_cases(reference):
     assert severity == sorted(severity)
     figs = figures(dataset)
     assert figs["switch_count"].axes[0].get_yscale() in ("log", "linear")
-    result, paths = write_report(out, worst=3)
+    _result, paths = write_report(out, worst=3)
     assert all(p.exists() and p.stat().st_size > 0 for p in paths)
     assert "converged" in (out / "report" / "report.md").read_text()
 
@@ -207,17 +214,33 @@ def test_cli_run_report_replay(tmp_path, capsys):
     from mrpctl.campaign.cli import add_parser
 
     spec_file = tmp_path / "c.toml"
-    lines = ['name = "cli"', "count = 4", "seed = 1", "tau = 0.05", "rate = 100.0", "t_final = 1.0",
-             "[spacecraft]", "inertia = [140.0, 100.0, 80.0]", "[gains]", "k_sigma = -70.11", "k_omega = -163.08",
-             "[rule]", 'type = "on-delayed"', "[dispersions.attitude]", "angle_deg = [170.0, 180.0]"]
+    lines = [
+        'name = "cli"',
+        "count = 4",
+        "seed = 1",
+        "tau = 0.05",
+        "rate = 100.0",
+        "t_final = 1.0",
+        "[spacecraft]",
+        "inertia = [140.0, 100.0, 80.0]",
+        "[gains]",
+        "k_sigma = -70.11",
+        "k_omega = -163.08",
+        "[rule]",
+        'type = "on-delayed"',
+        "[dispersions.attitude]",
+        "angle_deg = [170.0, 180.0]",
+    ]
     spec_file.write_text("\n".join(lines) + "\n")
     assert tomllib.loads(spec_file.read_text())["count"] == 4
     parser = argparse.ArgumentParser(prog="mrpctl")
     add_parser(parser.add_subparsers(dest="command"))
     out = tmp_path / "out"
-    for argv in (["campaign", "run", str(spec_file), "--out", str(out), "--chunk", "2"],
-                 ["campaign", "report", str(out)],
-                 ["campaign", "replay", str(out), "--run", "3"]):
+    for argv in (
+        ["campaign", "run", str(spec_file), "--out", str(out), "--chunk", "2"],
+        ["campaign", "report", str(out)],
+        ["campaign", "replay", str(out), "--run", "3"],
+    ):
         args = parser.parse_args(argv)
         assert args.handler(args) == 0
     text = capsys.readouterr().out

@@ -85,8 +85,11 @@ def test_quaternion_sampler_matches_scipy_rotation_conventions():
     assert np.allclose(sigma, mrp.from_quaternion(q), rtol=0, atol=1e-15)
     # scipy's own uniform sampler has the same angle law (an independent cross-check of the density)
     reference = Rotation.random(10000, random_state=3).magnitude()
-    ours = 4.0 * np.arctan(np.linalg.norm(quaternion_to_mrp(uniform_quaternions(
-        np.random.default_rng(9).standard_normal((10000, 4)))), axis=1))
+    ours = 4.0 * np.arctan(
+        np.linalg.norm(
+            quaternion_to_mrp(uniform_quaternions(np.random.default_rng(9).standard_normal((10000, 4)))), axis=1
+        )
+    )
     assert stats.ks_2samp(ours, reference).pvalue > 1e-3
 
 
@@ -100,8 +103,13 @@ def test_principal_angle_range_keeps_haar_density():
 
 def test_run_inputs_depend_on_seed_and_index_only():
     """Run i alone equals run i of a block; other dispersions do not shift its attitude; seeds differ."""
-    dispersions = {"attitude": {}, "rate": {"magnitude": [0.1, 0.2]}, "tau": {"range": [0.3, 0.6], "step": 0.1},
-                   "gains": {"scale": [0.9, 1.1]}, "inertia": {"axis_tolerance": 0.05, "product_tolerance": 2.0}}
+    dispersions = {
+        "attitude": {},
+        "rate": {"magnitude": [0.1, 0.2]},
+        "tau": {"range": [0.3, 0.6], "step": 0.1},
+        "gains": {"scale": [0.9, 1.1]},
+        "inertia": {"axis_tolerance": 0.05, "product_tolerance": 2.0},
+    }
     spec = parse_campaign(spec_with(**dispersions))
     block = run_inputs(spec, 100, 140)
     for j, i in enumerate(range(100, 140)):

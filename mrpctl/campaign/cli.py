@@ -20,7 +20,7 @@ MISMATCH = 1
 
 
 def _run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
+    from tqdm import tqdm  # type: ignore[import-untyped]
 
     from mrpctl.campaign.run import run_campaign
     from mrpctl.campaign.spec import load_campaign

@@ -26,7 +26,7 @@ from mrpctl.errors import SpecificationError
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from mrpctl.simulate import SimulationResult
+    from mrpctl import SimulationResult
 
 __all__ = [
     "CampaignReport",
@@ -51,7 +51,7 @@ def wilson_interval(successes: int, trials: int, *, confidence: float = 0.95) ->
     """
     if trials == 0:
         return 0.0, 1.0
-    from scipy.stats import norm
+    from scipy.stats import norm  # type: ignore[import-untyped]
 
     z = float(norm.ppf(0.5 + confidence / 2.0)) if confidence != 0.95 else _Z95
     p = successes / trials
@@ -65,7 +65,7 @@ def clopper_pearson_interval(successes: int, trials: int, *, confidence: float =
     """Exact (Clopper–Pearson 1934) interval of a binomial proportion, from the beta quantiles."""
     if trials == 0:
         return 0.0, 1.0
-    from scipy.stats import beta
+    from scipy.stats import beta  # type: ignore[import-untyped]
 
     alpha = 1.0 - confidence
     low = 0.0 if successes == 0 else float(beta.ppf(alpha / 2.0, successes, trials - successes + 1))
@@ -248,8 +248,11 @@ def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
         ax.hist(settling[converged], bins=min(50, max(5, int(np.sqrt(converged.sum())))), color="tab:blue")
     ax.set_xlabel("settling time (s): |σ| < 1e-2 and |ω| < 1e-3 rad/s to the end")
     ax.set_ylabel("runs")
-    ax.set_title(f"settling time of {int(converged.sum())}/{n} converged runs "
-                 f"({n - int(converged.sum())} not settled, {int(diverged.sum())} diverged, not shown)", fontsize=9)
+    ax.set_title(
+        f"settling time of {int(converged.sum())}/{n} converged runs "
+        f"({n - int(converged.sum())} not settled, {int(diverged.sum())} diverged, not shown)",
+        fontsize=9,
+    )
     out["settling_time"] = fig
 
     fig = Figure(figsize=(6.4, 4.0), layout="constrained")
@@ -259,7 +262,7 @@ def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
     if positive.size:
         top = max(2.0, float(positive.max()) * 1.05)
         bins = np.unique(np.round(np.geomspace(1.0, top, 40)))
-        ax.hist(positive, bins=np.append(bins, bins[-1] + 1), color="tab:orange")
+        ax.hist(positive, bins=np.append(bins, bins[-1] + 1).tolist(), color="tab:orange")
         ax.set_xscale("log")
         ax.set_yscale("log")
     ax.set_xlabel("shadow-set switches per run (log)")
@@ -341,8 +344,10 @@ class ReplayResult:
         return not self.mismatches
 
     def __str__(self) -> str:
-        lines = [f"replay of run {self.run}: " + ("identical to the stored run" if self.matches
-                                                  else "DIFFERS in " + ", ".join(self.mismatches))]
+        lines = [
+            f"replay of run {self.run}: "
+            + ("identical to the stored run" if self.matches else "DIFFERS in " + ", ".join(self.mismatches))
+        ]
         for name in METRICS:
             lines.append(f"  {name:<18} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
         return "\n".join(lines)
@@ -417,7 +422,11 @@ def plot_replay(result: ReplayResult) -> Figure:
     run = result.trajectory
     fig = Figure(figsize=(7.0, 6.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
-    for ax, values, label in ((axes[0], run.sigma, "σ"), (axes[1], run.omega, "ω (rad/s)"), (axes[2], run.u, "u (N m)")):
+    for ax, values, label in (
+        (axes[0], run.sigma, "σ"),
+        (axes[1], run.omega, "ω (rad/s)"),
+        (axes[2], run.u, "u (N m)"),
+    ):
         for i in range(3):
             ax.plot(run.t, values[:, i], lw=0.9, label=f"{label.split()[0]}{i + 1}")
         ax.set_ylabel(label)

@@ -133,8 +133,11 @@ def _dask(
         futures = as_completed()
         for index in pending:
             start, stop = store.bounds(index)
-            futures.add(client.submit(_chunk_on_worker, spec.source, spec.base.name, start, stop, key=f"chunk-{index}",
-                                      pure=False))
+            futures.add(
+                client.submit(
+                    _chunk_on_worker, spec.source, spec.base.name, start, stop, key=f"chunk-{index}", pure=False
+                )
+            )
             if futures.count() >= slots:
                 break
         for future in futures:
@@ -143,8 +146,11 @@ def _dask(
             following = next(pending, None)
             if following is not None:
                 start, stop = store.bounds(following)
-                futures.add(client.submit(_chunk_on_worker, spec.source, spec.base.name, start, stop,
-                                          key=f"chunk-{following}", pure=False))
+                futures.add(
+                    client.submit(
+                        _chunk_on_worker, spec.source, spec.base.name, start, stop, key=f"chunk-{following}", pure=False
+                    )
+                )
     finally:
         client.close()
         if cluster is not None:

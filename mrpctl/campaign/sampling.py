@@ -121,8 +121,9 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
     return np.where(norm > 0.0, vectors / np.where(norm > 0.0, norm, 1.0), fallback)
 
 
-def _attitude(dispersion: AttitudeDispersion, quaternion_normals: np.ndarray, axis_normals: np.ndarray,
-              angle_quantile: np.ndarray) -> np.ndarray:
+def _attitude(
+    dispersion: AttitudeDispersion, quaternion_normals: np.ndarray, axis_normals: np.ndarray, angle_quantile: np.ndarray
+) -> np.ndarray:
     if dispersion.full:
         return quaternion_to_mrp(uniform_quaternions(quaternion_normals))
     low, high = (math.radians(a) for a in dispersion.angle_deg)

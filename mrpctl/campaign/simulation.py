@@ -50,8 +50,13 @@ def _metrics(batch: Any, peak: np.ndarray | None) -> dict[str, np.ndarray]:
 
 
 def _batch(
-    spacecraft: Spacecraft, K: np.ndarray, x0: np.ndarray, tau: np.ndarray, rule: SwitchingRule,
-    options: dict[str, Any], peak_torque: bool,
+    spacecraft: Spacecraft,
+    K: np.ndarray,
+    x0: np.ndarray,
+    tau: np.ndarray,
+    rule: SwitchingRule,
+    options: dict[str, Any],
+    peak_torque: bool,
 ) -> dict[str, np.ndarray]:
     """Runs of one spacecraft; the peak torque from trajectories when the simulator lacks it."""
     if not peak_torque or _SIMULATOR_HAS_PEAK_TORQUE:
@@ -118,4 +123,3 @@ def simulate_runs(
         for name in METRICS:
             out[name][index] = part[name]
     return out
-

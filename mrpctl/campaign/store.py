@@ -31,7 +31,7 @@ from mrpctl.campaign.simulation import METRICS
 from mrpctl.campaign.spec import CampaignSpec, parse_campaign
 from mrpctl.errors import SpecificationError
 
-__all__ = ["STORE_NAME", "CampaignStore", "INPUTS", "open_campaign"]
+__all__ = ["INPUTS", "STORE_NAME", "CampaignStore", "open_campaign"]
 
 STORE_NAME = "campaign.zarr"
 
@@ -64,18 +64,15 @@ _UNITS = {
 
 def versions() -> dict[str, str]:
     """The versions of the packages a campaign's numbers depend on."""
-    import casadi
+    from importlib.metadata import PackageNotFoundError, version
 
-    import mrpctl
-
-    return {
-        "mrpctl": mrpctl.__version__,
-        "numpy": np.__version__,
-        "casadi": casadi.__version__,
-        "xarray": xr.__version__,
-        "zarr": zarr.__version__,
-        "python": platform.python_version(),
-    }
+    found = {"python": platform.python_version()}
+    for package in ("mrpctl", "numpy", "casadi", "xarray", "zarr", "dask"):
+        try:
+            found[package] = version(package)
+        except PackageNotFoundError:  # pragma: no cover - a source tree without installation
+            found[package] = "unknown"
+    return found
 
 
 def _attrs(spec: CampaignSpec) -> dict[str, Any]:
@@ -126,7 +123,7 @@ class CampaignStore:
                 raise SpecificationError(
                     f"out: {self.path} holds another campaign ({attrs.get('name')!r}); choose a new --out folder"
                 )
-            stored_chunk = int(stored["chunk_complete"].attrs["runs_per_chunk"])
+            stored_chunk = int(str(stored["chunk_complete"].attrs["runs_per_chunk"]))
             if chunk is not None and chunk != stored_chunk:
                 raise SpecificationError(
                     f"chunk: the store at {self.path} was started with {stored_chunk} runs per chunk, got {chunk}; "
@@ -148,7 +145,7 @@ class CampaignStore:
         dataset = _template(self.spec)
         chunks = -(-self.spec.count // self.chunk)
         dataset["chunk_complete"] = (("chunk",), np.zeros(chunks, dtype=bool), {"runs_per_chunk": self.chunk})
-        encoding = {name: {"chunks": (self.chunk,) + dataset[name].shape[1:]} for name in dataset.data_vars}
+        encoding = {name: {"chunks": (self.chunk, *dataset[name].shape[1:])} for name in dataset.data_vars}
         encoding["chunk_complete"] = {"chunks": (1,)}
         dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
         os.replace(temporary, self.path)
@@ -198,7 +195,7 @@ def open_campaign(out: str | Path, *, complete_only: bool = True) -> xr.Dataset:
     if not complete_only:
         return dataset
     flags = np.asarray(zarr.open_array(str(path / "chunk_complete"), mode="r")[:], dtype=bool)
-    runs_per_chunk = int(zarr.open_array(str(path / "chunk_complete"), mode="r").attrs["runs_per_chunk"])
+    runs_per_chunk = int(str(zarr.open_array(str(path / "chunk_complete"), mode="r").attrs["runs_per_chunk"]))
     done = np.repeat(flags, runs_per_chunk)[: dataset.sizes["run"]]
     return dataset.isel(run=np.flatnonzero(done))
 
