@@ -246,3 +246,18 @@ def test_cli_run_report_replay(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "campaign complete" in text and "identical to the stored run" in text
     assert (out / "report" / "switch_count.png").exists()
+
+
+def test_store_that_would_not_fit_is_refused_up_front(spec, tmp_path, monkeypatch):
+    """The size estimate is checked before anything is written, and the message says the way out."""
+    import shutil
+    from collections import namedtuple
+
+    from mrpctl.campaign.store import STORE_NAME, bytes_per_run
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**6, 10**6 - 100, 100))
+    with pytest.raises(SpecificationError, match="smaller count"):
+        run_campaign(spec, tmp_path, chunk=4)
+    assert not (tmp_path / STORE_NAME).exists()
+    assert bytes_per_run() == 8 * (3 + 3 + 9 + 4) + 8 * 6 + 2 + 8

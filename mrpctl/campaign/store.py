@@ -86,17 +86,28 @@ def _attrs(spec: CampaignSpec) -> dict[str, Any]:
     }
 
 
-def _template(spec: CampaignSpec) -> xr.Dataset:
+def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
+    """The store's arrays filled with the missing values, as lazy Dask arrays (memory: one chunk at a time)."""
+    import dask.array as da
+
     n = spec.count
     data: dict[str, Any] = {}
     for name, (dims, dtype) in INPUTS.items():
-        data[name] = (("run", *dims), np.full((n, *(_SIZES[d] for d in dims)), np.nan, dtype=dtype))
+        shape = (n, *(_SIZES[d] for d in dims))
+        data[name] = (("run", *dims), da.full(shape, np.nan, dtype=dtype, chunks=(chunk, *shape[1:])))
     for name, (dtype, missing) in METRICS.items():
-        data[name] = (("run",), np.full(n, missing, dtype=dtype))
+        data[name] = (("run",), da.full((n,), missing, dtype=dtype, chunks=(chunk,)))
     dataset = xr.Dataset(data, coords={"run": np.arange(n, dtype=np.int64)}, attrs=_attrs(spec))
     for name, unit in _UNITS.items():
         dataset[name].attrs["units"] = unit
     return dataset
+
+
+def bytes_per_run() -> int:
+    """Uncompressed bytes one run takes in the store (inputs, metrics and its coordinate)."""
+    inputs = sum(8 * int(np.prod([_SIZES[d] for d in dims])) for dims, _ in INPUTS.values())
+    metrics = sum(np.dtype(dtype).itemsize for dtype, _ in METRICS.values())
+    return inputs + metrics + 8
 
 
 class CampaignStore:
@@ -142,7 +153,15 @@ class CampaignStore:
         temporary = self.out / (STORE_NAME + ".tmp")
         if temporary.exists():
             shutil.rmtree(temporary)
-        dataset = _template(self.spec)
+        estimate = self.spec.count * bytes_per_run()
+        free = shutil.disk_usage(self.out).free
+        if estimate > free // 2:
+            raise SpecificationError(
+                f"count: the store of {self.spec.count} runs needs about {estimate / 1e9:.3g} GB (uncompressed) but "
+                f"{self.out} has {free / 1e9:.3g} GB free; use a smaller count (split the campaign by seed) or "
+                "another --out"
+            )
+        dataset = _template(self.spec, self.chunk)
         chunks = -(-self.spec.count // self.chunk)
         dataset["chunk_complete"] = (("chunk",), np.zeros(chunks, dtype=bool), {"runs_per_chunk": self.chunk})
         encoding = {name: {"chunks": (self.chunk, *dataset[name].shape[1:])} for name in dataset.data_vars}
@@ -191,6 +210,13 @@ def open_campaign(out: str | Path, *, complete_only: bool = True) -> xr.Dataset:
     if not path.exists():
         raise SpecificationError(f"out: no campaign store at {path}")
     with xr.open_zarr(str(path), consolidated=False) as stored:
+        estimate = stored.sizes["run"] * bytes_per_run()
+        available = _available_memory()
+        if available is not None and estimate > available // 2:
+            raise SpecificationError(
+                f"out: the campaign needs about {estimate / 1e9:.3g} GB in memory but {available / 1e9:.3g} GB are "
+                f"available; read it lazily with xarray.open_zarr({str(path)!r}) instead"
+            )
         dataset = stored.drop_vars("chunk_complete").load()
     if not complete_only:
         return dataset
@@ -198,6 +224,18 @@ def open_campaign(out: str | Path, *, complete_only: bool = True) -> xr.Dataset:
     runs_per_chunk = int(str(zarr.open_array(str(path / "chunk_complete"), mode="r").attrs["runs_per_chunk"]))
     done = np.repeat(flags, runs_per_chunk)[: dataset.sizes["run"]]
     return dataset.isel(run=np.flatnonzero(done))
+
+
+def _available_memory() -> int | None:
+    """MemAvailable from /proc/meminfo (bytes), None where it cannot be read."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
 
 
 def spec_of(dataset: xr.Dataset) -> CampaignSpec:
