@@ -127,6 +127,12 @@ def test_csv_of_a_one_hour_run_at_1khz_decimated(tmp_path):
     assert np.array_equal(frame["u3"].to_numpy(), long.u[::1000, 2])
     assert int(frame["switches"].sum()) == long.switch_count
     assert path.stat().st_size < 2_000_000
+    # 72 001 rows: more than one formatting block of write_csv, still exact and in order
+    frame = pd.read_csv(data.write_csv(long, tmp_path / "long50.csv", every=50))
+    assert len(frame) == 72001
+    assert np.array_equal(frame["t"].to_numpy(), long.t[::50])
+    assert np.array_equal(frame["omega2"].to_numpy(), long.omega[::50, 1])
+    assert int(frame["switches"].sum()) == long.switch_count
 
 
 def test_csv_decimation_keeps_last_sample_and_counts_switches(run, tmp_path):
