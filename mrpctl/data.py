@@ -361,7 +361,7 @@ def write_csv(result: SimulationResult, path: str | Path, *, every: int = 1) -> 
             stream.write(header)
             for start in range(0, len(rows), _CSV_BLOCK):
                 block = slice(start, start + _CSV_BLOCK)
-                # NumPy's float -> str is the shortest repr that round-trips, formatted in C (2x pandas.to_csv)
+                # NumPy's float -> str: the shortest repr that round-trips (measured: as fast as pandas.to_csv)
                 text = np.column_stack((values[block].astype(str), switches[block].astype(str)))
                 stream.write("\n".join(map(",".join, text.tolist())))
                 stream.write("\n")
