@@ -1,0 +1,134 @@
+"""``mrpctl campaign run | report | replay``: the sub-commands, for :mod:`mrpctl.cli` to mount.
+
+In ``mrpctl/cli.py``::
+
+    from mrpctl.campaign.cli import add_parser as add_campaign_parser
+    add_campaign_parser(commands)          # in build_parser(), next to the other sub-commands
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["add_parser", "main"]
+
+#: Exit code when a replayed run differs from the stored one, or a campaign did not finish.
+MISMATCH = 1
+
+
+def _run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm  # type: ignore[import-untyped]
+
+    from mrpctl.campaign.run import run_campaign
+    from mrpctl.campaign.spec import load_campaign
+    from mrpctl.campaign.store import CampaignStore
+
+    spec = load_campaign(args.spec)
+    store = CampaignStore(args.out, spec, args.chunk)  # creates or checks the store before the bar starts
+    complete = store.complete()
+    done = sum(store.bounds(i)[1] - store.bounds(i)[0] for i in range(store.chunks) if complete[i])
+    stream = sys.stderr
+    bar = tqdm(
+        total=spec.count,
+        initial=done,
+        unit="run",
+        desc=f"campaign {spec.base.name}",
+        file=stream,
+        disable=not stream.isatty(),
+        smoothing=0.1,
+    )
+
+    def progress(index: int, start: int, stop: int) -> None:
+        bar.update(stop - start)
+
+    try:
+        result = run_campaign(
+            spec, args.out, chunk=args.chunk, scheduler=args.scheduler, workers=args.workers, on_chunk=progress
+        )
+    except KeyboardInterrupt:
+        bar.close()
+        print(
+            f"mrpctl: interrupted; the complete chunks are kept in {args.out}. "
+            f"Resume with: mrpctl campaign run {args.spec} --out {args.out}",
+            file=sys.stderr,
+        )
+        return 130
+    bar.close()
+    print(result)
+    if args.report:
+        from mrpctl.campaign.report import write_report
+
+        summary, paths = write_report(args.out)
+        print(summary)
+        print(f"report written to {paths[0].parent}")
+    return 0 if result.complete else MISMATCH
+
+
+def _report(args: argparse.Namespace) -> int:
+    from mrpctl.campaign.report import write_report
+
+    summary, paths = write_report(args.out, worst=args.worst)
+    print(summary)
+    print(f"report.md, summary.json and {len(paths) - 2} figures written to {paths[0].parent}")
+    return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from mrpctl.campaign.report import replay, save_replay_plot
+
+    result = replay(args.out, args.run, trajectory=args.plot is not None)
+    print(result)
+    if args.plot is not None:
+        print(f"figure written to {save_replay_plot(result, args.plot)}")
+    return 0 if result.matches else MISMATCH
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``campaign`` with its ``run``, ``report`` and ``replay`` sub-commands to ``subparsers``."""
+    campaign = subparsers.add_parser("campaign", help="Monte Carlo campaigns: run (resumable), report, replay")
+    commands = campaign.add_subparsers(dest="campaign_command", required=True, metavar="ACTION")
+
+    run = commands.add_parser("run", help="run or resume a campaign into a Zarr store")
+    run.add_argument("spec", type=Path, help="campaign TOML (see examples/campaigns)")
+    run.add_argument("--out", type=Path, required=True, help="results folder (resumed when it exists)")
+    run.add_argument("--chunk", type=int, help="runs per chunk for a new store (default 1000)")
+    run.add_argument(
+        "--scheduler",
+        help="'local' for a Dask LocalCluster, or a Dask scheduler address tcp://host:port (default: this process)",
+    )
+    run.add_argument("--workers", type=int, help="processes of the 'local' Dask cluster (default: the CPUs)")
+    run.add_argument("--report", action="store_true", help="write the report when the campaign is complete")
+    run.set_defaults(handler=_run)
+
+    report = commands.add_parser("report", help="table and figures of a campaign's complete runs")
+    report.add_argument("out", type=Path, help="results folder")
+    report.add_argument("--worst", type=int, default=10, help="worst cases to list (default 10)")
+    report.set_defaults(handler=_report)
+
+    replay = commands.add_parser("replay", help="re-run one run alone and check it against the stored metrics")
+    replay.add_argument("out", type=Path, help="results folder")
+    replay.add_argument("--run", type=int, required=True, help="run index")
+    replay.add_argument("--plot", type=Path, help="write sigma, omega, u against t to this PNG")
+    replay.set_defaults(handler=_replay)
+    return campaign
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m mrpctl.campaign.cli ...``: the same sub-commands without the ``campaign`` word."""
+    from mrpctl.errors import MrpctlError
+
+    parser = argparse.ArgumentParser(prog="mrpctl")
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["campaign", *(sys.argv[1:] if argv is None else argv)])
+    try:
+        return int(args.handler(args))
+    except (MrpctlError, OSError) as exc:
+        print(f"mrpctl: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

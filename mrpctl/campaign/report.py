@@ -1,0 +1,445 @@
+"""Campaign summaries (convergence with confidence intervals, distributions, worst cases), figures and replay.
+
+Figures are built as :class:`matplotlib.figure.Figure` objects (no backend is selected and
+no pyplot state is touched) and written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shlex
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import xarray as xr
+
+from mrpctl._validation import integer
+from mrpctl.campaign.run import simulate_chunk
+from mrpctl.campaign.simulation import METRICS
+from mrpctl.campaign.store import INPUTS, open_campaign, spec_of
+from mrpctl.errors import SpecificationError
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from mrpctl import SimulationResult
+
+__all__ = [
+    "CampaignReport",
+    "ReplayResult",
+    "WorstCase",
+    "clopper_pearson_interval",
+    "figures",
+    "replay",
+    "report",
+    "wilson_interval",
+    "write_report",
+]
+
+#: Two-sided 95 % standard normal quantile.
+_Z95 = 1.959963984540054
+
+
+def wilson_interval(successes: int, trials: int, *, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion (Wilson 1927).
+
+    Returns (0, 1) when there are no trials.
+    """
+    if trials == 0:
+        return 0.0, 1.0
+    from scipy.stats import norm  # type: ignore[import-untyped]
+
+    z = float(norm.ppf(0.5 + confidence / 2.0)) if confidence != 0.95 else _Z95
+    p = successes / trials
+    denominator = 1.0 + z * z / trials
+    centre = (p + z * z / (2.0 * trials)) / denominator
+    half = z * math.sqrt(p * (1.0 - p) / trials + z * z / (4.0 * trials * trials)) / denominator
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def clopper_pearson_interval(successes: int, trials: int, *, confidence: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper–Pearson 1934) interval of a binomial proportion, from the beta quantiles."""
+    if trials == 0:
+        return 0.0, 1.0
+    from scipy.stats import beta  # type: ignore[import-untyped]
+
+    alpha = 1.0 - confidence
+    low = 0.0 if successes == 0 else float(beta.ppf(alpha / 2.0, successes, trials - successes + 1))
+    high = 1.0 if successes == trials else float(beta.ppf(1.0 - alpha / 2.0, successes + 1, trials - successes))
+    return low, high
+
+
+@dataclass(frozen=True)
+class WorstCase:
+    """One of the worst runs, with the command that replays it."""
+
+    run: int
+    reason: str
+    settling_time: float
+    switch_count: int
+    max_sigma: float
+    initial_angle: float
+    initial_rate: float
+    command: str
+
+
+@dataclass(frozen=True, eq=False)
+class CampaignReport:
+    """Summary of a campaign's complete runs.
+
+    Attributes
+    ----------
+    name : str
+        Campaign name.
+    count, complete : int
+        Runs in the campaign; runs stored so far.
+    converged, diverged : int
+        Runs that settled; runs that diverged.
+    convergence_rate : float
+        converged / complete.
+    wilson, clopper_pearson : tuple of float
+        95 % confidence intervals of the convergence rate.
+    settling_quantiles : dict
+        Median, 95th percentile and maximum settling time of the converged runs (s).
+    switch_quantiles : dict
+        Median, 95th percentile and maximum switch count.
+    peak_torque_max : float
+        Largest peak torque (N m), NaN when not computed.
+    worst : tuple of WorstCase
+        The worst runs: diverged, then not settled, then the slowest to settle.
+    """
+
+    name: str
+    count: int
+    complete: int
+    converged: int
+    diverged: int
+    convergence_rate: float
+    wilson: tuple[float, float]
+    clopper_pearson: tuple[float, float]
+    settling_quantiles: dict[str, float]
+    switch_quantiles: dict[str, float]
+    peak_torque_max: float
+    worst: tuple[WorstCase, ...] = field(repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        """The report as JSON-ready values."""
+        return {
+            "name": self.name,
+            "count": self.count,
+            "complete": self.complete,
+            "converged": self.converged,
+            "diverged": self.diverged,
+            "convergence_rate": self.convergence_rate,
+            "wilson_95": list(self.wilson),
+            "clopper_pearson_95": list(self.clopper_pearson),
+            "settling_time_s": self.settling_quantiles,
+            "switch_count": self.switch_quantiles,
+            "peak_torque_max_Nm": None if math.isnan(self.peak_torque_max) else self.peak_torque_max,
+            "worst": [case.__dict__ for case in self.worst],
+        }
+
+    def __str__(self) -> str:
+        s, w = self.settling_quantiles, self.switch_quantiles
+        lines = [
+            f"campaign {self.name}: {self.complete}/{self.count} runs complete",
+            f"  converged     {self.converged}/{self.complete} = {self.convergence_rate:.4%}  "
+            f"(95 % Wilson [{self.wilson[0]:.4%}, {self.wilson[1]:.4%}], "
+            f"Clopper-Pearson [{self.clopper_pearson[0]:.4%}, {self.clopper_pearson[1]:.4%}])",
+            f"  diverged      {self.diverged}",
+            f"  settling (s)  median {s['median']:.4g}, p95 {s['p95']:.4g}, max {s['max']:.4g} (converged runs)",
+            f"  switches      median {w['median']:.4g}, p95 {w['p95']:.4g}, max {w['max']:.4g}",
+            f"  peak torque   max {self.peak_torque_max:.4g} N m",
+            "  worst cases:",
+            f"    {'run':>8} {'reason':<12} {'settling_s':>10} {'switches':>8} {'max|sigma|':>10} "
+            f"{'angle_deg':>9} {'rate_rad/s':>10}  replay",
+        ]
+        for c in self.worst:
+            lines.append(
+                f"    {c.run:>8} {c.reason:<12} {c.settling_time:>10.4g} {c.switch_count:>8} {c.max_sigma:>10.4g} "
+                f"{math.degrees(c.initial_angle):>9.2f} {c.initial_rate:>10.4g}  {c.command}"
+            )
+        return "\n".join(lines)
+
+
+def _quantiles(values: np.ndarray) -> dict[str, float]:
+    if values.size == 0:
+        return {"median": math.nan, "p95": math.nan, "max": math.nan}
+    return {
+        "median": float(np.median(values)),
+        "p95": float(np.quantile(values, 0.95)),
+        "max": float(np.max(values)),
+    }
+
+
+def _dataset(source: str | Path | xr.Dataset) -> xr.Dataset:
+    return source if isinstance(source, xr.Dataset) else open_campaign(source)
+
+
+def report(source: str | Path | xr.Dataset, *, worst: int = 10, out: str | Path | None = None) -> CampaignReport:
+    """Summarise a campaign's complete runs (a results folder or its dataset).
+
+    ``out`` is the folder written into the replay commands (default: ``source`` when it is a path).
+    """
+    dataset = _dataset(source)
+    worst = integer("worst", worst, minimum=0)
+    folder = str(out if out is not None else (source if not isinstance(source, xr.Dataset) else "OUT"))
+    n = dataset.sizes["run"]
+    converged = np.asarray(dataset["converged"], dtype=bool)
+    diverged = np.asarray(dataset["diverged"], dtype=bool)
+    settling = np.asarray(dataset["settling_time"], dtype=float)
+    switches = np.asarray(dataset["switch_count"], dtype=np.int64)
+    k = int(converged.sum())
+    # worst first: diverged, then not settled (more switches first), then the slowest to settle
+    severity = np.where(diverged, 0, np.where(~converged, 1, 2))
+    order = np.lexsort((-switches, -np.nan_to_num(settling, nan=np.inf), severity))[:worst]
+    runs = np.asarray(dataset["run"])
+    cases = []
+    for i in order:
+        reason = "diverged" if diverged[i] else ("not settled" if not converged[i] else "slow")
+        cases.append(
+            WorstCase(
+                run=int(runs[i]),
+                reason=reason,
+                settling_time=float(settling[i]),
+                switch_count=int(switches[i]),
+                max_sigma=float(dataset["max_sigma"][i]),
+                initial_angle=float(dataset["initial_angle"][i]),
+                initial_rate=float(dataset["initial_rate"][i]),
+                command=f"mrpctl campaign replay {shlex.quote(folder)} --run {int(runs[i])}",
+            )
+        )
+    peak = np.asarray(dataset["peak_torque"], dtype=float)
+    return CampaignReport(
+        name=str(dataset.attrs.get("name", "campaign")),
+        count=int(dataset.attrs.get("count", n)),
+        complete=n,
+        converged=k,
+        diverged=int(diverged.sum()),
+        convergence_rate=k / n if n else math.nan,
+        wilson=wilson_interval(k, n),
+        clopper_pearson=clopper_pearson_interval(k, n),
+        settling_quantiles=_quantiles(settling[converged]),
+        switch_quantiles=_quantiles(switches.astype(float)),
+        peak_torque_max=float(np.nanmax(peak)) if np.any(np.isfinite(peak)) else math.nan,
+        worst=tuple(cases),
+    )
+
+
+def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
+    """The report's figures: settling-time and switch-count histograms, outcome against the initial state."""
+    from matplotlib.figure import Figure
+
+    dataset = _dataset(source)
+    converged = np.asarray(dataset["converged"], dtype=bool)
+    diverged = np.asarray(dataset["diverged"], dtype=bool)
+    settling = np.asarray(dataset["settling_time"], dtype=float)
+    switches = np.asarray(dataset["switch_count"], dtype=np.int64)
+    n = len(converged)
+    out: dict[str, Figure] = {}
+
+    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    ax = fig.add_subplot()
+    if converged.any():
+        ax.hist(settling[converged], bins=min(50, max(5, int(np.sqrt(converged.sum())))), color="tab:blue")
+    ax.set_xlabel("settling time (s): |σ| < 1e-2 and |ω| < 1e-3 rad/s to the end")
+    ax.set_ylabel("runs")
+    ax.set_title(
+        f"settling time of {int(converged.sum())}/{n} converged runs "
+        f"({n - int(converged.sum())} not settled, {int(diverged.sum())} diverged, not shown)",
+        fontsize=9,
+    )
+    out["settling_time"] = fig
+
+    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    ax = fig.add_subplot()
+    positive = switches[switches > 0]
+    zero = int(np.sum(switches == 0))
+    if positive.size:
+        top = max(2.0, float(positive.max()) * 1.05)
+        bins = np.unique(np.round(np.geomspace(1.0, top, 40)))
+        ax.hist(positive, bins=np.append(bins, bins[-1] + 1).tolist(), color="tab:orange")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    ax.set_xlabel("shadow-set switches per run (log)")
+    ax.set_ylabel("runs (log)")
+    ax.set_title(f"switch count of {n} runs ({zero} runs never switched, not on the log axis)", fontsize=9)
+    out["switch_count"] = fig
+
+    fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+    ax = fig.add_subplot()
+    angle = np.degrees(np.asarray(dataset["initial_angle"], dtype=float))
+    rate = np.asarray(dataset["initial_rate"], dtype=float)
+    failed = ~converged & ~diverged
+    ax.scatter(angle[converged], rate[converged], s=4, color="tab:green", label="converged", alpha=0.5)
+    ax.scatter(angle[failed], rate[failed], s=12, marker="x", color="tab:orange", label="not settled")
+    ax.scatter(angle[diverged], rate[diverged], s=14, marker="x", color="crimson", label="diverged")
+    ax.set_xlabel("initial principal angle Φ₀ (deg)")
+    ax.set_ylabel("initial rate |ω₀| (rad/s)")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.set_title("outcome against the initial state", fontsize=9)
+    out["outcome_vs_initial"] = fig
+    return out
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    """Write a figure atomically (temporary file, then rename)."""
+    temporary = path.with_name(path.name + ".tmp")
+    fig.savefig(temporary, format=path.suffix.lstrip(".") or "png", dpi=110)
+    os.replace(temporary, path)
+    return path
+
+
+def _write_text(path: Path, text: str) -> None:
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(text, encoding="utf-8")
+    os.replace(temporary, path)
+
+
+def write_report(out: str | Path, *, worst: int = 10) -> tuple[CampaignReport, list[Path]]:
+    """Write ``out/report/``: report.md (the table), summary.json and one PNG per figure."""
+    out = Path(out)
+    dataset = open_campaign(out)
+    result = report(dataset, worst=worst, out=out)
+    folder = out / "report"
+    folder.mkdir(parents=True, exist_ok=True)
+    written = [_save(fig, folder / f"{name}.png") for name, fig in figures(dataset).items()]
+    markdown = f"# Campaign {result.name}\n\n```\n{result}\n```\n\n" + "".join(
+        f"![{p.stem}]({p.name})\n\n" for p in written
+    )
+    _write_text(folder / "report.md", markdown)
+    _write_text(folder / "summary.json", json.dumps(result.summary(), indent=2, allow_nan=True) + "\n")
+    return result, [folder / "report.md", folder / "summary.json", *written]
+
+
+@dataclass(frozen=True, eq=False)
+class ReplayResult:
+    """A run re-simulated on its own from (seed, run index), against what the campaign stored.
+
+    Attributes
+    ----------
+    run : int
+        Run index.
+    stored, replayed : dict
+        The stored and the recomputed inputs and metrics.
+    mismatches : tuple of str
+        Names whose values differ (bit for bit; NaN equals NaN).
+    trajectory : SimulationResult or None
+        The full run, when asked for.
+    """
+
+    run: int
+    stored: dict[str, np.ndarray] = field(repr=False)
+    replayed: dict[str, np.ndarray] = field(repr=False)
+    mismatches: tuple[str, ...]
+    trajectory: SimulationResult | None = field(default=None, repr=False)
+
+    @property
+    def matches(self) -> bool:
+        """True when every input and metric is reproduced exactly."""
+        return not self.mismatches
+
+    def __str__(self) -> str:
+        lines = [
+            f"replay of run {self.run}: "
+            + ("identical to the stored run" if self.matches else "DIFFERS in " + ", ".join(self.mismatches))
+        ]
+        for name in METRICS:
+            lines.append(f"  {name:<18} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
+        return "\n".join(lines)
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape or a.dtype != b.dtype:
+        return False
+    if a.tobytes() == b.tobytes():
+        return True
+    return a.dtype.kind == "f" and bool(np.array_equal(a, b, equal_nan=True))
+
+
+def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResult:
+    """Re-run run ``run`` of the campaign in ``out`` alone and compare it with the stored values.
+
+    Raises
+    ------
+    SpecificationError
+        If the run is out of range or its chunk is not complete yet.
+    """
+    dataset = open_campaign(out, complete_only=False)
+    count = dataset.sizes["run"]
+    run = integer("run", run, minimum=0, maximum=count - 1)
+    complete = open_campaign(out)
+    if run not in set(np.asarray(complete["run"]).tolist()):
+        raise SpecificationError(f"run: run {run} has not been stored yet (its chunk is not complete)")
+    spec = spec_of(dataset)
+    values = simulate_chunk(spec, run, run + 1)
+    names = list(INPUTS) + list(METRICS)
+    stored = {name: np.asarray(dataset[name].isel(run=run).values) for name in names}
+    replayed = {name: np.asarray(values[name][0]) for name in names}
+    mismatches = tuple(name for name in names if not _same(stored[name], replayed[name]))
+    result = None
+    if trajectory:
+        result = _trajectory(spec, run, values)
+    return ReplayResult(run=run, stored=stored, replayed=replayed, mismatches=mismatches, trajectory=result)
+
+
+def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> SimulationResult:
+    # adapter: re-point at mrpctl.simulate(...) (the function) after the "sim" merge
+    from mrpctl import simulate_batch
+    from mrpctl.campaign.sampling import run_inputs
+    from mrpctl.spacecraft import Spacecraft
+
+    inputs = run_inputs(spec, run)
+    base = spec.base
+    batch = simulate_batch(
+        Spacecraft(inputs.inertia[0]),
+        inputs.gain_scale[0] * base.K,
+        inputs.x0,
+        tau=float(inputs.tau[0]),
+        rule=base.rule,
+        t_final=base.t_final,
+        rate=base.rate,
+        history=base.history,
+        substeps=base.substeps,
+        trajectories=True,
+        threads=1,
+    )
+    assert batch.runs is not None
+    return batch.runs[0]
+
+
+def plot_replay(result: ReplayResult) -> Figure:
+    """σ, ω and u of a replayed run against t, with the switches marked."""
+    from matplotlib.figure import Figure
+
+    if result.trajectory is None:
+        raise SpecificationError("result: replay(..., trajectory=True) is needed to plot a run")
+    run = result.trajectory
+    fig = Figure(figsize=(7.0, 6.5), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    for ax, values, label in (
+        (axes[0], run.sigma, "σ"),
+        (axes[1], run.omega, "ω (rad/s)"),
+        (axes[2], run.u, "u (N m)"),
+    ):
+        for i in range(3):
+            ax.plot(run.t, values[:, i], lw=0.9, label=f"{label.split()[0]}{i + 1}")
+        ax.set_ylabel(label)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+        for t in run.switch_times[:200]:
+            ax.axvline(t, color="crimson", lw=0.4, alpha=0.5)
+    axes[2].set_xlabel("t (s)")
+    axes[0].set_title(f"run {result.run}: {run.rule}, τ = {run.tau:g} s, {run.switch_count} switches", fontsize=9)
+    return fig
+
+
+def save_replay_plot(result: ReplayResult, path: str | Path) -> Path:
+    """Write :func:`plot_replay` to ``path`` atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return _save(plot_replay(result), path)

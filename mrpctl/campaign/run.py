@@ -1,0 +1,227 @@
+"""Run a campaign chunk by chunk, in this process or on Dask, into its Zarr store; resume after an interrupt."""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mrpctl._validation import integer
+from mrpctl.campaign.sampling import run_inputs
+from mrpctl.campaign.simulation import simulate_runs
+from mrpctl.campaign.spec import CampaignSpec, parse_campaign
+from mrpctl.campaign.store import CampaignStore
+from mrpctl.errors import SpecificationError
+
+__all__ = ["CampaignRun", "run_campaign", "simulate_chunk"]
+
+logger = logging.getLogger(__name__)
+
+#: Called after each chunk is durably stored: (chunk index, first run, stop run).
+ChunkCallback = Callable[[int, int, int], None]
+
+
+def _cpus() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | None = None) -> dict[str, np.ndarray]:
+    """Inputs and metrics of runs [start, stop) of ``spec`` (what one chunk stores).
+
+    Returns
+    -------
+    dict of numpy.ndarray
+        The arrays of :data:`mrpctl.campaign.store.INPUTS` and
+        :data:`mrpctl.campaign.simulation.METRICS`, one row per run.
+    """
+    inputs = run_inputs(spec, start, stop)
+    base = spec.base
+    K = inputs.gain_scale[:, None, None] * base.K[None]
+    metrics = simulate_runs(
+        inputs.inertia,
+        K,
+        inputs.x0,
+        inputs.tau,
+        base.rule,
+        t_final=base.t_final,
+        rate=base.rate,
+        history=base.history,
+        substeps=base.substeps,
+        threads=threads,
+        peak_torque=spec.peak_torque,
+    )
+    sigma_norm = np.linalg.norm(inputs.sigma0, axis=1)
+    return {
+        "sigma0": np.array(inputs.sigma0),
+        "omega0": np.array(inputs.omega0),
+        "inertia": np.array(inputs.inertia),
+        "tau": np.array(inputs.tau),
+        "gain_scale": np.array(inputs.gain_scale),
+        "initial_angle": 4.0 * np.arctan(sigma_norm),
+        "initial_rate": np.linalg.norm(inputs.omega0, axis=1),
+        **metrics,
+    }
+
+
+def _chunk_on_worker(source: dict[str, Any], name: str, start: int, stop: int) -> dict[str, np.ndarray]:
+    """The Dask task: rebuild the spec from plain data (cheap to ship) and run the chunk on one thread."""
+    return simulate_chunk(parse_campaign(source, name=name), start, stop, threads=1)
+
+
+@dataclass(frozen=True)
+class CampaignRun:
+    """What :func:`run_campaign` did.
+
+    Attributes
+    ----------
+    out : pathlib.Path
+        The results folder.
+    chunks : int
+        Chunks in the campaign.
+    already_complete : int
+        Chunks found complete in the store when the call started (resumed work).
+    simulated : int
+        Chunks simulated by this call.
+    runs : int
+        Runs simulated by this call.
+    """
+
+    out: Path
+    chunks: int
+    already_complete: int
+    simulated: int
+    runs: int
+
+    @property
+    def complete(self) -> bool:
+        """True when every chunk of the campaign is stored."""
+        return self.already_complete + self.simulated == self.chunks
+
+    def __str__(self) -> str:
+        resumed = f" (resumed: {self.already_complete} chunk(s) were already complete)" if self.already_complete else ""
+        state = "complete" if self.complete else "INCOMPLETE"
+        return f"campaign {state}: {self.simulated} chunk(s), {self.runs} runs simulated into {self.out}{resumed}"
+
+
+def _local(spec: CampaignSpec, store: CampaignStore, todo: list[int], threads: int | None) -> Iterator[tuple[int, Any]]:
+    for index in todo:
+        start, stop = store.bounds(index)
+        yield index, simulate_chunk(spec, start, stop, threads=threads)
+
+
+def _dask(
+    spec: CampaignSpec, store: CampaignStore, todo: list[int], scheduler: str, workers: int | None
+) -> Iterator[tuple[int, Any]]:
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler == "local":
+        cluster = LocalCluster(
+            n_workers=workers or _cpus(), threads_per_worker=1, processes=True, dashboard_address=None
+        )
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        slots = 2 * max(1, len(client.scheduler_info().get("workers", {})) or 1)
+        pending = iter(todo)
+        futures = as_completed()
+        for index in pending:
+            start, stop = store.bounds(index)
+            futures.add(
+                client.submit(
+                    _chunk_on_worker, spec.source, spec.base.name, start, stop, key=f"chunk-{index}", pure=False
+                )
+            )
+            if futures.count() >= slots:
+                break
+        for future in futures:
+            yield int(str(future.key).rsplit("-", 1)[1]), future.result()
+            del future
+            following = next(pending, None)
+            if following is not None:
+                start, stop = store.bounds(following)
+                futures.add(
+                    client.submit(
+                        _chunk_on_worker, spec.source, spec.base.name, start, stop, key=f"chunk-{following}", pure=False
+                    )
+                )
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_campaign(
+    spec: CampaignSpec,
+    out: str | Path,
+    *,
+    chunk: int | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    threads: int | None = None,
+    on_chunk: ChunkCallback | None = None,
+) -> CampaignRun:
+    """Run (or resume) a campaign into ``out/campaign.zarr``.
+
+    Chunks already complete in the store are skipped; the others (including one that was
+    half-written when an earlier call was interrupted) are simulated and written as they
+    finish. The stored values do not depend on the chunk size, the order, interruptions
+    or where the chunks ran.
+
+    Parameters
+    ----------
+    spec : CampaignSpec
+        The campaign.
+    out : path
+        Results folder.
+    chunk : int, optional
+        Runs per chunk for a new store (default 1000); a resumed store keeps its own.
+    scheduler : str, optional
+        None: run in this process (a thread pool over the compiled engine). ``"local"``:
+        a Dask ``LocalCluster`` of ``workers`` single-threaded processes. ``"tcp://host:port"``:
+        the Dask scheduler at that address (its workers need mrpctl and a C compiler, or
+        use CasADi's virtual machine).
+    workers : int, optional
+        Processes of the local Dask cluster (default: the CPUs available).
+    threads : int, optional
+        Threads of the in-process runner (default: the CPUs available).
+    on_chunk : callable, optional
+        ``on_chunk(index, start, stop)`` after each chunk is stored (progress bars; an
+        exception raised there stops the campaign, which resumes later).
+
+    Returns
+    -------
+    CampaignRun
+    """
+    if chunk is not None:
+        chunk = integer("chunk", chunk, minimum=1)
+    if workers is not None:
+        workers = integer("workers", workers, minimum=1)
+    if scheduler is not None and scheduler != "local" and "://" not in scheduler:
+        raise SpecificationError(f"scheduler must be 'local' or an address such as tcp://host:8786, got {scheduler!r}")
+    store = CampaignStore(out, spec, chunk)
+    complete = store.complete()
+    todo = [int(i) for i in np.flatnonzero(~complete)]
+    already = int(complete.sum())
+    logger.info("campaign %s: %d of %d chunks to run", spec.base.name, len(todo), store.chunks)
+    runs = simulated = 0
+    source = _local(spec, store, todo, threads) if scheduler is None else _dask(spec, store, todo, scheduler, workers)
+    try:
+        for index, values in source:
+            store.write(index, values)
+            start, stop = store.bounds(index)
+            simulated += 1
+            runs += stop - start
+            if on_chunk is not None:
+                on_chunk(index, start, stop)
+    finally:
+        close = getattr(source, "close", None)
+        if close is not None:
+            close()
+    return CampaignRun(out=Path(out), chunks=store.chunks, already_complete=already, simulated=simulated, runs=runs)

@@ -1,0 +1,231 @@
+"""The dispersed inputs of each run, from (seed, run index) alone.
+
+Run i draws from its own generator ``default_rng(SeedSequence(seed, spawn_key=(i,)))``
+(NumPy's PCG64 seeded by a SeedSequence whose spawn key is the run index), always in the
+same order and always the same variates, whether or not a dispersion is enabled:
+
+1. 4 standard normals: the attitude quaternion (uniform on SO(3) once normalised);
+2. 3 standard normals and 1 uniform: the axis and the angle quantile of a
+   principal-angle-restricted attitude;
+3. 3 standard normals and 1 uniform: the rate direction and magnitude quantile;
+4. 1 uniform: the delay grid index; 5. 1 uniform: the gain scale;
+6. last, the inertia: 6 uniforms per attempt until the sample is physically valid.
+
+So run i can be replayed on its own, and enabling one dispersion never changes the
+values of another.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mrpctl._validation import integer, sealed
+from mrpctl.campaign.spec import AttitudeDispersion, CampaignSpec
+from mrpctl.errors import SpecificationError
+from mrpctl.model import state
+
+__all__ = [
+    "RunInputs",
+    "haar_angle_cdf",
+    "quaternion_to_mrp",
+    "run_inputs",
+    "uniform_quaternions",
+]
+
+#: Attempts at a physically valid inertia before the tolerances are declared too wide.
+MAX_INERTIA_ATTEMPTS = 1000
+
+
+@dataclass(frozen=True, eq=False)
+class RunInputs:
+    """The dispersed inputs of runs ``index`` (one row each).
+
+    Attributes
+    ----------
+    index : numpy.ndarray
+        (N,) run indices.
+    sigma0 : numpy.ndarray
+        (N, 3) initial MRPs σ₀ (short set, |σ₀| <= 1 when the attitude is dispersed).
+    omega0 : numpy.ndarray
+        (N, 3) initial body rates ω₀ (rad/s).
+    inertia : numpy.ndarray
+        (N, 3, 3) inertia matrices J (kg m²).
+    tau : numpy.ndarray
+        (N,) delays τ (s), whole multiples of 1/rate.
+    gain_scale : numpy.ndarray
+        (N,) scale s of the base gain, K = s K_base.
+    inertia_attempts : numpy.ndarray
+        (N,) draws the inertia rejection sampler needed (1 when it is not dispersed).
+    """
+
+    index: np.ndarray
+    sigma0: np.ndarray
+    omega0: np.ndarray
+    inertia: np.ndarray
+    tau: np.ndarray
+    gain_scale: np.ndarray
+    inertia_attempts: np.ndarray = field(repr=False)
+
+    @property
+    def x0(self) -> np.ndarray:
+        """(N, 6) initial states x = [σ; ω/4]."""
+        return state(self.sigma0, self.omega0)
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+
+def uniform_quaternions(normals: np.ndarray) -> np.ndarray:
+    """Unit quaternions (scalar first, q₀ >= 0) from (..., 4) standard normal draws.
+
+    A standard normal 4-vector is isotropic, so its direction is uniform on S³, and the
+    unit quaternions uniform on S³ are the Haar (uniform) measure on SO(3) (Shoemake 1992;
+    the double cover q ~ −q is removed by q₀ >= 0).
+    """
+    q = np.asarray(normals, dtype=float)
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    q = np.where(norm > 0.0, q / np.where(norm > 0.0, norm, 1.0), np.array([1.0, 0.0, 0.0, 0.0]))
+    return np.where(q[..., :1] < 0.0, -q, q)
+
+
+def quaternion_to_mrp(q: np.ndarray) -> np.ndarray:
+    """σ = q_v / (1 + q₀) of unit quaternions (scalar first, q₀ >= 0, so |σ| <= 1)."""
+    return q[..., 1:] / (1.0 + q[..., :1])
+
+
+def haar_angle_cdf(theta: np.ndarray | float) -> np.ndarray:
+    """P(Φ <= θ) = (θ − sin θ)/π of the principal angle of a uniform rotation (θ in rad, [0, π])."""
+    theta = np.asarray(theta, dtype=float)
+    return (theta - np.sin(theta)) / math.pi
+
+
+def _haar_angle_quantile(p: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`haar_angle_cdf` by bisection: 64 halvings of [0, π], always terminates."""
+    low = np.zeros_like(p)
+    high = np.full_like(p, math.pi)
+    for _ in range(64):
+        mid = 0.5 * (low + high)
+        below = haar_angle_cdf(mid) < p
+        low = np.where(below, mid, low)
+        high = np.where(below, high, mid)
+    return 0.5 * (low + high)
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    fallback = np.zeros(vectors.shape[-1])
+    fallback[0] = 1.0
+    return np.where(norm > 0.0, vectors / np.where(norm > 0.0, norm, 1.0), fallback)
+
+
+def _attitude(
+    dispersion: AttitudeDispersion, quaternion_normals: np.ndarray, axis_normals: np.ndarray, angle_quantile: np.ndarray
+) -> np.ndarray:
+    if dispersion.full:
+        return quaternion_to_mrp(uniform_quaternions(quaternion_normals))
+    low, high = (math.radians(a) for a in dispersion.angle_deg)
+    p = haar_angle_cdf(low) + angle_quantile * (haar_angle_cdf(high) - haar_angle_cdf(low))
+    angle = np.clip(_haar_angle_quantile(p), low, high)
+    return np.tan(angle / 4.0)[:, None] * _unit(axis_normals)
+
+
+def _valid_inertia(matrix: np.ndarray) -> bool:
+    """Symmetric positive definite and every principal inertia <= the sum of the other two."""
+    eigenvalues = np.linalg.eigvalsh(matrix)
+    return bool(eigenvalues[0] > 0.0 and eigenvalues[2] <= eigenvalues[0] + eigenvalues[1])
+
+
+def _inertia(spec: CampaignSpec, generator: np.random.Generator, index: int) -> tuple[np.ndarray, int]:
+    base = spec.base.spacecraft.inertia
+    dispersion = spec.inertia
+    if dispersion is None:
+        return np.array(base), 1
+    upper = np.triu_indices(3, 1)
+    for attempt in range(1, MAX_INERTIA_ATTEMPTS + 1):
+        axes = generator.uniform(-1.0, 1.0, 3)
+        products = generator.uniform(-1.0, 1.0, 3)
+        matrix = np.array(base)
+        matrix[np.diag_indices(3)] *= 1.0 + dispersion.axis_tolerance * axes
+        offsets = np.zeros((3, 3))
+        offsets[upper] = dispersion.product_tolerance * products
+        matrix += offsets + offsets.T
+        if _valid_inertia(matrix):
+            return matrix, attempt
+    raise SpecificationError(
+        f"inertia: no physically valid inertia (SPD, triangle inequality) in {MAX_INERTIA_ATTEMPTS} draws for "
+        f"run {index}; reduce axis_tolerance ({dispersion.axis_tolerance:g}) or product_tolerance "
+        f"({dispersion.product_tolerance:g} kg m^2)"
+    )
+
+
+def _tau_grid(spec: CampaignSpec) -> np.ndarray:
+    rate = spec.base.rate
+    if spec.tau is None:
+        return np.array([spec.base.tau])
+    low = round(spec.tau.low * rate)
+    step = round(spec.tau.step * rate)
+    count = round((spec.tau.high - spec.tau.low) / spec.tau.step) + 1
+    return (low + step * np.arange(count)) / rate
+
+
+def run_inputs(spec: CampaignSpec, start: int, stop: int | None = None) -> RunInputs:
+    """The dispersed inputs of runs start, ..., stop − 1 (stop defaults to start + 1).
+
+    Each run's values depend only on (spec.seed, run index) and the dispersion settings.
+
+    Raises
+    ------
+    SpecificationError
+        If the range is outside [0, count), or the inertia tolerances admit no valid inertia.
+    """
+    start = integer("start", start, minimum=0, maximum=spec.count - 1)
+    stop = start + 1 if stop is None else integer("stop", stop, minimum=start + 1, maximum=spec.count)
+    n = stop - start
+    quaternion_normals = np.empty((n, 4))
+    axis_normals = np.empty((n, 3))
+    angle_quantile = np.empty(n)
+    rate_normals = np.empty((n, 3))
+    rate_quantile = np.empty(n)
+    tau_quantile = np.empty(n)
+    gain_quantile = np.empty(n)
+    inertia = np.empty((n, 3, 3))
+    attempts = np.empty(n, dtype=np.int64)
+    for j, index in enumerate(range(start, stop)):
+        generator = np.random.default_rng(np.random.SeedSequence(spec.seed, spawn_key=(index,)))
+        quaternion_normals[j] = generator.standard_normal(4)
+        axis_normals[j] = generator.standard_normal(3)
+        angle_quantile[j] = generator.random()
+        rate_normals[j] = generator.standard_normal(3)
+        rate_quantile[j] = generator.random()
+        tau_quantile[j] = generator.random()
+        gain_quantile[j] = generator.random()
+        inertia[j], attempts[j] = _inertia(spec, generator, index)
+
+    base_sigma, base_omega = spec.base.x0[:3], 4.0 * spec.base.x0[3:]
+    if spec.attitude is None:
+        sigma0 = np.tile(base_sigma, (n, 1))
+    else:
+        sigma0 = _attitude(spec.attitude, quaternion_normals, axis_normals, angle_quantile)
+    omega0 = np.tile(base_omega, (n, 1))
+    if spec.rate is not None:
+        low, high = spec.rate.magnitude
+        omega0 = omega0 + (low + (high - low) * rate_quantile)[:, None] * _unit(rate_normals)
+    grid = _tau_grid(spec)
+    tau = grid[np.minimum((tau_quantile * len(grid)).astype(np.int64), len(grid) - 1)]
+    if spec.gains is None:
+        gain_scale = np.ones(n)
+    else:
+        low, high = spec.gains.scale
+        gain_scale = low + (high - low) * gain_quantile
+    return RunInputs(
+        index=sealed(np.arange(start, stop, dtype=np.int64)),
+        sigma0=sealed(sigma0),
+        omega0=sealed(omega0),
+        inertia=sealed(inertia),
+        tau=sealed(np.array(tau)),
+        gain_scale=sealed(gain_scale),
+        inertia_attempts=sealed(attempts),
+    )

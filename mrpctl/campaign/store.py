@@ -1,0 +1,243 @@
+"""The Zarr store of a campaign: every run's inputs and metrics, and which chunks are complete.
+
+Layout of ``<out>/campaign.zarr`` (a Zarr group written by xarray):
+
+* coordinate ``run`` (count,) and, over ``run``, the inputs ``sigma0`` (run, axis),
+  ``omega0`` (run, axis), ``inertia`` (run, row, col), ``tau``, ``gain_scale``,
+  ``initial_angle``, ``initial_rate`` and the metrics of :data:`METRICS`; every array is
+  chunked along ``run`` by the campaign chunk, so a chunk's write touches only its own files;
+* ``chunk_complete`` (chunk,), one Zarr chunk per campaign chunk, set to True only after
+  all of that chunk's arrays are written. A chunk whose flag is False (never started, or
+  half-written when the campaign was interrupted) is simulated again on resume.
+
+The store is created complete (filled with the "missing" values) in a temporary folder
+and renamed into place, so a store that exists always has all its arrays.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+import zarr
+
+from mrpctl.campaign.simulation import METRICS
+from mrpctl.campaign.spec import CampaignSpec, parse_campaign
+from mrpctl.errors import SpecificationError
+
+__all__ = ["INPUTS", "STORE_NAME", "CampaignStore", "open_campaign"]
+
+STORE_NAME = "campaign.zarr"
+
+#: The dispersed inputs stored per run: (dims after run, dtype).
+INPUTS: dict[str, tuple[tuple[str, ...], Any]] = {
+    "sigma0": (("axis",), np.float64),
+    "omega0": (("axis",), np.float64),
+    "inertia": (("row", "col"), np.float64),
+    "tau": ((), np.float64),
+    "gain_scale": ((), np.float64),
+    "initial_angle": ((), np.float64),
+    "initial_rate": ((), np.float64),
+}
+_SIZES = {"axis": 3, "row": 3, "col": 3}
+_UNITS = {
+    "sigma0": "1",
+    "omega0": "rad/s",
+    "inertia": "kg m^2",
+    "tau": "s",
+    "gain_scale": "1",
+    "initial_angle": "rad",
+    "initial_rate": "rad/s",
+    "first_switch_time": "s",
+    "last_switch_time": "s",
+    "settling_time": "s",
+    "max_sigma": "1",
+    "peak_torque": "N m",
+}
+
+
+def versions() -> dict[str, str]:
+    """The versions of the packages a campaign's numbers depend on."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = {"python": platform.python_version()}
+    for package in ("mrpctl", "numpy", "casadi", "xarray", "zarr", "dask"):
+        try:
+            found[package] = version(package)
+        except PackageNotFoundError:  # pragma: no cover - a source tree without installation
+            found[package] = "unknown"
+    return found
+
+
+def _attrs(spec: CampaignSpec) -> dict[str, Any]:
+    return {
+        "campaign": json.dumps(spec.source, sort_keys=True),
+        "name": spec.base.name,
+        "count": spec.count,
+        "seed": spec.seed,
+        "rule": str(spec.base.rule),
+        "versions": json.dumps(versions(), sort_keys=True),
+    }
+
+
+def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
+    """The store's arrays filled with the missing values, as lazy Dask arrays (memory: one chunk at a time)."""
+    import dask.array as da
+
+    n = spec.count
+    data: dict[str, Any] = {}
+    for name, (dims, dtype) in INPUTS.items():
+        shape = (n, *(_SIZES[d] for d in dims))
+        data[name] = (("run", *dims), da.full(shape, np.nan, dtype=dtype, chunks=(chunk, *shape[1:])))
+    for name, (dtype, missing) in METRICS.items():
+        data[name] = (("run",), da.full((n,), missing, dtype=dtype, chunks=(chunk,)))
+    dataset = xr.Dataset(data, coords={"run": np.arange(n, dtype=np.int64)}, attrs=_attrs(spec))
+    for name, unit in _UNITS.items():
+        dataset[name].attrs["units"] = unit
+    return dataset
+
+
+def bytes_per_run() -> int:
+    """Uncompressed bytes one run takes in the store (inputs, metrics and its coordinate)."""
+    inputs = sum(8 * int(np.prod([_SIZES[d] for d in dims])) for dims, _ in INPUTS.values())
+    metrics = sum(np.dtype(dtype).itemsize for dtype, _ in METRICS.values())
+    return inputs + metrics + 8
+
+
+class CampaignStore:
+    """A campaign's results folder: create or reopen it, write chunks, read what is complete.
+
+    Parameters
+    ----------
+    out : path
+        The results folder (created if needed); the store is ``out/campaign.zarr``.
+    spec : CampaignSpec
+        The campaign. Reopening a store of another campaign is an error.
+    chunk : int or None
+        Runs per chunk. None: the store's (when it exists) or 1000.
+    """
+
+    def __init__(self, out: str | Path, spec: CampaignSpec, chunk: int | None = None) -> None:
+        self.out = Path(out)
+        self.path = self.out / STORE_NAME
+        self.spec = spec
+        if self.path.exists():
+            stored = zarr.open_group(str(self.path), mode="r")
+            attrs = dict(stored.attrs)
+            if json.loads(str(attrs.get("campaign", "null"))) != spec.source:
+                raise SpecificationError(
+                    f"out: {self.path} holds another campaign ({attrs.get('name')!r}); choose a new --out folder"
+                )
+            stored_chunk = int(str(stored["chunk_complete"].attrs["runs_per_chunk"]))
+            if chunk is not None and chunk != stored_chunk:
+                raise SpecificationError(
+                    f"chunk: the store at {self.path} was started with {stored_chunk} runs per chunk, got {chunk}; "
+                    "resume with the same chunk (or leave it out)"
+                )
+            self.chunk = stored_chunk
+        else:
+            self.chunk = 1000 if chunk is None else chunk
+            if self.chunk < 1:
+                raise SpecificationError(f"chunk must be >= 1, got {self.chunk}")
+            self._create()
+        self.chunks = -(-spec.count // self.chunk)
+
+    def _create(self) -> None:
+        self.out.mkdir(parents=True, exist_ok=True)
+        temporary = self.out / (STORE_NAME + ".tmp")
+        if temporary.exists():
+            shutil.rmtree(temporary)
+        estimate = self.spec.count * bytes_per_run()
+        free = shutil.disk_usage(self.out).free
+        if estimate > free // 2:
+            raise SpecificationError(
+                f"count: the store of {self.spec.count} runs needs about {estimate / 1e9:.3g} GB (uncompressed) but "
+                f"{self.out} has {free / 1e9:.3g} GB free; use a smaller count (split the campaign by seed) or "
+                "another --out"
+            )
+        dataset = _template(self.spec, self.chunk)
+        chunks = -(-self.spec.count // self.chunk)
+        dataset["chunk_complete"] = (("chunk",), np.zeros(chunks, dtype=bool), {"runs_per_chunk": self.chunk})
+        encoding = {name: {"chunks": (self.chunk, *dataset[name].shape[1:])} for name in dataset.data_vars}
+        encoding["chunk_complete"] = {"chunks": (1,)}
+        dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
+        os.replace(temporary, self.path)
+
+    def complete(self) -> np.ndarray:
+        """(chunks,) True for every chunk whose runs are all written."""
+        return np.asarray(zarr.open_array(str(self.path / "chunk_complete"), mode="r")[:], dtype=bool)
+
+    def bounds(self, index: int) -> tuple[int, int]:
+        """The runs [start, stop) of chunk ``index``."""
+        return index * self.chunk, min((index + 1) * self.chunk, self.spec.count)
+
+    def write(self, index: int, values: dict[str, np.ndarray]) -> None:
+        """Write chunk ``index``'s arrays, then mark it complete (in that order)."""
+        start, stop = self.bounds(index)
+        data = {}
+        for name, (dims, _) in INPUTS.items():
+            data[name] = (("run", *dims), values[name])
+        for name in METRICS:
+            data[name] = (("run",), values[name])
+        xr.Dataset(data).to_zarr(str(self.path), region={"run": slice(start, stop)}, mode="r+", consolidated=False)
+        flags = zarr.open_array(str(self.path / "chunk_complete"), mode="r+")
+        flags[index] = True
+
+
+def open_campaign(out: str | Path, *, complete_only: bool = True) -> xr.Dataset:
+    """The results of a campaign (running, interrupted or finished) as an in-memory Dataset.
+
+    Parameters
+    ----------
+    out : path
+        The results folder given to ``run_campaign`` / ``mrpctl campaign run --out``.
+    complete_only : bool
+        Keep only the runs of complete chunks (default); False returns every run, with
+        the missing values (NaN, −1, False) where a run has not finished.
+
+    Returns
+    -------
+    xarray.Dataset
+        Over ``run``; ``attrs`` holds the campaign (JSON), seed, count and versions.
+    """
+    path = Path(out) / STORE_NAME
+    if not path.exists():
+        raise SpecificationError(f"out: no campaign store at {path}")
+    with xr.open_zarr(str(path), consolidated=False) as stored:
+        estimate = stored.sizes["run"] * bytes_per_run()
+        available = _available_memory()
+        if available is not None and estimate > available // 2:
+            raise SpecificationError(
+                f"out: the campaign needs about {estimate / 1e9:.3g} GB in memory but {available / 1e9:.3g} GB are "
+                f"available; read it lazily with xarray.open_zarr({str(path)!r}) instead"
+            )
+        dataset = stored.drop_vars("chunk_complete").load()
+    if not complete_only:
+        return dataset
+    flags = np.asarray(zarr.open_array(str(path / "chunk_complete"), mode="r")[:], dtype=bool)
+    runs_per_chunk = int(str(zarr.open_array(str(path / "chunk_complete"), mode="r").attrs["runs_per_chunk"]))
+    done = np.repeat(flags, runs_per_chunk)[: dataset.sizes["run"]]
+    return dataset.isel(run=np.flatnonzero(done))
+
+
+def _available_memory() -> int | None:
+    """MemAvailable from /proc/meminfo (bytes), None where it cannot be read."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def spec_of(dataset: xr.Dataset) -> CampaignSpec:
+    """The campaign specification stored in a results dataset."""
+    return parse_campaign(json.loads(dataset.attrs["campaign"]), name=str(dataset.attrs.get("name", "campaign")))

@@ -1,0 +1,263 @@
+"""Campaign runs: the stored dataset is the same bit for bit however it ran (chunks, resume, Dask), replay, report."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+import xarray as xr
+from scipy import stats
+
+from mrpctl import Spacecraft, simulate_batch
+from mrpctl.campaign import open_campaign, parse_campaign, replay, report, run_campaign, run_inputs, write_report
+from mrpctl.campaign.report import clopper_pearson_interval, figures, wilson_interval
+from mrpctl.campaign.simulation import METRICS
+from mrpctl.errors import SpecificationError
+
+SPEC = {
+    "name": "small",
+    "count": 12,
+    "seed": 3,
+    "tau": 0.05,
+    "rate": 100.0,
+    "t_final": 3.0,
+    "spacecraft": {"inertia": [140.0, 100.0, 80.0]},
+    "gains": {"k_sigma": -70.11, "k_omega": -163.08},
+    "rule": {"type": "delay-aware"},
+    "dispersions": {
+        "attitude": {"angle_deg": [150.0, 180.0]},
+        "rate": {"magnitude": [0.0, 0.5]},
+        "tau": {"range": [0.04, 0.05], "step": 0.01},
+        "gains": {"scale": [0.5, 1.5]},
+    },
+}
+
+
+class Stop(Exception):
+    """Raised by a progress callback to interrupt a campaign, as Ctrl-C would."""
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return parse_campaign(copy.deepcopy(SPEC))
+
+
+@pytest.fixture(scope="module")
+def reference(spec, tmp_path_factory):
+    out = tmp_path_factory.mktemp("reference")
+    result = run_campaign(spec, out, chunk=5, threads=1)
+    assert result.complete and result.simulated == 3 and result.runs == 12
+    return out, open_campaign(out)
+
+
+def assert_bitwise_identical(a: xr.Dataset, b: xr.Dataset) -> None:
+    xr.testing.assert_identical(a, b)
+    for name in a.data_vars:
+        assert a[name].values.tobytes() == b[name].values.tobytes(), name
+
+
+def test_dataset_holds_inputs_metrics_and_spec(spec, reference):
+    _out, dataset = reference
+    assert dataset.sizes["run"] == 12
+    assert set(METRICS) <= set(dataset.data_vars)
+    assert {"sigma0", "omega0", "inertia", "tau", "gain_scale"} <= set(dataset.data_vars)
+    assert json.loads(dataset.attrs["campaign"]) == SPEC
+    assert dataset.attrs["seed"] == 3 and "casadi" in json.loads(dataset.attrs["versions"])
+    inputs = run_inputs(spec, 0, 12)
+    assert np.array_equal(dataset["sigma0"].values, inputs.sigma0)
+    assert np.array_equal(dataset["tau"].values, inputs.tau)
+
+
+def test_metrics_equal_an_independent_simulate_batch_call(spec, reference):
+    """Each run's stored metrics equal simulate_batch of that run's inputs (with its trajectory for the torque)."""
+    _, dataset = reference
+    inputs = run_inputs(spec, 0, 12)
+    for i in (0, 7, 11):
+        batch = simulate_batch(
+            Spacecraft(inputs.inertia[i]),
+            inputs.gain_scale[i] * spec.base.K,
+            inputs.x0[i],
+            tau=float(inputs.tau[i]),
+            rule=spec.base.rule,
+            t_final=spec.base.t_final,
+            rate=spec.base.rate,
+            trajectories=True,
+            threads=1,
+        )
+        run = batch.runs[0]
+        assert int(dataset["switch_count"][i]) == run.switch_count
+        assert bool(dataset["converged"][i]) == run.converged
+        assert float(dataset["max_sigma"][i]) == run.max_sigma
+        u = np.asarray(run.u)
+        assert float(dataset["peak_torque"][i]) == pytest.approx(np.max(np.sqrt(np.sum(u * u, axis=1))), rel=1e-15)
+
+
+def test_chunk_size_does_not_change_the_result(spec, reference, tmp_path):
+    run_campaign(spec, tmp_path, chunk=4, threads=2)
+    assert_bitwise_identical(open_campaign(tmp_path), reference[1])
+
+
+def test_interrupted_campaign_resumes_to_the_uninterrupted_result(spec, reference, tmp_path):
+    done = []
+
+    def stop_after_two(index: int, start: int, stop: int) -> None:
+        done.append(index)
+        if len(done) == 2:
+            raise Stop
+
+    with pytest.raises(Stop):
+        run_campaign(spec, tmp_path, chunk=3, threads=1, on_chunk=stop_after_two)
+    partial = open_campaign(tmp_path)
+    assert partial.sizes["run"] == 6  # a running/interrupted campaign can be read: its complete chunks
+    # simulate a chunk half-written when the process died: data written, flag not yet set
+    from mrpctl.campaign.run import simulate_chunk
+    from mrpctl.campaign.store import CampaignStore
+
+    store = CampaignStore(tmp_path, spec)
+    values = simulate_chunk(spec, 6, 9)
+    values["max_sigma"] = np.full(3, 123.0)  # garbage that the resume must overwrite
+    xr.Dataset({"max_sigma": (("run",), values["max_sigma"])}).to_zarr(
+        str(store.path), region={"run": slice(6, 9)}, mode="r+", consolidated=False
+    )
+    assert open_campaign(tmp_path).sizes["run"] == 6
+    resumed = run_campaign(spec, tmp_path, threads=1)
+    assert resumed.already_complete == 2 and resumed.simulated == 2 and resumed.complete
+    assert_bitwise_identical(open_campaign(tmp_path), reference[1])
+
+
+def test_resume_refuses_another_campaign_or_chunk(spec, reference):
+    out, _ = reference
+    with pytest.raises(SpecificationError, match="chunk"):
+        run_campaign(spec, out, chunk=7)
+    other = parse_campaign({**copy.deepcopy(SPEC), "seed": 4})
+    with pytest.raises(SpecificationError, match="another campaign"):
+        run_campaign(other, out)
+
+
+@pytest.mark.slow
+def test_dask_local_cluster_equals_local(spec, reference, tmp_path):
+    """2 worker processes of a Dask LocalCluster store the same dataset, bit for bit."""
+    pytest.importorskip("distributed")
+    result = run_campaign(spec, tmp_path, chunk=5, scheduler="local", workers=2)
+    assert result.complete
+    assert_bitwise_identical(open_campaign(tmp_path), reference[1])
+
+
+def test_replay_equals_stored(reference, tmp_path):
+    out, dataset = reference
+    worst = int(dataset["run"][int(np.argmax(dataset["switch_count"].values))])
+    result = replay(out, worst, trajectory=True)
+    assert result.matches, result.mismatches
+    assert result.trajectory is not None and result.trajectory.switch_count == int(dataset["switch_count"][worst])
+    from mrpctl.campaign.report import save_replay_plot
+
+    path = save_replay_plot(result, tmp_path / "replay.png")
+    assert path.stat().st_size > 1000
+
+
+def test_replay_detects_a_tampered_store(spec, tmp_path):
+    run_campaign(spec, tmp_path, chunk=12, threads=1)
+    from mrpctl.campaign.store import STORE_NAME
+
+    xr.Dataset({"switch_count": (("run",), np.full(12, 99, dtype=np.int64))}).to_zarr(
+        str(tmp_path / STORE_NAME), region={"run": slice(0, 12)}, mode="r+", consolidated=False
+    )
+    result = replay(tmp_path, 2)
+    assert not result.matches and result.mismatches == ("switch_count",)
+    with pytest.raises(SpecificationError, match="run"):
+        replay(tmp_path, 12)
+
+
+def test_wilson_and_clopper_pearson_intervals():
+    """Endpoints checked against their defining equations (score test; binomial tails), not a copy of the formula."""
+    for k, n in ((0, 10), (8, 10), (97, 100), (1000, 1000), (3, 7)):
+        low, high = wilson_interval(k, n)
+        p, z = k / n, stats.norm.ppf(0.975)
+        for end in (low, high):
+            if 0 < end < 1:
+                assert (p - end) ** 2 == pytest.approx(z * z * end * (1 - end) / n, rel=1e-9)
+        low, high = clopper_pearson_interval(k, n)
+        if k > 0:
+            assert stats.binom.sf(k - 1, n, low) == pytest.approx(0.025, rel=1e-9)
+        else:
+            assert low == 0.0
+        if k < n:
+            assert stats.binom.cdf(k, n, high) == pytest.approx(0.025, rel=1e-9)
+        else:
+            assert high == 1.0
+        assert low <= p <= high
+
+
+def test_report_table_figures_and_worst_cases(reference):
+    out, dataset = reference
+    summary = report(out, worst=3)
+    k = int(dataset["converged"].sum())
+    assert summary.converged == k and summary.complete == 12
+    assert summary.wilson == wilson_interval(k, 12)
+    assert len(summary.worst) == 3
+    assert all(case.command == f"mrpctl campaign replay {out} --run {case.run}" for case in summary.worst)
+    severity = [0 if c.reason == "diverged" else 1 if c.reason == "not settled" else 2 for c in summary.worst]
+    assert severity == sorted(severity)
+    figs = figures(dataset)
+    assert figs["switch_count"].axes[0].get_yscale() in ("log", "linear")
+    _result, paths = write_report(out, worst=3)
+    assert all(p.exists() and p.stat().st_size > 0 for p in paths)
+    assert "converged" in (out / "report" / "report.md").read_text()
+
+
+def test_cli_run_report_replay(tmp_path, capsys):
+    import argparse
+    import tomllib
+
+    from mrpctl.campaign.cli import add_parser
+
+    spec_file = tmp_path / "c.toml"
+    lines = [
+        'name = "cli"',
+        "count = 4",
+        "seed = 1",
+        "tau = 0.05",
+        "rate = 100.0",
+        "t_final = 1.0",
+        "[spacecraft]",
+        "inertia = [140.0, 100.0, 80.0]",
+        "[gains]",
+        "k_sigma = -70.11",
+        "k_omega = -163.08",
+        "[rule]",
+        'type = "on-delayed"',
+        "[dispersions.attitude]",
+        "angle_deg = [170.0, 180.0]",
+    ]
+    spec_file.write_text("\n".join(lines) + "\n")
+    assert tomllib.loads(spec_file.read_text())["count"] == 4
+    parser = argparse.ArgumentParser(prog="mrpctl")
+    add_parser(parser.add_subparsers(dest="command"))
+    out = tmp_path / "out"
+    for argv in (
+        ["campaign", "run", str(spec_file), "--out", str(out), "--chunk", "2"],
+        ["campaign", "report", str(out)],
+        ["campaign", "replay", str(out), "--run", "3"],
+    ):
+        args = parser.parse_args(argv)
+        assert args.handler(args) == 0
+    text = capsys.readouterr().out
+    assert "campaign complete" in text and "identical to the stored run" in text
+    assert (out / "report" / "switch_count.png").exists()
+
+
+def test_store_that_would_not_fit_is_refused_up_front(spec, tmp_path, monkeypatch):
+    """The size estimate is checked before anything is written, and the message says the way out."""
+    import shutil
+    from collections import namedtuple
+
+    from mrpctl.campaign.store import STORE_NAME, bytes_per_run
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**6, 10**6 - 100, 100))
+    with pytest.raises(SpecificationError, match="smaller count"):
+        run_campaign(spec, tmp_path, chunk=4)
+    assert not (tmp_path / STORE_NAME).exists()
+    assert bytes_per_run() == 8 * (3 + 3 + 9 + 4) + 8 * 6 + 2 + 8
