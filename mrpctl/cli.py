@@ -1060,6 +1060,12 @@ def _add_init(commands: Any) -> None:
     parser.set_defaults(handler=_init)
 
 
+def _add_campaign(commands: Any) -> None:
+    from mrpctl.campaign.cli import add_parser
+
+    add_parser(commands)
+
+
 #: The subcommands in the order of ``mrpctl --help``; each adds its parser to the subparsers object.
 SUBCOMMANDS: tuple[Callable[[Any], None], ...] = (
     _add_example,
@@ -1070,6 +1076,7 @@ SUBCOMMANDS: tuple[Callable[[Any], None], ...] = (
     _add_sweep,
     _add_reproduce,
     _add_export,
+    _add_campaign,
 )
 
 
