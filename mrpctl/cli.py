@@ -142,7 +142,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from mrpctl.simulate import simulate_batch
+    from mrpctl.simulation import simulate_batch
     from mrpctl.switching import BoundaryLayer
 
     base = load_scenario(args.scenario) if args.scenario else _paper_base()

@@ -35,7 +35,7 @@ import casadi as ca
 
 from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, find_compiler
 from mrpctl.errors import CodegenError, SpecificationError
-from mrpctl.simulate import ClosedLoopFunctions, closed_loop_functions
+from mrpctl.loop import ClosedLoopFunctions, closed_loop_functions
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 

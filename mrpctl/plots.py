@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 if TYPE_CHECKING:
-    from mrpctl.simulate import SimulationResult
+    from mrpctl.simulation import SimulationResult
 
 __all__ = ["plot_attitude", "plot_response", "plot_sweep", "save_figure"]
 

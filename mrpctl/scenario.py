@@ -17,7 +17,7 @@ from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 if TYPE_CHECKING:
-    from mrpctl.simulate import SimulationResult
+    from mrpctl.simulation import SimulationResult
 
 __all__ = ["RULE_NAMES", "Scenario", "load_scenario", "parse_scenario", "rule_from_name", "tumbling_states"]
 
@@ -88,7 +88,7 @@ class Scenario:
 
     def simulate(self) -> SimulationResult:
         """Run the scenario with :func:`mrpctl.simulate.simulate`."""
-        from mrpctl.simulate import simulate
+        from mrpctl.simulation import simulate
 
         return simulate(
             self.spacecraft,

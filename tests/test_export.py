@@ -28,7 +28,7 @@ from mrpctl.export import (
     ExportResult,
     export,
 )
-from mrpctl.simulate import closed_loop_functions, simulate
+from mrpctl import closed_loop_functions, simulate
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import DelayAware, NoSwitching, OnDelayed
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mrpctl import paper, plots
-from mrpctl.simulate import simulate
+from mrpctl import simulate
 from mrpctl.switching import BoundaryLayer
 
 

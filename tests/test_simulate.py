@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 
 from mrpctl import paper
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.simulate import (
+from mrpctl.simulation import (
     SimulationResult,
     closed_loop_functions,
     delay_samples,
