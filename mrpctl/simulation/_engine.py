@@ -277,10 +277,10 @@ class Engine:
                     indices.append(found)
                     stored += found.size
             k += done
-            if state[diverged] >= 0:
-                break  # the driver stopped after the diverging sample
             if stop is not None and stop(k):
                 break
+            if state[diverged] >= 0:
+                break  # the driver stopped after the diverging sample
         switch_indices = np.concatenate(indices) if indices else np.zeros(0, np.int64)
         return RunOutput(
             stats=state[STATE_SIZE + MEMORY_SIZE :].copy(),
