@@ -18,6 +18,7 @@ number of substeps.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,18 +27,21 @@ import numpy as np
 
 from mrpctl._validation import check_spacecraft, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
-from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix, plant_model
+from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, gain_matrix, plant_model
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, SwitchingRule
 
 __all__ = [
     "MAX_SUBSTEPS",
     "ClosedLoopFunctions",
+    "InertiaInput",
     "check_rule",
     "check_substeps",
     "closed_loop_functions",
     "core_function",
     "delay_samples",
+    "inertia_input",
+    "inertia_values",
     "step_function",
 ]
 
@@ -90,42 +94,99 @@ def check_substeps(substeps: Any) -> int:
 
 
 # ================================================================ symbolic building blocks
-def step_function(spacecraft: Spacecraft, period: float, substeps: int) -> ca.Function:
-    """``step(x, u) -> x_next``: RK4 over one period h with ``substeps`` equal substeps."""
-    dynamics = plant_model(spacecraft).dynamics
+class InertiaInput(enum.Enum):
+    """How a run-time inertia enters a compiled Function (see :func:`inertia_input`)."""
+
+    #: J and J⁻¹ diagonal: two 3-vectors (the diagonals), the same operations as constants.
+    DIAGONAL = "diagonal"
+    #: Full 3 × 3 J and J⁻¹ (column-major).
+    FULL = "full"
+
+
+def inertia_input(spacecraft: Spacecraft) -> InertiaInput:
+    """DIAGONAL when both J and J⁻¹ of ``spacecraft`` are exactly diagonal, else FULL."""
+    for matrix in (spacecraft.inertia, spacecraft.inertia_inverse):
+        if np.any(matrix != np.diag(np.diag(matrix))):
+            return InertiaInput.FULL
+    return InertiaInput.DIAGONAL
+
+
+def inertia_values(spacecraft: Spacecraft, kind: InertiaInput) -> tuple[np.ndarray, np.ndarray]:
+    """The run-time inputs J, J⁻¹ of ``spacecraft`` for a Function built with ``kind`` (contiguous)."""
+    if kind is InertiaInput.DIAGONAL:
+        return np.diag(spacecraft.inertia).copy(), np.diag(spacecraft.inertia_inverse).copy()
+    return np.ascontiguousarray(spacecraft.inertia.T), np.ascontiguousarray(spacecraft.inertia_inverse.T)
+
+
+def _inertia_symbols(kind: InertiaInput) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """(J input, J⁻¹ input, J as 3 × 3, J⁻¹ as 3 × 3); diagonal matrices are structurally diagonal."""
+    if kind is InertiaInput.DIAGONAL:
+        j, j_inv = ca.SX.sym("J", 3), ca.SX.sym("J_inv", 3)
+        return j, j_inv, ca.diag(j), ca.diag(j_inv)
+    j, j_inv = ca.SX.sym("J", 3, 3), ca.SX.sym("J_inv", 3, 3)
+    return j, j_inv, j, j_inv
+
+
+def step_function(
+    spacecraft: Spacecraft, period: float, substeps: int, *, inertia: InertiaInput | None = None
+) -> ca.Function:
+    """``step(x, u) -> x_next``: RK4 over one period h with ``substeps`` equal substeps.
+
+    With ``inertia`` the spacecraft's J and J⁻¹ are inputs instead of constants:
+    ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see :class:`InertiaInput`).
+    """
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", INPUT_SIZE)
+    extra: list[ca.SX] = []
+    if inertia is None:
+        dynamics = plant_model(spacecraft).dynamics
+    else:
+        j_in, j_inv_in, j, j_inv = _inertia_symbols(inertia)
+        extra = [j_in, j_inv_in]
+        xdot = dynamics_expr(None, x, u, inertia=j, inertia_inverse=j_inv)
+        dynamics = ca.Function("dynamics", [x, u, j_in, j_inv_in], [xdot])
     dt = period / substeps
     z = x
     for _ in range(substeps):
-        k1 = dynamics(z, u)
-        k2 = dynamics(z + (dt / 2) * k1, u)
-        k3 = dynamics(z + (dt / 2) * k2, u)
-        k4 = dynamics(z + dt * k3, u)
+        k1 = dynamics(z, u, *extra)
+        k2 = dynamics(z + (dt / 2) * k1, u, *extra)
+        k3 = dynamics(z + (dt / 2) * k2, u, *extra)
+        k4 = dynamics(z + dt * k3, u, *extra)
         z = z + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("step", [x, u], [z], ["x", "u"], ["x_next"])
+    names = ["x", "u"] + (["J", "J_inv"] if extra else [])
+    return ca.Function("step", [x, u, *extra], [z], names, ["x_next"])
 
 
-def core_function(spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> ca.Function:
+def core_function(
+    spacecraft: Spacecraft,
+    rule: SwitchingRule,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+) -> ca.Function:
     """One sample with K and the rule parameters as inputs (pure SX).
 
-    ``core(x, memory, x_delayed, K, parameters) -> (x_next, memory_next, x_meas, u, switched)``.
+    ``core(x, memory, x_delayed, K, parameters) -> (x_next, memory_next, x_meas, u, switched)``;
+    with ``inertia``, J and J⁻¹ are two more inputs (``..., parameters, J, J_inv``).
     """
-    step = step_function(spacecraft, period, substeps)
+    step = step_function(spacecraft, period, substeps, inertia=inertia)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", MEMORY_SIZE)
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
     seen_by_rule = x_delayed if d > 0 else x
     x_meas, memory_next, switched = rule.expressions(x, seen_by_rule, memory, delay_samples=d, parameters=parameters)
     u = gain @ (x_delayed if d > 0 else x_meas)
-    x_next = step(x_meas, u)
+    x_next = step(x_meas, u, *extra)
     return ca.Function(
         "core",
-        [x, memory, x_delayed, gain, parameters],
+        [x, memory, x_delayed, gain, parameters, *extra],
         [x_next, memory_next, x_meas, u, switched],
-        ["x", "memory", "x_delayed", "K", "parameters"],
+        ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []),
         ["x_next", "memory_next", "x_meas", "u", "switched"],
     )
 

@@ -281,3 +281,15 @@ def test_plot_delegates_to_the_plots_module(full_run: SimulationResult, monkeypa
 def test_mrpctl_simulate_is_the_function() -> None:
     assert mrpctl.simulate is simulate and mrpctl.simulate_batch is simulate_batch
     assert callable(mrpctl.simulate) and mrpctl.simulation.SimulationResult is SimulationResult
+
+
+def test_one_engine_serves_every_spacecraft_of_a_layout() -> None:
+    period = 1e-3
+    a, b = Spacecraft(np.array([140.0, 100.0, 80.0])), Spacecraft(np.array([30.0, 25.0, 20.0]))
+    full = Spacecraft(np.array([[120.0, 5.0, -3.0], [5.0, 100.0, 2.0], [-3.0, 2.0, 90.0]]))
+    assert _engine.engine(a, OnDelayed(), 20, period, 1) is _engine.engine(b, OnDelayed(), 20, period, 1)
+    assert _engine.engine(full, OnDelayed(), 20, period, 1) is not _engine.engine(a, OnDelayed(), 20, period, 1)
+    # the inertia is an input: the small spacecraft's run is its own, not the first one's
+    x1 = np.array([0.5, 0.2, -0.1, 0.05, 0.0, 0.02])
+    runs = [simulate(craft, paper.GAIN, x1, tau=0.02, rule=OnDelayed(), t_final=2.0) for craft in (a, b)]
+    assert not np.array_equal(runs[0].sigma, runs[1].sigma)

@@ -8,10 +8,11 @@ code; ``_driver.c`` (package data) is appended and the whole is compiled by
 :data:`SLICE_SAMPLES` samples, so that Ctrl-C is seen between slices; the driver stops at
 the first divergence.
 
-Engines are cached in-process by the *structure* they compile: spacecraft, d, h,
-substeps and the rule's expressions with symbolic parameters (so every instance of a
-built-in rule shares one engine whatever its ε, while a user's rule whose attributes
-enter its expressions as constants gets its own).
+Engines are cached in-process by the *structure* they compile: the inertia layout
+(diagonal or full; J and J⁻¹ are run-time inputs), d, h, substeps and the rule's
+expressions with symbolic parameters (so every instance of a built-in rule shares one
+engine whatever its ε, while a user's rule whose attributes enter its expressions as
+constants gets its own).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import numpy as np
 
 from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
 from mrpctl.errors import CodegenError
-from mrpctl.loop import core_function
+from mrpctl.loop import core_function, inertia_input, inertia_values
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.simulation._stats import (
     DIVERGENCE_BOUND,
@@ -66,7 +67,8 @@ def slice_samples(substeps: int) -> int:
 def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.Function:
     """The core sample plus the divergence guard and the metric accumulators (pure SX).
 
-    ``sample(x, memory, stats, x_delayed, K, parameters) -> (x_next, memory_next, stats_next, x_meas, u, switched)``.
+    ``sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv]) ->
+    (x_next, memory_next, stats_next, x_meas, u, switched)``; J, J⁻¹ when ``core`` has them.
     """
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", MEMORY_SIZE)
@@ -74,7 +76,8 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
-    x_raw, memory_rule, x_meas, u, switched = core(x, memory, x_delayed, gain, parameters)
+    extra = [ca.SX.sym(core.name_in(i), core.sparsity_in(i)) for i in range(5, core.n_in())]
+    x_raw, memory_rule, x_meas, u, switched = core(x, memory, x_delayed, gain, parameters, *extra)
 
     k = stats[S_K]
     counted = ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
@@ -107,9 +110,9 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     )
     return ca.Function(
         name,
-        [x, memory, stats, x_delayed, gain, parameters],
+        [x, memory, stats, x_delayed, gain, parameters, *extra],
         [x_next, memory_next, stats_next, x_meas, u, switched],
-        ["x", "memory", "stats", "x_delayed", "K", "parameters"],
+        ["x", "memory", "stats", "x_delayed", "K", "parameters"] + [core.name_in(i) for i in range(5, core.n_in())],
         ["x_next", "memory_next", "stats_next", "x_meas", "u", "switched"],
     )
 
@@ -155,13 +158,18 @@ class RunOutput:
 
 
 class Engine:
-    """The compiled engine of one structure (spacecraft, d, h, rule expressions, substeps)."""
+    """The compiled engine of one structure (inertia layout, d, h, rule expressions, substeps).
+
+    J and J⁻¹ are run-time inputs, so one library serves every spacecraft of the same
+    :class:`~mrpctl.loop.InertiaInput` layout (diagonal, or full).
+    """
 
     def __init__(self, spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> None:
         self.d = d
         self.substeps = substeps
-        core = core_function(spacecraft, rule, d, period, substeps)
-        label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}"
+        self.inertia = inertia_input(spacecraft)
+        core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
+        label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
         self.compiled: CompiledFunction = compile_function(
             self.sample, flags=SIMULATION_FLAGS, appendix=_driver_source(self.sample)
@@ -205,6 +213,7 @@ class Engine:
         parameters: np.ndarray,
         n: int,
         *,
+        spacecraft: Spacecraft,
         keep_every: int | None,
         workspace: Workspace,
         switch_limit: int = 0,
@@ -214,6 +223,8 @@ class Engine:
 
         Parameters
         ----------
+        spacecraft : Spacecraft
+            The run's spacecraft (of this engine's inertia layout; its J, J⁻¹ are inputs).
         history : numpy.ndarray
             (columns, 6) measurements m_{−d}, …: one column (a constant history) or d.
         keep_every : int or None
@@ -234,6 +245,9 @@ class Engine:
         history_stride = STATE_SIZE if history.shape[0] > 1 else 0
         gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
         parameters = np.ascontiguousarray(parameters, dtype=float)
+        if inertia_input(spacecraft) is not self.inertia:
+            raise ValueError(f"this engine takes a {self.inertia.value} inertia, got {spacecraft}")
+        inertia, inertia_inverse = inertia_values(spacecraft, self.inertia)
         if keep_every is None:
             measurements = u = None
             keep = 0
@@ -257,8 +271,8 @@ class Engine:
                 history_stride,
                 address(gain_cm),
                 address(parameters),
-                None,
-                None,
+                address(inertia),
+                address(inertia_inverse),
                 k,
                 k1,
                 self.d,
@@ -308,7 +322,7 @@ _ENGINES_LOCK = threading.Lock()
 
 def engine(spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached."""
-    key = (spacecraft, type(rule), rule_key(rule, d), d, period, substeps)
+    key = (inertia_input(spacecraft), type(rule), rule_key(rule, d), d, period, substeps)
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -316,7 +330,7 @@ def engine(spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, s
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
 
-                found = VirtualMachineEngine(found.sample, d)
+                found = VirtualMachineEngine(found.sample, d, found.inertia)
             _ENGINES[key] = found
         return found
 

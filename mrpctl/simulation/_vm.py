@@ -16,10 +16,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl.model import INPUT_SIZE, STATE_SIZE
+from mrpctl.loop import InertiaInput, inertia_values
+from mrpctl.model import STATE_SIZE
 from mrpctl.simulation._engine import RunOutput, Workspace
 from mrpctl.simulation._stats import S_DIVERGED, STATS_SIZE, initial_stats
-from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import MEMORY_SIZE
 
 _BLOCK_TARGET = 500  # samples per block (a whole number of chunks)
 
@@ -27,8 +29,9 @@ _BLOCK_TARGET = 500  # samples per block (a whole number of chunks)
 def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function, int]:
     """A whole number of chunks of max(d, 1) samples (about 500 samples), as one MX Function.
 
-    ``block(x, memory, stats, history, K, parameters) ->
-    (x_end, memory_end, stats_end, history_end, measurements, u, switched)``.
+    ``block(x, memory, stats, history, K, parameters[, J, J_inv]) ->
+    (x_end, memory_end, stats_end, history_end, measurements, u, switched)``: the inputs after
+    ``history`` are the sample's constant inputs (the same at every sample).
     """
     length = max(d, 1)
     chunks = max(1, round(_BLOCK_TARGET / length))
@@ -37,29 +40,29 @@ def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function
     memory = ca.MX.sym("memory", MEMORY_SIZE)
     stats = ca.MX.sym("stats", STATS_SIZE)
     history = ca.MX.sym("history", STATE_SIZE, length)
-    gain = ca.MX.sym("K", INPUT_SIZE, STATE_SIZE)
-    parameters = ca.MX.sym("parameters", PARAMETER_SIZE)
+    constants = _constant_symbols(sample)
+    names = ["x", "memory", "stats", "history"] + [sample.name_in(i) for i in range(4, sample.n_in())]
 
     # One chunk: the method of steps over d samples (accumulators x, memory, stats).
     chunk_samples = sample.mapaccum("chunk_samples", length, 3)
     xs, memories, statss, measurements, u, switched = chunk_samples(
-        x, memory, stats, history, ca.repmat(gain, 1, length), ca.repmat(parameters, 1, length)
+        x, memory, stats, history, *[ca.repmat(value, 1, length) for value in constants]
     )
     chunk = ca.Function(
         "chunk",
-        [x, memory, stats, history, gain, parameters],
+        [x, memory, stats, history, *constants],
         [xs[:, -1], memories[:, -1], statss[:, -1], measurements, u, switched],
-        ["x", "memory", "stats", "history", "K", "parameters"],
+        names,
         ["x_end", "memory_end", "stats_end", "measurements", "u", "switched"],
     )
     # A block: chunks chained, each one's measurements being the next one's history.
     chained = chunk.mapaccum("block_chunks", chunks, 4)
     xs, memories, statss, measurements, u, switched = chained(
-        x, memory, stats, history, ca.repmat(gain, 1, chunks), ca.repmat(parameters, 1, chunks)
+        x, memory, stats, history, *[ca.repmat(value, 1, chunks) for value in constants]
     )
     block = ca.Function(
         name,
-        [x, memory, stats, history, gain, parameters],
+        [x, memory, stats, history, *constants],
         [
             xs[:, -1],
             memories[:, -1],
@@ -69,10 +72,15 @@ def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function
             u,
             switched,
         ],
-        ["x", "memory", "stats", "history", "K", "parameters"],
+        names,
         ["x_end", "memory_end", "stats_end", "history_end", "measurements", "u", "switched"],
     )
     return block, samples
+
+
+def _constant_symbols(sample: ca.Function) -> list[ca.MX]:
+    """MX symbols for the sample's inputs after x, memory, stats, x_delayed (K, parameters, ...)."""
+    return [ca.MX.sym(sample.name_in(i), sample.sparsity_in(i)) for i in range(4, sample.n_in())]
 
 
 class VirtualMachineEngine:
@@ -80,8 +88,10 @@ class VirtualMachineEngine:
 
     compiled_code = False
 
-    def __init__(self, sample: ca.Function, d: int) -> None:
+    def __init__(self, sample: ca.Function, d: int, inertia: InertiaInput) -> None:
         self.d = d
+        self.inertia = inertia
+        self.sample = sample
         self.history_columns = max(d, 1)
         block, self.block_samples = _block_function(sample, d, sample.name().replace("sample", "block"))
         self.block = block.expand()  # one SX Function: no MX layers per sample in the VM
@@ -110,6 +120,7 @@ class VirtualMachineEngine:
         parameters: np.ndarray,
         n: int,
         *,
+        spacecraft: Spacecraft,
         keep_every: int | None,
         workspace: Workspace,
         switch_limit: int = 0,
@@ -117,8 +128,9 @@ class VirtualMachineEngine:
     ) -> RunOutput:
         """As :meth:`mrpctl.simulation._engine.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
+        inertia = inertia_values(spacecraft, self.inertia)
         out = self.horizon(self.blocks(n), trajectories)(
-            x0, memory0, initial_stats(n), self.history_block(history), gain, parameters
+            x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *inertia
         )
         if not trajectories:
             return self.output(np.asarray(out).ravel(), n, None, None, None, keep_every, workspace, switch_limit)
@@ -148,9 +160,9 @@ class VirtualMachineEngine:
         return RunOutput(stats=stats, samples=valid, measurements=kept_m, u=kept_u, switch_indices=indices)
 
     def horizon(self, blocks: int, trajectories: bool) -> ca.Function:
-        """The chain of ``blocks`` blocks as a CasADi Function (for the virtual machine and ``map``).
+        """The chain of ``blocks`` blocks as a CasADi Function (for the virtual machine).
 
-        ``horizon(x, memory, stats, history, K, parameters) -> (stats_end[, measurements, u, switched])``.
+        ``horizon(x, memory, stats, history, K, parameters[, J, J_inv]) -> (stats_end[, measurements, u, switched])``.
         """
         key = (blocks, trajectories)
         with self._lock:
@@ -163,12 +175,11 @@ class VirtualMachineEngine:
         memory = ca.MX.sym("memory", MEMORY_SIZE)
         stats = ca.MX.sym("stats", STATS_SIZE)
         history = ca.MX.sym("history", STATE_SIZE, self.history_columns)
-        gain = ca.MX.sym("K", INPUT_SIZE, STATE_SIZE)
-        parameters = ca.MX.sym("parameters", PARAMETER_SIZE)
+        constants = _constant_symbols(self.sample)
         carry: tuple[Any, ...] = (x, memory, stats, history)
         pieces: list[tuple[Any, ...]] = []
         for _ in range(blocks):
-            out = self.block(*carry, gain, parameters)
+            out = self.block(*carry, *constants)
             carry = tuple(out[0:4])
             pieces.append(tuple(out[4:7]))
         outputs = [carry[2]]
@@ -178,8 +189,8 @@ class VirtualMachineEngine:
             names += ["measurements", "u", "switched"]
         return ca.Function(
             "horizon",
-            [x, memory, stats, history, gain, parameters],
+            [x, memory, stats, history, *constants],
             outputs,
-            ["x", "memory", "stats", "history", "K", "parameters"],
+            ["x", "memory", "stats", "history"] + [self.sample.name_in(i) for i in range(4, self.sample.n_in())],
             names,
         )
