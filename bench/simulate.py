@@ -266,6 +266,7 @@ def main() -> int:
                 np.asarray(paper.GAIN),
                 np.zeros(1),
                 n,
+                spacecraft=paper.SPACECRAFT,
                 keep_every=1,
                 workspace=space,
                 switch_limit=n,

@@ -18,6 +18,7 @@ constants gets its own).
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import threading
 from collections.abc import Callable
@@ -51,7 +52,16 @@ from mrpctl.simulation._stats import (
     initial_stats,
 )
 from mrpctl.spacecraft import Spacecraft
-from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, SwitchingRule
+from mrpctl.switching import (
+    MEMORY_SIZE,
+    PARAMETER_SIZE,
+    BoundaryLayer,
+    DelayAware,
+    NoSwitching,
+    OnCurrent,
+    OnDelayed,
+    SwitchingRule,
+)
 
 #: Samples per C call: Ctrl-C and the batch's stop flag are seen between slices (about
 #: 10 ms of the paper's loop per slice at one substep; divided by the substeps).
@@ -94,7 +104,11 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     unsettled = ca.logic_or(sigma_squared >= SETTLING_SIGMA**2, ca.dot(omega, omega) >= SETTLING_OMEGA**2)
     u_prev = stats[S_UPREV]
     flips = stats[S_FLIPS] + ca.if_else(ca.logic_and(counted, u * u_prev < 0), 1.0, 0.0)
-    torque = ca.fmax(ca.fmax(ca.fabs(u[0]), ca.fabs(u[1])), ca.fabs(u[2]))
+    # max |u_i| by comparisons: casadi_fmax is a libm call per use (no -ffinite-math-only)
+    size = [ca.fabs(u[i]) for i in range(INPUT_SIZE)]
+    torque = ca.if_else(size[0] >= size[1], size[0], size[1])
+    torque = ca.if_else(torque >= size[2], torque, size[2])
+    peak = stats[S_PEAK_TORQUE]
     stats_next = ca.vertcat(
         k + 1,
         stats[S_N],
@@ -106,7 +120,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
         ca.if_else(ca.logic_and(counted, unsettled), k, stats[S_UNSETTLED]),
         ca.if_else(counted, ca.fmax(stats[S_MAX_SIGMA], sigma_squared), stats[S_MAX_SIGMA]),  # max |σ|²
         ca.if_else(ca.logic_and(counted, ca.logic_not(ok)), k, stats[S_DIVERGED]),
-        ca.if_else(counted, ca.fmax(stats[S_PEAK_TORQUE], torque), stats[S_PEAK_TORQUE]),  # max |u|_inf
+        ca.if_else(ca.logic_and(counted, torque > peak), torque, peak),  # max |u|_inf
     )
     return ca.Function(
         name,
@@ -305,8 +319,31 @@ class Engine:
         )
 
 
-def rule_key(rule: SwitchingRule, d: int) -> str:
-    """A digest of the rule's expressions with symbolic parameters (what the engine compiles)."""
+#: The rules of :mod:`mrpctl.switching`: their expressions depend on their values only
+#: through :meth:`~mrpctl.switching.SwitchingRule.parameters` (a run-time input), so
+#: all instances of one of these classes share an engine.
+_BUILT_IN_RULES = (NoSwitching, OnCurrent, OnDelayed, BoundaryLayer, DelayAware)
+
+
+def rule_key(rule: SwitchingRule, d: int) -> Any:
+    """What distinguishes the engines of rules: the class for a built-in rule, else a
+    digest of the rule's expressions with symbolic parameters (about 5 ms; memoised per
+    rule value when the rule is hashable)."""
+    if type(rule) in _BUILT_IN_RULES:
+        return type(rule)
+    try:
+        hash(rule)
+    except TypeError:
+        return _expressions_digest(rule, d)
+    return _memoised_digest(rule, d)
+
+
+@functools.lru_cache(maxsize=1024)
+def _memoised_digest(rule: SwitchingRule, d: int) -> str:
+    return _expressions_digest(rule, d)
+
+
+def _expressions_digest(rule: SwitchingRule, d: int) -> str:
     x = ca.SX.sym("x", STATE_SIZE)
     x_meas = ca.SX.sym("x_meas", STATE_SIZE)
     memory = ca.SX.sym("memory", MEMORY_SIZE)
