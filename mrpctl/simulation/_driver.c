@@ -9,7 +9,8 @@
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
  * stats alternate between two buffers; the sample writes m_k into a ring of ring_size
  * columns (slot k mod ring_size) from which m_{k-d} is read (from the history for k < d);
- * every keep_every-th m_k and u_k are copied to the kept arrays (column k / keep_every),
+ * every keep_every-th m_k and u_k are copied to the kept arrays (column k / keep_every;
+ * with keep_every = 1 the caller may pass the kept array itself as a ring of n columns),
  * the switch flags of the slice go to switched[k - k0]. The arithmetic is the sample's,
  * unchanged: a run cut into slices gives the same bits as one call.
  *
@@ -66,7 +67,8 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     res[5] = switched ? switched + (k - k0) : switched_scratch;
     if (MRPCTL_SAMPLE(arg, res, iw, w, 0)) return -1;
     if (kept) {
-      for (i = 0; i < 6; ++i) kept_measurements[6 * kept_column + i] = ring[6 * slot + i];
+      if (kept_measurements != ring)
+        for (i = 0; i < 6; ++i) kept_measurements[6 * kept_column + i] = ring[6 * slot + i];
       ++kept_column;
     }
     if (keep_every > 0 && ++phase == keep_every) phase = 0;

@@ -274,6 +274,8 @@ class Engine:
         indices: list[np.ndarray] = []
         stored = 0
         ring = workspace.ring
+        if keep == 1 and measurements is not None:
+            ring = measurements  # every sample kept: m_{k-d} is read back from the result (no copy)
         step = slice_samples(self.substeps)
         k = 0
         diverged = STATE_SIZE + MEMORY_SIZE + S_DIVERGED
