@@ -20,7 +20,7 @@ simulate = mrpctl.simulate if callable(mrpctl.simulate) else mrpctl.simulate.sim
 simulate_batch = mrpctl.simulate_batch
 
 SC = paper.SPACECRAFT
-GENERAL = Spacecraft([[140.0, 4.0, -2.0], [4.0, 100.0, 3.0], [-2.0, 3.0, 80.0]])
+GENERAL = Spacecraft(np.array([[140.0, 4.0, -2.0], [4.0, 100.0, 3.0], [-2.0, 3.0, 80.0]]))
 X0 = np.array(paper.INITIAL_STATE, dtype=float)
 X1 = np.array([0.5, 0.2, -0.1, 0.05, 0.0, 0.02])
 RULES = [NoSwitching(), OnCurrent(), OnDelayed(), BoundaryLayer(0.005), DelayAware(), DelayAware(1.1)]

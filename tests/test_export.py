@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import mrpctl
-from mrpctl import paper
+from mrpctl import closed_loop_functions, paper, simulate
 from mrpctl._compile import CompilerWarning, find_compiler
 from mrpctl.errors import CodegenError, SpecificationError
 from mrpctl.export import (
@@ -28,7 +28,6 @@ from mrpctl.export import (
     ExportResult,
     export,
 )
-from mrpctl import closed_loop_functions, simulate
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import DelayAware, NoSwitching, OnDelayed
 

@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mrpctl import paper, plots
-from mrpctl import simulate
+from mrpctl import paper, plots, simulate
 from mrpctl.switching import BoundaryLayer
 
 
