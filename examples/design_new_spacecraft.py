@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from mrpctl import DelayAware, Spacecraft, mrp
+from mrpctl import DelayAware, Spacecraft, mrp, simulate
 from mrpctl.design import analyze_gains, linearized_loop, synthesize_pd
 from mrpctl.model import state
-from mrpctl.simulate import simulate
 
 TAU = 0.2  # s
 INERTIA = [[4.2, 0.1, -0.05], [0.1, 3.1, 0.08], [-0.05, 0.08, 2.4]]  # kg m^2

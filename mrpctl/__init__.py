@@ -1,17 +1,18 @@
 """mrpctl: delayed-feedback attitude control with MRP shadow-set switching.
 
 The flow: a :class:`Spacecraft` and gains K go to :mod:`mrpctl.design` (PD gains, LMI
-certificates, the exact delay margin, synthesis), to :func:`simulate` (the sampled
-nonlinear closed loop with a switching rule, generated as C through CasADi), to
-:mod:`mrpctl.plots` and to :mod:`mrpctl.export`. cvxpy is imported on the first LMI
-solve and matplotlib only by :mod:`mrpctl.plots`.
+certificates, the exact delay margin, synthesis), to :func:`simulate` and
+:func:`simulate_batch` (:mod:`mrpctl.simulation`: the sampled nonlinear closed loop
+with a switching rule, generated as C through CasADi from the Functions of
+:mod:`mrpctl.loop`), to :mod:`mrpctl.plots` and to :mod:`mrpctl.export`. cvxpy is
+imported on the first LMI solve and matplotlib only by :mod:`mrpctl.plots`.
 """
 
 from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
-from mrpctl import design, errors, model, mrp, paper
+from mrpctl import design, errors, loop, model, mrp, paper, simulation
 from mrpctl._export import ExportResult, export
 from mrpctl.errors import (
     CodegenError,
@@ -21,15 +22,10 @@ from mrpctl.errors import (
     MrpctlError,
     SpecificationError,
 )
+from mrpctl.loop import ClosedLoopFunctions, closed_loop_functions
 from mrpctl.model import PlantModel, plant_model
 from mrpctl.scenario import Scenario, load_scenario
-from mrpctl.simulate import (
-    BatchResult,
-    ClosedLoopFunctions,
-    SimulationResult,
-    closed_loop_functions,
-    simulate_batch,
-)
+from mrpctl.simulation import BatchResult, SimulationResult, simulate, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
@@ -64,9 +60,12 @@ __all__ = [
     "errors",
     "export",
     "load_scenario",
+    "loop",
     "model",
     "mrp",
     "paper",
     "plant_model",
+    "simulate",
     "simulate_batch",
+    "simulation",
 ]

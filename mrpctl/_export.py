@@ -9,7 +9,7 @@ rate and switching rule::
         libmrpctl_model.so                  gcc -O2 -shared -fPIC (only when a compiler is found)
         manifest.json                       versions, parameters, ports, SHA-256 content hash
 
-The Functions are those of :func:`mrpctl.simulate.closed_loop_functions`, with the
+The Functions are those of :func:`mrpctl.loop.closed_loop_functions`, with the
 same named ports (x = [σ; ω/4], u in N m; K, J and the rule's parameters are constants
 inside them). The ``.casadi`` files keep the plain names (``step``, ``rule``, ...); in the
 C code and the shared library every symbol carries the prefix ``mrpctl_``
@@ -39,7 +39,7 @@ import casadi as ca
 
 from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_library, compiler_version, find_compiler
 from mrpctl.errors import CodegenError, SpecificationError
-from mrpctl.simulate import ClosedLoopFunctions, closed_loop_functions
+from mrpctl.loop import ClosedLoopFunctions, closed_loop_functions
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 

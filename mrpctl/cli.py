@@ -40,7 +40,7 @@ from mrpctl.scenario import (
 )
 
 if TYPE_CHECKING:
-    from mrpctl.simulate import SimulationResult
+    from mrpctl.simulation import SimulationResult
     from mrpctl.spacecraft import Spacecraft
 
 __all__ = ["EXIT_DIVERGED", "USER_ERROR", "build_parser", "main"]
@@ -687,7 +687,8 @@ def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, s
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from mrpctl.simulate import simulate_batch
+    from mrpctl.simulation import simulate_batch
+    from mrpctl.switching import BoundaryLayer
 
     base = load_scenario(args.scenario) if args.scenario else _paper_base()
     base = _apply_overrides(base, args)

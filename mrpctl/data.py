@@ -1,7 +1,7 @@
 """Results as labelled data: xarray and pandas conversions, save/load of a run, a decimating CSV writer.
 
-* :func:`to_xarray` / :func:`to_pandas`: a :class:`~mrpctl.simulate.SimulationResult`
-  over ``time`` (and ``axis``), a :class:`~mrpctl.simulate.BatchResult` over ``run`` with
+* :func:`to_xarray` / :func:`to_pandas`: a :class:`~mrpctl.simulation.SimulationResult`
+  over ``time`` (and ``axis``), a :class:`~mrpctl.simulation.BatchResult` over ``run`` with
   each run's initial state and inputs.
 * :func:`save` / :func:`load`: one run with its inputs, the package versions and a seed,
   as a NetCDF-3 file (xarray's scipy engine, no netCDF4 library needed), written

@@ -7,7 +7,7 @@
   broken at the delay, L_i(s) = −(K₂ᵢ s + K₁ᵢ)/s², and the delay margin PM/ω_c they imply
   (equal to :meth:`mrpctl.design.LinearizedLoop.delay_margin` for a decoupled loop).
 * :func:`to_time_response` / :func:`from_time_response` convert a
-  :class:`~mrpctl.simulate.SimulationResult` to ``control.TimeResponseData`` and back.
+  :class:`~mrpctl.simulation.SimulationResult` to ``control.TimeResponseData`` and back.
 * :func:`basilisk_mrp_feedback` maps K to the scalar gains of Basilisk's ``mrpFeedback``.
 
 Conventions: x = [σ; ω/4] (σ dimensionless, ω in rad/s), u in N m, τ in s.
@@ -28,7 +28,7 @@ from mrpctl.model import gain_matrix, pd_from_gain, plant_model
 from mrpctl.spacecraft import Spacecraft
 
 if TYPE_CHECKING:
-    from mrpctl.simulate import SimulationResult
+    from mrpctl.simulation import SimulationResult
 
 __all__ = [
     "STATE_LABELS",

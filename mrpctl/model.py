@@ -45,13 +45,31 @@ STATE_SIZE = 6
 INPUT_SIZE = 3
 
 
-def dynamics_expr(spacecraft: Spacecraft, x: Any, u: Any) -> Any:
+def dynamics_expr(
+    spacecraft: Spacecraft | None, x: Any, u: Any, *, inertia: Any = None, inertia_inverse: Any = None
+) -> Any:
     """ẋ for x = [σ; ω/4] and torque u, as a CasADi expression (SX or MX).
 
     σ̇ = ¼ B(σ) ω and ω̇ = J⁻¹ (−ω × J ω + u), then ẋ = [σ̇; ω̇/4].
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft or None
+        Its J and J⁻¹ (kg m², 1/(kg m²)) enter as constants, unless given below.
+    x, u : casadi.SX or casadi.MX
+        State (6) and torque (3, N m).
+    inertia, inertia_inverse : casadi.SX or casadi.MX, keyword-only
+        3 × 3 expressions (for example symbols, possibly structurally diagonal) used
+        instead of the spacecraft's constants: the inertia as a run-time input of a
+        compiled Function. Give both, or neither.
     """
-    inertia = ca.DM(spacecraft.inertia)
-    inertia_inverse = ca.DM(spacecraft.inertia_inverse)
+    if (inertia is None) != (inertia_inverse is None):
+        raise ValueError("dynamics_expr: give both inertia and inertia_inverse, or neither")
+    if inertia is None:
+        if spacecraft is None:
+            raise ValueError("dynamics_expr: give a spacecraft or inertia and inertia_inverse")
+        inertia = ca.DM(spacecraft.inertia)
+        inertia_inverse = ca.DM(spacecraft.inertia_inverse)
     sigma = x[0:3]
     omega = 4 * x[3:6]
     sigma_dot = b_matrix_expr(sigma) @ omega / 4

@@ -32,7 +32,7 @@ from matplotlib.figure import Figure
 from mrpctl.errors import DimensionError, SpecificationError
 
 if TYPE_CHECKING:
-    from mrpctl.simulate import BatchResult, SimulationResult
+    from mrpctl.simulation import BatchResult, SimulationResult
 
 __all__ = [
     "SETTLING_CAPTION",
@@ -48,7 +48,7 @@ __all__ = [
 _SUB = ("₁", "₂", "₃")
 _SWITCH_COLOR = "crimson"
 _FAIL_COLOR = "crimson"
-#: The settling tolerance of :class:`~mrpctl.simulate.SimulationResult` (|σ| < 1e-2, |ω| < 1e-3 rad/s).
+#: The settling tolerance of :class:`~mrpctl.simulation.SimulationResult` (|σ| < 1e-2, |ω| < 1e-3 rad/s).
 SETTLING_CAPTION = "settled: |σ| < 10⁻² and |ω| < 10⁻³ rad/s to the end"
 #: A cluster of at least this many switches in at most this fraction of the run gets a zoom inset.
 _INSET_MIN_SWITCHES = 10
@@ -164,7 +164,7 @@ def plot_response(
     Parameters
     ----------
     result : SimulationResult
-        A run of :func:`mrpctl.simulate.simulate`.
+        A run of :func:`mrpctl.simulate`.
     title : str, optional
         Figure title; by default the rule, the delay τ, the switch count and whether the run
         settled (with the settling tolerance).
@@ -249,7 +249,7 @@ def plot_attitude(
     Parameters
     ----------
     result : SimulationResult
-        A run of :func:`mrpctl.simulate.simulate`.
+        A run of :func:`mrpctl.simulate`.
     window : (float, float), optional
         Time window in s; the whole run by default.
     title : str, optional
@@ -436,7 +436,7 @@ def plot_monte_carlo(batch: BatchResult, *, title: str | None = None, ax: Any = 
     Parameters
     ----------
     batch : BatchResult
-        A batch of :func:`mrpctl.simulate.simulate_batch`.
+        A batch of :func:`mrpctl.simulate_batch`.
     title : str, optional
         Figure title.
     ax : sequence of 3 matplotlib.axes.Axes, optional
@@ -512,7 +512,7 @@ def plot_batch(
     Parameters
     ----------
     batch : BatchResult
-        A batch of :func:`mrpctl.simulate.simulate_batch`.
+        A batch of :func:`mrpctl.simulate_batch`.
     over : {"tau", "eps", "initial"}, optional
         What varies across the runs; detected by default (τ when the delays differ, ε when
         every rule is a BoundaryLayer and their ε differ, the initial state otherwise).

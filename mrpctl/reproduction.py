@@ -19,7 +19,7 @@ from mrpctl import paper
 from mrpctl._validation import positive_scalar
 from mrpctl.errors import SpecificationError
 from mrpctl.scenario import Scenario
-from mrpctl.simulate import SimulationResult
+from mrpctl.simulation import SimulationResult
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 __all__ = [

@@ -18,7 +18,7 @@ from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 if TYPE_CHECKING:
-    from mrpctl.simulate import SimulationResult
+    from mrpctl.simulation import SimulationResult
 
 __all__ = [
     "RULE_NAMES",
@@ -55,7 +55,7 @@ _KEYS = {
 
 @dataclass(frozen=True, eq=False)
 class Scenario:
-    """One simulation set-up: everything :func:`mrpctl.simulate.simulate` needs.
+    """One simulation set-up: everything :func:`mrpctl.simulate` needs.
 
     Attributes
     ----------
@@ -100,8 +100,8 @@ class Scenario:
         return replace(self, rule=rule)
 
     def simulate(self) -> SimulationResult:
-        """Run the scenario with :func:`mrpctl.simulate.simulate`."""
-        from mrpctl.simulate import simulate
+        """Run the scenario with :func:`mrpctl.simulate`."""
+        from mrpctl.simulation import simulate
 
         return simulate(
             self.spacecraft,
@@ -264,7 +264,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
 
 
 def _check_delay(tau: float, rate: float) -> None:
-    """τ · rate must be a whole number of measurement periods (as :func:`~mrpctl.simulate.simulate` requires)."""
+    """τ · rate must be a whole number of measurement periods (as :func:`~mrpctl.simulate` requires)."""
     samples = tau * rate
     if not math.isfinite(samples) or abs(samples - round(samples)) > 1e-9 * max(1.0, abs(samples)):
         raise SpecificationError(

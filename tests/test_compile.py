@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from mrpctl import _compile, paper
+from mrpctl import _compile, paper, simulate, simulate_batch
 from mrpctl._compile import (
     TIMEOUT_VARIABLE,
     CompilerWarning,
@@ -34,11 +34,8 @@ from mrpctl._compile import (
     generate_code,
 )
 from mrpctl.errors import CacheWarning, CodegenError, SpecificationError
-from mrpctl.simulate import simulate, simulate_batch
+from mrpctl.simulation._engine import clear_engines
 from mrpctl.switching import OnDelayed
-
-# The module, not the function that mrpctl/__init__.py re-exports under the same name.
-simulate_module = importlib.import_module("mrpctl.simulate")
 
 
 def _function(scale: float = 2.0) -> ca.Function:
@@ -114,14 +111,14 @@ def test_simulation_in_the_virtual_machine_matches_compiled(monkeypatch: pytest.
     x0 = np.array([0.98, 0.05, 0.0, 0.12, 0.01, 0.0])
     compiled = simulate(paper.SPACECRAFT, paper.GAIN, x0, **arguments)
     compiled_batch = simulate_batch(paper.SPACECRAFT, paper.GAIN, [x0, -x0], **arguments)
-    simulate_module._clear_engines()
+    clear_engines()
     try:
         monkeypatch.setattr(_compile, "find_compiler", lambda: None)
         with pytest.warns(CompilerWarning):
             interpreted = simulate(paper.SPACECRAFT, paper.GAIN, x0, **arguments)
             batch = simulate_batch(paper.SPACECRAFT, paper.GAIN, [x0, -x0], trajectories=True, **arguments)
     finally:
-        simulate_module._clear_engines()
+        clear_engines()
     assert compiled.switch_count > 0
     np.testing.assert_array_equal(interpreted.switch_indices, compiled.switch_indices)
     np.testing.assert_allclose(interpreted.sigma, compiled.sigma, rtol=0, atol=1e-13)

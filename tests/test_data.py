@@ -8,15 +8,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mrpctl import BoundaryLayer, DelayAware, data, paper, simulate_batch
+from mrpctl import BoundaryLayer, DelayAware, data, paper, simulate, simulate_batch
 from mrpctl.errors import SpecificationError
 
 X0 = np.array([0.93, 0.0, 0.0, 0.46 / 4, 0.0, 0.0])
 
 
 def _run(rule=None, t_final: float = 4.0, rate: float = 100.0, tau: float = 0.5):
-    # adapter: re-point at mrpctl.simulate after the merge
-    batch = simulate_batch(
+    return simulate(
         paper.SPACECRAFT,
         paper.GAIN,
         X0,
@@ -24,10 +23,7 @@ def _run(rule=None, t_final: float = 4.0, rate: float = 100.0, tau: float = 0.5)
         rule=rule or DelayAware(),
         t_final=t_final,
         rate=rate,
-        trajectories=True,
-        threads=1,
     )
-    return batch.runs[0]
 
 
 @pytest.fixture(scope="module")
@@ -146,3 +142,14 @@ def test_csv_decimation_keeps_last_sample_and_counts_switches(run, tmp_path):
     assert frame["switches"].tolist() == expected
     with pytest.raises(SpecificationError, match="every"):
         data.write_csv(run, tmp_path / "bad.csv", every=0)
+
+
+def test_result_methods_are_the_data_functions():
+    run = _run(t_final=1.0)
+    assert run.to_xarray().equals(data.to_xarray(run))
+    assert run.to_pandas().equals(data.to_pandas(run))
+    batch = simulate_batch(
+        paper.SPACECRAFT, paper.GAIN, np.stack([X0, 0.5 * X0]), tau=0.5, rule=DelayAware(), t_final=1.0, rate=100.0
+    )
+    assert batch.to_xarray().equals(data.to_xarray(batch))
+    assert batch.to_pandas().equals(data.to_pandas(batch))

@@ -229,7 +229,7 @@ def test_decay_optimal_gains_converge_on_random_tumbles() -> None:
     from mrpctl import NoSwitching, mrp
     from mrpctl.design import pd_gains
     from mrpctl.model import state
-    from mrpctl.simulate import simulate_batch
+    from mrpctl import simulate_batch
 
     rng = np.random.default_rng(9)
     x0 = []

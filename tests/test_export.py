@@ -17,7 +17,7 @@ import pytest
 
 import mrpctl
 from mrpctl import _export as export_module
-from mrpctl import paper
+from mrpctl import closed_loop_functions, paper, simulate
 from mrpctl._compile import CompilerWarning, find_compiler
 from mrpctl._export import (
     C_PREFIX,
@@ -30,7 +30,6 @@ from mrpctl._export import (
     export,
 )
 from mrpctl.errors import CodegenError, SpecificationError
-from mrpctl.simulate import closed_loop_functions, simulate
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import DelayAware, NoSwitching, OnDelayed
 

@@ -24,7 +24,7 @@ from mrpctl.interop import (
     to_time_response,
 )
 from mrpctl.model import plant_model
-from mrpctl.simulate import simulate
+from mrpctl import simulate
 
 
 def _spectral_roots(a: np.ndarray, a_d: np.ndarray, tau: float, m: int = 60) -> np.ndarray:

@@ -122,3 +122,21 @@ def test_bad_inputs() -> None:
         state([0, 0, 0], [np.inf, 0, 0])
     with pytest.raises(DimensionError, match="K1"):
         gain_from_pd(paper.SPACECRAFT, np.ones((2, 2)), np.eye(3))
+
+
+def test_dynamics_with_a_symbolic_inertia_matches_the_direct_equations() -> None:
+    from mrpctl.model import dynamics_expr
+
+    inertia = np.array([[120.0, 5.0, -3.0], [5.0, 100.0, 2.0], [-3.0, 2.0, 90.0]])
+    x = ca.SX.sym("x", 6)
+    u = ca.SX.sym("u", 3)
+    j = ca.SX.sym("J", 3, 3)
+    j_inv = ca.SX.sym("J_inv", 3, 3)
+    f = ca.Function("f", [x, u, j, j_inv], [dynamics_expr(None, x, u, inertia=j, inertia_inverse=j_inv)])
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        xv, uv = rng.normal(size=6), rng.normal(size=3)
+        got = np.asarray(f(xv, uv, inertia, np.linalg.inv(inertia))).ravel()
+        np.testing.assert_allclose(got, _direct(inertia, xv, uv), rtol=1e-12, atol=1e-14)
+    with pytest.raises(ValueError, match="both"):
+        dynamics_expr(None, x, u, inertia=j)

@@ -62,7 +62,7 @@ def test_wheel_works_outside_the_source_tree(tmp_path: Path) -> None:
     assert "tau = 0.5 s" in _run([str(python), "-m", "mrpctl", "example"], outside, env)
     script = (
         "from mrpctl import DelayAware, paper, plots\n"
-        "from mrpctl.simulate import simulate\n"
+        "from mrpctl import simulate\n"
         "run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.5, rule=DelayAware(), t_final=3.0)\n"
         "plots.save_figure(plots.plot_response(run), 'run.png')\n"
         "print(run.switch_count)\n"

@@ -16,10 +16,9 @@ from matplotlib.legend import Legend
 from matplotlib.patches import Rectangle
 from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
-from mrpctl import paper, plots, simulate_batch
+from mrpctl import paper, plots, simulate, simulate_batch
 from mrpctl.design import linearized_loop
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.simulate import simulate
 from mrpctl.switching import BoundaryLayer, OnDelayed
 
 

@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 
 from mrpctl import paper
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.simulate import (
+from mrpctl.simulation import (
     SimulationResult,
     closed_loop_functions,
     delay_samples,
@@ -421,3 +421,16 @@ def test_result_is_frozen_and_readable(paper_runs) -> None:
 def test_runs_are_bit_reproducible(paper_runs) -> None:
     again = simulate(SC, paper.GAIN, paper.INITIAL_STATE, tau=0.5, rule=OnDelayed(), t_final=60.0)
     np.testing.assert_array_equal(again.sigma, paper_runs["delayed"].sigma)
+
+
+def test_run_time_inertia_follows_each_spacecraft() -> None:
+    """One compiled engine per inertia layout: a second diagonal spacecraft still gets its own J."""
+    small = np.diag([30.0, 25.0, 20.0])
+    x0 = np.array([0.3, -0.5, 0.7, 0.05, 0.02, -0.03])
+    simulate(SC, K, x0, tau=0.007, rule=OnDelayed(), t_final=0.5)  # the engine, built for the paper's J
+    run = simulate(Spacecraft(np.diag(small)), K, x0, tau=0.007, rule=OnDelayed(), t_final=0.5)
+    sigma, omega, u, switched = reference_run(["delayed"], [1.0], d=7, rate=1000.0, n=501, inertia=small, x0=x0)
+    assert np.max(np.abs(run.sigma - sigma[:, 0])) < 1e-12
+    assert np.max(np.abs(run.omega - omega[:, 0])) < 1e-12
+    assert np.max(np.abs(run.u - u[:, 0])) < 1e-12 * np.max(np.abs(K))
+    np.testing.assert_array_equal(run.switch_indices, np.flatnonzero(switched[:, 0]))

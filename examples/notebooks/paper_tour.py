@@ -24,7 +24,7 @@ import matplotlib.pyplot as plt  # the notebook's backend shows the figures; mrp
 
 from mrpctl import DelayAware, OnDelayed, paper, plots
 from mrpctl.design import linearized_loop
-from mrpctl.simulate import simulate
+from mrpctl import simulate
 
 print(linearized_loop(paper.SPACECRAFT, paper.GAIN).delay_margin())
 

@@ -389,28 +389,23 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
 
 
 def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> SimulationResult:
-    # adapter: re-point at mrpctl.simulate(...) (the function) after the "sim" merge
-    from mrpctl import simulate_batch
+    from mrpctl import simulate
     from mrpctl.campaign.sampling import run_inputs
     from mrpctl.spacecraft import Spacecraft
 
     inputs = run_inputs(spec, run)
     base = spec.base
-    batch = simulate_batch(
+    return simulate(
         Spacecraft(inputs.inertia[0]),
         inputs.gain_scale[0] * base.K,
-        inputs.x0,
+        inputs.x0[0],
         tau=float(inputs.tau[0]),
         rule=base.rule,
         t_final=base.t_final,
         rate=base.rate,
         history=base.history,
         substeps=base.substeps,
-        trajectories=True,
-        threads=1,
     )
-    assert batch.runs is not None
-    return batch.runs[0]
 
 
 def plot_replay(result: ReplayResult) -> Figure:

@@ -1,0 +1,346 @@
+"""The closed loop as CasADi Functions: controller, rule, RK4 step, one sample, one chunk.
+
+Shared by :mod:`mrpctl.simulation` (whose engine adds the metric accumulators and a C
+horizon driver around :func:`core_function`) and :mod:`mrpctl.export` (which generates
+C for :func:`closed_loop_functions`). The model (paper Eq. nonc, sampled; see
+``design/switching.md``)::
+
+    ẋ(t) = A x + B u(t) + f(x),   x = [σ; ω/4]
+    u(t) = u_k = K m_{k−d}          for t in [t_k, t_{k+1}),  t_k = k h,  h = 1/rate
+    m_k  = rule(x(t_k), m_{k−d})    the state after the switching rule at t_k
+
+with τ = d h (d an integer >= 0). At each sample k: (1) the rule may replace σ_k by its
+shadow; (2) the result is recorded as the measurement m_k; (3) u_k = K m_{k−d} is held
+over one period (zero-order hold; for d = 0, u_k = K m_k); (4) the plant of
+:func:`mrpctl.model.dynamics_expr` is integrated over one period by RK4 with a fixed
+number of substeps.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from mrpctl._validation import check_spacecraft, integer, nonnegative_scalar, positive_scalar, readonly
+from mrpctl.errors import SpecificationError
+from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, gain_matrix, plant_model
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, SwitchingRule
+
+__all__ = [
+    "MAX_SUBSTEPS",
+    "ClosedLoopFunctions",
+    "InertiaInput",
+    "check_rule",
+    "check_substeps",
+    "closed_loop_functions",
+    "core_function",
+    "delay_samples",
+    "inertia_input",
+    "inertia_values",
+    "step_function",
+]
+
+_DELAY_TOLERANCE = 1e-9
+#: RK4 substeps per measurement period at most. The step is unrolled into the generated
+#: code (about 0.5 kB of C and 0.1 s of gcc per substep): 64 substeps already make h/64 a
+#: step far below any period the loop can resolve, while 1000 would take minutes and
+#: > 2 GB to compile. For a finer integration raise the rate instead.
+MAX_SUBSTEPS = 64
+
+
+# =============================================================================== inputs
+def delay_samples(tau: Any, rate: Any) -> int:
+    """d = τ · rate as an integer (τ in s, rate in Hz).
+
+    Raises
+    ------
+    SpecificationError
+        If τ < 0, rate <= 0, or τ · rate is not an integer to 1e-9.
+    """
+    tau = nonnegative_scalar("tau", tau)
+    rate = positive_scalar("rate", rate)
+    samples = tau * rate
+    d = round(samples)
+    if abs(samples - d) > _DELAY_TOLERANCE:
+        raise SpecificationError(
+            f"tau * rate must be a whole number of measurement periods: tau = {tau!r} s and "
+            f"rate = {rate!r} Hz give tau * rate = {samples!r}; choose tau as a multiple of 1/rate"
+        )
+    return int(d)
+
+
+def check_rule(rule: Any, name: str = "rule") -> SwitchingRule:
+    """Return ``rule`` if it is a :class:`~mrpctl.switching.SwitchingRule`, else raise SpecificationError."""
+    if not isinstance(rule, SwitchingRule):
+        raise SpecificationError(
+            f"{name} must be a switching rule such as mrpctl.switching.OnDelayed(), got {type(rule).__name__}: {rule!r}"
+        )
+    return rule
+
+
+def check_substeps(substeps: Any) -> int:
+    """RK4 substeps per measurement period: an integer in 1 .. :data:`MAX_SUBSTEPS`."""
+    if isinstance(substeps, int | np.integer) and not isinstance(substeps, bool) and substeps > MAX_SUBSTEPS:
+        raise SpecificationError(
+            f"substeps must be <= {MAX_SUBSTEPS}, got {substeps}: each substep is unrolled into the compiled "
+            f"code (1000 substeps take minutes and > 2 GB to compile); for a finer step raise rate instead"
+        )
+    return integer("substeps", substeps, minimum=1)
+
+
+# ================================================================ symbolic building blocks
+class InertiaInput(enum.Enum):
+    """How a run-time inertia enters a compiled Function (see :func:`inertia_input`)."""
+
+    #: J and J⁻¹ diagonal: two 3-vectors (the diagonals), the same operations as constants.
+    DIAGONAL = "diagonal"
+    #: Full 3 × 3 J and J⁻¹ (column-major).
+    FULL = "full"
+
+
+def inertia_input(spacecraft: Spacecraft) -> InertiaInput:
+    """DIAGONAL when both J and J⁻¹ of ``spacecraft`` are exactly diagonal, else FULL."""
+    for matrix in (spacecraft.inertia, spacecraft.inertia_inverse):
+        if np.any(matrix != np.diag(np.diag(matrix))):
+            return InertiaInput.FULL
+    return InertiaInput.DIAGONAL
+
+
+def inertia_values(spacecraft: Spacecraft, kind: InertiaInput) -> tuple[np.ndarray, np.ndarray]:
+    """The run-time inputs J, J⁻¹ of ``spacecraft`` for a Function built with ``kind`` (contiguous)."""
+    if kind is InertiaInput.DIAGONAL:
+        return np.diag(spacecraft.inertia).copy(), np.diag(spacecraft.inertia_inverse).copy()
+    return np.ascontiguousarray(spacecraft.inertia.T), np.ascontiguousarray(spacecraft.inertia_inverse.T)
+
+
+def _inertia_symbols(kind: InertiaInput) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """(J input, J⁻¹ input, J as 3 × 3, J⁻¹ as 3 × 3); diagonal matrices are structurally diagonal."""
+    if kind is InertiaInput.DIAGONAL:
+        j, j_inv = ca.SX.sym("J", 3), ca.SX.sym("J_inv", 3)
+        return j, j_inv, ca.diag(j), ca.diag(j_inv)
+    j, j_inv = ca.SX.sym("J", 3, 3), ca.SX.sym("J_inv", 3, 3)
+    return j, j_inv, j, j_inv
+
+
+def step_function(
+    spacecraft: Spacecraft, period: float, substeps: int, *, inertia: InertiaInput | None = None
+) -> ca.Function:
+    """``step(x, u) -> x_next``: RK4 over one period h with ``substeps`` equal substeps.
+
+    With ``inertia`` the spacecraft's J and J⁻¹ are inputs instead of constants:
+    ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see :class:`InertiaInput`).
+    """
+    x = ca.SX.sym("x", STATE_SIZE)
+    u = ca.SX.sym("u", INPUT_SIZE)
+    extra: list[ca.SX] = []
+    if inertia is None:
+        dynamics = plant_model(spacecraft).dynamics
+    else:
+        j_in, j_inv_in, j, j_inv = _inertia_symbols(inertia)
+        extra = [j_in, j_inv_in]
+        xdot = dynamics_expr(None, x, u, inertia=j, inertia_inverse=j_inv)
+        dynamics = ca.Function("dynamics", [x, u, j_in, j_inv_in], [xdot])
+    dt = period / substeps
+    z = x
+    for _ in range(substeps):
+        k1 = dynamics(z, u, *extra)
+        k2 = dynamics(z + (dt / 2) * k1, u, *extra)
+        k3 = dynamics(z + (dt / 2) * k2, u, *extra)
+        k4 = dynamics(z + dt * k3, u, *extra)
+        z = z + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+    names = ["x", "u"] + (["J", "J_inv"] if extra else [])
+    return ca.Function("step", [x, u, *extra], [z], names, ["x_next"])
+
+
+def core_function(
+    spacecraft: Spacecraft,
+    rule: SwitchingRule,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+) -> ca.Function:
+    """One sample with K and the rule parameters as inputs (pure SX).
+
+    ``core(x, memory, x_delayed, K, parameters) -> (x_next, memory_next, x_meas, u, switched)``;
+    with ``inertia``, J and J⁻¹ are two more inputs (``..., parameters, J, J_inv``).
+    """
+    step = step_function(spacecraft, period, substeps, inertia=inertia)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    seen_by_rule = x_delayed if d > 0 else x
+    x_meas, memory_next, switched = rule.expressions(x, seen_by_rule, memory, delay_samples=d, parameters=parameters)
+    u = gain @ (x_delayed if d > 0 else x_meas)
+    x_next = step(x_meas, u, *extra)
+    return ca.Function(
+        "core",
+        [x, memory, x_delayed, gain, parameters, *extra],
+        [x_next, memory_next, x_meas, u, switched],
+        ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []),
+        ["x_next", "memory_next", "x_meas", "u", "switched"],
+    )
+
+
+def _chunk_function(sample: ca.Function, d: int) -> ca.Function:
+    """``chunk(x, memory, history) -> (x_end, memory_end, measurements, u, switched)``.
+
+    One chunk is max(d, 1) samples, a ``mapaccum`` of ``sample``.
+    """
+    length = max(d, 1)
+    accumulated = sample.mapaccum("chunk_samples", length, 2)
+    x = ca.MX.sym("x", STATE_SIZE)
+    memory = ca.MX.sym("memory", MEMORY_SIZE)
+    history = ca.MX.sym("history", STATE_SIZE, length)
+    xs, memories, measurements, u, switched = accumulated(x, memory, history)
+    return ca.Function(
+        "chunk",
+        [x, memory, history],
+        [xs[:, length - 1], memories[:, length - 1], measurements, u, switched],
+        ["x", "memory", "history"],
+        ["x_end", "memory_end", "measurements", "u", "switched"],
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ClosedLoopFunctions:
+    """The closed loop as named CasADi Functions (the building blocks of the simulator).
+
+    All ports carry x = [σ; ω/4] (6), u in N m (3); K and the rule's parameters are
+    constants in the expressions. ``dynamics``, ``controller``, ``switching``, ``step``
+    and ``sample`` are pure SX Functions; ``chunk`` is an MX ``mapaccum`` of ``sample``
+    (a loop, not an unrolled expression), also code-generatable and serialisable.
+
+    Attributes
+    ----------
+    dynamics : casadi.Function
+        ``dynamics(x, u) -> xdot`` from :mod:`mrpctl.model`.
+    controller : casadi.Function
+        ``controller(x_meas) -> u``: u = K x_meas.
+    switching : casadi.Function
+        ``rule(x, x_meas, memory) -> (x_next, memory_next, switched)``.
+    step : casadi.Function
+        ``step(x, u) -> x_next``: RK4 over one measurement period h with ``substeps``.
+    sample : casadi.Function
+        ``sample(x, memory, x_delayed) -> (x_next, memory_next, x_meas, u, switched)``:
+        one measurement period (rule, record, hold, integrate); ``x_delayed`` is m_{k−d}
+        and is not used when d = 0.
+    chunk : casadi.Function
+        ``chunk(x, memory, history) -> (x_end, memory_end, measurements, u, switched)``:
+        max(d, 1) samples; ``history`` (6 × d) is the previous chunk's ``measurements``.
+    initial_memory : float
+        The rule memory at k = 0.
+    """
+
+    spacecraft: Spacecraft
+    K: np.ndarray = field(repr=False)
+    rule: SwitchingRule
+    tau: float
+    rate: float
+    delay_samples: int
+    substeps: int
+    initial_memory: float
+    dynamics: ca.Function = field(repr=False)
+    controller: ca.Function = field(repr=False)
+    switching: ca.Function = field(repr=False)
+    step: ca.Function = field(repr=False)
+    sample: ca.Function = field(repr=False)
+    chunk: ca.Function = field(repr=False)
+
+    @property
+    def period(self) -> float:
+        """Measurement period h = 1/rate (s)."""
+        return 1.0 / self.rate
+
+    def functions(self) -> dict[str, ca.Function]:
+        """The Functions by name, for export."""
+        return {
+            "dynamics": self.dynamics,
+            "controller": self.controller,
+            "rule": self.switching,
+            "step": self.step,
+            "sample": self.sample,
+            "chunk": self.chunk,
+        }
+
+    def __str__(self) -> str:
+        lines = [
+            f"Closed loop: {self.spacecraft}, tau = {self.tau:g} s = {self.delay_samples} samples "
+            f"at {self.rate:g} Hz, RK4 with {self.substeps} substep(s), rule {self.rule}"
+        ]
+        lines += [f"  {function}" for function in self.functions().values()]
+        return "\n".join(lines)
+
+
+def closed_loop_functions(
+    spacecraft: Spacecraft,
+    K: Any,
+    *,
+    tau: float,
+    rule: SwitchingRule,
+    rate: float = 1000.0,
+    substeps: int = 1,
+) -> ClosedLoopFunctions:
+    """Build the closed loop's named CasADi Functions (see :class:`ClosedLoopFunctions`).
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The plant.
+    K : array_like
+        (3, 6) gain acting on x = [σ; ω/4]: u = K x(t − τ).
+    tau : float, keyword-only
+        Delay τ (s), a whole number d of periods 1/rate.
+    rule : SwitchingRule, keyword-only
+        The shadow-set switching rule.
+    rate : float, keyword-only
+        Measurement rate (Hz), default 1000.
+    substeps : int, keyword-only
+        RK4 substeps per measurement period, default 1.
+    """
+    spacecraft = check_spacecraft(spacecraft)
+    gain = gain_matrix(K)
+    rule = check_rule(rule)
+    d = delay_samples(tau, rate)
+    rate = float(rate)
+    substeps = check_substeps(substeps)
+    period = 1.0 / rate
+    core = core_function(spacecraft, rule, d, period, substeps)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    bound = list(core(x, memory, x_delayed, ca.DM(gain), ca.DM(rule.parameters())))
+    sample = ca.Function(
+        "sample",
+        [x, memory, x_delayed],
+        bound,
+        ["x", "memory", "x_delayed"],
+        ["x_next", "memory_next", "x_meas", "u", "switched"],
+    )
+    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
+    controller = ca.Function("controller", [x_meas], [ca.DM(gain) @ x_meas], ["x_meas"], ["u"])
+    return ClosedLoopFunctions(
+        spacecraft=spacecraft,
+        K=readonly(gain),
+        rule=rule,
+        tau=float(tau),
+        rate=rate,
+        delay_samples=d,
+        substeps=substeps,
+        initial_memory=rule.initial_memory(delay_samples=d),
+        dynamics=plant_model(spacecraft).dynamics,
+        controller=controller,
+        switching=rule.function(delay_samples=d),
+        step=step_function(spacecraft, period, substeps),
+        sample=sample,
+        chunk=_chunk_function(sample, d),
+    )

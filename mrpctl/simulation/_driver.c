@@ -1,0 +1,85 @@
+/* mrpctl: the horizon driver appended to CasADi's C code of one engine sample.
+ *
+ * MRPCTL_SAMPLE is the generated sample function
+ *   sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv])
+ *     -> (x_next, memory_next, stats_next, x_meas, u, switched)
+ * and MRPCTL_RUN the exported driver; both, and the sizes below, are #defined by
+ * mrpctl/simulation/_engine.py in front of this file.
+ *
+ * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
+ * stats alternate between two buffers; the sample writes m_k into a ring of ring_size
+ * columns (slot k mod ring_size) from which m_{k-d} is read (from the history for k < d);
+ * every keep_every-th m_k and u_k are copied to the kept arrays (column k / keep_every;
+ * with keep_every = 1 the caller may pass the kept array itself as a ring of n columns),
+ * the switch flags of the slice go to switched[k - k0]. The arithmetic is the sample's,
+ * unchanged: a run cut into slices gives the same bits as one call.
+ *
+ * Returns the number of samples done: k1 - k0, or fewer when the run diverged (the last
+ * one done is the diverging sample, whose measurement is still a good state); -1 when the
+ * sample function failed. state (x, memory, stats) holds the state after the last sample.
+ */
+CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
+    long long history_stride, const casadi_real* gain, const casadi_real* parameters,
+    const casadi_real* inertia, const casadi_real* inertia_inverse, long long k0, long long k1,
+    long long d, casadi_real* ring, long long ring_size, long long keep_every,
+    casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched) {
+  const casadi_real* arg[MRPCTL_SZ_ARG];
+  casadi_real* res[MRPCTL_SZ_RES];
+  casadi_int iw[MRPCTL_SZ_IW];
+  casadi_real w[MRPCTL_SZ_W];
+  casadi_real buffers[2][MRPCTL_STATE];
+  casadi_real u_scratch[3], switched_scratch[1];
+  long long k, slot, delayed_slot = 0, phase = 1, kept_column = 0;
+  int i, now_index = 0;
+  for (i = 0; i < MRPCTL_STATE; ++i) buffers[0][i] = state[i];
+  slot = k0 % ring_size;
+  if (k0 >= d) delayed_slot = (k0 - d) % ring_size;
+  if (keep_every > 0) {
+    phase = k0 % keep_every;
+    kept_column = (k0 + keep_every - 1) / keep_every;
+  }
+  arg[4] = gain;
+  arg[5] = parameters;
+#if MRPCTL_INERTIA_INPUT
+  arg[6] = inertia;
+  arg[7] = inertia_inverse;
+#else
+  (void)inertia;
+  (void)inertia_inverse;
+#endif
+  for (k = k0; k < k1; ++k) {
+    casadi_real* now = buffers[now_index];
+    casadi_real* next = buffers[now_index ^ 1];
+    int kept = keep_every > 0 && phase == 0;
+    arg[0] = now;
+    arg[1] = now + MRPCTL_X;
+    arg[2] = now + MRPCTL_X_MEMORY;
+    if (d == 0) {
+      arg[3] = history;
+    } else {
+      arg[3] = k < d ? history + history_stride * k : ring + 6 * delayed_slot;
+    }
+    res[0] = next;
+    res[1] = next + MRPCTL_X;
+    res[2] = next + MRPCTL_X_MEMORY;
+    res[3] = ring + 6 * slot;
+    res[4] = kept ? kept_u + 3 * kept_column : u_scratch;
+    res[5] = switched ? switched + (k - k0) : switched_scratch;
+    if (MRPCTL_SAMPLE(arg, res, iw, w, 0)) return -1;
+    if (kept) {
+      if (kept_measurements != ring)
+        for (i = 0; i < 6; ++i) kept_measurements[6 * kept_column + i] = ring[6 * slot + i];
+      ++kept_column;
+    }
+    if (keep_every > 0 && ++phase == keep_every) phase = 0;
+    if (++slot == ring_size) slot = 0;
+    if (k >= d && ++delayed_slot == ring_size) delayed_slot = 0;
+    now_index ^= 1;
+    if (next[MRPCTL_X_MEMORY + MRPCTL_S_DIVERGED] >= 0) {
+      ++k;
+      break;
+    }
+  }
+  for (i = 0; i < MRPCTL_STATE; ++i) state[i] = buffers[now_index][i];
+  return k - k0;
+}

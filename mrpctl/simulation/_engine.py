@@ -1,0 +1,380 @@
+"""The compiled engine: one sample as generated C, and a horizon driver run slice by slice.
+
+One sample (:func:`engine_sample`) is the loop's core sample (:func:`mrpctl.loop.core_function`)
+plus the divergence guard and the metric accumulators, a pure SX Function with K, the rule
+parameters (and, for a run-time inertia, J and J⁻¹) as inputs. CasADi generates its C
+code; ``_driver.c`` (package data) is appended and the whole is compiled by
+:mod:`mrpctl._compile`, cached on disk. A run is a few C calls, one per slice of
+:data:`SLICE_SAMPLES` samples, so that Ctrl-C is seen between slices; the driver stops at
+the first divergence.
+
+Engines are cached in-process by the *structure* they compile: the inertia layout
+(diagonal or full; J and J⁻¹ are run-time inputs), d, h, substeps and the rule's
+expressions with symbolic parameters (so every instance of a built-in rule shares one
+engine whatever its ε, while a user's rule whose attributes enter its expressions as
+constants gets its own).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import hashlib
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import resources
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
+from mrpctl.errors import CodegenError
+from mrpctl.loop import core_function, inertia_input, inertia_values
+from mrpctl.model import INPUT_SIZE, STATE_SIZE
+from mrpctl.simulation._stats import (
+    DIVERGENCE_BOUND,
+    S_COUNT,
+    S_DIVERGED,
+    S_FIRST,
+    S_FLIPS,
+    S_K,
+    S_LAST,
+    S_MAX_SIGMA,
+    S_N,
+    S_PEAK_TORQUE,
+    S_UNSETTLED,
+    S_UPREV,
+    SETTLING_OMEGA,
+    SETTLING_SIGMA,
+    STATS_SIZE,
+    initial_stats,
+)
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import (
+    MEMORY_SIZE,
+    PARAMETER_SIZE,
+    BoundaryLayer,
+    DelayAware,
+    NoSwitching,
+    OnCurrent,
+    OnDelayed,
+    SwitchingRule,
+)
+
+#: Samples per C call: Ctrl-C and the batch's stop flag are seen between slices (about
+#: 10 ms of the paper's loop per slice at one substep; divided by the substeps).
+SLICE_SAMPLES = 2**16
+STATE_BLOCK = STATE_SIZE + MEMORY_SIZE + STATS_SIZE  # x, memory, stats: the driver's carried state
+
+
+def slice_samples(substeps: int) -> int:
+    """Samples per slice for ``substeps`` RK4 substeps (the work per slice stays about the same)."""
+    return max(1, SLICE_SAMPLES // substeps)
+
+
+def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.Function:
+    """The core sample plus the divergence guard and the metric accumulators (pure SX).
+
+    ``sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv]) ->
+    (x_next, memory_next, stats_next, x_meas, u, switched)``; J, J⁻¹ when ``core`` has them.
+    """
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", MEMORY_SIZE)
+    stats = ca.SX.sym("stats", STATS_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [ca.SX.sym(core.name_in(i), core.sparsity_in(i)) for i in range(5, core.n_in())]
+    x_raw, memory_rule, x_meas, u, switched = core(x, memory, x_delayed, gain, parameters, *extra)
+
+    k = stats[S_K]
+    counted = ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
+    sigma_raw, omega_raw = x_raw[0:3], 4 * x_raw[3:6]
+    bound = DIVERGENCE_BOUND**2
+    # NaN compares false, so a NaN or inf state is "not ok".
+    ok = ca.logic_and(ca.dot(sigma_raw, sigma_raw) <= bound, ca.dot(omega_raw, omega_raw) <= bound)
+    x_next = ca.if_else(ca.logic_and(counted, ok), x_raw, x_meas)
+    memory_next = ca.if_else(counted, memory_rule, memory)
+    switch_counted = ca.logic_and(counted, switched > 0)
+
+    sigma, omega = x_meas[0:3], 4 * x_meas[3:6]
+    sigma_squared = ca.dot(sigma, sigma)
+    unsettled = ca.logic_or(sigma_squared >= SETTLING_SIGMA**2, ca.dot(omega, omega) >= SETTLING_OMEGA**2)
+    u_prev = stats[S_UPREV]
+    flips = stats[S_FLIPS] + ca.if_else(ca.logic_and(counted, u * u_prev < 0), 1.0, 0.0)
+    # max |u_i| by comparisons: casadi_fmax is a libm call per use (no -ffinite-math-only)
+    size = [ca.fabs(u[i]) for i in range(INPUT_SIZE)]
+    torque = ca.if_else(size[0] >= size[1], size[0], size[1])
+    torque = ca.if_else(torque >= size[2], torque, size[2])
+    peak = stats[S_PEAK_TORQUE]
+    stats_next = ca.vertcat(
+        k + 1,
+        stats[S_N],
+        stats[S_COUNT] + ca.if_else(switch_counted, 1.0, 0.0),
+        ca.if_else(ca.logic_and(switch_counted, stats[S_FIRST] < 0), k, stats[S_FIRST]),
+        ca.if_else(switch_counted, k, stats[S_LAST]),
+        flips,
+        ca.if_else(counted, u, u_prev),
+        ca.if_else(ca.logic_and(counted, unsettled), k, stats[S_UNSETTLED]),
+        ca.if_else(counted, ca.fmax(stats[S_MAX_SIGMA], sigma_squared), stats[S_MAX_SIGMA]),  # max |σ|²
+        ca.if_else(ca.logic_and(counted, ca.logic_not(ok)), k, stats[S_DIVERGED]),
+        ca.if_else(ca.logic_and(counted, torque > peak), torque, peak),  # max |u|_inf
+    )
+    return ca.Function(
+        name,
+        [x, memory, stats, x_delayed, gain, parameters, *extra],
+        [x_next, memory_next, stats_next, x_meas, u, switched],
+        ["x", "memory", "stats", "x_delayed", "K", "parameters"] + [core.name_in(i) for i in range(5, core.n_in())],
+        ["x_next", "memory_next", "stats_next", "x_meas", "u", "switched"],
+    )
+
+
+def _driver_source(sample: ca.Function) -> str:
+    """``_driver.c`` with the #defines that bind it to ``sample``."""
+    defines = {
+        "MRPCTL_SAMPLE": sample.name(),
+        "MRPCTL_RUN": sample.name() + "_run",
+        "MRPCTL_SZ_ARG": max(sample.sz_arg(), 8),
+        "MRPCTL_SZ_RES": max(sample.sz_res(), 6),
+        "MRPCTL_SZ_IW": max(sample.sz_iw(), 1),
+        "MRPCTL_SZ_W": max(sample.sz_w(), 1),
+        "MRPCTL_STATE": STATE_BLOCK,
+        "MRPCTL_X": STATE_SIZE,
+        "MRPCTL_X_MEMORY": STATE_SIZE + MEMORY_SIZE,
+        "MRPCTL_S_DIVERGED": S_DIVERGED,
+        "MRPCTL_INERTIA_INPUT": int(sample.n_in() > 6),
+    }
+    header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
+    body = resources.files("mrpctl.simulation").joinpath("_driver.c").read_text(encoding="utf-8")
+    return "\n" + header + body
+
+
+@dataclass
+class Workspace:
+    """The buffers one thread reuses across the runs of one engine (no allocation per run)."""
+
+    state: np.ndarray
+    ring: np.ndarray
+    switched: np.ndarray | None
+
+
+@dataclass
+class RunOutput:
+    """What one run produced: the final statistics, kept arrays, switch indices."""
+
+    stats: np.ndarray
+    samples: int
+    measurements: np.ndarray | None
+    u: np.ndarray | None
+    switch_indices: np.ndarray | None
+
+
+class Engine:
+    """The compiled engine of one structure (inertia layout, d, h, rule expressions, substeps).
+
+    J and J⁻¹ are run-time inputs, so one library serves every spacecraft of the same
+    :class:`~mrpctl.loop.InertiaInput` layout (diagonal, or full).
+    """
+
+    def __init__(self, spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> None:
+        self.d = d
+        self.substeps = substeps
+        self.inertia = inertia_input(spacecraft)
+        core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
+        label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
+        self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
+        self.compiled: CompiledFunction = compile_function(
+            self.sample, flags=SIMULATION_FLAGS, appendix=_driver_source(self.sample)
+        )
+        self._run_c: Any = None
+        if self.compiled.compiled:
+            self._library = ctypes.CDLL(str(self.compiled.library))
+            self._run_c = getattr(self._library, self.sample.name() + "_run")
+            self._run_c.restype = ctypes.c_longlong
+            self._run_c.argtypes = (
+                [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
+                + [ctypes.c_void_p] * 4
+                + [ctypes.c_longlong] * 3
+                + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
+                + [ctypes.c_void_p] * 3
+            )
+
+    @property
+    def compiled_code(self) -> bool:
+        """True when runs call the compiled library."""
+        return self._run_c is not None
+
+    def ring_size(self, n: int) -> int:
+        """Columns of the measurement ring: m_{k−d} is read back for k >= d only."""
+        return min(self.d, n) + 1
+
+    def workspace(self, n: int, switches: bool) -> Workspace:
+        """Buffers for runs of n samples (``switches``: collect switch instants)."""
+        return Workspace(
+            state=np.empty(STATE_BLOCK),
+            ring=np.empty((self.ring_size(n), STATE_SIZE)),
+            switched=np.empty(min(slice_samples(self.substeps), n)) if switches else None,
+        )
+
+    def run(
+        self,
+        x0: np.ndarray,
+        memory0: float,
+        history: np.ndarray,
+        gain: np.ndarray,
+        parameters: np.ndarray,
+        n: int,
+        *,
+        spacecraft: Spacecraft,
+        keep_every: int | None,
+        workspace: Workspace,
+        switch_limit: int = 0,
+        stop: Callable[[int], bool] | None = None,
+    ) -> RunOutput:
+        """One run of n samples, slice by slice.
+
+        Parameters
+        ----------
+        spacecraft : Spacecraft
+            The run's spacecraft (of this engine's inertia layout; its J, J⁻¹ are inputs).
+        history : numpy.ndarray
+            (columns, 6) measurements m_{−d}, …: one column (a constant history) or d.
+        keep_every : int or None
+            Keep m_k and u_k for k = 0, k, 2k, …; None keeps nothing.
+        workspace : Workspace
+            From :meth:`workspace` (its ``switched`` buffer set when switch instants are wanted).
+        switch_limit : int
+            Keep at most this many switch indices (the count in the statistics stays exact).
+        stop : callable, optional
+            Called after each slice with the samples done; True stops the run (it then
+            returns what it has). KeyboardInterrupt raised by it propagates.
+        """
+        state = workspace.state
+        state[:STATE_SIZE] = x0
+        state[STATE_SIZE] = memory0
+        state[STATE_SIZE + MEMORY_SIZE :] = initial_stats(n)
+        history = np.ascontiguousarray(history, dtype=float)
+        history_stride = STATE_SIZE if history.shape[0] > 1 else 0
+        gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
+        parameters = np.ascontiguousarray(parameters, dtype=float)
+        if inertia_input(spacecraft) is not self.inertia:
+            raise ValueError(f"this engine takes a {self.inertia.value} inertia, got {spacecraft}")
+        inertia, inertia_inverse = inertia_values(spacecraft, self.inertia)
+        if keep_every is None:
+            measurements = u = None
+            keep = 0
+        else:
+            kept = (n - 1) // keep_every + 1
+            measurements = np.empty((kept, STATE_SIZE))
+            u = np.empty((kept, INPUT_SIZE))
+            keep = keep_every
+        switched = workspace.switched
+        indices: list[np.ndarray] = []
+        stored = 0
+        ring = workspace.ring
+        if keep == 1 and measurements is not None:
+            ring = measurements  # every sample kept: m_{k-d} is read back from the result (no copy)
+        step = slice_samples(self.substeps)
+        k = 0
+        diverged = STATE_SIZE + MEMORY_SIZE + S_DIVERGED
+        while k < n:
+            k1 = min(k + step, n)
+            done = self._run_c(
+                address(state),
+                address(history),
+                history_stride,
+                address(gain_cm),
+                address(parameters),
+                address(inertia),
+                address(inertia_inverse),
+                k,
+                k1,
+                self.d,
+                address(ring),
+                len(ring),
+                keep,
+                None if measurements is None else address(measurements),
+                None if u is None else address(u),
+                None if switched is None else address(switched),
+            )
+            if done < 0:
+                raise CodegenError(f"evaluation of the compiled engine {self.compiled.library} failed")
+            if switched is not None and stored < switch_limit:
+                found = np.flatnonzero(switched[:done] > 0.5)[: switch_limit - stored] + k
+                if found.size:
+                    indices.append(found)
+                    stored += found.size
+            k += done
+            if stop is not None and stop(k):
+                break
+            if state[diverged] >= 0:
+                break  # the driver stopped after the diverging sample
+        switch_indices = np.concatenate(indices) if indices else np.zeros(0, np.int64)
+        return RunOutput(
+            stats=state[STATE_SIZE + MEMORY_SIZE :].copy(),
+            samples=k,
+            measurements=measurements,
+            u=u,
+            switch_indices=switch_indices if switched is not None else None,
+        )
+
+
+#: The rules of :mod:`mrpctl.switching`: their expressions depend on their values only
+#: through :meth:`~mrpctl.switching.SwitchingRule.parameters` (a run-time input), so
+#: all instances of one of these classes share an engine.
+_BUILT_IN_RULES = (NoSwitching, OnCurrent, OnDelayed, BoundaryLayer, DelayAware)
+
+
+def rule_key(rule: SwitchingRule, d: int) -> Any:
+    """What distinguishes the engines of rules: the class for a built-in rule, else a
+    digest of the rule's expressions with symbolic parameters (about 5 ms; memoised per
+    rule value when the rule is hashable)."""
+    if type(rule) in _BUILT_IN_RULES:
+        return type(rule)
+    try:
+        hash(rule)
+    except TypeError:
+        return _expressions_digest(rule, d)
+    return _memoised_digest(rule, d)
+
+
+@functools.lru_cache(maxsize=1024)
+def _memoised_digest(rule: SwitchingRule, d: int) -> str:
+    return _expressions_digest(rule, d)
+
+
+def _expressions_digest(rule: SwitchingRule, d: int) -> str:
+    x = ca.SX.sym("x", STATE_SIZE)
+    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
+    memory = ca.SX.sym("memory", MEMORY_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    out = rule.expressions(x, x_meas, memory, delay_samples=d, parameters=parameters)
+    function = ca.Function("rule", [x, x_meas, memory, parameters], list(out))
+    return hashlib.sha256(function.serialize().encode()).hexdigest()
+
+
+_ENGINES: dict[tuple[Any, ...], Any] = {}
+_ENGINES_LOCK = threading.Lock()
+
+
+def engine(spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> Any:
+    """The engine of this structure (compiled, or the virtual machine's without a compiler), cached."""
+    key = (inertia_input(spacecraft), type(rule), rule_key(rule, d), d, period, substeps)
+    with _ENGINES_LOCK:
+        found = _ENGINES.get(key)
+        if found is None:
+            found = Engine(spacecraft, rule, d, period, substeps)
+            if not found.compiled_code:
+                from mrpctl.simulation._vm import VirtualMachineEngine
+
+                found = VirtualMachineEngine(found.sample, d, found.inertia)
+            _ENGINES[key] = found
+        return found
+
+
+def clear_engines() -> None:
+    """Forget the loaded engines (the on-disk cache stays); for benchmarks and tests."""
+    with _ENGINES_LOCK:
+        _ENGINES.clear()

@@ -1,0 +1,468 @@
+"""``simulate`` and ``simulate_batch``: input checks, the memory estimate, runs, the thread pool."""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import queue
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from typing import Any
+
+import numpy as np
+
+from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
+from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.loop import check_rule, check_substeps, delay_samples
+from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
+from mrpctl.simulation._engine import RunOutput, engine, slice_samples
+from mrpctl.simulation._stats import HISTORY_KINDS, STATS_SIZE
+from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import SwitchingRule
+
+#: At most this many switch instants are kept per run when ``keep_every != 1`` (16 MB);
+#: the count, the first and the last switch stay exact.
+SWITCH_LIMIT = 2**20
+# Bytes per kept sample in a result: m_k and u_k as computed (72), t (8), omega (24).
+_BYTES_PER_KEPT = 104
+_BYTES_PER_SWITCH = 16  # index and time
+
+
+# =============================================================================== inputs
+def _history(history: Any, x0: np.ndarray, d: int) -> tuple[np.ndarray, Any]:
+    """The measurements before t = 0 as (columns, 6) rows m_{−d}, … (one row for a constant
+    history: only that row is stored), and the value to store in the result."""
+    if isinstance(history, str):
+        if history == "constant":
+            return x0[None, :].copy(), history
+        if history == "zero-input":
+            return np.zeros((1, STATE_SIZE)), history
+        raise SpecificationError(f"history must be one of {HISTORY_KINDS} or an array of shape (d, 6), got {history!r}")
+    array = finite_array("history", history)
+    if array.shape != (d, STATE_SIZE):
+        raise DimensionError(
+            f"history: expected shape (d, 6) = ({d}, 6) (d = tau * rate delayed states, oldest first) "
+            f"but found {array.shape}"
+        )
+    if d == 0:
+        return np.zeros((1, STATE_SIZE)), readonly(array)
+    return np.ascontiguousarray(array), readonly(array)
+
+
+def _samples(t_final: Any, rate: float) -> tuple[float, int]:
+    t_final = positive_scalar("t_final", t_final)
+    n = math.floor(t_final * rate + 1e-9) + 1
+    return t_final, n
+
+
+def _keep_every(keep_every: Any) -> int | None:
+    if keep_every is None:
+        return None
+    return integer("keep_every", keep_every, minimum=1)
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available now (os.sysconf), None where it cannot be read."""
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _memory_limit(memory_limit: Any) -> float:
+    if memory_limit is not None:
+        return positive_scalar("memory_limit", memory_limit)
+    available = available_memory()
+    return available / 2 if available else math.inf
+
+
+def run_bytes(n: int, keep_every: int | None, *, switches: bool = True) -> int:
+    """Bytes a result of n samples holds: the kept samples and (at most) its switch instants."""
+    kept = 0 if keep_every is None else (n - 1) // keep_every + 1
+    switch_cap = (n if keep_every == 1 else min(n, SWITCH_LIMIT)) if switches else 0
+    return kept * _BYTES_PER_KEPT + switch_cap * _BYTES_PER_SWITCH
+
+
+def workspace_bytes(n: int, d: int, substeps: int) -> int:
+    """Bytes of one worker's buffers: the d-sample ring and the slice's switch flags."""
+    return (min(d, n) + 1) * STATE_SIZE * 8 + min(slice_samples(substeps), n) * 8
+
+
+def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: int | None, runs: int = 1) -> None:
+    if estimate <= limit:
+        return
+    what = f"{runs} runs of " if runs > 1 else ""
+    keeping = "metrics only" if keep_every is None else f"keep_every = {keep_every}"
+    raise SpecificationError(
+        f"t_final = {t_final:g} s with {keeping} needs about {estimate / 1e9:.3g} GB for {what}the kept samples, "
+        f"more than the limit of {limit / 1e9:.3g} GB (memory_limit; default half the available memory): "
+        "keep fewer samples (keep_every=k keeps every k-th, keep_every=None only the metrics and switch instants), "
+        "shorten t_final, or raise memory_limit"
+    )
+
+
+# ======================================================================= simulate
+def simulate(
+    spacecraft: Spacecraft,
+    K: Any,
+    x0: Any,
+    *,
+    tau: float,
+    rule: SwitchingRule,
+    t_final: float,
+    rate: float = 1000.0,
+    history: Any = "constant",
+    substeps: int = 1,
+    keep_every: int | None = 1,
+    memory_limit: float | None = None,
+    progress: Callable[[int, int], Any] | None = None,
+) -> SimulationResult:
+    """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
+
+    The model and the engine: ``design/switching.md``. A run is a few calls of compiled C
+    (one per slice of 65 536 samples): Ctrl-C stops it within a slice; a diverging run
+    stops at the first bad sample.
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The plant (inertia J in kg m²).
+    K : array_like
+        (3, 6) gain on x = [σ; ω/4] (N m).
+    x0 : array_like
+        (6,) initial state x = [σ; ω/4] (ω in rad/s; see :func:`mrpctl.model.state`).
+    tau : float, keyword-only
+        Measurement delay τ >= 0 (s), a whole number of periods 1/rate.
+    rule : SwitchingRule, keyword-only
+        Shadow-set switching rule, e.g. ``OnDelayed()``.
+    t_final : float, keyword-only
+        Horizon (s), > 0.
+    rate : float, keyword-only
+        Measurement rate (Hz), default 1000.
+    history : {"constant", "zero-input"} or array_like, keyword-only
+        Measurements before t = 0: x0 (the paper's φ(θ) = x0; default), zero (u = 0
+        until the first measurement arrives), or a (d, 6) array m_{−d}, …, m_{−1}.
+    substeps : int, keyword-only
+        RK4 substeps per measurement period, 1 to 64 (default 1).
+    keep_every : int or None, keyword-only
+        Keep every k-th sample in the arrays (default 1: all); None keeps none (metrics
+        and switch instants only). Metrics are always over every sample. Memory: about
+        104 bytes per kept sample, plus the d-sample history.
+    memory_limit : float, keyword-only
+        Refuse up front a run whose kept arrays would exceed this many bytes; default half
+        of the memory available (``os.sysconf``).
+    progress : callable, keyword-only
+        ``progress(samples_done, n)`` after each slice; an exception raised by it
+        (KeyboardInterrupt included) stops the run and propagates.
+
+    Returns
+    -------
+    SimulationResult
+
+    Raises
+    ------
+    SpecificationError, DimensionError
+        On invalid inputs (NaN, negative τ, rate <= 0, t_final <= 0, τ · rate not an
+        integer, wrong shapes, unknown history, substeps outside 1..64, keep_every < 1),
+        or when the kept arrays would exceed ``memory_limit``.
+    """
+    spacecraft = check_spacecraft(spacecraft)
+    gain = gain_matrix(K)
+    x0 = finite_array("x0", x0, (STATE_SIZE,))
+    rule = check_rule(rule)
+    d = delay_samples(tau, rate)
+    rate = float(rate)
+    t_final, n = _samples(t_final, rate)
+    substeps = check_substeps(substeps)
+    keep = _keep_every(keep_every)
+    history_rows, history_value = _history(history, x0, d)
+    limit = _memory_limit(memory_limit)
+    _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps), limit, t_final=t_final, keep_every=keep)
+
+    found = engine(spacecraft, rule, d, 1.0 / rate, substeps)
+    stop = None
+    if progress is not None:
+
+        def stop(done: int) -> bool:
+            progress(done, n)
+            return False
+
+    output = found.run(
+        x0,
+        rule.initial_memory(delay_samples=d),
+        history_rows,
+        gain,
+        np.array(rule.parameters()),
+        n,
+        spacecraft=spacecraft,
+        keep_every=keep,
+        workspace=found.workspace(n, switches=True),
+        switch_limit=n if keep == 1 else SWITCH_LIMIT,
+        stop=stop,
+    )
+    common = dict(
+        spacecraft=spacecraft,
+        K=readonly(gain),
+        tau=float(tau),
+        rate=rate,
+        delay_samples=d,
+        rule=rule,
+        history=history_value,
+        substeps=substeps,
+        t_final=t_final,
+        x0=readonly(x0),
+    )
+    return assemble_run(output, n=n, keep_every=keep, common=common)
+
+
+# ======================================================================= batches
+def _broadcast(name: str, count: int, n: int) -> None:
+    if count not in (1, n):
+        raise DimensionError(f"{name}: expected 1 or {n} entries (one per run) but found {count}")
+
+
+def _threads(threads: Any) -> int:
+    if threads is None:
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return integer("threads", threads, minimum=1)
+
+
+def simulate_batch(
+    spacecraft: Spacecraft | Sequence[Spacecraft],
+    K: Any,
+    x0: Any,
+    *,
+    tau: Any,
+    rule: SwitchingRule | Sequence[SwitchingRule],
+    t_final: float,
+    rate: float = 1000.0,
+    history: Any = "constant",
+    substeps: int = 1,
+    trajectories: bool = False,
+    keep_every: int | None = 1,
+    threads: int | None = None,
+    memory_limit: float | None = None,
+    progress: Callable[[int, int], Any] | None = None,
+) -> BatchResult:
+    """Simulate many runs at once on several threads.
+
+    Compiled runs are spread over a pool of worker threads, each with its own buffers
+    (reused from run to run), calling the generated library slice by slice; Ctrl-C (or an
+    exception from ``progress``) sets a stop flag that the workers check between slices.
+    Without a C compiler the runs are evaluated one after the other in CasADi's virtual
+    machine.
+
+    Any of ``spacecraft``, ``x0``, ``K``, ``tau`` and ``rule`` may be given once (shared)
+    or once per run.
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft or sequence of Spacecraft
+        The plant, or one per run.
+    K : array_like
+        (3, 6) or (N, 3, 6) gains on x = [σ; ω/4].
+    x0 : array_like
+        (6,) or (N, 6) initial states x = [σ; ω/4].
+    tau : float or array_like, keyword-only
+        Delay(s) (s), each a whole number of periods 1/rate; runs of the same structure
+        (spacecraft, delay) share one compiled engine.
+    rule : SwitchingRule or sequence of SwitchingRule, keyword-only
+        One rule, or one per run (their parameters, such as ε, may differ).
+    t_final, rate, history, substeps
+        As in :func:`simulate`; ``history`` is shared by all runs (an array is allowed
+        only when all runs have the same delay).
+    trajectories : bool, keyword-only
+        Also return every run as a :class:`SimulationResult` (memory: about 104 bytes per
+        kept sample and run).
+    keep_every : int or None, keyword-only
+        With ``trajectories``, the samples kept per run, as in :func:`simulate`.
+    threads : int, keyword-only
+        Worker threads; default: the CPUs available to this process.
+    memory_limit : float, keyword-only
+        As in :func:`simulate`, for all the runs kept.
+    progress : callable, keyword-only
+        ``progress(samples_done, samples_total)``, called from the calling thread while
+        the workers run; an exception raised by it stops the batch and propagates.
+
+    Returns
+    -------
+    BatchResult
+    """
+    crafts = (spacecraft,) if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
+    if not crafts:
+        raise SpecificationError("spacecraft: give a Spacecraft or a non-empty sequence of them")
+    for i, each in enumerate(crafts):
+        check_spacecraft(each, "spacecraft" if len(crafts) == 1 else f"spacecraft[{i}]")
+    states = finite_array("x0", x0, (None, STATE_SIZE)).reshape(-1, STATE_SIZE)
+    gains = finite_array("K", K)
+    if gains.shape == (INPUT_SIZE, STATE_SIZE):
+        gains = gains[None]
+    if gains.ndim != 3 or gains.shape[1:] != (INPUT_SIZE, STATE_SIZE):
+        raise DimensionError(f"K: expected shape (3, 6) or (N, 3, 6) but found {np.shape(K)}")
+    delays = np.atleast_1d(finite_array("tau", tau))
+    if delays.ndim != 1:
+        raise DimensionError(f"tau: expected a scalar or shape (N,) but found {delays.shape}")
+    rules = (rule,) if isinstance(rule, SwitchingRule) else tuple(rule)
+    if not rules:
+        raise SpecificationError("rule: give a switching rule or a non-empty sequence of rules")
+    for one in rules:
+        check_rule(one)
+    n_runs = max(len(states), len(gains), len(delays), len(rules), len(crafts))
+    for name, count in (
+        ("spacecraft", len(crafts)),
+        ("x0", len(states)),
+        ("K", len(gains)),
+        ("tau", len(delays)),
+        ("rule", len(rules)),
+    ):
+        _broadcast(name, count, n_runs)
+    states = np.broadcast_to(states, (n_runs, STATE_SIZE))
+    gains = np.broadcast_to(gains, (n_runs, INPUT_SIZE, STATE_SIZE))
+    delays = np.broadcast_to(delays, (n_runs,))
+    rules = rules * n_runs if len(rules) == 1 else rules
+    crafts = crafts * n_runs if len(crafts) == 1 else crafts
+    rate = positive_scalar("rate", rate)
+    samples_by_run = [delay_samples(value, rate) for value in delays]
+    t_final, n = _samples(t_final, rate)
+    substeps = check_substeps(substeps)
+    threads = _threads(threads)
+    keep = _keep_every(keep_every) if trajectories else None
+    if not isinstance(history, str) and len(set(samples_by_run)) > 1:
+        raise SpecificationError("history: an array history needs all runs to have the same tau")
+    histories = [_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
+    limit = _memory_limit(memory_limit)
+    workers = min(threads, n_runs)
+    estimate = workers * workspace_bytes(n, max(samples_by_run), substeps) + n_runs * STATS_SIZE * 8 * 4
+    if trajectories:
+        estimate += n_runs * run_bytes(n, keep)
+    _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
+
+    by_structure: dict[tuple[int, int, int], Any] = {}  # objects alive during the call: id() is safe
+    engines = []
+    for i in range(n_runs):
+        key = (id(crafts[i]), id(rules[i]), samples_by_run[i])
+        if key not in by_structure:
+            by_structure[key] = engine(crafts[i], rules[i], samples_by_run[i], 1.0 / rate, substeps)
+        engines.append(by_structure[key])
+    outputs: list[RunOutput | None] = [None] * n_runs
+    stop_flag = threading.Event()
+    done_samples = [0] * workers
+    work: queue.SimpleQueue[int] = queue.SimpleQueue()
+    for i in range(n_runs):
+        work.put(i)
+
+    def worker(slot: int) -> None:
+        spaces: dict[int, Any] = {}
+        previous = 0
+
+        def stop(done: int) -> bool:
+            done_samples[slot] = previous + done
+            return stop_flag.is_set()
+
+        while not stop_flag.is_set():
+            try:
+                i = work.get_nowait()
+            except queue.Empty:
+                return
+            found = engines[i]
+            space = spaces.get(id(found))
+            if space is None:
+                space = spaces[id(found)] = found.workspace(n, switches=trajectories)
+            d = samples_by_run[i]
+            outputs[i] = found.run(
+                states[i],
+                rules[i].initial_memory(delay_samples=d),
+                histories[i][0],
+                gains[i],
+                np.array(rules[i].parameters()),
+                n,
+                spacecraft=crafts[i],
+                keep_every=keep,
+                workspace=space,
+                switch_limit=n if keep == 1 else SWITCH_LIMIT,
+                stop=stop,
+            )
+            previous += n
+            done_samples[slot] = previous
+
+    compiled = all(each.compiled_code for each in engines)
+    count = workers if compiled else 1  # the virtual machine: one run after the other
+    jobs: list[Callable[[], None]] = [functools.partial(worker, slot) for slot in range(count)]
+    _run_polled(jobs, progress, done_samples, n * n_runs, stop_flag, count)
+
+    stats = np.array([output.stats for output in outputs if output is not None]).reshape(n_runs, STATS_SIZE)
+    runs: list[SimulationResult] | None = None
+    if trajectories:
+        runs = []
+        for i, output in enumerate(outputs):
+            assert output is not None
+            runs.append(
+                assemble_run(
+                    output,
+                    n=n,
+                    keep_every=keep,
+                    common=dict(
+                        spacecraft=crafts[i],
+                        K=readonly(gains[i]),
+                        tau=float(delays[i]),
+                        rate=rate,
+                        delay_samples=samples_by_run[i],
+                        rule=rules[i],
+                        history=histories[i][1],
+                        substeps=substeps,
+                        t_final=t_final,
+                        x0=readonly(states[i]),
+                    ),
+                )
+            )
+    return assemble_batch(
+        stats,
+        n=n,
+        rate=rate,
+        runs=runs,
+        common=dict(
+            x0=readonly(states),
+            K=readonly(gains),
+            tau=readonly(delays),
+            rules=tuple(rules),
+            spacecraft=tuple(crafts),
+            t_final=t_final,
+            substeps=substeps,
+            history=history if isinstance(history, str) else readonly(history),
+        ),
+    )
+
+
+def _run_polled(
+    jobs: list[Callable[[], None]],
+    progress: Callable[[int, int], Any] | None,
+    done_samples: list[int],
+    total: int,
+    stop_flag: threading.Event,
+    count: int,
+) -> None:
+    """Run ``jobs`` on ``count`` threads; the calling thread waits (so Ctrl-C reaches it),
+    calls ``progress`` and, on any exception, sets ``stop_flag`` and waits for the workers
+    (each stops within one slice) before re-raising."""
+    pool = ThreadPoolExecutor(max_workers=count)
+    try:
+        futures = [pool.submit(job) for job in jobs]
+        reported = -1
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, timeout=0.05, return_when=FIRST_EXCEPTION)
+            for future in finished:
+                future.result()  # a worker's exception propagates
+            if progress is not None:
+                done = sum(done_samples)
+                if done != reported:
+                    reported = done
+                    progress(done, total)
+    except BaseException:
+        stop_flag.set()
+        raise
+    finally:
+        pool.shutdown(wait=True)

@@ -1,0 +1,196 @@
+"""The engine without a C compiler: blocks of samples chained in CasADi's virtual machine.
+
+A block is a whole number of chunks of max(d, 1) samples (about 500 samples; a
+``mapaccum`` of chunks, the method of steps), expanded to one SX Function; a run is the
+chain of blocks covering the horizon, evaluated by CasADi. It gives what the compiled
+engine gives (to rounding: the VM's evaluation order may differ in the last bits) but
+keeps the whole run in memory and is not interrupted between slices.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from mrpctl.loop import InertiaInput, inertia_values
+from mrpctl.model import STATE_SIZE
+from mrpctl.simulation._engine import RunOutput, Workspace
+from mrpctl.simulation._stats import S_DIVERGED, STATS_SIZE, initial_stats
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import MEMORY_SIZE
+
+_BLOCK_TARGET = 500  # samples per block (a whole number of chunks)
+
+
+def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function, int]:
+    """A whole number of chunks of max(d, 1) samples (about 500 samples), as one MX Function.
+
+    ``block(x, memory, stats, history, K, parameters[, J, J_inv]) ->
+    (x_end, memory_end, stats_end, history_end, measurements, u, switched)``: the inputs after
+    ``history`` are the sample's constant inputs (the same at every sample).
+    """
+    length = max(d, 1)
+    chunks = max(1, round(_BLOCK_TARGET / length))
+    samples = chunks * length
+    x = ca.MX.sym("x", STATE_SIZE)
+    memory = ca.MX.sym("memory", MEMORY_SIZE)
+    stats = ca.MX.sym("stats", STATS_SIZE)
+    history = ca.MX.sym("history", STATE_SIZE, length)
+    constants = _constant_symbols(sample)
+    names = ["x", "memory", "stats", "history"] + [sample.name_in(i) for i in range(4, sample.n_in())]
+
+    # One chunk: the method of steps over d samples (accumulators x, memory, stats).
+    chunk_samples = sample.mapaccum("chunk_samples", length, 3)
+    xs, memories, statss, measurements, u, switched = chunk_samples(
+        x, memory, stats, history, *[ca.repmat(value, 1, length) for value in constants]
+    )
+    chunk = ca.Function(
+        "chunk",
+        [x, memory, stats, history, *constants],
+        [xs[:, -1], memories[:, -1], statss[:, -1], measurements, u, switched],
+        names,
+        ["x_end", "memory_end", "stats_end", "measurements", "u", "switched"],
+    )
+    # A block: chunks chained, each one's measurements being the next one's history.
+    chained = chunk.mapaccum("block_chunks", chunks, 4)
+    xs, memories, statss, measurements, u, switched = chained(
+        x, memory, stats, history, *[ca.repmat(value, 1, chunks) for value in constants]
+    )
+    block = ca.Function(
+        name,
+        [x, memory, stats, history, *constants],
+        [
+            xs[:, -1],
+            memories[:, -1],
+            statss[:, -1],
+            measurements[:, samples - length :],
+            measurements,
+            u,
+            switched,
+        ],
+        names,
+        ["x_end", "memory_end", "stats_end", "history_end", "measurements", "u", "switched"],
+    )
+    return block, samples
+
+
+def _constant_symbols(sample: ca.Function) -> list[ca.MX]:
+    """MX symbols for the sample's inputs after x, memory, stats, x_delayed (K, parameters, ...)."""
+    return [ca.MX.sym(sample.name_in(i), sample.sparsity_in(i)) for i in range(4, sample.n_in())]
+
+
+class VirtualMachineEngine:
+    """The engine of one structure in CasADi's virtual machine (see the module docstring)."""
+
+    compiled_code = False
+
+    def __init__(self, sample: ca.Function, d: int, inertia: InertiaInput) -> None:
+        self.d = d
+        self.inertia = inertia
+        self.sample = sample
+        self.history_columns = max(d, 1)
+        block, self.block_samples = _block_function(sample, d, sample.name().replace("sample", "block"))
+        self.block = block.expand()  # one SX Function: no MX layers per sample in the VM
+        self._horizons: dict[tuple[int, bool], ca.Function] = {}
+        self._lock = threading.Lock()
+
+    def blocks(self, n: int) -> int:
+        """Blocks of the chain covering n samples."""
+        return -(-n // self.block_samples)
+
+    def workspace(self, n: int, switches: bool) -> Workspace:
+        return Workspace(state=np.empty(0), ring=np.empty((0, STATE_SIZE)), switched=np.empty(0) if switches else None)
+
+    def history_block(self, history: np.ndarray) -> np.ndarray:
+        """(6, max(d, 1)) history block from (columns, 6) measurements (one column: constant)."""
+        if history.shape[0] == self.history_columns:
+            return np.ascontiguousarray(history.T)
+        return np.tile(history[0][:, None], (1, self.history_columns))
+
+    def run(
+        self,
+        x0: np.ndarray,
+        memory0: float,
+        history: np.ndarray,
+        gain: np.ndarray,
+        parameters: np.ndarray,
+        n: int,
+        *,
+        spacecraft: Spacecraft,
+        keep_every: int | None,
+        workspace: Workspace,
+        switch_limit: int = 0,
+        stop: Callable[[int], bool] | None = None,
+    ) -> RunOutput:
+        """As :meth:`mrpctl.simulation._engine.Engine.run`, the whole horizon at once."""
+        trajectories = keep_every is not None or workspace.switched is not None
+        inertia = inertia_values(spacecraft, self.inertia)
+        out = self.horizon(self.blocks(n), trajectories)(
+            x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *inertia
+        )
+        if not trajectories:
+            return self.output(np.asarray(out).ravel(), n, None, None, None, keep_every, workspace, switch_limit)
+        stats, measurements, u, switched = (np.asarray(value) for value in out)
+        return self.output(stats.ravel(), n, measurements.T, u.T, switched.ravel(), keep_every, workspace, switch_limit)
+
+    @staticmethod
+    def output(
+        stats: np.ndarray,
+        n: int,
+        measurements: np.ndarray | None,
+        u: np.ndarray | None,
+        switched: np.ndarray | None,
+        keep_every: int | None,
+        workspace: Workspace,
+        switch_limit: int,
+    ) -> RunOutput:
+        """What the compiled engine returns, from whole-horizon arrays."""
+        valid = int(stats[S_DIVERGED]) + 1 if stats[S_DIVERGED] >= 0 else n
+        indices = None
+        if workspace.switched is not None and switched is not None:
+            indices = np.flatnonzero(switched[:valid] > 0.5)[:switch_limit]
+        kept_m = kept_u = None
+        if keep_every is not None and measurements is not None and u is not None:
+            kept_m = np.ascontiguousarray(measurements[:n:keep_every])
+            kept_u = np.ascontiguousarray(u[:n:keep_every])
+        return RunOutput(stats=stats, samples=valid, measurements=kept_m, u=kept_u, switch_indices=indices)
+
+    def horizon(self, blocks: int, trajectories: bool) -> ca.Function:
+        """The chain of ``blocks`` blocks as a CasADi Function (for the virtual machine).
+
+        ``horizon(x, memory, stats, history, K, parameters[, J, J_inv]) -> (stats_end[, measurements, u, switched])``.
+        """
+        key = (blocks, trajectories)
+        with self._lock:
+            if key not in self._horizons:
+                self._horizons[key] = self._build_horizon(blocks, trajectories)
+            return self._horizons[key]
+
+    def _build_horizon(self, blocks: int, trajectories: bool) -> ca.Function:
+        x = ca.MX.sym("x", STATE_SIZE)
+        memory = ca.MX.sym("memory", MEMORY_SIZE)
+        stats = ca.MX.sym("stats", STATS_SIZE)
+        history = ca.MX.sym("history", STATE_SIZE, self.history_columns)
+        constants = _constant_symbols(self.sample)
+        carry: tuple[Any, ...] = (x, memory, stats, history)
+        pieces: list[tuple[Any, ...]] = []
+        for _ in range(blocks):
+            out = self.block(*carry, *constants)
+            carry = tuple(out[0:4])
+            pieces.append(tuple(out[4:7]))
+        outputs = [carry[2]]
+        names = ["stats_end"]
+        if trajectories:
+            outputs += [ca.horzcat(*[piece[i] for piece in pieces]) for i in range(3)]
+            names += ["measurements", "u", "switched"]
+        return ca.Function(
+            "horizon",
+            [x, memory, stats, history, *constants],
+            outputs,
+            ["x", "memory", "stats", "history"] + [self.sample.name_in(i) for i in range(4, self.sample.n_in())],
+            names,
+        )

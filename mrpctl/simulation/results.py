@@ -1,0 +1,317 @@
+"""Results of closed-loop runs: :class:`SimulationResult`, :class:`BatchResult`, and their assembly."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mrpctl._validation import readonly, sealed
+from mrpctl.simulation._engine import RunOutput
+from mrpctl.simulation._stats import DIVERGENCE_BOUND, Metrics
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import SwitchingRule
+
+__all__ = ["BatchResult", "SimulationResult"]
+
+logger = logging.getLogger("mrpctl.simulation")
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """One closed-loop run, sampled at the measurement instants t_k = k h.
+
+    ``sigma``, ``omega`` are the state at t_k *after* the switching rule (the recorded
+    measurement m_k), ``u`` the torque held over [t_k, t_{k+1}). With ``keep_every = k``
+    only every k-th sample is kept (t_0, t_k, t_2k, …); with ``keep_every = None`` none
+    (the arrays are empty) — the metrics and the switch instants are those of every sample.
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        (m,) times of the kept samples (s); with every sample kept, m = n =
+        floor(t_final · rate) + 1, fewer if the run diverged.
+    sigma : numpy.ndarray
+        (m, 3) MRPs σ (dimensionless).
+    omega : numpy.ndarray
+        (m, 3) body rates ω (rad/s).
+    u : numpy.ndarray
+        (m, 3) control torque (N m).
+    switch_indices : numpy.ndarray
+        Sample indices k at which σ was replaced by its shadow (all of them; when
+        ``keep_every != 1``, at most the first 2**20, see ``switch_count``).
+    switch_times : numpy.ndarray
+        The same as times (s).
+    switch_count : int
+        Number of shadow-set switches (exact, even when ``switch_indices`` was cut).
+    first_switch_time, last_switch_time : float or None
+        Times of the first and last switch (s), None if there was none.
+    sign_flips : numpy.ndarray
+        (3,) number of sign changes u_i(t_k) u_i(t_{k−1}) < 0 per torque axis.
+    max_sigma : float
+        max_k |σ(t_k)| over every sample.
+    peak_torque : float
+        max_k |u_k|_∞ over every sample (N m).
+    settling_time : float or None
+        First t_k from which |σ| < 1e-2 and |ω| < 1e-3 rad/s to the end; None if the run
+        does not settle (or diverged).
+    diverged : bool
+        True when |σ| or |ω| exceeded 1e6 or stopped being finite; the run stopped there
+        and the arrays end at the last good sample.
+    samples : int
+        Samples simulated (n, or up to the diverging one).
+    spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
+        The inputs of the run.
+    """
+
+    t: np.ndarray = field(repr=False)
+    sigma: np.ndarray = field(repr=False)
+    omega: np.ndarray = field(repr=False)
+    u: np.ndarray = field(repr=False)
+    switch_indices: np.ndarray = field(repr=False)
+    switch_times: np.ndarray = field(repr=False)
+    switch_count: int
+    first_switch_time: float | None
+    last_switch_time: float | None
+    sign_flips: np.ndarray = field(repr=False)
+    max_sigma: float
+    peak_torque: float
+    settling_time: float | None
+    diverged: bool
+    samples: int
+    spacecraft: Spacecraft
+    K: np.ndarray = field(repr=False)
+    tau: float
+    rate: float
+    delay_samples: int
+    rule: SwitchingRule
+    history: Any = field(repr=False)
+    substeps: int
+    x0: np.ndarray = field(repr=False)
+    t_final: float
+    keep_every: int | None = 1
+
+    @property
+    def converged(self) -> bool:
+        """True when the run settled (|σ| < 1e-2, |ω| < 1e-3 rad/s) and stayed so to the end."""
+        return self.settling_time is not None
+
+    @property
+    def period(self) -> float:
+        """Measurement period h (s)."""
+        return 1.0 / self.rate
+
+    @property
+    def x(self) -> np.ndarray:
+        """(m, 6) states x = [σ; ω/4] of the kept samples."""
+        return np.hstack((self.sigma, self.omega / 4.0))
+
+    def plot(self, **kwargs: Any) -> Any:
+        """Plot the run: :func:`mrpctl.plots.plot_response` (``kwargs`` passed on)."""
+        from mrpctl.plots import plot_response
+
+        return plot_response(self, **kwargs)
+
+    def to_xarray(self) -> Any:
+        """The result as a labelled ``xarray.Dataset`` (:func:`mrpctl.data.to_xarray`)."""
+        from mrpctl.data import to_xarray
+
+        return to_xarray(self)
+
+    def to_pandas(self) -> Any:
+        """The result as a ``pandas.DataFrame`` (:func:`mrpctl.data.to_pandas`)."""
+        from mrpctl.data import to_pandas
+
+        return to_pandas(self)
+
+    def __str__(self) -> str:
+        history = self.history if isinstance(self.history, str) else f"array {self.history.shape}"
+        if self.diverged:
+            status = f"DIVERGED at t = {(self.samples - 1) / self.rate:.3f} s"
+        elif self.converged:
+            status = f"converged, settling time {self.settling_time:.3f} s"
+        else:
+            status = "not settled"
+        last = "" if self.last_switch_time is None else f", last at {self.last_switch_time:.3f} s"
+        first = "" if self.first_switch_time is None else f", first at {self.first_switch_time:.3f} s"
+        kept = {1: "every sample", None: "metrics only"}.get(self.keep_every, f"every {self.keep_every}th sample")
+        return "\n".join(
+            (
+                f"Simulation {self.t_final:g} s, tau = {self.tau:g} s ({self.delay_samples} samples at "
+                f"{self.rate:g} Hz), history {history}, RK4 x{self.substeps}, {kept} kept",
+                f"  rule         {self.rule}",
+                f"  switches     {self.switch_count}{first}{last}",
+                f"  sign flips   u1 {self.sign_flips[0]}, u2 {self.sign_flips[1]}, u3 {self.sign_flips[2]}",
+                f"  max |sigma|  {self.max_sigma:.6f}",
+                f"  peak torque  {self.peak_torque:.6g} N m",
+                f"  status       {status}",
+            )
+        )
+
+
+def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: dict[str, Any]) -> SimulationResult:
+    """The one place a :class:`SimulationResult` is built from what an engine returned."""
+    rate = common["rate"]
+    metrics = Metrics.from_stats(output.stats)
+    valid = metrics.valid_samples(n)
+    if keep_every is None or output.measurements is None or output.u is None:
+        measurements = np.zeros((0, 6))
+        u = np.zeros((0, 3))
+        t = np.zeros(0)
+    else:
+        kept = (valid - 1) // keep_every + 1
+        measurements = output.measurements[:kept]
+        u = output.u[:kept]
+        t = np.arange(0, valid, keep_every) / rate
+    indices = output.switch_indices if output.switch_indices is not None else np.zeros(0, np.int64)
+    if metrics.diverged:
+        settling = None
+        logger.info("run diverged at t = %.4f s (|sigma| or |omega| > %g)", (valid - 1) / rate, DIVERGENCE_BOUND)
+    else:
+        settle_index = metrics.unsettled_index + 1
+        settling = settle_index / rate if settle_index < n else None
+    first, last = metrics.first_switch_index, metrics.last_switch_index
+    return SimulationResult(
+        t=sealed(t),
+        sigma=sealed(measurements[:, 0:3]),
+        omega=sealed(4.0 * measurements[:, 3:6]),
+        u=sealed(u),
+        switch_indices=readonly(indices, np.int64),
+        switch_times=readonly(indices / rate),
+        switch_count=metrics.switch_count,
+        first_switch_time=first / rate if first >= 0 else None,
+        last_switch_time=last / rate if last >= 0 else None,
+        sign_flips=readonly(metrics.sign_flips, np.int64),
+        max_sigma=metrics.max_sigma,
+        peak_torque=metrics.peak_torque,
+        settling_time=settling,
+        diverged=metrics.diverged,
+        samples=valid,
+        keep_every=keep_every,
+        **common,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class BatchResult:
+    """Metrics of many closed-loop runs (one entry per run, in input order).
+
+    Attributes
+    ----------
+    x0 : numpy.ndarray
+        (N, 6) initial states.
+    K : numpy.ndarray
+        (N, 3, 6) gains.
+    tau : numpy.ndarray
+        (N,) delays (s).
+    rules : tuple of SwitchingRule
+        The rule of each run.
+    spacecraft : tuple of Spacecraft
+        The spacecraft of each run.
+    switch_count : numpy.ndarray
+        (N,) number of switches.
+    first_switch_time, last_switch_time : numpy.ndarray
+        (N,) times of the first and last switch (s); NaN when a run never switched.
+    sign_flips : numpy.ndarray
+        (N, 3) torque sign changes per axis.
+    settling_time : numpy.ndarray
+        (N,) settling time (s), NaN when the run did not settle.
+    converged, diverged : numpy.ndarray
+        (N,) booleans.
+    max_sigma : numpy.ndarray
+        (N,) max |σ| over the run.
+    peak_torque : numpy.ndarray
+        (N,) max over the run of |u|_∞ (N m).
+    runs : tuple of SimulationResult or None
+        The full runs when ``trajectories=True`` was asked for.
+    rate, t_final, substeps, history
+        The shared inputs.
+    """
+
+    x0: np.ndarray = field(repr=False)
+    K: np.ndarray = field(repr=False)
+    tau: np.ndarray = field(repr=False)
+    rules: tuple[SwitchingRule, ...] = field(repr=False)
+    switch_count: np.ndarray = field(repr=False)
+    first_switch_time: np.ndarray = field(repr=False)
+    last_switch_time: np.ndarray = field(repr=False)
+    sign_flips: np.ndarray = field(repr=False)
+    settling_time: np.ndarray = field(repr=False)
+    converged: np.ndarray = field(repr=False)
+    diverged: np.ndarray = field(repr=False)
+    max_sigma: np.ndarray = field(repr=False)
+    peak_torque: np.ndarray = field(repr=False)
+    rate: float
+    t_final: float
+    substeps: int
+    history: Any = field(repr=False)
+    spacecraft: tuple[Spacecraft, ...] = field(default=(), repr=False)
+    runs: tuple[SimulationResult, ...] | None = field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.switch_count)
+
+    def plot(self, **kwargs: Any) -> Any:
+        """Plot the batch: :func:`mrpctl.plots.plot_batch` (``kwargs`` passed on)."""
+        from mrpctl.plots import plot_batch
+
+        return plot_batch(self, **kwargs)
+
+    def to_xarray(self) -> Any:
+        """The result as a labelled ``xarray.Dataset`` (:func:`mrpctl.data.to_xarray`)."""
+        from mrpctl.data import to_xarray
+
+        return to_xarray(self)
+
+    def to_pandas(self) -> Any:
+        """The result as a ``pandas.DataFrame`` (:func:`mrpctl.data.to_pandas`)."""
+        from mrpctl.data import to_pandas
+
+        return to_pandas(self)
+
+    def __str__(self) -> str:
+        n = len(self)
+        switching = self.last_switch_time[np.isfinite(self.last_switch_time)]
+        latest = f"{switching.max():.3f} s" if switching.size else "none"
+        rules = sorted({str(rule) for rule in self.rules})
+        return "\n".join(
+            (
+                f"Batch of {n} runs over {self.t_final:g} s at {self.rate:g} Hz, "
+                f"tau in [{self.tau.min():g}, {self.tau.max():g}] s",
+                "  rule         " + "; ".join(rules),
+                f"  converged    {int(self.converged.sum())}/{n}, diverged {int(self.diverged.sum())}",
+                f"  switches     median {np.median(self.switch_count):g}, max {self.switch_count.max()}, "
+                f"latest switch {latest}",
+                f"  max |sigma|  {self.max_sigma.max():.6f}",
+                f"  peak torque  {self.peak_torque.max():.6g} N m",
+            )
+        )
+
+
+def assemble_batch(
+    stats: np.ndarray, *, n: int, rate: float, common: dict[str, Any], runs: list[SimulationResult] | None
+) -> BatchResult:
+    """The :class:`BatchResult` from the (N, stats) rows of the runs."""
+    metrics = [Metrics.from_stats(row) for row in stats]
+    n_runs = len(metrics)
+    diverged = np.array([m.diverged for m in metrics], dtype=bool)
+    settle = np.array([m.unsettled_index + 1 for m in metrics], dtype=float)
+    settled = ~diverged & (settle < n)
+    first = np.array([m.first_switch_index for m in metrics], dtype=float)
+    last = np.array([m.last_switch_index for m in metrics], dtype=float)
+    return BatchResult(
+        switch_count=readonly([m.switch_count for m in metrics], np.int64),
+        first_switch_time=readonly(np.where(first >= 0, first / rate, np.nan)),
+        last_switch_time=readonly(np.where(last >= 0, last / rate, np.nan)),
+        sign_flips=readonly([m.sign_flips for m in metrics], np.int64).reshape(n_runs, 3),
+        settling_time=readonly(np.where(settled, settle / rate, np.nan)),
+        converged=readonly(settled, bool),
+        diverged=readonly(diverged, bool),
+        max_sigma=readonly([m.max_sigma for m in metrics]),
+        peak_torque=readonly([m.peak_torque for m in metrics]),
+        rate=rate,
+        runs=tuple(runs) if runs is not None else None,
+        **common,
+    )
