@@ -89,4 +89,6 @@ def test_bad_input_is_refused() -> None:
         certify_interval(BENCH_A, BENCH_AD, 1.0, rate=True)  # type: ignore[arg-type]
     with pytest.raises(SpecificationError, match="lower <= upper"):
         DelayRate.between(1.0, 0.0)
+    with pytest.raises(SpecificationError, match="must contain 0"):
+        DelayRate.between(1.0, 1.0)
     assert DelayRate.sawtooth().kind is RateKind.SAWTOOTH and DelayRate.unknown().vertices == ()

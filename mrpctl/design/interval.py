@@ -78,6 +78,11 @@ class DelayRate:
         hi = finite_scalar("upper", upper)
         if hi < lo:
             raise SpecificationError(f"rate bounds must satisfy lower <= upper, got [{lo}, {hi}]")
+        if lo > 0.0 or hi < 0.0:
+            raise SpecificationError(
+                f"rate bounds [{lo}, {hi}] must contain 0: a continuous delay that stays in [tau_min, tau_max] "
+                "has mean rate 0 (for the sampled-data delay use DelayRate.sawtooth())"
+            )
         return cls(RateKind.BOUNDED, lo, hi)
 
     @classmethod
@@ -262,7 +267,7 @@ def _g_matrix(lay: _Layout, h1: float, tau: float, rate: DelayRate) -> np.ndarra
         rows += [h1 * lay.e(f"O0{k}") for k in range(lay.order)]
     ia = (tau - h1) * lay.e("Oa0")
     ib = (1.0 - tau) * lay.e("Ob0")
-    rows += [ia + ib] if rate.kind is RateKind.UNKNOWN else [ia, ib]
+    rows += [ia + ib] if _merged(rate) else [ia, ib]
     return np.vstack(rows)
 
 
@@ -273,17 +278,27 @@ def _h_matrix(lay: _Layout, f0: np.ndarray, rate: DelayRate, d: float) -> np.nda
         return f0
     if lay.has0:
         rows += lay.bessel("x0", "x1", "0")[: lay.order]
-    if rate.kind is RateKind.UNKNOWN:
+    if _merged(rate):
         rows.append(lay.e("x1") - lay.e("x2"))
     else:
         rows += [lay.e("x1") - (1.0 - d) * lay.e("xt"), (1.0 - d) * lay.e("xt") - lay.e("x2")]
     return np.vstack(rows)
 
 
+def _merged(rate: DelayRate) -> bool:
+    """ξ holds ∫_{t−h2}^{t−h1} x whole (not split at t − τ(t)) when τ is unknown or jumps.
+
+    The split integrals are continuous in t only for a continuous τ(t). The sampled-data sawtooth
+    resets τ at every sampling instant, where they would jump and ξᵀPξ could jump up: so the
+    sawtooth uses the merged integral, whose derivative does not involve τ̇ (and no Q term).
+    """
+    return rate.kind is not RateKind.BOUNDED
+
+
 def _xi_size(n: int, order: int, has0: bool, rate: DelayRate) -> int:
     if order == 0:
         return n
-    return n * (1 + order * int(has0) + (1 if rate.kind is RateKind.UNKNOWN else 2))
+    return n * (1 + order * int(has0) + (1 if _merged(rate) else 2))
 
 
 def _vertex_points(h1: float, rate: DelayRate) -> list[tuple[float, float]]:
@@ -307,7 +322,7 @@ def _phi(
     if lay.has0:
         phi = phi + mm(e0.T, mm(S1, e0)) - mm(e1.T, mm(S1, e1))
     phi = phi + mm(e1.T, mm(S2, e1)) - mm(e2.T, mm(S2, e2))
-    if rate.kind is not RateKind.UNKNOWN:
+    if rate.kind is RateKind.BOUNDED:
         phi = phi + mm(e1.T, mm(Q, e1)) - (1.0 - d) * mm(et.T, mm(Q, et))
     if _fridman(rate, lay.has0):
         # d = 0 only: W = (t_{k+1} − t)[∫_{t_k}^t ẋᵀUẋ + (x − x_k)ᵀ Z (x − x_k)], zero at t_k⁺ and t_{k+1}⁻
@@ -393,7 +408,7 @@ def interval_blocks(
     if has0:
         blocks["S1"] = _sym(mats["S1"])
         blocks["R1"] = _sym(mats["R1"])
-    if rate.kind is not RateKind.UNKNOWN:
+    if rate.kind is RateKind.BOUNDED:
         blocks["Q"] = _sym(mats["Q"])
     if _fridman(rate, has0):
         blocks["U"] = _sym(mats["U"])
@@ -440,8 +455,12 @@ def _solve_lmi(
     unknowns: Sequence[_Unknown],
     blocks: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]],
     fixed: dict[str, np.ndarray],
+    normalise: Sequence[str],
 ) -> tuple[SolveOutcome, dict[str, np.ndarray] | None, float]:
-    """Maximise t s.t. every block(mats) ≽ t I and the traces of the symmetric unknowns sum to 1.
+    """Maximise t s.t. every block(mats) ≽ t I and the traces of the ``normalise`` blocks sum to 1.
+
+    The normalised blocks must bound every unknown (e.g. P ≻ 0 itself, or τP + diag(0, S, ...)),
+    else t is unbounded.
 
     ``blocks`` must be linear in the unknowns. It is evaluated once per basis matrix, so the cvxpy
     problem is a few dense affine maps of one variable vector: fast to build, and built per call
@@ -455,13 +474,12 @@ def _solve_lmi(
     zero = {u.name: np.zeros((u.rows, u.cols)) for u in unknowns}
     columns: dict[str, list[np.ndarray]] = {}
     trace_row = np.zeros(len(bases))
-    sym_names = {u.name for u in unknowns if u.symmetric}
     for idx, (name, b) in enumerate(bases):
         mats = {**fixed, **zero, name: b}
         for key, block in blocks(mats).items():
             columns.setdefault(key, []).append(block.reshape(-1))
-        if name in sym_names:
-            trace_row[idx] = float(np.trace(b))
+            if key in normalise:
+                trace_row[idx] += float(np.trace(block))
     v = cp.Variable(len(bases), name="v")
     t = cp.Variable(name="t")
     cons = []
@@ -498,7 +516,7 @@ def _solve_interval(
     unknowns = [_Unknown("P", nx, nx, True), _Unknown("S2", n, n, True), _Unknown("R2", n, n, True)]
     if has0:
         unknowns += [_Unknown("S1", n, n, True), _Unknown("R1", n, n, True)]
-    if rate.kind is not RateKind.UNKNOWN:
+    if rate.kind is RateKind.BOUNDED:
         unknowns.append(_Unknown("Q", n, n, True))
     if _fridman(rate, has0):
         unknowns += [_Unknown("U", n, n, True), _Unknown("Z", n, n, True)]
@@ -509,7 +527,7 @@ def _solve_interval(
         return interval_blocks(scaled, h1, rate, mats, order=order)
 
     start = time.perf_counter()
-    outcome, values, t_opt = _solve_lmi(unknowns, blocks, fixed)
+    outcome, values, t_opt = _solve_lmi(unknowns, blocks, fixed, [u.name for u in unknowns if u.symmetric])
     elapsed = time.perf_counter() - start
     base: dict[str, Any] = {
         "order": order,

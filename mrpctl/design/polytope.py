@@ -172,7 +172,11 @@ def _vertex_loops(poly: InertiaPolytope, K: Any) -> list[tuple[np.ndarray, np.nd
     k = gain_matrix(K)
     a = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
     out = []
+    seen: set[bytes] = set()
     for jinv in poly.vertices:
+        if jinv.tobytes() in seen:
+            continue
+        seen.add(jinv.tobytes())
         b = np.vstack((np.zeros((3, 3)), jinv / 4.0))
         out.append((a, b @ k))
     return out
@@ -188,7 +192,8 @@ def _axis_loops(poly: InertiaPolytope, K: Any) -> list[list[tuple[np.ndarray, np
     axes = []
     for i in range(3):
         loops = []
-        for jinv in (poly.lower[i, i], poly.upper[i, i]):
+        # Equal ends (tolerance 0) give one vertex: duplicated LMIs made Clarabel inaccurate.
+        for jinv in sorted({float(poly.lower[i, i]), float(poly.upper[i, i])}):
             loops.append((a, np.array([[0.0, 0.0], [jinv * ks[i, i] / 4.0, jinv * kw[i, i] / 4.0]])))
         axes.append(loops)
     return axes
@@ -255,7 +260,7 @@ def _common_constant(
         return out
 
     start = time.perf_counter()
-    outcome, values, _ = _solve_lmi(unknowns, blocks, {})
+    outcome, values, _ = _solve_lmi(unknowns, blocks, {}, ["positivity[vertex 0]", "S[vertex 0]", "R[vertex 0]"])
     elapsed = time.perf_counter() - start
     if values is None:
         return CertificateStatus.SOLVER_FAILED, (), elapsed, outcome.error or f"solver status {outcome.status!r}"
