@@ -7,6 +7,14 @@ so ``import mrpctl.design`` is cheap.
 from __future__ import annotations
 
 from mrpctl.design.gains import AxisDamping, GainAnalysis, PDGains, analyze_gains, pd_gains
+from mrpctl.design.interval import (
+    DelayRate,
+    IntervalCertificate,
+    IntervalDelayCertification,
+    RateKind,
+    certify_interval,
+    max_certified_interval_delay,
+)
 from mrpctl.design.lmi import (
     JENSEN,
     WIRTINGER,
@@ -23,6 +31,28 @@ from mrpctl.design.lmi import (
 )
 from mrpctl.design.loop import LinearizedLoop, linearized_loop
 from mrpctl.design.margin import Crossing, DelayMargin, delay_margin
+from mrpctl.design.polytope import (
+    InertiaPolytope,
+    PolytopeCertificate,
+    certify_polytope,
+    exact_polytope_margin,
+    inertia_polytope,
+    max_certified_tolerance,
+    max_stable_tolerance,
+)
+from mrpctl.design.robust import DelayModel, RobustPDSynthesis, RobustStatus, synthesize_robust_pd
+from mrpctl.design.sampled import (
+    SampledCertification,
+    SampledStability,
+    certify_sampled,
+    lifted_matrices,
+    max_certified_delay_samples,
+    max_certified_period,
+    max_stable_delay_samples,
+    max_stable_period,
+    sampled_stability,
+    spacecraft_axes,
+)
 from mrpctl.design.synthesis import LMISynthesis, PDSynthesis, SynthesisStatus, synthesize_lmi, synthesize_pd
 
 __all__ = [
@@ -35,22 +65,49 @@ __all__ = [
     "Crossing",
     "DelayCertification",
     "DelayMargin",
+    "DelayModel",
+    "DelayRate",
     "GainAnalysis",
+    "InertiaPolytope",
+    "IntervalCertificate",
+    "IntervalDelayCertification",
     "LMISynthesis",
     "LinearizedLoop",
     "PDGains",
     "PDSynthesis",
+    "PolytopeCertificate",
     "Positivity",
+    "RateKind",
+    "RobustPDSynthesis",
+    "RobustStatus",
+    "SampledCertification",
+    "SampledStability",
     "SearchStatus",
     "SynthesisStatus",
     "analyze_gains",
     "certify",
+    "certify_interval",
+    "certify_polytope",
+    "certify_sampled",
     "criterion_name",
     "delay_margin",
+    "exact_polytope_margin",
+    "inertia_polytope",
+    "lifted_matrices",
     "linearized_loop",
     "lmi_blocks",
     "max_certified_delay",
+    "max_certified_delay_samples",
+    "max_certified_interval_delay",
+    "max_certified_period",
+    "max_certified_tolerance",
+    "max_stable_delay_samples",
+    "max_stable_period",
+    "max_stable_tolerance",
     "pd_gains",
+    "sampled_stability",
+    "spacecraft_axes",
     "synthesize_lmi",
     "synthesize_pd",
+    "synthesize_robust_pd",
 ]

@@ -1,0 +1,428 @@
+"""Inertia uncertainty: a polytope of linearised loops from a nominal Spacecraft and tolerances.
+
+The J-set: J = J₀ + diag(δ) + E with |δᵢ| ≤ tol·J₀,ᵢᵢ (per-axis relative tolerance on the diagonal
+of the nominal J₀, which must be diagonal) and symmetric off-diagonal products of inertia
+|E_ij| ≤ ``product_bound`` (kg m²). The loop matrix A_d = B(J) K = [[0, 0], [J⁻¹K_σ/4, J⁻¹K_ω/4]] is
+affine in J⁻¹, not in J, so the certified set is a box in the entries of J⁻¹ that contains the
+image of the J-set (:func:`inverse_box`):
+
+- products of inertia zero: J⁻¹ = diag(1/Jᵢᵢ) and the box [1/((1+tol)J₀,ᵢᵢ), 1/((1−tol)J₀,ᵢᵢ)] is the
+  image itself (exact; its 8 vertices are physical inertias);
+- otherwise: J = D + E, J⁻¹ = D⁻¹ − D⁻¹ E D⁻¹ + R with ‖R‖₂ ≤ ‖D⁻¹‖³‖E‖²/(1 − ‖D⁻¹‖‖E‖); interval bounds
+  of the first two terms plus ±‖R‖₂ on every entry give a box of the 6 entries (64 vertices).
+
+Every plant of the convex hull of the vertices is certified by one common Lyapunov-Krasovskii
+functional (the vertex LMIs are affine in A_d). Vertices of the outer box that are not the
+inverse of a physical inertia (not positive definite, or violating the triangle inequality) are
+KEPT: certifying a superset is sound, only more conservative; :attr:`InertiaPolytope.nonphysical`
+counts them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar
+from mrpctl.design._common import frozen, order_value
+from mrpctl.design.interval import (
+    DelayRate,
+    IntervalCertificate,
+    _margins,
+    _rate_value,
+    _solve_interval,
+    _solve_lmi,
+    _Unknown,
+)
+from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, lmi_blocks
+from mrpctl.errors import SpecificationError
+from mrpctl.model import gain_matrix
+from mrpctl.spacecraft import Spacecraft
+
+__all__ = [
+    "InertiaPolytope",
+    "PolytopeCertificate",
+    "certify_polytope",
+    "exact_polytope_margin",
+    "inertia_polytope",
+    "inverse_box",
+    "max_certified_tolerance",
+    "max_stable_tolerance",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class InertiaPolytope:
+    """The inertia set and the J⁻¹ box that contains its image.
+
+    Attributes
+    ----------
+    nominal : Spacecraft
+    tolerance : float
+        Relative per-axis tolerance on the principal inertias.
+    product_bound : float
+        Bound on |J_ij|, i ≠ j (kg m²).
+    lower, upper : numpy.ndarray
+        (3, 3) entrywise bounds of J⁻¹ (1/(kg m²)).
+    vertices : numpy.ndarray
+        (V, 3, 3) vertices of the J⁻¹ box (symmetric matrices).
+    nonphysical : int
+        Number of vertices that are not the inverse of a physical inertia.
+    """
+
+    nominal: Spacecraft
+    tolerance: float
+    product_bound: float
+    lower: np.ndarray = field(repr=False)
+    upper: np.ndarray = field(repr=False)
+    vertices: np.ndarray = field(repr=False)
+    nonphysical: int
+
+    @property
+    def diagonal(self) -> bool:
+        """True when products of inertia are excluded (then the box is exact and the loop splits per axis)."""
+        return self.product_bound == 0.0
+
+    def contains_inverse(self, inertia: Any, *, rtol: float = 1e-12) -> bool:
+        """True when inv(inertia) lies in the J⁻¹ box (up to ``rtol`` of the box size)."""
+        inv = np.linalg.inv(np.asarray(inertia, dtype=float))
+        slack = rtol * float(np.max(np.abs(self.upper)))
+        return bool(np.all(inv >= self.lower - slack) and np.all(inv <= self.upper + slack))
+
+    def __str__(self) -> str:
+        return (
+            f"inertia polytope around {self.nominal}: +/-{100 * self.tolerance:g} % per axis, "
+            f"|J_ij| <= {self.product_bound:g} kg m^2; {len(self.vertices)} vertices of J^-1 "
+            f"({self.nonphysical} not physical)"
+        )
+
+
+def inverse_box(nominal: np.ndarray, tolerance: float, product_bound: float) -> tuple[np.ndarray, np.ndarray]:
+    """Entrywise bounds (lower, upper) of J⁻¹ over the J-set (see the module docstring)."""
+    j0 = np.diag(nominal)
+    dmin, dmax = (1.0 - tolerance) * j0, (1.0 + tolerance) * j0
+    lower = np.zeros((3, 3))
+    upper = np.zeros((3, 3))
+    np.fill_diagonal(lower, 1.0 / dmax)
+    np.fill_diagonal(upper, 1.0 / dmin)
+    if product_bound > 0.0:
+        inv_norm = 1.0 / float(np.min(dmin))
+        e_norm = product_bound * math.sqrt(6.0)  # ‖E‖₂ <= ‖E‖_F
+        if inv_norm * e_norm >= 1.0:
+            raise SpecificationError(
+                f"product_bound = {product_bound:g} kg m^2 is too large for the Neumann bound "
+                f"(need sqrt(6) p < min J_ii (1 - tolerance) = {np.min(dmin):.6g})"
+            )
+        r = inv_norm**3 * e_norm**2 / (1.0 - inv_norm * e_norm)
+        first = product_bound / np.outer(dmin, dmin)
+        np.fill_diagonal(first, 0.0)
+        lower = lower - first - r
+        upper = upper + first + r
+    return lower, upper
+
+
+def inertia_polytope(spacecraft: Spacecraft, tolerance: float, *, product_bound: float = 0.0) -> InertiaPolytope:
+    """Build the J⁻¹ polytope around a diagonal nominal inertia.
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        Nominal; its J must be diagonal.
+    tolerance : float
+        Relative per-axis tolerance on Jᵢᵢ, 0 <= tol < 1.
+    product_bound : float, optional
+        |J_ij| bound (kg m²), default 0.
+    """
+    sc = check_spacecraft(spacecraft)
+    if not sc.is_diagonal:
+        raise SpecificationError("spacecraft: the nominal inertia must be diagonal (principal axes)")
+    tol = nonnegative_scalar("tolerance", tolerance)
+    if tol >= 1.0:
+        raise SpecificationError(f"tolerance must be < 1 (a relative tolerance), got {tol}")
+    p = nonnegative_scalar("product_bound", product_bound)
+    lower, upper = inverse_box(np.array(sc.inertia), tol, p)
+    if p == 0.0:
+        corners = [np.diag(c) for c in itertools.product(*[(lower[i, i], upper[i, i]) for i in range(3)])]
+    else:
+        idx = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+        corners = []
+        for choice in itertools.product(*[(lower[i, j], upper[i, j]) for i, j in idx]):
+            m = np.zeros((3, 3))
+            for (i, j), v in zip(idx, choice, strict=True):
+                m[i, j] = m[j, i] = v
+            corners.append(m)
+    bad = 0
+    for m in corners:
+        eig = np.linalg.eigvalsh(m)
+        if eig[0] <= 0.0:
+            bad += 1
+            continue
+        inertias = np.sort(1.0 / eig)
+        if inertias[2] > inertias[0] + inertias[1]:
+            bad += 1
+    return InertiaPolytope(sc, tol, p, frozen(lower), frozen(upper), frozen(np.array(corners)), bad)
+
+
+def _vertex_loops(poly: InertiaPolytope, K: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+    k = gain_matrix(K)
+    a = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
+    out = []
+    seen: set[bytes] = set()
+    for jinv in poly.vertices:
+        if jinv.tobytes() in seen:
+            continue
+        seen.add(jinv.tobytes())
+        b = np.vstack((np.zeros((3, 3)), jinv / 4.0))
+        out.append((a, b @ k))
+    return out
+
+
+def _axis_loops(poly: InertiaPolytope, K: Any) -> list[list[tuple[np.ndarray, np.ndarray]]] | None:
+    """Per-axis 2×2 vertex loops when the set and the gain split per axis, else None."""
+    k = gain_matrix(K)
+    ks, kw = k[:, :3], k[:, 3:]
+    if not (poly.diagonal and np.all(ks == np.diag(np.diag(ks))) and np.all(kw == np.diag(np.diag(kw)))):
+        return None
+    a = np.array([[0.0, 1.0], [0.0, 0.0]])
+    axes = []
+    for i in range(3):
+        loops = []
+        # Equal ends (tolerance 0) give one vertex: duplicated LMIs made Clarabel inaccurate.
+        for jinv in sorted({float(poly.lower[i, i]), float(poly.upper[i, i])}):
+            loops.append((a, np.array([[0.0, 0.0], [jinv * ks[i, i] / 4.0, jinv * kw[i, i] / 4.0]])))
+        axes.append(loops)
+    return axes
+
+
+@dataclass(frozen=True, eq=False)
+class PolytopeCertificate:
+    """One common-functional certificate over every vertex of an inertia polytope.
+
+    Attributes
+    ----------
+    status : CertificateStatus
+        CERTIFIED only when every sub-problem (one per axis when the loop splits) was solved
+        ``optimal`` and re-verified in float64 at every vertex.
+    order : int
+    tau : float
+        The constant delay τ (s), or the upper end of the interval.
+    vertices : int
+        Number of vertex plants certified (per axis, when split).
+    margins : tuple of BlockMargin
+    solve_time : float
+    reason : str
+    """
+
+    status: CertificateStatus
+    order: int
+    tau: float
+    vertices: int
+    margins: tuple[BlockMargin, ...]
+    solve_time: float
+    reason: str
+    interval: tuple[IntervalCertificate, ...] = field(default=(), repr=False)
+
+    @property
+    def certified(self) -> bool:
+        return self.status is CertificateStatus.CERTIFIED
+
+    def __str__(self) -> str:
+        return (
+            f"polytope certificate ({self.vertices} vertices, order {self.order}) at tau = {self.tau:.6g} s: "
+            f"{self.status.value} ({1e3 * self.solve_time:.1f} ms)\n  {self.reason}"
+        )
+
+
+def _common_constant(
+    plants: list[tuple[np.ndarray, np.ndarray]], tau: float, order: int, margin_tol: float
+) -> tuple[CertificateStatus, tuple[BlockMargin, ...], float, str]:
+    """Seuret-Gouaisbaut order-N LMI with common (P, S, R) at every plant, in time normalised by τ.
+
+    The blocks are those of :func:`~mrpctl.design.lmi.lmi_blocks` (linear in P, S, R) at every
+    vertex (τA, τA_d) with τ = 1; the same function re-checks the solution in float64.
+    """
+    n = plants[0][0].shape[0]
+    scaled = [(tau * a, tau * a_d) for a, a_d in plants]
+    size = (order + 1) * n
+    unknowns = [_Unknown("P", size, size, True), _Unknown("S", n, n, True), _Unknown("R", n, n, True)]
+
+    def blocks(mats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        for i, (a, a_d) in enumerate(scaled):
+            for name, block in lmi_blocks(a, a_d, 1.0, mats["P"], mats["S"], mats["R"], order=order).items():
+                if name == "derivative" or i == 0:
+                    out[f"{name}[vertex {i}]"] = block
+        return out
+
+    start = time.perf_counter()
+    outcome, values, _ = _solve_lmi(unknowns, blocks, {}, ["positivity[vertex 0]", "S[vertex 0]", "R[vertex 0]"])
+    elapsed = time.perf_counter() - start
+    if values is None:
+        return CertificateStatus.SOLVER_FAILED, (), elapsed, outcome.error or f"solver status {outcome.status!r}"
+    margins = _margins(blocks(values))
+    worst = min(margins, key=lambda m: m.relative)
+    ok = worst.relative >= margin_tol
+    status = CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED
+    return status, margins, elapsed, f"smallest relative margin {worst.relative:.3g} ({worst.name})"
+
+
+def certify_polytope(
+    polytope: InertiaPolytope,
+    K: Any,
+    tau: float,
+    *,
+    order: int = 2,
+    tau_min: float | None = None,
+    rate: DelayRate | float | None = None,
+    margin_tol: float = DEFAULT_MARGIN_TOL,
+) -> PolytopeCertificate:
+    """Certify u = K x(t − τ) for every inertia of the polytope with one functional per axis (or 6×6).
+
+    With ``tau_min=None`` the delay is constant τ and the criterion is the order-N Bessel-Legendre
+    LMI of :func:`~mrpctl.design.lmi.certify` with (P, S, R) common to the vertices (re-checked by
+    :func:`~mrpctl.design.lmi.lmi_blocks` at every vertex). Otherwise the delay varies in
+    [tau_min, tau] with ``rate`` and the interval criterion is used with common matrices.
+    """
+    if not isinstance(polytope, InertiaPolytope):
+        raise SpecificationError(f"polytope must be an InertiaPolytope, got {type(polytope).__name__}")
+    tau = positive_scalar("tau", tau)
+    order = order_value(order)
+    margin_tol = positive_scalar("margin_tol", margin_tol)
+    axes = _axis_loops(polytope, K)
+    groups = axes if axes is not None else [_vertex_loops(polytope, K)]
+    status = CertificateStatus.CERTIFIED
+    margins: list[BlockMargin] = []
+    total = 0.0
+    reasons = []
+    intervals: list[IntervalCertificate] = []
+    for gi, plants in enumerate(groups):
+        if tau_min is None:
+            st, mg, tm, why = _common_constant(plants, tau, order, margin_tol)
+        else:
+            lo = nonnegative_scalar("tau_min", tau_min)
+            if not tau > lo:
+                raise SpecificationError(f"tau must exceed tau_min, got [{lo}, {tau}]")
+            cert = _solve_interval(plants, lo, tau, _rate_value(rate), order, margin_tol)
+            intervals.append(cert)
+            st, mg, tm, why = cert.status, cert.margins, cert.solve_time, cert.reason
+        total += tm
+        margins += list(mg)
+        reasons.append(f"{'axis ' + str(gi + 1) if axes is not None else '6x6'}: {st.value}, {why}")
+        if st is CertificateStatus.SOLVER_FAILED:
+            status = CertificateStatus.SOLVER_FAILED
+        elif st is CertificateStatus.NOT_CERTIFIED and status is CertificateStatus.CERTIFIED:
+            status = CertificateStatus.NOT_CERTIFIED
+    return PolytopeCertificate(
+        status=status,
+        order=order,
+        tau=tau,
+        vertices=sum(len(g) for g in groups),
+        margins=tuple(margins),
+        solve_time=total,
+        reason="; ".join(reasons),
+        interval=tuple(intervals),
+    )
+
+
+def exact_polytope_margin(polytope: InertiaPolytope, K: Any, *, points: int = 41) -> float:
+    """The smallest exact constant-delay margin (s) over a grid of the J-set (the reference).
+
+    Diagonal sets: per axis, ``points`` values of Jᵢᵢ across the interval (the loop splits, the
+    margin of the 6×6 loop is the smallest axis margin). With products of inertia: a grid of
+    min(points, 3) values per each of the 6 entries (3⁶ = 729 full 6×6 margins); grid points that
+    are not physical inertias are skipped.
+    """
+    from mrpctl.design.margin import delay_margin
+
+    k = gain_matrix(K)
+    j0 = np.diag(polytope.nominal.inertia)
+    tol = polytope.tolerance
+    worst = math.inf
+    a6 = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
+    axes = _axis_loops(polytope, k)
+    if axes is not None:
+        a2 = np.array([[0.0, 1.0], [0.0, 0.0]])
+        for i in range(3):
+            for j in np.linspace((1 - tol) * j0[i], (1 + tol) * j0[i], points):
+                a_d = np.array([[0.0, 0.0], [k[i, i] / (4 * j), k[i, 3 + i] / (4 * j)]])
+                worst = min(worst, delay_margin(a2, a_d).margin)
+        return worst
+    q = min(points, 3)
+    p = polytope.product_bound
+    grids = [np.linspace((1 - tol) * j0[i], (1 + tol) * j0[i], q) for i in range(3)]
+    off = np.linspace(-p, p, q)
+    for d0, d1, d2, e01, e02, e12 in itertools.product(*grids, off, off, off):
+        j = np.array([[d0, e01, e02], [e01, d1, e12], [e02, e12, d2]])
+        eig = np.linalg.eigvalsh(j)
+        if eig[0] <= 0 or eig[2] > eig[0] + eig[1]:
+            continue
+        b = np.vstack((np.zeros((3, 3)), np.linalg.inv(j) / 4.0))
+        worst = min(worst, delay_margin(a6, b @ k).margin)
+    return worst
+
+
+def max_stable_tolerance(spacecraft: Spacecraft, K: Any, tau: float, *, points: int = 41, rtol: float = 1e-4) -> float:
+    """The largest relative tolerance tol such that every grid inertia of the diagonal box is stable at τ.
+
+    Bisection on tol ∈ [0, 1) with :func:`exact_polytope_margin` (products of inertia zero).
+    Returns nan when the nominal loop is unstable at τ.
+    """
+    tau = positive_scalar("tau", tau)
+
+    def ok(tol: float) -> bool:
+        return exact_polytope_margin(inertia_polytope(spacecraft, tol), K, points=points) > tau
+
+    if not ok(0.0):
+        return math.nan
+    good, bad = 0.0, 0.999
+    if ok(bad):
+        return bad
+    for _ in range(100):
+        if bad - good <= rtol * max(good, 1e-6):
+            break
+        mid = 0.5 * (good + bad)
+        if ok(mid):
+            good = mid
+        else:
+            bad = mid
+    return good
+
+
+def max_certified_tolerance(
+    spacecraft: Spacecraft,
+    K: Any,
+    tau: float,
+    *,
+    order: int = 2,
+    product_bound: float = 0.0,
+    rtol: float = 1e-3,
+) -> tuple[float, PolytopeCertificate | None]:
+    """The largest relative tolerance certified at τ by :func:`certify_polytope` (bisection, terminates).
+
+    Returns (tol, certificate at tol); (nan, None) when the nominal loop is not certified.
+    """
+    tau = positive_scalar("tau", tau)
+
+    def test(tol: float) -> PolytopeCertificate:
+        return certify_polytope(inertia_polytope(spacecraft, tol, product_bound=product_bound), K, tau, order=order)
+
+    first = test(0.0)
+    if not first.certified:
+        return math.nan, None
+    good, cert = 0.0, first
+    bad = 0.999
+    for _ in range(60):
+        if bad - good <= rtol * max(good, 1e-3):
+            break
+        mid = 0.5 * (good + bad)
+        trial = test(mid)
+        if trial.certified:
+            good, cert = mid, trial
+        else:
+            bad = mid
+    return good, cert

@@ -1,0 +1,462 @@
+"""The sampled-data loop as flown: period h, zero-order hold, a delay of d samples.
+
+u(t) = K x(t_{k−d}) for t ∈ [t_k, t_{k+1}), t_k = k h, on ẋ = A x + B u. Two answers:
+
+- **exact**: the lifted discrete-time system x_{k+1} = Φ x_k + Γ K x_{k−d}, Φ = e^{Ah},
+  Γ = ∫₀ʰ e^{As} ds B, is stable iff the spectral radius of its companion matrix (size n(d+1))
+  is below 1 (:func:`sampled_stability`, :func:`max_stable_delay_samples`, :func:`max_stable_period`);
+- **certified**: the input-delay approach, ẋ = A x + B K x(t − τ(t)) with the sawtooth
+  τ(t) = d h + (t − t_k) ∈ [d h, (d+1) h), τ̇ = 1, through the interval criterion of
+  :mod:`mrpctl.design.interval` (:func:`certify_sampled`, :func:`max_certified_period`).
+
+For a spacecraft with a gain that splits per axis, :func:`spacecraft_axes` returns the three 2×2
+(A, B, K) triples, so d = 500 (τ = 0.5 s at 1 kHz) is a 1002×1002 eigenproblem per axis.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg  # type: ignore[import-untyped]
+
+from mrpctl._validation import finite_array, integer, positive_scalar
+from mrpctl.design._common import order_value
+from mrpctl.design.interval import DelayRate, IntervalCertificate, _solve_interval
+from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, SearchStatus, criterion_name
+from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.spacecraft import Spacecraft
+
+__all__ = [
+    "MAX_LIFTED_SIZE",
+    "SampledCertification",
+    "SampledStability",
+    "certify_sampled",
+    "lifted_matrices",
+    "max_certified_delay_samples",
+    "max_certified_period",
+    "max_stable_delay_samples",
+    "max_stable_period",
+    "sampled_stability",
+    "spacecraft_axes",
+]
+
+#: Largest companion matrix (rows) :func:`sampled_stability` builds densely (8·N² bytes: 128 MB at 4000).
+MAX_LIFTED_SIZE = 4000
+
+
+def _system(A: Any, B: Any, K: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    a = finite_array("A", A)
+    if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] == 0:
+        raise DimensionError(f"A: expected a square (n, n) matrix but found shape {a.shape}")
+    n = a.shape[0]
+    b = finite_array("B", B)
+    if b.ndim == 1:
+        b = b.reshape(n, -1) if b.size % n == 0 else b
+    if b.ndim != 2 or b.shape[0] != n:
+        raise DimensionError(f"B: expected shape ({n}, m) but found {b.shape}")
+    k = finite_array("K", K)
+    if k.ndim == 1:
+        k = k.reshape(1, -1)
+    if k.shape != (b.shape[1], n):
+        raise DimensionError(f"K: expected shape ({b.shape[1]}, {n}) but found {k.shape}")
+    return np.array(a, dtype=float), np.array(b, dtype=float), np.array(k, dtype=float)
+
+
+def lifted_matrices(A: Any, B: Any, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Φ, Γ) = (e^{Ah}, ∫₀ʰ e^{As} ds B) from one expm of [[A, B], [0, 0]] h.
+
+    Parameters
+    ----------
+    A : array_like
+        (n, n) (1/s).
+    B : array_like
+        (n, m).
+    period : float
+        Sampling period h (s).
+    """
+    a = finite_array("A", A)
+    b = finite_array("B", B)
+    h = positive_scalar("period", period)
+    n, m = a.shape[0], b.shape[1]
+    aug = np.zeros((n + m, n + m))
+    aug[:n, :n] = a
+    aug[:n, n:] = b
+    e = scipy.linalg.expm(aug * h)
+    return e[:n, :n].copy(), e[:n, n:].copy()
+
+
+@dataclass(frozen=True)
+class SampledStability:
+    """Exact stability of the lifted sampled loop.
+
+    Attributes
+    ----------
+    period : float
+        h (s).
+    delay_samples : int
+        d.
+    spectral_radius : float
+        Largest |eigenvalue| of the n(d+1) companion matrix.
+    size : int
+        n(d+1).
+    """
+
+    period: float
+    delay_samples: int
+    spectral_radius: float
+    size: int
+
+    @property
+    def stable(self) -> bool:
+        """True when the spectral radius is below 1."""
+        return self.spectral_radius < 1.0
+
+    def __str__(self) -> str:
+        word = "stable" if self.stable else "unstable"
+        return (
+            f"sampled loop h = {self.period:.6g} s, d = {self.delay_samples}: {word} "
+            f"(spectral radius {self.spectral_radius:.9f}, companion size {self.size})"
+        )
+
+
+def _radius(a: np.ndarray, b: np.ndarray, k: np.ndarray, h: float, d: int) -> tuple[float, int]:
+    n = a.shape[0]
+    size = n * (d + 1)
+    if size > MAX_LIFTED_SIZE:
+        raise SpecificationError(
+            f"delay_samples: the lifted companion matrix would be {size}x{size} "
+            f"(~{8 * size * size / 1e6:.0f} MB, an O(N^3) eigenproblem), above MAX_LIFTED_SIZE = {MAX_LIFTED_SIZE}; "
+            "split the loop per axis (spacecraft_axes) or use a longer period"
+        )
+    phi, gam = lifted_matrices(a, b, h)
+    gk = gam @ k
+    if d == 0:
+        return float(np.max(np.abs(np.linalg.eigvals(phi + gk)))), size
+    m = np.zeros((size, size))
+    m[:n, :n] = phi
+    m[:n, d * n :] = gk
+    m[n:, :-n] = np.eye(d * n)
+    return float(np.max(np.abs(scipy.linalg.eigvals(m, overwrite_a=True, check_finite=False)))), size
+
+
+def _stable_by_winding(a: np.ndarray, b: np.ndarray, k: np.ndarray, h: float, d: int) -> bool:
+    """Stability of the lifted loop by the argument principle (O(n³ M) for M circle points, any d).
+
+    det(zI − M) = p(z) = z^{nd} q(z), q(z) = det(zI − Φ − z^{−d} Γ K), of degree n(d+1): every zero is
+    inside the unit circle iff the winding number of q(e^{iθ}) about 0 is n. The grid is doubled
+    until no phase step exceeds π/2 (then no winding is missed); a grid of 2²⁰ points that still
+    fails falls back to the dense eigenvalues (which refuses companions above MAX_LIFTED_SIZE).
+    """
+    n = a.shape[0]
+    phi, gam = lifted_matrices(a, b, h)
+    gk = gam @ k
+    points = max(4096, 32 * (d + 1))
+    while points <= 2**20:
+        theta = np.linspace(0.0, 2.0 * np.pi, points, endpoint=False)
+        z = np.exp(1j * theta)
+        mats = z[:, None, None] * np.eye(n) - phi[None] - (z ** (-d))[:, None, None] * gk[None]
+        q = np.linalg.det(mats)
+        if np.any(q == 0.0):
+            return False
+        ang = np.angle(np.concatenate((q, q[:1])))
+        steps = np.angle(np.exp(1j * np.diff(ang)))
+        if np.max(np.abs(steps)) <= np.pi / 2:
+            winding = round(float(np.sum(steps)) / (2.0 * np.pi))
+            return winding == n
+        points *= 2
+    return _radius(a, b, k, h, d)[0] < 1.0
+
+
+def sampled_stability(A: Any, B: Any, K: Any, period: float, *, delay_samples: int = 0) -> SampledStability:
+    """Exact stability of u(t) = K x(t_{k−d}) held over [t_k, t_{k+1}) on ẋ = A x + B u.
+
+    Parameters
+    ----------
+    A, B, K : array_like
+        (n, n), (n, m) and (m, n).
+    period : float
+        Sampling period h (s).
+    delay_samples : int, optional
+        d >= 0 (keyword-only; default 0).
+
+    Raises
+    ------
+    SpecificationError
+        If n(d+1) > MAX_LIFTED_SIZE (the estimate and the way out are in the message).
+    """
+    a, b, k = _system(A, B, K)
+    h = positive_scalar("period", period)
+    d = integer("delay_samples", delay_samples, minimum=0)
+    rho, size = _radius(a, b, k, h, d)
+    return SampledStability(h, d, rho, size)
+
+
+@dataclass(frozen=True)
+class _Scan:
+    value: float
+    evaluations: int
+
+
+def max_stable_delay_samples(A: Any, B: Any, K: Any, period: float, *, d_limit: int = 2000) -> int:
+    """The largest d such that the lifted loop is stable for every delay 0, 1, ..., d samples.
+
+    Stability in d is located by doubling then bisection on the first unstable d (each test by the
+    argument principle, :func:`_stable_by_winding`, so d in the thousands is cheap), and the answer
+    is verified (stable at d, unstable at d + 1). Returns -1 when d = 0 is already unstable and
+    ``d_limit`` when every d up to the limit is stable (checked at the limit only).
+    """
+    a, b, k = _system(A, B, K)
+    h = positive_scalar("period", period)
+    d_limit = integer("d_limit", d_limit, minimum=1)
+
+    def stable(d: int) -> bool:
+        return _stable_by_winding(a, b, k, h, d)
+
+    if not stable(0):
+        return -1
+    good, bad = 0, 1
+    while stable(bad):
+        good = bad
+        if bad >= d_limit:
+            return d_limit
+        bad = min(2 * bad, d_limit)
+    while bad - good > 1:
+        mid = (good + bad) // 2
+        if stable(mid):
+            good = mid
+        else:
+            bad = mid
+    return good
+
+
+def max_stable_period(
+    A: Any, B: Any, K: Any, *, delay_samples: int = 0, period_limit: float = 100.0, rtol: float = 1e-6, grid: int = 400
+) -> float:
+    """The largest h such that the lifted loop is stable for every period in (0, h] (s).
+
+    A geometric grid of ``grid`` periods from period_limit·1e-6 up to ``period_limit`` finds the first
+    unstable period, then bisection to ``rtol``. Returns nan when no grid period is stable, and
+    ``period_limit`` when every grid period is.
+    """
+    a, b, k = _system(A, B, K)
+    d = integer("delay_samples", delay_samples, minimum=0)
+    limit = positive_scalar("period_limit", period_limit)
+    rtol = positive_scalar("rtol", rtol)
+    grid = integer("grid", grid, minimum=2)
+    periods = np.geomspace(limit * 1e-6, limit, grid)
+    good = math.nan
+    bad = math.nan
+    for h in periods:
+        if _radius(a, b, k, float(h), d)[0] < 1.0:
+            good = float(h)
+        else:
+            bad = float(h)
+            break
+    if math.isnan(good):
+        return math.nan
+    if math.isnan(bad):
+        return limit
+    for _ in range(200):
+        if bad - good <= rtol * good:
+            break
+        mid = 0.5 * (good + bad)
+        if _radius(a, b, k, mid, d)[0] < 1.0:
+            good = mid
+        else:
+            bad = mid
+    return good
+
+
+def certify_sampled(
+    A: Any,
+    B: Any,
+    K: Any,
+    period: float,
+    *,
+    delay_samples: int = 0,
+    order: int = 1,
+    margin_tol: float = DEFAULT_MARGIN_TOL,
+) -> IntervalCertificate:
+    """Certify the sampled loop by the input-delay approach (interval delay with τ̇ = 1).
+
+    ẋ = A x + B K x(t − τ(t)), τ(t) = d h + t − t_k ∈ [d h, (d+1) h], τ̇ = 1; see
+    :func:`~mrpctl.design.interval.certify_interval`.
+    """
+    a, b, k = _system(A, B, K)
+    h = positive_scalar("period", period)
+    d = integer("delay_samples", delay_samples, minimum=0)
+    return _solve_interval(
+        [(a, b @ k)],
+        d * h,
+        (d + 1) * h,
+        DelayRate.sawtooth(),
+        order_value(order),
+        positive_scalar("margin_tol", margin_tol),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class SampledCertification:
+    """Result of :func:`max_certified_period`.
+
+    Attributes
+    ----------
+    status : SearchStatus
+    order : int
+    delay_samples : int
+    period : float
+        Largest certified sampling period h (s); nan when none.
+    certificate : IntervalCertificate or None
+    solves : int
+    reason : str
+    """
+
+    status: SearchStatus
+    order: int
+    delay_samples: int
+    period: float
+    certificate: IntervalCertificate | None = field(repr=False)
+    solves: int
+    reason: str
+
+    @property
+    def certified(self) -> bool:
+        return self.status is not SearchStatus.NOT_CERTIFIED
+
+    def __str__(self) -> str:
+        head = f"{criterion_name(self.order)} + RCC, sampled (d = {self.delay_samples})"
+        if not self.certified:
+            return f"{head}: {self.status.value} ({self.reason})"
+        return f"{head}: certified for h <= {self.period:.6g} s ({self.solves} solves; {self.reason})"
+
+
+def max_certified_period(
+    A: Any,
+    B: Any,
+    K: Any,
+    *,
+    delay_samples: int = 0,
+    order: int = 1,
+    rtol: float = 1e-3,
+    period_limit: float | None = None,
+    margin_tol: float = DEFAULT_MARGIN_TOL,
+) -> SampledCertification:
+    """The largest sampling period h certified by :func:`certify_sampled` (bisection, ≤ 200 solves).
+
+    The exact period (:func:`max_stable_period`) bounds the search from above: a sound certificate
+    cannot exceed it. The bound itself is tested too.
+    """
+    a, b, k = _system(A, B, K)
+    d = integer("delay_samples", delay_samples, minimum=0)
+    order = order_value(order)
+    rtol = positive_scalar("rtol", rtol)
+    margin_tol = positive_scalar("margin_tol", margin_tol)
+    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(b @ k, 2)), 1e-12)
+    limit = 1e3 / scale if period_limit is None else positive_scalar("period_limit", period_limit)
+    exact = max_stable_period(a, b, k, delay_samples=d, period_limit=limit)
+    solves = 0
+
+    def test(h: float) -> IntervalCertificate:
+        nonlocal solves
+        solves += 1
+        return _solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+
+    if math.isnan(exact):
+        return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, 0, "no stable period")
+    bad = exact
+    good, cert = math.nan, None
+    for f in (1.0, 0.5, 0.2, 0.05, 0.01, 1e-3):
+        trial = test(f * exact)
+        if trial.certified:
+            good, cert = f * exact, trial
+            break
+        bad = f * exact
+    if cert is None:
+        return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, solves, "nothing certified")
+    if good >= exact:
+        return SampledCertification(
+            SearchStatus.CERTIFIED, order, d, good, cert, solves, f"certified at the exact bound {exact:.6g} s"
+        )
+    for _ in range(200):
+        if bad - good <= rtol * good:
+            break
+        mid = 0.5 * (good + bad)
+        trial = test(mid)
+        if trial.certified:
+            good, cert = mid, trial
+        else:
+            bad = mid
+    return SampledCertification(SearchStatus.CERTIFIED, order, d, good, cert, solves, f"exact period {exact:.6g} s")
+
+
+def spacecraft_axes(spacecraft: Spacecraft, K: Any) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
+    """(A, B, K) of the linearised spacecraft loop: three 2×2 per-axis triples when it splits, else one 6×6.
+
+    Per axis i on (σᵢ, ωᵢ/4): A = [[0, 1], [0, 0]], B = [0; 1/(4 Jᵢ)], K = [K_σ,ii, K_ω,ii]; the split
+    needs a diagonal J and diagonal gain blocks.
+    """
+    from mrpctl._validation import check_spacecraft
+    from mrpctl.model import gain_matrix, plant_model
+
+    sc = check_spacecraft(spacecraft)
+    k = gain_matrix(K)
+    plant = plant_model(sc)
+    ks, kw = k[:, :3], k[:, 3:]
+    if sc.is_diagonal and _diag(ks) and _diag(kw):
+        a = np.array([[0.0, 1.0], [0.0, 0.0]])
+        jd = np.diag(sc.inertia)
+        return tuple((a, np.array([[0.0], [0.25 / jd[i]]]), np.array([[ks[i, i], kw[i, i]]])) for i in range(3))
+    return ((np.array(plant.A), np.array(plant.B), np.array(k)),)
+
+
+def _diag(m: np.ndarray) -> bool:
+    return bool(np.all(m == np.diag(np.diag(m))))
+
+
+def max_certified_delay_samples(
+    A: Any,
+    B: Any,
+    K: Any,
+    period: float,
+    *,
+    order: int = 1,
+    d_max: int,
+    margin_tol: float = DEFAULT_MARGIN_TOL,
+) -> tuple[int, IntervalCertificate | None, int]:
+    """The largest d <= d_max such that :func:`certify_sampled` certifies delays d' = d (bisection on d).
+
+    Certified d means the sawtooth τ(t) ∈ [d h, (d+1) h] is certified; the search assumes the
+    certified set in d is an interval starting at 0 (the certificate at the answer is returned and
+    the answer + 1 was tested and failed, unless it is ``d_max``). Returns (d, certificate, solves);
+    d = -1 when d = 0 is not certified.
+    """
+    a, b, k = _system(A, B, K)
+    h = positive_scalar("period", period)
+    order = order_value(order)
+    d_max = integer("d_max", d_max, minimum=0)
+    margin_tol = positive_scalar("margin_tol", margin_tol)
+    solves = 0
+
+    def test(d: int) -> IntervalCertificate:
+        nonlocal solves
+        solves += 1
+        return _solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+
+    top = test(d_max)
+    if top.certified:
+        return d_max, top, solves
+    first = test(0)
+    if not first.certified:
+        return -1, None, solves
+    good, cert, bad = 0, first, d_max
+    while bad - good > 1:
+        mid = (good + bad) // 2
+        trial = test(mid)
+        if trial.certified:
+            good, cert = mid, trial
+        else:
+            bad = mid
+    return good, cert, solves
