@@ -4,17 +4,22 @@
 instructions``) and writes C in which every value is W-wide, one lane per run, so that gcc
 vectorises across runs: W runs advance in lockstep through the sample. Each operation is
 written as CasADi's own generated C writes it for one scalar (``casadi_sq(x)`` is ``x*x``,
-``if_else_zero(c, x)`` is ``c ? x : 0``, comparisons and logic give 0/1, ``fmin``/``fmax``
-follow this host's libm to the sign of zero), so the arithmetic of each lane is bit-identical
-to the scalar engine's: the same IEEE operations in the same order, ``-ffp-contract=off``, no
-fast-math; across lanes nothing is reassociated (no reductions). Operations without a vector
-form (``sin``, ``exp``, ``pow``, ...) call the same libm function lane by lane.
+``if_else_zero(c, x)`` is ``c ? x : 0``, comparisons and logic give 1.0 or +0.0), so the
+arithmetic of each lane is bit-identical to the scalar engine's: the same IEEE operations in
+the same order, ``-ffp-contract=off``, no fast-math; across lanes nothing is reassociated (no
+reductions). Selections are bit masks rather than ``?:`` (gcc would sink one arm's arithmetic
+into a branch and give up vectorising); comparison results keep their mask for the consumers
+in the same loop. ``fmin``/``fmax`` follow the libm's rule for NaNs and for a (+0, -0) tie
+(probed at import; C99 leaves the tie to the library, and gcc may swap the arguments of
+CasADi's calls, so on a tie the lanes follow the libm with CasADi's argument order; the closed
+loop never meets one: its arguments are sums of squares and counters). Operations without a
+vector form (``sin``, ``exp``, ``pow``, ...) call the same libm function lane by lane.
 
 Two layouts (``fuse``):
 
 * ``fuse=False``: every work variable of CasADi's register allocation is a ``double w[W]``
   array and every instruction a loop ``for (l = 0; l < W; ++l) w7[l] = (w3[l]*w5[l]);``.
-* ``fuse=True`` (default, measured faster): maximal runs of vectorisable instructions are one
+* ``fuse=True`` (default, measured 4x faster): maximal runs of vectorisable instructions are one
   loop over lanes whose body holds the instructions as scalar locals, so the values stay in
   vector registers (the shape of a hand-written structure-of-arrays loop); only values used
   across a libm call go through W-wide arrays.
@@ -65,8 +70,9 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-#: Lanes per batch: measured on the 60 s DelayAware tumbling batch (bench/vector.py): with
-#: AVX2, 8 lanes (two 4-wide vectors per operation) were the fastest of 4, 8, 16 and 32.
+#: Lanes per batch: measured on the 60 s DelayAware tumbling batch (bench/vector.py, AVX2 host,
+#: CPU time of one thread): W = 4, 8, 16, 32 gave 742, 758, 729, 693 runs/s; 8 lanes are two
+#: 4-wide vectors per operation.
 DEFAULT_WIDTH = 8
 
 _DRIVER_FILE = "_lanes_driver.c"
@@ -91,15 +97,20 @@ _VECTOR_OPS: dict[int, str] = {
     ca.OP_SQRT: "sqrt({0})",  # vectorised with -fno-math-errno (sqrtpd is correctly rounded, as sqrtsd)
     ca.OP_FABS: "fabs({0})",
     ca.OP_COPYSIGN: "copysign({0},{1})",
-    ca.OP_SIGN: "L_SELECT({0}<0., -1., L_SELECT({0}>0., 1., {0}))",  # casadi_sign: x<0 ? -1 : x>0 ? 1 : x
-    ca.OP_LT: "L_BOOL({0}<{1})",
-    ca.OP_LE: "L_BOOL({0}<={1})",
-    ca.OP_EQ: "L_BOOL({0}=={1})",
-    ca.OP_NE: "L_BOOL({0}!={1})",
-    ca.OP_NOT: "L_BOOL({0}==0.)",  # !x
-    ca.OP_AND: "L_BOOL(({0}!=0.)&({1}!=0.))",  # x&&y (no side effects: no short circuit needed)
-    ca.OP_OR: "L_BOOL(({0}!=0.)|({1}!=0.))",  # x||y
-    ca.OP_IF_ELSE_ZERO: "L_SELECT({0}!=0., {1}, 0.)",  # (c?x:0)
+    ca.OP_SIGN: "L_SELECT(L_MASK({0}<0.), -1., L_SELECT(L_MASK({0}>0.), 1., {0}))",  # x<0 ? -1 : x>0 ? 1 : x
+    ca.OP_IF_ELSE_ZERO: "mrpctl_real(mrpctl_bits({1}) & {t0})",  # (c?x:0): x, or +0.0
+}
+# Comparisons and logic: CasADi's C gives the int 0/1 (as double 1.0 or +0.0). The lanes keep
+# the all-ones/zero bit mask m as well, so that a consumer in the same loop tests "x != 0" as m
+# (the value is exactly 0.0 or 1.0, so the two tests agree). {t0}/{t1}: the operand's mask.
+_MASK_OPS: dict[int, str] = {
+    ca.OP_LT: "L_MASK({0}<{1})",
+    ca.OP_LE: "L_MASK({0}<={1})",
+    ca.OP_EQ: "L_MASK({0}=={1})",
+    ca.OP_NE: "L_MASK({0}!={1})",
+    ca.OP_NOT: "(~{t0})",  # !x
+    ca.OP_AND: "({t0}&{t1})",  # x&&y (no side effects: no short circuit needed)
+    ca.OP_OR: "({t0}|{t1})",  # x||y
 }
 # Selections are written as bit masks, not ?:, so that gcc does not sink the arithmetic of
 # one arm into a branch (which stops if-conversion and vectorisation); the bits are the same.
@@ -108,11 +119,12 @@ _LANE_HELPERS = r"""
 typedef unsigned long long mrpctl_bits_t;
 static inline mrpctl_bits_t mrpctl_bits(double x) { mrpctl_bits_t u; memcpy(&u, &x, sizeof u); return u; }
 static inline double mrpctl_real(mrpctl_bits_t u) { double x; memcpy(&x, &u, sizeof x); return x; }
-/* c ? a : b for c in {0, 1}, bit for bit */
-#define L_SELECT(c, a, b) \
-  mrpctl_real((mrpctl_bits(a) & -(mrpctl_bits_t)(c)) | (mrpctl_bits(b) & ((mrpctl_bits_t)(c) - 1)))
-/* (double)c for c in {0, 1}: 1.0 or +0.0 */
-#define L_BOOL(c) mrpctl_real(0x3ff0000000000000ULL & -(mrpctl_bits_t)(c))
+/* the mask of a C condition: all ones if true, zero if false */
+#define L_MASK(c) (-(mrpctl_bits_t)(c))
+/* m ? a : b for a mask m, bit for bit */
+#define L_SELECT(m, a, b) mrpctl_real((mrpctl_bits(a) & (m)) | (mrpctl_bits(b) & ~(m)))
+/* (double)c of a mask: 1.0 or +0.0 */
+#define L_BOOL(m) mrpctl_real(0x3ff0000000000000ULL & (m))
 """
 # fmin/fmax: casadi_fmin/casadi_fmax call the C99 fmin/fmax of the libm; the lane form is
 # chosen by probing that libm (see _min_max_forms) so that ties of +0/-0 and NaNs agree.
@@ -167,9 +179,9 @@ def _min_max_forms() -> dict[int, str]:
         second_on_tie = math.copysign(1.0, function(0.0, -0.0)) < 0 and math.copysign(1.0, function(-0.0, 0.0)) > 0
         nan_ok = function(math.nan, 1.0) == 1.0 and function(1.0, math.nan) == 1.0
         if nan_ok and first_on_tie:
-            forms[op] = f"L_SELECT(({{0}}{compare}={{1}})|({{1}}!={{1}}), {{0}}, {{1}})"
+            forms[op] = f"L_SELECT(L_MASK(({{0}}{compare}={{1}})|({{1}}!={{1}})), {{0}}, {{1}})"
         elif nan_ok and second_on_tie:
-            forms[op] = f"L_SELECT(({{0}}{compare}{{1}})|({{1}}!={{1}}), {{0}}, {{1}})"
+            forms[op] = f"L_SELECT(L_MASK(({{0}}{compare}{{1}})|({{1}}!={{1}})), {{0}}, {{1}})"
     return forms
 
 
@@ -269,6 +281,7 @@ def emit_lanes(
     dropped_index = {i for i, port in enumerate(outputs) if port.name in dropped}
     vector_ops = dict(_VECTOR_OPS)
     vector_ops.update(_min_max_forms())
+    vector_ops.update(_MASK_OPS)
 
     # Decode the instruction list: (op, output slot or None, input slots, text template).
     count = function.n_instructions()
@@ -290,7 +303,8 @@ def emit_lanes(
             reads.append([])
         elif op in vector_ops or op in _CALL_OPS:
             defs.append(function.instruction_output(k)[0])
-            arity = 2 if "{1}" in (vector_ops.get(op) or _CALL_OPS[op]) else 1
+            template = vector_ops.get(op) or _CALL_OPS[op]
+            arity = 2 if "{1}" in template or "{t1}" in template else 1
             reads.append(list(function.instruction_input(k)[:arity]))
         else:
             label = _OP_NAMES.get(op, str(op))
@@ -336,6 +350,11 @@ def emit_lanes(
             return f"v{origin}"
         return f"w{defs[origin]}[l]"
 
+    def truth(origin: int, at: int) -> str:
+        if segment[origin] == segment[at] and ops[origin] in _MASK_OPS:
+            return f"m{origin}"
+        return f"L_MASK({value(origin, at)}!=0.)"
+
     port_index = {i: i for i in range(len(inputs))}
     lines: list[str] = []
     pragma = "    #pragma GCC ivdep\n" if ivdep else ""
@@ -360,7 +379,12 @@ def emit_lanes(
                 continue
             else:
                 template = vector_ops.get(op) or _CALL_OPS[op]
-                text = template.format(*(value(origin, j) for origin in source[j]))
+                operands = source[j]
+                masks = {f"t{i}": truth(origin, j) for i, origin in enumerate(operands) if f"{{t{i}}}" in template}
+                text = template.format(*(value(origin, j) for origin in operands), **masks)
+                if op in _MASK_OPS:
+                    body.append(f"const mrpctl_bits_t m{j} = {text};")
+                    text = f"L_BOOL(m{j})"
             body.append(f"const double v{j} = {text};")
             if crosses[j]:
                 body.append(f"w{defs[j]}[l] = v{j};")
@@ -426,8 +450,10 @@ def host_isa_flags() -> tuple[str, ...]:
 
 
 #: IEEE-exact flags of the lane engine: the simulator's, plus -fno-math-errno (sqrt then
-#: vectorises: sqrtpd is correctly rounded like sqrtsd; only errno is not set).
-LANE_FLAGS: tuple[str, ...] = (*_compile.SIMULATION_FLAGS, "-fno-math-errno")
+#: vectorises: sqrtpd is correctly rounded like sqrtsd; only errno is not set) and pressure-aware
+#: scheduling before register allocation (fewer spills of the long lane loop: measured 1.1x;
+#: it reorders instructions, never changes one).
+LANE_FLAGS: tuple[str, ...] = (*_compile.SIMULATION_FLAGS, "-fno-math-errno", "-fschedule-insns", "-fsched-pressure")
 
 
 def _build_library(code: str, name: str, flags: tuple[str, ...]) -> Path:
@@ -471,6 +497,8 @@ class LaneEngine:
         Emitter options (see :func:`emit_lanes`).
     isa : tuple of str, keyword-only
         Vector-ISA flags (default :func:`host_isa_flags`).
+    flags : tuple of str, keyword-only
+        The other compiler flags (default :data:`LANE_FLAGS`); they must keep IEEE arithmetic.
     delayed : (str, str), keyword-only
         The delayed input and the output that feeds it.
     """
@@ -484,6 +512,7 @@ class LaneEngine:
         fuse: bool = True,
         ivdep: bool = False,
         isa: tuple[str, ...] | None = None,
+        flags: tuple[str, ...] = LANE_FLAGS,
         delayed: tuple[str, str] = ("x_delayed", "x_meas"),
     ) -> None:
         self.d = integer("delay_samples", delay_samples, minimum=0)
@@ -547,7 +576,7 @@ class LaneEngine:
             f"static const long long mrpctl_out_offset[] = {{{', '.join(map(str, out_offset))}}};\n"
         )
         self.program = program
-        self.flags = (*LANE_FLAGS, *(host_isa_flags() if isa is None else isa))
+        self.flags = (*flags, *(host_isa_flags() if isa is None else isa))
         code = (
             header
             + program.code
@@ -577,7 +606,8 @@ class LaneEngine:
         """One batch of W lanes: SoA arrays in, the carried block (carried_size, W) out."""
         block = np.ascontiguousarray(carried.T) if self.carried_size else np.zeros((1, self.width))
         values = np.ascontiguousarray(constants.T) if self.constant_size else np.zeros((1, self.width))
-        columns = np.ascontiguousarray(history.transpose(1, 2, 0))  # (columns, measured, W)
+        columns = np.empty((self.history_columns, self.measured, self.width))  # m_{-d}.., (measured, W) each
+        columns[...] = history.transpose(1, 2, 0)  # broadcasts a constant (1-column) history
         ring = np.empty((self.d + 1, self.measured, self.width))
         status = self._run(
             _compile.address(block),
@@ -610,7 +640,8 @@ class LaneEngine:
         constants : mapping of str to array_like
             For each constant input, the (N, nnz) values of each run.
         history : array_like
-            (N, max(d, 1), nnz of the delayed input): m_{-d}, ..., m_{-1} of each run.
+            (N, max(d, 1), nnz of the delayed input): m_{-d}, ..., m_{-1} of each run, or
+            (N, 1, nnz) for a history constant in time (not repeated in memory).
         n : int
             Samples.
         threads : int, keyword-only
@@ -628,9 +659,23 @@ class LaneEngine:
             raise SpecificationError(f"lane engine inputs: missing {missing}, unexpected {extra}")
         history_array = np.asarray(history, dtype=float)
         runs = history_array.shape[0] if history_array.ndim == 3 else -1
-        if history_array.shape != (runs, self.history_columns, self.measured) or runs < 1:
+        shapes = {(runs, self.history_columns, self.measured), (runs, 1, self.measured)}
+        if history_array.shape not in shapes or runs < 1:
             raise DimensionError(
-                f"history: expected shape (N, {self.history_columns}, {self.measured}) but found {history_array.shape}"
+                f"history: expected shape (N, {self.history_columns}, {self.measured}) or (N, 1, {self.measured}) "
+                f"but found {history_array.shape}"
+            )
+        workers = _threads(threads)
+        per_batch = 8 * self.width * (2 * self.carried_size + self.constant_size + self.measured * (self.d + 1))
+        per_batch += 8 * self.width * self.measured * self.history_columns
+        needed = 8 * runs * (2 * self.carried_size + self.constant_size) + min(workers, runs) * per_batch
+        available = _available_memory()
+        if available is not None and needed > available:
+            raise SpecificationError(
+                f"the lane engine would need about {needed / 2**30:.1f} GiB ({runs} runs; per thread and batch of "
+                f"{self.width} lanes {per_batch / 2**20:.1f} MiB for the delay ring of d + 1 = {self.d + 1} "
+                f"samples) but about {available / 2**30:.1f} GiB are available; run fewer runs per call, "
+                "fewer threads or fewer lanes"
             )
         full_carried = np.empty((runs, max(self.carried_size, 1)))
         full_constants = np.empty((runs, max(self.constant_size, 1)))
@@ -656,14 +701,25 @@ class LaneEngine:
             stop = min((b + 1) * width, runs)
             out[b * width : stop] = block.T[: stop - b * width]
 
-        _pool_map(one, batches, threads)
+        _pool_map(one, batches, workers)
         return {name: out[:, where] for name, where in self.carried.items()}
 
 
-def _pool_map(task: Callable[[int], None], count: int, threads: int | None) -> None:
+def _threads(threads: int | None) -> int:
     if threads is None:
-        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    threads = integer("threads", threads, minimum=1)
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return integer("threads", threads, minimum=1)
+
+
+def _available_memory() -> int | None:
+    """Bytes of physical memory available now (None where the system does not say)."""
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _pool_map(task: Callable[[int], None], count: int, threads: int) -> None:
     if threads == 1 or count == 1:
         for b in range(count):
             task(b)
@@ -727,7 +783,8 @@ def simulate_lanes(
     memory0 : numpy.ndarray
         (N,) initial rule memories.
     history : numpy.ndarray
-        (N, 6, max(d, 1)) initial history blocks, as the scalar engine takes them.
+        (N, 6, max(d, 1)) initial history blocks, as the scalar engine takes them, or
+        (N, 6, 1) for a history constant in time.
     gains : numpy.ndarray
         (N, 3, 6) gains K (N m).
     parameters : numpy.ndarray

@@ -292,11 +292,16 @@ def test_lanes_default_width_threads_and_padding(rng: np.random.Generator) -> No
     serial = lane_stats(x0, gains, rules, d, n, width=_vectorize.DEFAULT_WIDTH, threads=1)
     np.testing.assert_array_equal(bits(pooled), bits(expected))
     np.testing.assert_array_equal(bits(serial), bits(expected))
+    lanes = _vectorize.lane_engine(paper.SPACECRAFT, rules[0], d, PERIOD, 1, width=_vectorize.DEFAULT_WIDTH)
+    constant_history = _vectorize.simulate_lanes(
+        lanes, x0, np.full(len(x0), 0.0), x0[:, :, None], gains, np.array([r.parameters() for r in rules]), n
+    )  # (N, 6, 1): the "constant" history without d copies
+    np.testing.assert_array_equal(bits(constant_history), bits(expected))
     alone = lane_stats(x0[5:6], gains[5:6], rules[5:6], d, n, width=_vectorize.DEFAULT_WIDTH)
     np.testing.assert_array_equal(bits(alone), bits(expected[5:6]))  # padding lanes do not leak in
 
 
-def test_lane_engine_reads_its_ports_and_checks_inputs() -> None:
+def test_lane_engine_reads_its_ports_and_checks_inputs(monkeypatch: pytest.MonkeyPatch) -> None:
     lanes = _vectorize.lane_engine(paper.SPACECRAFT, OnDelayed(), 150, PERIOD, 1, width=_vectorize.DEFAULT_WIDTH)
     assert set(lanes.carried) == {"x", "memory", "stats"}
     assert set(lanes.constants) == {"K", "parameters"}
@@ -307,10 +312,21 @@ def test_lane_engine_reads_its_ports_and_checks_inputs() -> None:
     history = np.zeros((2, 150, 6))
     with pytest.raises(SpecificationError, match="missing \\['K'\\]"):
         lanes.run(good, {"parameters": np.zeros((2, 1))}, history, 10)
-    with pytest.raises(DimensionError, match="history: expected shape \\(N, 150, 6\\)"):
+    with pytest.raises(DimensionError, match="history: expected shape \\(N, 150, 6\\) or \\(N, 1, 6\\)"):
         lanes.run(good, constants, np.zeros((2, 149, 6)), 10)
     with pytest.raises(DimensionError, match="x: expected shape \\(2, 6\\)"):
         lanes.run({**good, "x": np.zeros((3, 6))}, constants, history, 10)
     with pytest.raises(SpecificationError, match="threads"):
         lanes.run(good, constants, history, 10, threads=0)
     assert math.isfinite(lanes.run(good, constants, history, 3)["stats"][0, 0])
+    monkeypatch.setattr(_vectorize, "_available_memory", lambda: 2**30)
+    with pytest.raises(
+        SpecificationError, match="about 4.5 GiB .* about 1.0 GiB are available; run fewer runs per call"
+    ):
+        huge = 10**7  # 8 * (2 * 21 + 19) bytes per run: refused before anything is allocated
+        lanes.run(
+            {key: np.broadcast_to(value[:1], (huge, value.shape[1])) for key, value in good.items()},
+            {key: np.broadcast_to(value[:1], (huge, value.shape[1])) for key, value in constants.items()},
+            np.broadcast_to(history[:1, :1], (huge, 1, 6)),
+            10,
+        )
