@@ -321,7 +321,7 @@ def test_lane_engine_reads_its_ports_and_checks_inputs(monkeypatch: pytest.Monke
     assert math.isfinite(lanes.run(good, constants, history, 3)["stats"][0, 0])
     monkeypatch.setattr(_vectorize, "_available_memory", lambda: 2**30)
     with pytest.raises(
-        SpecificationError, match="about 4.5 GiB .* about 1.0 GiB are available; run fewer runs per call"
+        SpecificationError, match=r"about 4\.5 GiB .* about 1\.0 GiB are available; run fewer runs per call"
     ):
         huge = 10**7  # 8 * (2 * 21 + 19) bytes per run: refused before anything is allocated
         lanes.run(
