@@ -355,7 +355,6 @@ def emit_lanes(
             return f"m{origin}"
         return f"L_MASK({value(origin, at)}!=0.)"
 
-    port_index = {i: i for i in range(len(inputs))}
     lines: list[str] = []
     pragma = "    #pragma GCC ivdep\n" if ivdep else ""
     k = 0
@@ -369,7 +368,7 @@ def emit_lanes(
             op = ops[j]
             if op == ca.OP_INPUT:
                 port, nz = function.instruction_input(j)
-                text = f"i{port_index[port]}[{nz * width}+l]"
+                text = f"i{port}[{nz * width}+l]"
             elif op == ca.OP_CONST:
                 text = _constant(float(function.instruction_constant(j)))
             elif op == ca.OP_OUTPUT:
