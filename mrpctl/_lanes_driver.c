@@ -1,0 +1,62 @@
+/* mrpctl: the W-lane horizon driver (appended to the code that mrpctl._vectorize emits).
+ *
+ * W runs advance in lockstep, one lane each, through n samples of the same sample Function.
+ * Every buffer is structure-of-arrays: the nonzero j of a port for lane l is at [j * W + l].
+ * The emitted code before this file defines
+ *   MRPCTL_W, MRPCTL_N_IN, MRPCTL_N_OUT        lanes, the sample's input and output counts
+ *   MRPCTL_CARRIED, MRPCTL_MEASURED            nonzeros carried from sample to sample (x, memory,
+ *                                              stats, ...) and of the delayed measurement
+ *   mrpctl_in_role[], mrpctl_in_offset[]       per input: MRPCTL_ROLE_CARRIED (offset into the
+ *                                              carried block), MRPCTL_ROLE_DELAYED or
+ *                                              MRPCTL_ROLE_CONSTANT (offset into the constants)
+ *   mrpctl_out_role[], mrpctl_out_offset[]     per output: MRPCTL_ROLE_CARRIED (the next value
+ *                                              of a carried input), MRPCTL_ROLE_MEASUREMENT or
+ *                                              MRPCTL_ROLE_DROPPED (not computed)
+ *   mrpctl_lanes_sample(arg, res)              one sample for all W lanes
+ * The loop is the scalar driver's (mrpctl.simulate._DRIVER_C without trajectories): the carried
+ * block alternates between two buffers, the measurement m_k goes to a ring of d + 1 columns and
+ * m_{k-d} is read back from it (from the history for k < d). Masking of lanes that diverged or
+ * finished is done by the sample itself (its stats freeze), exactly as in the scalar engine.
+ */
+#include <string.h>
+
+#define MRPCTL_BLOCK (MRPCTL_CARRIED * MRPCTL_W)
+#define MRPCTL_COLUMN (MRPCTL_MEASURED * MRPCTL_W)
+
+/* carried: (MRPCTL_CARRIED, W), the initial values in and the values after n samples out.
+ * constants: (constant nonzeros, W). history: (max(d, 1), MRPCTL_MEASURED, W), m_{-d}.. m_{-1}.
+ * ring: (d + 1, MRPCTL_MEASURED, W) work space. Returns 0. */
+__attribute__((visibility("default"))) int mrpctl_lanes_run(double* carried, const double* constants,
+                                                            const double* history, long long n, long long d,
+                                                            double* ring) {
+  static double* const unused = 0;
+  double buffers[2][MRPCTL_BLOCK] __attribute__((aligned(64)));
+  const double* arg[MRPCTL_N_IN];
+  double* res[MRPCTL_N_OUT];
+  long long k, slot = 0, delayed_slot = 0;
+  int i;
+  memcpy(buffers[0], carried, sizeof(buffers[0]));
+  for (i = 0; i < MRPCTL_N_IN; ++i) arg[i] = constants + mrpctl_in_offset[i] * MRPCTL_W;
+  for (i = 0; i < MRPCTL_N_OUT; ++i) res[i] = unused;
+  for (k = 0; k < n; ++k) {
+    double* now = buffers[k & 1];
+    double* next = buffers[(k + 1) & 1];
+    const double* delayed = d == 0 ? history : k < d ? history + MRPCTL_COLUMN * k : ring + MRPCTL_COLUMN * delayed_slot;
+    for (i = 0; i < MRPCTL_N_IN; ++i) {
+      if (mrpctl_in_role[i] == MRPCTL_ROLE_CARRIED) arg[i] = now + mrpctl_in_offset[i] * MRPCTL_W;
+      else if (mrpctl_in_role[i] == MRPCTL_ROLE_DELAYED) arg[i] = delayed;
+    }
+    for (i = 0; i < MRPCTL_N_OUT; ++i) {
+      if (mrpctl_out_role[i] == MRPCTL_ROLE_CARRIED) res[i] = next + mrpctl_out_offset[i] * MRPCTL_W;
+      else if (mrpctl_out_role[i] == MRPCTL_ROLE_MEASUREMENT) res[i] = ring + MRPCTL_COLUMN * slot;
+    }
+    mrpctl_lanes_sample(arg, res);
+    if (++slot > d) slot = 0;
+    if (k >= d && ++delayed_slot > d) delayed_slot = 0;
+  }
+  memcpy(carried, buffers[n & 1], sizeof(buffers[0]));
+  return 0;
+}
+
+/* The lane count this library was built for (checked by the loader). */
+__attribute__((visibility("default"))) int mrpctl_lanes_width(void) { return MRPCTL_W; }

@@ -1,0 +1,806 @@
+"""A vectorised batch engine generated from the same CasADi sample Function as the scalar one.
+
+:func:`emit_lanes` walks the instruction list of a pure SX Function (``casadi.Function.
+instructions``) and writes C in which every value is W-wide, one lane per run, so that gcc
+vectorises across runs: W runs advance in lockstep through the sample. Each operation is
+written as CasADi's own generated C writes it for one scalar (``casadi_sq(x)`` is ``x*x``,
+``if_else_zero(c, x)`` is ``c ? x : 0``, comparisons and logic give 1.0 or +0.0), so the
+arithmetic of each lane is bit-identical to the scalar engine's: the same IEEE operations in
+the same order, ``-ffp-contract=off``, no fast-math; across lanes nothing is reassociated (no
+reductions). Selections are bit masks rather than ``?:`` (gcc would sink one arm's arithmetic
+into a branch and give up vectorising); comparison results keep their mask for the consumers
+in the same loop. ``fmin``/``fmax`` follow the libm's rule for NaNs and for a (+0, -0) tie
+(probed at import; C99 leaves the tie to the library, and gcc may swap the arguments of
+CasADi's calls, so on a tie the lanes follow the libm with CasADi's argument order; the closed
+loop never meets one: its arguments are sums of squares and counters). Operations without a
+vector form (``sin``, ``exp``, ``pow``, ...) call the same libm function lane by lane.
+
+Two layouts (``fuse``):
+
+* ``fuse=False``: every work variable of CasADi's register allocation is a ``double w[W]``
+  array and every instruction a loop ``for (l = 0; l < W; ++l) w7[l] = (w3[l]*w5[l]);``.
+* ``fuse=True`` (default, measured 4x faster): maximal runs of vectorisable instructions are one
+  loop over lanes whose body holds the instructions as scalar locals, so the values stay in
+  vector registers (the shape of a hand-written structure-of-arrays loop); only values used
+  across a libm call go through W-wide arrays.
+
+:class:`LaneEngine` compiles the emitted sample with the horizon driver ``_lanes_driver.c``
+and runs N runs in batches of W on a thread pool (ctypes releases the GIL); the ports are read
+from the Function: an input ``p`` with an output ``p_next`` is carried from sample to sample,
+the input ``x_delayed`` is fed m_{k-d} from a ring of the output ``x_meas``, every other input
+is a per-lane constant (K, rule parameters, ...), every other output is not computed.
+
+The module is self-contained until the simulation package and ``_compile.compile_source``
+land: :func:`_scalar_parts` and :func:`_build_library` are the two adapters to re-point.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import functools
+import hashlib
+import importlib.resources
+import logging
+import math
+import os
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from mrpctl import _compile
+from mrpctl._validation import integer
+from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+
+__all__ = [
+    "DEFAULT_WIDTH",
+    "LaneEngine",
+    "LaneProgram",
+    "emit_lanes",
+    "host_isa_flags",
+    "lane_engine",
+    "simulate_lanes",
+]
+
+logger = logging.getLogger(__name__)
+
+#: Lanes per batch: measured on the 60 s DelayAware tumbling batch (bench/vector.py, AVX2 host,
+#: CPU time of one thread): W = 4, 8, 16, 32 gave 742, 758, 729, 693 runs/s; 8 lanes are two
+#: 4-wide vectors per operation.
+DEFAULT_WIDTH = 8
+
+_DRIVER_FILE = "_lanes_driver.c"
+_ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT = 0, 1, 2
+_ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
+
+# ------------------------------------------------------------------ the operations
+# Each entry: the C expression of one lane, as CasADi 3.8's code generator writes it for a
+# scalar (casadi/core/calculus.h, casadi_math<T>::print and the casadi_* helpers). The
+# comparison and logic operators give 0/1 as ints in CasADi's C, converted to double on
+# assignment; ``c ? ...`` tests c != 0 (NaN is true), as in C.
+_VECTOR_OPS: dict[int, str] = {
+    ca.OP_ASSIGN: "{0}",
+    ca.OP_ADD: "({0}+{1})",
+    ca.OP_SUB: "({0}-{1})",
+    ca.OP_MUL: "({0}*{1})",
+    ca.OP_DIV: "({0}/{1})",
+    ca.OP_NEG: "(-{0})",
+    ca.OP_TWICE: "(2.*{0})",
+    ca.OP_INV: "(1./{0})",
+    ca.OP_SQ: "({0}*{0})",  # casadi_sq(x) { return x*x; }
+    ca.OP_SQRT: "sqrt({0})",  # vectorised with -fno-math-errno (sqrtpd is correctly rounded, as sqrtsd)
+    ca.OP_FABS: "fabs({0})",
+    ca.OP_COPYSIGN: "copysign({0},{1})",
+    ca.OP_SIGN: "L_SELECT(L_MASK({0}<0.), -1., L_SELECT(L_MASK({0}>0.), 1., {0}))",  # x<0 ? -1 : x>0 ? 1 : x
+    ca.OP_IF_ELSE_ZERO: "mrpctl_real(mrpctl_bits({1}) & {t0})",  # (c?x:0): x, or +0.0
+}
+# Comparisons and logic: CasADi's C gives the int 0/1 (as double 1.0 or +0.0). The lanes keep
+# the all-ones/zero bit mask m as well, so that a consumer in the same loop tests "x != 0" as m
+# (the value is exactly 0.0 or 1.0, so the two tests agree). {t0}/{t1}: the operand's mask.
+_MASK_OPS: dict[int, str] = {
+    ca.OP_LT: "L_MASK({0}<{1})",
+    ca.OP_LE: "L_MASK({0}<={1})",
+    ca.OP_EQ: "L_MASK({0}=={1})",
+    ca.OP_NE: "L_MASK({0}!={1})",
+    ca.OP_NOT: "(~{t0})",  # !x
+    ca.OP_AND: "({t0}&{t1})",  # x&&y (no side effects: no short circuit needed)
+    ca.OP_OR: "({t0}|{t1})",  # x||y
+}
+# Selections are written as bit masks, not ?:, so that gcc does not sink the arithmetic of
+# one arm into a branch (which stops if-conversion and vectorisation); the bits are the same.
+_LANE_HELPERS = r"""
+#include <string.h>
+typedef unsigned long long mrpctl_bits_t;
+static inline mrpctl_bits_t mrpctl_bits(double x) { mrpctl_bits_t u; memcpy(&u, &x, sizeof u); return u; }
+static inline double mrpctl_real(mrpctl_bits_t u) { double x; memcpy(&x, &u, sizeof x); return x; }
+/* the mask of a C condition: all ones if true, zero if false */
+#define L_MASK(c) (-(mrpctl_bits_t)(c))
+/* m ? a : b for a mask m, bit for bit */
+#define L_SELECT(m, a, b) mrpctl_real((mrpctl_bits(a) & (m)) | (mrpctl_bits(b) & ~(m)))
+/* (double)c of a mask: 1.0 or +0.0 */
+#define L_BOOL(m) mrpctl_real(0x3ff0000000000000ULL & (m))
+"""
+# fmin/fmax: casadi_fmin/casadi_fmax call the C99 fmin/fmax of the libm; the lane form is
+# chosen by probing that libm (see _min_max_forms) so that ties of +0/-0 and NaNs agree.
+# Operations evaluated by a libm call in every lane (the same function the scalar code calls).
+_CALL_OPS: dict[int, str] = {
+    ca.OP_EXP: "exp({0})",
+    ca.OP_LOG: "log({0})",
+    ca.OP_POW: "pow({0},{1})",
+    ca.OP_CONSTPOW: "pow({0},{1})",
+    ca.OP_SIN: "sin({0})",
+    ca.OP_COS: "cos({0})",
+    ca.OP_TAN: "tan({0})",
+    ca.OP_ASIN: "asin({0})",
+    ca.OP_ACOS: "acos({0})",
+    ca.OP_ATAN: "atan({0})",
+    ca.OP_ATAN2: "atan2({0},{1})",
+    ca.OP_SINH: "sinh({0})",
+    ca.OP_COSH: "cosh({0})",
+    ca.OP_TANH: "tanh({0})",
+    ca.OP_ASINH: "asinh({0})",
+    ca.OP_ACOSH: "acosh({0})",
+    ca.OP_ATANH: "atanh({0})",
+    ca.OP_FLOOR: "floor({0})",
+    ca.OP_CEIL: "ceil({0})",
+    ca.OP_FMOD: "fmod({0},{1})",
+    ca.OP_ERF: "erf({0})",
+    ca.OP_HYPOT: "hypot({0},{1})",
+    ca.OP_LOG1P: "log1p({0})",
+    ca.OP_EXPM1: "expm1({0})",
+}
+_CASADI_VERSION: str = getattr(ca, "__version__", "unknown")
+_OP_NAMES = {getattr(ca, name): name for name in dir(ca) if name.startswith("OP_")}
+
+
+@functools.lru_cache(maxsize=1)
+def _min_max_forms() -> dict[int, str]:
+    """Lane forms of fmin/fmax that reproduce this host's libm on ties (+0, -0) and NaNs.
+
+    C99 leaves fmax(+0, -0) to the library: glibc's generic code returns the first argument
+    on ties, its old x86-64 assembly (maxsd) the second. Both forms return the non-NaN
+    argument when one is NaN and the first when both are. The choice is probed from the
+    libm that the scalar code links; a libm matching neither refuses fmin/fmax.
+    """
+    name = ctypes.util.find_library("m")
+    libm = ctypes.CDLL(name) if name else ctypes.CDLL(None)
+    forms: dict[int, str] = {}
+    for op, c_name, compare in ((ca.OP_FMAX, "fmax", ">"), (ca.OP_FMIN, "fmin", "<")):
+        function = getattr(libm, c_name)
+        function.restype = ctypes.c_double
+        function.argtypes = [ctypes.c_double, ctypes.c_double]
+        first_on_tie = math.copysign(1.0, function(0.0, -0.0)) > 0 and math.copysign(1.0, function(-0.0, 0.0)) < 0
+        second_on_tie = math.copysign(1.0, function(0.0, -0.0)) < 0 and math.copysign(1.0, function(-0.0, 0.0)) > 0
+        nan_ok = function(math.nan, 1.0) == 1.0 and function(1.0, math.nan) == 1.0
+        if nan_ok and first_on_tie:
+            forms[op] = f"L_SELECT(L_MASK(({{0}}{compare}={{1}})|({{1}}!={{1}})), {{0}}, {{1}})"
+        elif nan_ok and second_on_tie:
+            forms[op] = f"L_SELECT(L_MASK(({{0}}{compare}{{1}})|({{1}}!={{1}})), {{0}}, {{1}})"
+    return forms
+
+
+def _constant(value: float) -> str:
+    if math.isnan(value):
+        return "NAN"
+    if math.isinf(value):
+        return "INFINITY" if value > 0 else "(-INFINITY)"
+    return f"({value.hex()})"  # C99 hexadecimal literal: exact
+
+
+@dataclass(frozen=True)
+class _Port:
+    name: str
+    nnz: int
+
+
+@dataclass(frozen=True)
+class LaneProgram:
+    """The emitted C of one SX Function over W lanes.
+
+    Attributes
+    ----------
+    code : str
+        C source defining ``<name>(in0, ..., out0, ...)`` (``static``, restrict pointers to
+        (nnz, W) structure-of-arrays buffers) and ``<name>_call(arg, res)``.
+    name : str
+        The C function name.
+    width : int
+        W, the lanes.
+    inputs, outputs : tuple of (str, int)
+        Port names and nonzero counts, in the Function's order.
+    dropped : tuple of str
+        Outputs that are not computed.
+    segments : int
+        Loops over lanes in the body (1 per instruction without fusion).
+    """
+
+    code: str
+    name: str
+    width: int
+    inputs: tuple[tuple[str, int], ...]
+    outputs: tuple[tuple[str, int], ...]
+    dropped: tuple[str, ...]
+    segments: int
+
+
+def emit_lanes(
+    function: ca.Function,
+    width: int,
+    *,
+    name: str = "mrpctl_lanes",
+    fuse: bool = True,
+    drop: Sequence[str] = (),
+    ivdep: bool = False,
+    standalone: bool = False,
+) -> LaneProgram:
+    """Emit C evaluating a pure SX Function on ``width`` lanes at once.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        A pure SX Function (no calls to other Functions, no free variables).
+    width : int
+        W >= 1, the lanes (a compile-time constant of the code).
+    name : str, keyword-only
+        Name of the emitted C function.
+    fuse : bool, keyword-only
+        One loop over lanes per run of vectorisable instructions (True) or per instruction.
+    drop : sequence of str, keyword-only
+        Output names not to compute.
+    ivdep : bool, keyword-only
+        Put ``#pragma GCC ivdep`` before every lane loop.
+    standalone : bool, keyword-only
+        Also export ``<name>_eval(const double** arg, double** res)`` (for tests).
+
+    Returns
+    -------
+    LaneProgram
+
+    Raises
+    ------
+    CodegenError
+        If the Function is not SX or uses an operation without a bit-identical lane form.
+    """
+    width = integer("width", width, minimum=1)
+    if not function.is_a("SXFunction"):
+        raise CodegenError(f"emit_lanes needs a pure SX Function, got {function.class_name()} {function.name()!r}")
+    if function.has_free():
+        raise CodegenError(f"{function.name()}: free variables {function.get_free()} cannot be emitted")
+    inputs = tuple(_Port(function.name_in(i), function.nnz_in(i)) for i in range(function.n_in()))
+    outputs = tuple(_Port(function.name_out(i), function.nnz_out(i)) for i in range(function.n_out()))
+    dropped = tuple(drop)
+    unknown = sorted(set(dropped) - {port.name for port in outputs})
+    if unknown:
+        raise SpecificationError(f"drop: {unknown} are not outputs of {function.name()} ({[p.name for p in outputs]})")
+    dropped_index = {i for i, port in enumerate(outputs) if port.name in dropped}
+    vector_ops = dict(_VECTOR_OPS)
+    vector_ops.update(_min_max_forms())
+    vector_ops.update(_MASK_OPS)
+
+    # Decode the instruction list: (op, output slot or None, input slots, text template).
+    count = function.n_instructions()
+    ops: list[int] = []
+    defs: list[int | None] = []
+    reads: list[list[int]] = []
+    for k in range(count):
+        op = function.instruction_id(k)
+        ops.append(op)
+        if op == ca.OP_INPUT:
+            defs.append(function.instruction_output(k)[0])
+            reads.append([])
+        elif op == ca.OP_OUTPUT:
+            defs.append(None)
+            keep = function.instruction_output(k)[0] not in dropped_index
+            reads.append([function.instruction_input(k)[0]] if keep else [])
+        elif op == ca.OP_CONST:
+            defs.append(function.instruction_output(k)[0])
+            reads.append([])
+        elif op in vector_ops or op in _CALL_OPS:
+            defs.append(function.instruction_output(k)[0])
+            template = vector_ops.get(op) or _CALL_OPS[op]
+            arity = 2 if "{1}" in template or "{t1}" in template else 1
+            reads.append(list(function.instruction_input(k)[:arity]))
+        else:
+            label = _OP_NAMES.get(op, str(op))
+            if op in (ca.OP_FMIN, ca.OP_FMAX):
+                reason = "this host's libm fmin/fmax match no known lane form"
+            else:
+                reason = "no bit-identical lane form"
+            raise CodegenError(
+                f"{function.name()}: cannot vectorise instruction {k} ({label}): {reason}; supported: "
+                + ", ".join(sorted(_OP_NAMES[o] for o in (*vector_ops, *_CALL_OPS) if o in _OP_NAMES))
+            )
+
+    # Segments: maximal runs of vectorisable instructions (fuse) or one per instruction.
+    segment = [0] * count
+    current = 0
+    for k in range(count):
+        call = ops[k] in _CALL_OPS
+        if k > 0 and (not fuse or call or ops[k - 1] in _CALL_OPS):
+            current += 1
+        segment[k] = current
+
+    # Which definition each read refers to; values read in another segment go through arrays.
+    last_def: dict[int, int] = {}
+    source: list[list[int]] = []
+    crosses = [False] * count
+    for k in range(count):
+        refs = []
+        for slot in reads[k]:
+            if slot not in last_def:
+                raise CodegenError(f"{function.name()}: instruction {k} reads work variable {slot} before writing it")
+            origin = last_def[slot]
+            refs.append(origin)
+            if segment[origin] != segment[k]:
+                crosses[origin] = True
+        source.append(refs)
+        defined = defs[k]
+        if defined is not None:
+            last_def[defined] = k
+    array_slots = sorted({slot for k, slot in enumerate(defs) if crosses[k] and slot is not None})
+
+    def value(origin: int, at: int) -> str:
+        if segment[origin] == segment[at]:
+            return f"v{origin}"
+        return f"w{defs[origin]}[l]"
+
+    def truth(origin: int, at: int) -> str:
+        if segment[origin] == segment[at] and ops[origin] in _MASK_OPS:
+            return f"m{origin}"
+        return f"L_MASK({value(origin, at)}!=0.)"
+
+    lines: list[str] = []
+    pragma = "    #pragma GCC ivdep\n" if ivdep else ""
+    k = 0
+    segments = 0
+    while k < count:
+        start = k
+        while k < count and segment[k] == segment[start]:
+            k += 1
+        body: list[str] = []
+        for j in range(start, k):
+            op = ops[j]
+            if op == ca.OP_INPUT:
+                port, nz = function.instruction_input(j)
+                text = f"i{port}[{nz * width}+l]"
+            elif op == ca.OP_CONST:
+                text = _constant(float(function.instruction_constant(j)))
+            elif op == ca.OP_OUTPUT:
+                port, nz = function.instruction_output(j)
+                if port not in dropped_index:
+                    body.append(f"o{port}[{nz * width}+l] = {value(source[j][0], j)};")
+                continue
+            else:
+                template = vector_ops.get(op) or _CALL_OPS[op]
+                operands = source[j]
+                masks = {f"t{i}": truth(origin, j) for i, origin in enumerate(operands) if f"{{t{i}}}" in template}
+                text = template.format(*(value(origin, j) for origin in operands), **masks)
+                if op in _MASK_OPS:
+                    body.append(f"const mrpctl_bits_t m{j} = {text};")
+                    text = f"L_BOOL(m{j})"
+            body.append(f"const double v{j} = {text};")
+            if crosses[j]:
+                body.append(f"w{defs[j]}[l] = v{j};")
+        if body:
+            segments += 1
+            lines.append(pragma + "    for (l = 0; l < W; ++l) {\n      " + "\n      ".join(body) + "\n    }")
+
+    in_params = [f"const double* restrict i{i}" for i in range(len(inputs))]
+    out_params = [f"double* restrict o{i}" for i in range(len(outputs))]
+    declarations = "".join(f"  double w{slot}[W] __attribute__((aligned(64)));\n" for slot in array_slots)
+    call_args = [f"arg[{i}]" for i in range(len(inputs))] + [f"res[{i}]" for i in range(len(outputs))]
+    signature = ", ".join(in_params + out_params) or "void"
+    code = (
+        f"/* {name}: {function.name()} on W = {width} lanes, emitted by mrpctl._vectorize from "
+        f"{count} CasADi {_CASADI_VERSION} instructions */\n"
+        "#include <math.h>\n" + _LANE_HELPERS + f"#undef W\n#define W {width}\n"
+        f"static void __attribute__((noinline)) {name}({signature}) {{\n"
+        "  int l;\n" + declarations + "\n".join(lines) + "\n}\n"
+        f"static inline void {name}_call(const double** arg, double** res) {{\n"
+        f"  {name}({', '.join(call_args)});\n}}\n#undef W\n"
+    )
+    if standalone:
+        code += (
+            f'__attribute__((visibility("default"))) int {name}_eval(const double** arg, double** res) {{\n'
+            f"  {name}_call(arg, res);\n  return 0;\n}}\n"
+        )
+    return LaneProgram(
+        code=code,
+        name=name,
+        width=width,
+        inputs=tuple((port.name, port.nnz) for port in inputs),
+        outputs=tuple((port.name, port.nnz) for port in outputs),
+        dropped=dropped,
+        segments=segments,
+    )
+
+
+# ------------------------------------------------------------------ flags and the build
+def _cpu_flags() -> set[str]:
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as handle:
+            for line in handle:
+                if line.startswith("flags"):
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
+@functools.lru_cache(maxsize=1)
+def host_isa_flags() -> tuple[str, ...]:
+    """Vector-ISA flags for this host: ``-mavx2`` where the CPU has AVX2, else none (SSE2).
+
+    Explicit flags rather than ``-march=native``, so that the cache key (which hashes the
+    flags) tells libraries for different machines apart. AVX-512 is not chosen (not
+    measured: the development host has none); ``$MRPCTL_LANES_ISA`` overrides (space-separated
+    flags, empty for SSE2). No FMA: ``-ffp-contract=off`` keeps the IEEE sequence either way.
+    """
+    configured = os.environ.get("MRPCTL_LANES_ISA")
+    if configured is not None:
+        return tuple(configured.split())
+    return ("-mavx2",) if "avx2" in _cpu_flags() else ()
+
+
+#: IEEE-exact flags of the lane engine: the simulator's, plus -fno-math-errno (sqrt then
+#: vectorises: sqrtpd is correctly rounded like sqrtsd; only errno is not set) and pressure-aware
+#: scheduling before register allocation (fewer spills of the long lane loop: measured 1.1x;
+#: it reorders instructions, never changes one).
+LANE_FLAGS: tuple[str, ...] = (*_compile.SIMULATION_FLAGS, "-fno-math-errno", "-fschedule-insns", "-fsched-pressure")
+
+
+def _build_library(code: str, name: str, flags: tuple[str, ...]) -> Path:
+    """Compile ``code`` to a cached shared library and return its path.
+
+    # adapter: re-point at _compile.compile_source(code, name, flags=flags) after the merge.
+    """
+    compiler = _compile.find_compiler()
+    if compiler is None:
+        raise CodegenError("the lane engine needs a C compiler ($CC, gcc or cc); none was found")
+    digest = hashlib.sha256(
+        "\n".join((code, _compile._compiler_identity(compiler), " ".join(flags), _CASADI_VERSION)).encode()
+    ).hexdigest()[:20]
+    library = _compile.cache_dir() / f"{name}_{digest}.so"
+    if not library.exists():
+        seconds = _compile._build(code, library, compiler, flags)
+        logger.info("compiled %s in %.2f s -> %s", name, seconds, library)
+    return library
+
+
+def _driver_source() -> str:
+    return importlib.resources.files("mrpctl").joinpath(_DRIVER_FILE).read_text(encoding="utf-8")
+
+
+# ------------------------------------------------------------------ the lane engine
+class LaneEngine:
+    """Runs of one sample Function, W at a time in lockstep (compiled C, a thread pool).
+
+    Parameters
+    ----------
+    sample : casadi.Function
+        The per-sample SX Function. An input ``p`` with an output ``p_next`` is carried from
+        sample to sample; ``delayed[0]`` (default ``x_delayed``) is fed the output
+        ``delayed[1]`` (default ``x_meas``) of d samples earlier; other inputs are constants
+        of each run; other outputs are not computed.
+    delay_samples : int
+        d >= 0.
+    width : int, keyword-only
+        W, lanes per batch (default :data:`DEFAULT_WIDTH`).
+    fuse, ivdep : bool, keyword-only
+        Emitter options (see :func:`emit_lanes`).
+    isa : tuple of str, keyword-only
+        Vector-ISA flags (default :func:`host_isa_flags`).
+    flags : tuple of str, keyword-only
+        The other compiler flags (default :data:`LANE_FLAGS`); they must keep IEEE arithmetic.
+    delayed : (str, str), keyword-only
+        The delayed input and the output that feeds it.
+    """
+
+    def __init__(
+        self,
+        sample: ca.Function,
+        delay_samples: int,
+        *,
+        width: int = DEFAULT_WIDTH,
+        fuse: bool = True,
+        ivdep: bool = False,
+        isa: tuple[str, ...] | None = None,
+        flags: tuple[str, ...] = LANE_FLAGS,
+        delayed: tuple[str, str] = ("x_delayed", "x_meas"),
+    ) -> None:
+        self.d = integer("delay_samples", delay_samples, minimum=0)
+        self.width = integer("width", width, minimum=1)
+        names_in = [sample.name_in(i) for i in range(sample.n_in())]
+        names_out = [sample.name_out(i) for i in range(sample.n_out())]
+        delayed_in, measured_out = delayed
+        if delayed_in not in names_in or measured_out not in names_out:
+            raise SpecificationError(
+                f"delayed: {sample.name()} needs an input {delayed_in!r} and an output {measured_out!r}, "
+                f"has inputs {names_in} and outputs {names_out}"
+            )
+        self.measured = sample.nnz_out(names_out.index(measured_out))
+        if sample.nnz_in(names_in.index(delayed_in)) != self.measured:
+            raise DimensionError(f"{delayed_in} and {measured_out} of {sample.name()} differ in size")
+        carried = [name for name in names_in if name + "_next" in names_out]
+        self.carried: dict[str, slice] = {}
+        self.constants: dict[str, slice] = {}
+        in_role, in_offset, offset_carried, offset_constant = [], [], 0, 0
+        for i, name in enumerate(names_in):
+            size = sample.nnz_in(i)
+            if name in carried:
+                if sample.nnz_out(names_out.index(name + "_next")) != size:
+                    raise DimensionError(f"{name} and {name}_next of {sample.name()} differ in size")
+                in_role.append(_ROLE_CARRIED)
+                in_offset.append(offset_carried)
+                self.carried[name] = slice(offset_carried, offset_carried + size)
+                offset_carried += size
+            elif name == delayed_in:
+                in_role.append(_ROLE_DELAYED)
+                in_offset.append(0)
+            else:
+                in_role.append(_ROLE_CONSTANT)
+                in_offset.append(offset_constant)
+                self.constants[name] = slice(offset_constant, offset_constant + size)
+                offset_constant += size
+        out_role, out_offset, drop = [], [], []
+        for name in names_out:
+            if name.endswith("_next") and name[: -len("_next")] in carried:
+                out_role.append(_ROLE_CARRIED)
+                out_offset.append(self.carried[name[: -len("_next")]].start)
+            elif name == measured_out:
+                out_role.append(_ROLE_MEASUREMENT)
+                out_offset.append(0)
+            else:
+                out_role.append(_ROLE_DROPPED)
+                out_offset.append(0)
+                drop.append(name)
+        self.carried_size, self.constant_size = offset_carried, offset_constant
+        program = emit_lanes(sample, self.width, name="mrpctl_lanes_sample_body", fuse=fuse, drop=drop, ivdep=ivdep)
+        header = (
+            f"#define MRPCTL_W {self.width}\n#define MRPCTL_N_IN {len(names_in)}\n"
+            f"#define MRPCTL_N_OUT {len(names_out)}\n#define MRPCTL_CARRIED {max(offset_carried, 1)}\n"
+            f"#define MRPCTL_MEASURED {self.measured}\n"
+            f"#define MRPCTL_ROLE_CARRIED {_ROLE_CARRIED}\n#define MRPCTL_ROLE_DELAYED {_ROLE_DELAYED}\n"
+            f"#define MRPCTL_ROLE_CONSTANT {_ROLE_CONSTANT}\n#define MRPCTL_ROLE_MEASUREMENT {_ROLE_MEASUREMENT}\n"
+            f"#define MRPCTL_ROLE_DROPPED {_ROLE_DROPPED}\n"
+            f"static const int mrpctl_in_role[] = {{{', '.join(map(str, in_role))}}};\n"
+            f"static const long long mrpctl_in_offset[] = {{{', '.join(map(str, in_offset))}}};\n"
+            f"static const int mrpctl_out_role[] = {{{', '.join(map(str, out_role))}}};\n"
+            f"static const long long mrpctl_out_offset[] = {{{', '.join(map(str, out_offset))}}};\n"
+        )
+        self.program = program
+        self.flags = (*flags, *(host_isa_flags() if isa is None else isa))
+        code = (
+            header
+            + program.code
+            + "#define mrpctl_lanes_sample(arg, res) mrpctl_lanes_sample_body_call(arg, res)\n"
+            + _driver_source()
+        )
+        self.library = _build_library(code, f"{sample.name()}_w{self.width}", self.flags)
+        self._dll = ctypes.CDLL(str(self.library))
+        if self._dll.mrpctl_lanes_width() != self.width:
+            raise CodegenError(f"{self.library} was built for {self._dll.mrpctl_lanes_width()} lanes, not {self.width}")
+        self._run = self._dll.mrpctl_lanes_run
+        self._run.restype = ctypes.c_int
+        self._run.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_longlong] * 2 + [ctypes.c_void_p]
+
+    @property
+    def history_columns(self) -> int:
+        """Columns of the initial history: max(d, 1)."""
+        return max(self.d, 1)
+
+    def _batch(
+        self,
+        carried: np.ndarray,
+        constants: np.ndarray,
+        history: np.ndarray,
+        n: int,
+    ) -> np.ndarray:
+        """One batch of W lanes: SoA arrays in, the carried block (carried_size, W) out."""
+        block = np.ascontiguousarray(carried.T) if self.carried_size else np.zeros((1, self.width))
+        values = np.ascontiguousarray(constants.T) if self.constant_size else np.zeros((1, self.width))
+        columns = np.empty((self.history_columns, self.measured, self.width))  # m_{-d}.., (measured, W) each
+        columns[...] = history.transpose(1, 2, 0)  # broadcasts a constant (1-column) history
+        ring = np.empty((self.d + 1, self.measured, self.width))
+        status = self._run(
+            _compile.address(block),
+            _compile.address(values),
+            _compile.address(columns),
+            n,
+            self.d,
+            _compile.address(ring),
+        )
+        if status != 0:
+            raise CodegenError(f"the lane engine {self.library} failed")
+        return block
+
+    def run(
+        self,
+        carried: Mapping[str, Any],
+        constants: Mapping[str, Any],
+        history: Any,
+        n: int,
+        *,
+        threads: int | None = None,
+    ) -> dict[str, np.ndarray]:
+        """N runs of n samples; the carried values after the last sample, in input order.
+
+        Parameters
+        ----------
+        carried : mapping of str to array_like
+            For each carried input, the (N, nnz) initial values (CasADi's column-major
+            nonzero order).
+        constants : mapping of str to array_like
+            For each constant input, the (N, nnz) values of each run.
+        history : array_like
+            (N, max(d, 1), nnz of the delayed input): m_{-d}, ..., m_{-1} of each run, or
+            (N, 1, nnz) for a history constant in time (not repeated in memory).
+        n : int
+            Samples.
+        threads : int, keyword-only
+            Worker threads (default: the CPUs available to this process).
+
+        Returns
+        -------
+        dict of str to numpy.ndarray
+            The (N, nnz) carried values after n samples.
+        """
+        n = integer("n", n, minimum=0)
+        missing = sorted((set(self.carried) - set(carried)) | (set(self.constants) - set(constants)))
+        extra = sorted(set(carried) - set(self.carried)) + sorted(set(constants) - set(self.constants))
+        if missing or extra:
+            raise SpecificationError(f"lane engine inputs: missing {missing}, unexpected {extra}")
+        history_array = np.asarray(history, dtype=float)
+        runs = history_array.shape[0] if history_array.ndim == 3 else -1
+        shapes = {(runs, self.history_columns, self.measured), (runs, 1, self.measured)}
+        if history_array.shape not in shapes or runs < 1:
+            raise DimensionError(
+                f"history: expected shape (N, {self.history_columns}, {self.measured}) or (N, 1, {self.measured}) "
+                f"but found {history_array.shape}"
+            )
+        workers = _threads(threads)
+        per_batch = 8 * self.width * (2 * self.carried_size + self.constant_size + self.measured * (self.d + 1))
+        per_batch += 8 * self.width * self.measured * self.history_columns
+        needed = 8 * runs * (2 * self.carried_size + self.constant_size) + min(workers, runs) * per_batch
+        available = _available_memory()
+        if available is not None and needed > available:
+            raise SpecificationError(
+                f"the lane engine would need about {needed / 2**30:.1f} GiB ({runs} runs; per thread and batch of "
+                f"{self.width} lanes {per_batch / 2**20:.1f} MiB for the delay ring of d + 1 = {self.d + 1} "
+                f"samples) but about {available / 2**30:.1f} GiB are available; run fewer runs per call, "
+                "fewer threads or fewer lanes"
+            )
+        full_carried = np.empty((runs, max(self.carried_size, 1)))
+        full_constants = np.empty((runs, max(self.constant_size, 1)))
+        for target, layout, values in (
+            (full_carried, self.carried, carried),
+            (full_constants, self.constants, constants),
+        ):
+            for name, where in layout.items():
+                array = np.asarray(values[name], dtype=float)
+                if array.shape != (runs, where.stop - where.start):
+                    raise DimensionError(
+                        f"{name}: expected shape ({runs}, {where.stop - where.start}) but found {array.shape}"
+                    )
+                target[:, where] = array
+        width = self.width
+        batches = -(-runs // width)
+        out = np.empty((runs, max(self.carried_size, 1)))
+
+        def one(b: int) -> None:
+            lanes = np.arange(b * width, (b + 1) * width)
+            lanes[lanes >= runs] = b * width  # padding lanes repeat the batch's first run
+            block = self._batch(full_carried[lanes], full_constants[lanes], history_array[lanes], n)
+            stop = min((b + 1) * width, runs)
+            out[b * width : stop] = block.T[: stop - b * width]
+
+        _pool_map(one, batches, workers)
+        return {name: out[:, where] for name, where in self.carried.items()}
+
+
+def _threads(threads: int | None) -> int:
+    if threads is None:
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return integer("threads", threads, minimum=1)
+
+
+def _available_memory() -> int | None:
+    """Bytes of physical memory available now (None where the system does not say)."""
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _pool_map(task: Callable[[int], None], count: int, threads: int) -> None:
+    if threads == 1 or count == 1:
+        for b in range(count):
+            task(b)
+        return
+    with ThreadPoolExecutor(max_workers=min(threads, count)) as pool:
+        for done in pool.map(task, range(count)):
+            del done
+
+
+# ------------------------------------------------------------------ the closed loop
+def _scalar_parts() -> Any:
+    """The scalar engine's pieces (the sample builder and the stats layout).
+
+    # adapter: the lead re-points this at mrpctl.simulation._engine after the merge.
+    """
+    from mrpctl import simulate as engine
+
+    return engine
+
+
+_ENGINES: dict[tuple[Any, ...], LaneEngine] = {}
+_ENGINES_LOCK = threading.Lock()
+
+
+def lane_engine(
+    spacecraft: Any, rule: Any, d: int, period: float, substeps: int, *, width: int = DEFAULT_WIDTH, **options: Any
+) -> LaneEngine:
+    """The (cached) lane engine of the scalar engine's sample for one structure."""
+    parts = _scalar_parts()
+    key = (spacecraft, type(rule), d, period, substeps, width, tuple(sorted(options.items())))
+    with _ENGINES_LOCK:
+        engine = _ENGINES.get(key)
+        if engine is None:
+            core = parts._core_function(spacecraft, rule, d, period, substeps)
+            label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}"
+            sample = parts._engine_sample(core, d, f"mrpctl_lanes_{label}")
+            engine = LaneEngine(sample, d, width=width, **options)
+            _ENGINES[key] = engine
+        return engine
+
+
+def simulate_lanes(
+    engine: LaneEngine,
+    x0: np.ndarray,
+    memory0: np.ndarray,
+    history: np.ndarray,
+    gains: np.ndarray,
+    parameters: np.ndarray,
+    n: int,
+    *,
+    threads: int | None = None,
+) -> np.ndarray:
+    """The stats (N, STATS) of N runs of the closed loop, as the scalar engine's ``run`` gives them.
+
+    Parameters
+    ----------
+    engine : LaneEngine
+        From :func:`lane_engine`.
+    x0 : numpy.ndarray
+        (N, 6) initial states x = [σ; ω/4] (ω in rad/s).
+    memory0 : numpy.ndarray
+        (N,) initial rule memories.
+    history : numpy.ndarray
+        (N, 6, max(d, 1)) initial history blocks, as the scalar engine takes them, or
+        (N, 6, 1) for a history constant in time.
+    gains : numpy.ndarray
+        (N, 3, 6) gains K (N m).
+    parameters : numpy.ndarray
+        (N, P) rule parameters.
+    n : int
+        Samples.
+    threads : int, keyword-only
+        Worker threads.
+    """
+    parts = _scalar_parts()
+    runs = len(x0)
+    stats0 = np.tile(parts._initial_stats(n), (runs, 1))
+    end = engine.run(
+        {"x": x0, "memory": np.reshape(memory0, (runs, -1)), "stats": stats0},
+        {"K": np.asarray(gains).transpose(0, 2, 1).reshape(runs, -1), "parameters": np.reshape(parameters, (runs, -1))},
+        np.asarray(history).transpose(0, 2, 1),
+        n,
+        threads=threads,
+    )
+    return end["stats"]

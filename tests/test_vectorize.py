@@ -1,0 +1,332 @@
+"""The vectorised lane engine (mrpctl._vectorize) against CasADi and the scalar engine.
+
+Independent references: CasADi's own generated C of the same Function compiled with the
+simulator's flags (bit for bit), CasADi's virtual machine (to an ulp), and the scalar engine
+of mrpctl.simulate run after run (bit for bit, every statistic).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
+
+from mrpctl import _compile, _vectorize, paper
+from mrpctl import simulate as engine
+from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+from mrpctl.model import state
+from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
+
+RATE = 1000.0
+PERIOD = 1.0 / RATE
+
+
+def bits(array: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(array, dtype=float).view(np.int64)
+
+
+# ------------------------------------------------------------------ the emitter alone
+def lanes_eval(function: ca.Function, inputs: list[np.ndarray], *, fuse: bool) -> list[np.ndarray]:
+    """Evaluate the emitted lane code: inputs (W, nnz_i) per port -> outputs (W, nnz_o)."""
+    width = inputs[0].shape[0]
+    program = _vectorize.emit_lanes(function, width, name=f"t_{function.name()}", fuse=fuse, standalone=True)
+    library = _vectorize._build_library(program.code, f"test_{function.name()}_w{width}", _vectorize.LANE_FLAGS)
+    evaluate = getattr(ctypes.CDLL(str(library)), program.name + "_eval")
+    soa_in = [np.ascontiguousarray(value.T) for value in inputs]
+    soa_out = [np.zeros((function.nnz_out(i), width)) for i in range(function.n_out())]
+    arg = (ctypes.c_void_p * len(soa_in))(*[_compile.address(a) for a in soa_in])
+    res = (ctypes.c_void_p * len(soa_out))(*[_compile.address(a) for a in soa_out])
+    assert evaluate(arg, res) == 0
+    return [value.T for value in soa_out]
+
+
+def casadi_c_eval(function: ca.Function, inputs: list[np.ndarray]) -> list[np.ndarray]:
+    """CasADi's generated scalar C (simulator flags), lane by lane."""
+    direct = _compile.compile_function(function, flags=_compile.SIMULATION_FLAGS).direct()
+    assert direct is not None
+    width = inputs[0].shape[0]
+    outputs = [np.zeros((width, function.nnz_out(i))) for i in range(function.n_out())]
+    for lane in range(width):
+        row_in = [np.ascontiguousarray(value[lane]) for value in inputs]
+        row_out = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
+        direct(row_in, row_out)
+        for i, value in enumerate(row_out):
+            outputs[i][lane] = value
+    return outputs
+
+
+def vm_eval(function: ca.Function, inputs: list[np.ndarray]) -> list[np.ndarray]:
+    width = inputs[0].shape[0]
+    mapped = function.map(width)
+    shapes_in = [function.size_in(i) for i in range(function.n_in())]
+    out = mapped(
+        *[
+            np.hstack([row.reshape(shape, order="F") for row in value])
+            for value, shape in zip(inputs, shapes_in, strict=True)
+        ]
+    )
+    out = out if isinstance(out, (list, tuple)) else [out]
+    rows = []
+    for i, value in enumerate(out):
+        columns = function.size_out(i)[1]
+        array = np.asarray(value)
+        rows.append(
+            np.array([array[:, lane * columns : (lane + 1) * columns].ravel(order="F") for lane in range(width)])
+        )
+    return rows
+
+
+def special_values(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
+    """Random values with signed zeros, ties, infinities and NaNs mixed in."""
+    values = rng.normal(scale=3.0, size=shape)
+    pool = np.array([0.0, -0.0, 1.0, -1.0, np.inf, -np.inf, np.nan, 2.5, 1e-300, -1e300])
+    mask = rng.uniform(size=shape) < 0.3
+    values[mask] = rng.choice(pool, size=int(mask.sum()))
+    return values
+
+
+def arithmetic_function() -> ca.Function:
+    x = ca.SX.sym("x", 3)
+    y = ca.SX.sym("y", 2)
+    e = [
+        x[0] + x[1], x[0] - y[0], x[1] * y[1], x[0] / x[2], -x[2], ca.sqrt(x[1]), x[0] ** 2, 2 * y[0], 1 / x[1],
+        ca.fabs(x[2]), ca.sign(x[0]), ca.copysign(x[0], y[1]),
+        x[0] < x[1], x[0] <= y[0], x[1] == y[1], x[2] != y[0],
+        ca.logic_not(x[0]), ca.logic_and(x[0], y[0]), ca.logic_or(x[1], y[1]),
+        ca.if_else(x[0] > y[0], x[1] * y[1], x[2] / y[0]),
+    ]  # fmt: skip
+    return ca.Function("arith", [x, y], [ca.vertcat(*e), x[0] * y[0] + 3.0], ["x", "y"], ["r", "s"])
+
+
+def libm_function() -> ca.Function:
+    x = ca.SX.sym("x", 2)
+    e = [
+        ca.exp(x[0]), ca.log(x[1]), ca.fabs(x[0]) ** x[1], ca.sin(x[0]) * ca.cos(x[1]), ca.tan(x[0]),
+        ca.atan2(x[0], x[1]),
+        ca.tanh(x[1]), ca.floor(x[0]) + ca.ceil(x[1]), ca.fmod(x[0], x[1]), ca.erf(x[0]), ca.hypot(x[0], x[1]),
+        ca.log1p(ca.fabs(x[1])), ca.expm1(x[0] / 8), ca.asin(x[0] / 10) + ca.acos(x[1] / 10) + ca.atan(x[0]),
+        ca.sinh(x[0] / 4) + ca.cosh(x[1] / 4), x[0] * ca.exp(-x[1] * x[1]) + 1,
+    ]  # fmt: skip
+    return ca.Function("libm", [x], [ca.vertcat(*e)], ["x"], ["r"])
+
+
+def engine_sample_function(rule) -> ca.Function:
+    d = 7
+    return engine._engine_sample(engine._core_function(paper.SPACECRAFT, rule, d, PERIOD, 1), d, "sample_t")
+
+
+@pytest.mark.parametrize("fuse", [True, False])
+def test_emitter_bit_identical_to_casadi_c_on_special_values(rng: np.random.Generator, fuse: bool) -> None:
+    function = arithmetic_function()
+    width = 37
+    inputs = [special_values(rng, (width, 3)), special_values(rng, (width, 2))]
+    got = lanes_eval(function, inputs, fuse=fuse)
+    expected = casadi_c_eval(function, inputs)
+    for g, e in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(bits(g), bits(e))
+    assert np.isnan(expected[0]).any() and np.isinf(expected[0]).any()  # the special values were exercised
+
+
+def minmax_function() -> ca.Function:
+    x = ca.SX.sym("x", 2)
+    e = [ca.fmin(x[0], x[1]), ca.fmax(x[0], x[1]), ca.fmax(x[1], x[0]), ca.fmin(ca.sqrt(x[0]), 2 * x[1])]
+    return ca.Function("minmax", [x], [ca.vertcat(*e)], ["x"], ["r"])
+
+
+def test_emitter_fmin_fmax_bit_identical_to_casadi_c_and_to_the_libm_on_ties(rng: np.random.Generator) -> None:
+    function = minmax_function()
+    values = special_values(rng, (41, 2))
+    values[:4] = [[np.nan, 1.0], [1.0, np.nan], [np.nan, np.nan], [np.inf, -np.inf]]
+    zero = (values == 0.0).all(axis=1) & (np.signbit(values[:, 0]) != np.signbit(values[:, 1]))
+    values[zero, 1] = 0.5  # no (+0, -0) ties here: see below
+    got = lanes_eval(function, [values], fuse=True)[0]
+    np.testing.assert_array_equal(bits(got), bits(casadi_c_eval(function, [values])[0]))
+    # C99 leaves fmin/fmax(+0, -0) to the library, and gcc may swap the arguments of these
+    # commutative builtins in CasADi's C, so on a tie the lanes follow the libm called with
+    # CasADi's argument order (through ctypes: no compiler in between).
+    libm = ctypes.CDLL(ctypes.util.find_library("m"))
+    ties = np.array([[0.0, -0.0], [-0.0, 0.0]])
+    got = lanes_eval(function, [ties], fuse=True)[0]
+    for name, column, (a, b) in (("fmin", 0, (0, 1)), ("fmax", 1, (0, 1)), ("fmax", 2, (1, 0))):
+        reference = getattr(libm, name)
+        reference.restype = ctypes.c_double
+        reference.argtypes = [ctypes.c_double, ctypes.c_double]
+        for row in range(2):
+            expected = reference(ties[row, a], ties[row, b])
+            assert math.copysign(1.0, got[row, column]) == math.copysign(1.0, expected)
+
+
+def test_emitter_libm_calls_bit_identical_to_casadi_c_and_an_ulp_from_the_vm(rng: np.random.Generator) -> None:
+    function = libm_function()
+    inputs = [np.column_stack((rng.uniform(-3, 3, 19), rng.uniform(0.2, 4, 19)))]
+    got = lanes_eval(function, inputs, fuse=True)[0]
+    np.testing.assert_array_equal(bits(got), bits(casadi_c_eval(function, inputs)[0]))
+    vm = vm_eval(function, inputs)[0]
+    assert np.all(np.isfinite(vm))
+    np.testing.assert_array_less(np.abs(got - vm), 2.0 * np.spacing(np.maximum(np.abs(got), np.abs(vm))) + 1e-300)
+
+
+@pytest.mark.parametrize("rule", [OnDelayed(), DelayAware(1.1)], ids=["OnDelayed", "DelayAware"])
+def test_emitter_on_the_engine_sample(rng: np.random.Generator, rule) -> None:
+    function = engine_sample_function(rule)
+    width = 16
+    x = state(Rotation.random(width, random_state=rng).as_mrp() * rng.uniform(0.5, 1.9, (width, 1)),
+              rng.uniform(-5, 5, (width, 3)))  # fmt: skip
+    stats = np.tile(engine._initial_stats(100), (width, 1))
+    stats[:, 0] = rng.integers(0, 120, width)  # some lanes past the horizon: masked
+    stats[::5, 13] = 3.0  # some already diverged: masked
+    inputs = [
+        x,
+        rng.integers(0, 9, (width, 1)).astype(float),
+        stats,
+        state(rng.normal(scale=0.8, size=(width, 3)), rng.uniform(-5, 5, (width, 3))),
+        np.tile(paper.GAIN.T.ravel(), (width, 1)) * rng.uniform(0.5, 1.5, (width, 1)),
+        np.full((width, 1), rule.parameters()[0]),
+    ]
+    got = lanes_eval(function, inputs, fuse=True)
+    compiled = casadi_c_eval(function, inputs)
+    vm = vm_eval(function, inputs)
+    for g, e, v in zip(got, compiled, vm, strict=True):
+        np.testing.assert_array_equal(bits(g), bits(e))
+        np.testing.assert_array_less(np.abs(g - v), 2.0 * np.spacing(np.maximum(np.abs(g), np.abs(v))) + 1e-300)
+    assert 0 < got[5].sum() < width  # some lanes switched, some did not
+
+
+def test_emitter_refuses_unsupported_operations_and_mx() -> None:
+    x = ca.SX.sym("x", 2)
+    printing = ca.Function("printing", [x], [x[0].printme(x[1]) + 1])
+    with pytest.raises(CodegenError, match=r"cannot vectorise instruction .*OP_PRINTME.*supported: .*OP_ADD"):
+        _vectorize.emit_lanes(printing, 4)
+    z = ca.MX.sym("z", 2)
+    with pytest.raises(CodegenError, match="pure SX Function"):
+        _vectorize.emit_lanes(ca.Function("mx", [z], [z * 2]), 4)
+    with pytest.raises(SpecificationError, match="drop"):
+        _vectorize.emit_lanes(arithmetic_function(), 4, drop=["nope"])
+    with pytest.raises(SpecificationError, match="width"):
+        _vectorize.emit_lanes(arithmetic_function(), 0)
+
+
+# ------------------------------------------------------------------ lanes against the scalar engine
+def dispersed_batch(rng: np.random.Generator, rule_class, count: int = 13):
+    """Attitudes uniform on SO(3), rates to 5 rad/s, gains 0.5-1.5x the paper's, one run the
+    paper's chattering case, one diverging run (|omega| = 4e5 rad/s), dispersed rule parameters."""
+    x0 = state(Rotation.random(count, random_state=rng).as_mrp(), rng.uniform(-5, 5, (count, 3)))
+    x0[0] = paper.INITIAL_STATE
+    x0[1, 3:] = 1e5  # omega = 4e5 rad/s: the divergence guard fires
+    gains = paper.GAIN[None] * rng.uniform(0.5, 1.5, (count, 1, 1))
+    gains[0] = paper.GAIN
+    rules: list[SwitchingRule]
+    if rule_class is BoundaryLayer:
+        rules = [BoundaryLayer(float(eps)) for eps in rng.uniform(0.001, 0.2, count)]
+    elif rule_class is DelayAware:
+        rules = [DelayAware(float(alpha)) for alpha in rng.uniform(1.0, 1.3, count)]
+    else:
+        rules = [rule_class()] * count
+    return x0, gains, rules
+
+
+def scalar_stats(x0, gains, rules, d: int, n: int) -> np.ndarray:
+    scalar = engine._engine(paper.SPACECRAFT, rules[0], d, PERIOD, 1)
+    return np.array(
+        [
+            scalar.run(
+                x0[i],
+                rules[i].initial_memory(delay_samples=d),
+                engine._initial_stats(n),
+                engine._history("constant", x0[i], d)[0],
+                gains[i],
+                np.array(rules[i].parameters()),
+                n,
+                trajectories=False,
+            )[0]
+            for i in range(len(x0))
+        ]
+    )
+
+
+def lane_stats(x0, gains, rules, d: int, n: int, *, width: int, threads: int | None = None) -> np.ndarray:
+    lanes = _vectorize.lane_engine(paper.SPACECRAFT, rules[0], d, PERIOD, 1, width=width)
+    return _vectorize.simulate_lanes(
+        lanes,
+        x0,
+        np.array([rule.initial_memory(delay_samples=d) for rule in rules]),
+        np.stack([engine._history("constant", x, d)[0] for x in x0]),
+        gains,
+        np.array([rule.parameters() for rule in rules]),
+        n,
+        threads=threads,
+    )
+
+
+RULES = [NoSwitching, OnCurrent, OnDelayed, BoundaryLayer, DelayAware]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("d", [0, 150])
+@pytest.mark.parametrize("rule_class", RULES, ids=[rule.__name__ for rule in RULES])
+def test_every_lane_bit_identical_to_the_scalar_engine(rng: np.random.Generator, rule_class, d: int) -> None:
+    n = 1501  # 1.5 s at 1 kHz: the paper's case crosses |sigma| = 1 at 0.44 s
+    x0, gains, rules = dispersed_batch(rng, rule_class)
+    expected = scalar_stats(x0, gains, rules, d, n)
+    got = lane_stats(x0, gains, rules, d, n, width=4)  # 13 runs: 3 full batches and one padded
+    np.testing.assert_array_equal(bits(got), bits(expected))
+    # the batch holds what it should: a diverged run, settled and unsettled ones, switching ones
+    assert expected[1, 13] >= 0 and (expected[:, 13] < 0).sum() >= 10
+    if rule_class is not NoSwitching:
+        assert (expected[:, 2] >= 1).sum() >= 3
+    if rule_class is OnDelayed and d > 0:
+        assert expected[0, 2] > 50  # the paper's chatter
+
+
+def test_lanes_default_width_threads_and_padding(rng: np.random.Generator) -> None:
+    d, n = 150, 1501
+    x0, gains, rules = dispersed_batch(rng, OnDelayed, count=11)
+    expected = scalar_stats(x0, gains, rules, d, n)
+    assert expected[0, 2] > 50 and expected[1, 13] >= 0  # chattering and diverging runs present
+    pooled = lane_stats(x0, gains, rules, d, n, width=_vectorize.DEFAULT_WIDTH, threads=2)
+    serial = lane_stats(x0, gains, rules, d, n, width=_vectorize.DEFAULT_WIDTH, threads=1)
+    np.testing.assert_array_equal(bits(pooled), bits(expected))
+    np.testing.assert_array_equal(bits(serial), bits(expected))
+    lanes = _vectorize.lane_engine(paper.SPACECRAFT, rules[0], d, PERIOD, 1, width=_vectorize.DEFAULT_WIDTH)
+    constant_history = _vectorize.simulate_lanes(
+        lanes, x0, np.full(len(x0), 0.0), x0[:, :, None], gains, np.array([r.parameters() for r in rules]), n
+    )  # (N, 6, 1): the "constant" history without d copies
+    np.testing.assert_array_equal(bits(constant_history), bits(expected))
+    alone = lane_stats(x0[5:6], gains[5:6], rules[5:6], d, n, width=_vectorize.DEFAULT_WIDTH)
+    np.testing.assert_array_equal(bits(alone), bits(expected[5:6]))  # padding lanes do not leak in
+
+
+def test_lane_engine_reads_its_ports_and_checks_inputs(monkeypatch: pytest.MonkeyPatch) -> None:
+    lanes = _vectorize.lane_engine(paper.SPACECRAFT, OnDelayed(), 150, PERIOD, 1, width=_vectorize.DEFAULT_WIDTH)
+    assert set(lanes.carried) == {"x", "memory", "stats"}
+    assert set(lanes.constants) == {"K", "parameters"}
+    assert lanes.program.dropped == ("u", "switched")
+    assert lanes.history_columns == 150
+    good = {"x": np.zeros((2, 6)), "memory": np.zeros((2, 1)), "stats": np.zeros((2, engine._STATS_SIZE))}
+    constants = {"K": np.zeros((2, 18)), "parameters": np.zeros((2, 1))}
+    history = np.zeros((2, 150, 6))
+    with pytest.raises(SpecificationError, match="missing \\['K'\\]"):
+        lanes.run(good, {"parameters": np.zeros((2, 1))}, history, 10)
+    with pytest.raises(DimensionError, match="history: expected shape \\(N, 150, 6\\) or \\(N, 1, 6\\)"):
+        lanes.run(good, constants, np.zeros((2, 149, 6)), 10)
+    with pytest.raises(DimensionError, match="x: expected shape \\(2, 6\\)"):
+        lanes.run({**good, "x": np.zeros((3, 6))}, constants, history, 10)
+    with pytest.raises(SpecificationError, match="threads"):
+        lanes.run(good, constants, history, 10, threads=0)
+    assert math.isfinite(lanes.run(good, constants, history, 3)["stats"][0, 0])
+    monkeypatch.setattr(_vectorize, "_available_memory", lambda: 2**30)
+    with pytest.raises(
+        SpecificationError, match=r"about 4\.5 GiB .* about 1\.0 GiB are available; run fewer runs per call"
+    ):
+        huge = 10**7  # 8 * (2 * 21 + 19) bytes per run: refused before anything is allocated
+        lanes.run(
+            {key: np.broadcast_to(value[:1], (huge, value.shape[1])) for key, value in good.items()},
+            {key: np.broadcast_to(value[:1], (huge, value.shape[1])) for key, value in constants.items()},
+            np.broadcast_to(history[:1, :1], (huge, 1, 6)),
+            10,
+        )
