@@ -688,7 +688,6 @@ def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, s
 
 def _sweep(args: argparse.Namespace) -> int:
     from mrpctl.simulation import simulate_batch
-    from mrpctl.switching import BoundaryLayer
 
     base = load_scenario(args.scenario) if args.scenario else _paper_base()
     base = _apply_overrides(base, args)

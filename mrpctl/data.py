@@ -66,12 +66,24 @@ def _versions() -> dict[str, str]:
     return versions()
 
 
+def _time_or_nan(value: float | None) -> float:
+    return np.nan if value is None else float(value)
+
+
+def _nan_or_time(value: Any) -> float | None:
+    number = float(value)
+    return None if np.isnan(number) else number
+
+
 def _run_dataset(result: SimulationResult) -> xr.Dataset:
     import xarray as xr
 
     n = len(result.t)
+    every = result.keep_every or 1
+    indices = np.asarray(result.switch_indices, dtype=np.int64)
+    kept = indices[indices % every == 0] // every  # switches that fall on a kept sample
     switched = np.zeros(n, dtype=np.int8)
-    switched[result.switch_indices] = 1
+    switched[kept[kept < n]] = 1
     data: dict[str, Any] = {
         "sigma": (
             ("time", "axis"),
@@ -80,7 +92,13 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
         ),
         "omega": (("time", "axis"), np.asarray(result.omega), {"units": "rad/s", "long_name": "body rate omega"}),
         "u": (("time", "axis"), np.asarray(result.u), {"units": "N m", "long_name": "torque held over [t_k, t_k+1)"}),
-        "switched": (("time",), switched, {"long_name": "1 where sigma was replaced by its shadow"}),
+        "switched": (("time",), switched, {"long_name": "1 where sigma was replaced by its shadow (kept samples)"}),
+        "switch_index": (("switch",), indices, {"long_name": "sample index k of every recorded switch"}),
+        "switch_count": ((), int(result.switch_count), {"long_name": "number of switches (exact)"}),
+        "first_switch_time": ((), _time_or_nan(result.first_switch_time), {"units": "s"}),
+        "last_switch_time": ((), _time_or_nan(result.last_switch_time), {"units": "s"}),
+        "peak_torque": ((), float(result.peak_torque), {"units": "N m", "long_name": "max_k |u_k|_inf"}),
+        "samples": ((), int(result.samples), {"long_name": "samples simulated"}),
         "sign_flips": (("axis",), np.asarray(result.sign_flips), {"long_name": "torque sign changes per axis"}),
         "max_sigma": ((), float(result.max_sigma), {"units": "1"}),
         "settling_time": ((), np.nan if result.settling_time is None else float(result.settling_time), {"units": "s"}),
@@ -94,7 +112,11 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
         "substeps": ((), int(result.substeps)),
         "t_final": ((), float(result.t_final), {"units": "s"}),
     }
-    attrs: dict[str, Any] = {**_rule_fields(result.rule), "history": "array"}
+    attrs: dict[str, Any] = {
+        **_rule_fields(result.rule),
+        "history": "array",
+        "keep_every": "none" if result.keep_every is None else int(result.keep_every),
+    }
     if isinstance(result.history, str):
         attrs["history"] = result.history
     else:
@@ -158,7 +180,7 @@ def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
     the inputs in ``DataFrame.attrs``. A batch: indexed by ``run``, columns for the initial
     state, τ, the rule and every metric.
     """
-    import pandas as pd  # type: ignore[import-untyped]
+    import pandas as pd
 
     if isinstance(result, SimulationResult):
         run = result
@@ -286,8 +308,9 @@ def load(path: str | Path) -> SimulationResult:
 
     dataset = _open(path)
     rate = float(dataset["rate"])
-    switched = np.asarray(dataset["switched"]) > 0
-    indices = np.flatnonzero(switched).astype(np.int64)
+    indices = np.asarray(dataset["switch_index"].values, dtype=np.int64)
+    times = indices / rate
+    keep_every = dataset.attrs.get("keep_every", 1)
     settling = float(dataset["settling_time"])
     history: Any = dataset.attrs["history"]
     if history == "array":
@@ -298,9 +321,14 @@ def load(path: str | Path) -> SimulationResult:
         omega=readonly(dataset["omega"].values),
         u=readonly(dataset["u"].values),
         switch_indices=readonly(indices, np.int64),
-        switch_times=readonly(indices / rate),
+        switch_times=readonly(times),
+        switch_count=int(dataset["switch_count"]),
+        first_switch_time=_nan_or_time(dataset["first_switch_time"]),
+        last_switch_time=_nan_or_time(dataset["last_switch_time"]),
         sign_flips=readonly(dataset["sign_flips"].values, np.int64),
         max_sigma=float(dataset["max_sigma"]),
+        peak_torque=float(dataset["peak_torque"]),
+        samples=int(dataset["samples"]),
         settling_time=None if np.isnan(settling) else settling,
         diverged=bool(dataset["diverged"]),
         spacecraft=Spacecraft(dataset["inertia"].values),
@@ -313,6 +341,7 @@ def load(path: str | Path) -> SimulationResult:
         substeps=int(dataset["substeps"]),
         x0=readonly(dataset["x0"].values),
         t_final=float(dataset["t_final"]),
+        keep_every=None if keep_every == "none" else int(keep_every),
     )
 
 

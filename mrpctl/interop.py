@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import control  # type: ignore[import-untyped]
+import control
 import numpy as np
 
 from mrpctl._validation import check_spacecraft, finite_array, finite_scalar, integer, nonnegative_scalar, readonly

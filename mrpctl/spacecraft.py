@@ -6,6 +6,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mrpctl._validation import finite_array, readonly
 from mrpctl.errors import DimensionError, InertiaWarning, SpecificationError
@@ -15,7 +16,7 @@ __all__ = ["Spacecraft"]
 _SYMMETRY_RTOL = 1e-9
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class Spacecraft:
     """A rigid spacecraft with inertia matrix J (kg m², body frame B).
 
@@ -45,10 +46,10 @@ class Spacecraft:
     """
 
     inertia: np.ndarray
-    inertia_inverse: np.ndarray = field(init=False, repr=False)
+    inertia_inverse: np.ndarray = field(repr=False)
 
-    def __post_init__(self) -> None:
-        raw = finite_array("inertia", self.inertia)
+    def __init__(self, inertia: ArrayLike) -> None:
+        raw = finite_array("inertia", inertia)
         if raw.shape == (3,):
             matrix = np.diag(raw)
         elif raw.shape == (3, 3):
@@ -71,7 +72,7 @@ class Spacecraft:
                 f"inertia violates the rigid-body triangle inequality: principal inertias "
                 f"{eigenvalues} have {j3:.6g} > {j1:.6g} + {j2:.6g}",
                 InertiaWarning,
-                stacklevel=3,
+                stacklevel=2,
             )
         object.__setattr__(self, "inertia", readonly(matrix))
         object.__setattr__(self, "inertia_inverse", readonly(np.linalg.inv(matrix)))

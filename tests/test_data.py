@@ -33,7 +33,15 @@ def run():
 
 def test_run_to_xarray_and_pandas_are_labelled(run):
     ds = data.to_xarray(run)
-    assert ds.sizes == {"time": len(run.t), "axis": 3, "row": 3, "col": 3, "input": 3, "state": 6}
+    assert ds.sizes == {
+        "time": len(run.t),
+        "axis": 3,
+        "row": 3,
+        "col": 3,
+        "input": 3,
+        "state": 6,
+        "switch": run.switch_count,
+    }
     assert np.array_equal(ds["time"].values, run.t) and ds["time"].attrs["units"] == "s"
     assert np.array_equal(ds["sigma"].sel(axis=2).values, run.sigma[:, 1])
     assert np.array_equal(ds["u"].values, run.u)
@@ -75,6 +83,12 @@ def test_save_load_round_trip(run, tmp_path):
         "substeps",
         "t_final",
         "history",
+        "switch_count",
+        "first_switch_time",
+        "last_switch_time",
+        "peak_torque",
+        "samples",
+        "keep_every",
     ):
         assert getattr(back, name) == getattr(run, name), name
     assert back.rule == run.rule and back.spacecraft == run.spacecraft
@@ -153,3 +167,14 @@ def test_result_methods_are_the_data_functions():
     )
     assert batch.to_xarray().equals(data.to_xarray(batch))
     assert batch.to_pandas().equals(data.to_pandas(batch))
+
+
+def test_decimated_run_round_trip(tmp_path):
+    """A run kept every 7th sample saves and loads with its exact switch list and metrics."""
+    run = simulate(paper.SPACECRAFT, paper.GAIN, X0, tau=0.5, rule=BoundaryLayer(0.005), t_final=3.0, keep_every=7)
+    assert run.switch_count > 0 and run.keep_every == 7
+    back = data.load(data.save(run, tmp_path / "run.nc"))
+    for name in ("t", "sigma", "switch_indices", "switch_times"):
+        assert np.array_equal(getattr(back, name), getattr(run, name)), name
+    for name in ("switch_count", "first_switch_time", "last_switch_time", "peak_torque", "samples", "keep_every"):
+        assert getattr(back, name) == getattr(run, name), name

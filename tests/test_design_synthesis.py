@@ -226,10 +226,9 @@ def test_decay_rate_is_required() -> None:
 def test_decay_optimal_gains_converge_on_random_tumbles() -> None:
     # The issue: the old "fastest certified" gains (omega_n = 1.29477 at tau = 0.5 s, exact margin
     # 0.500019 s) converged on none of 200 random tumbles in 120 s. Nonlinear simulation, 24 runs.
-    from mrpctl import NoSwitching, mrp
+    from mrpctl import NoSwitching, mrp, simulate_batch
     from mrpctl.design import pd_gains
     from mrpctl.model import state
-    from mrpctl import simulate_batch
 
     rng = np.random.default_rng(9)
     x0 = []

@@ -9,7 +9,7 @@ import control  # type: ignore[import-untyped]
 import numpy as np
 import pytest
 
-from mrpctl import DelayAware, NoSwitching, Spacecraft, paper
+from mrpctl import DelayAware, NoSwitching, Spacecraft, paper, simulate
 from mrpctl.design import linearized_loop, pd_gains
 from mrpctl.errors import SpecificationError
 from mrpctl.interop import (
@@ -24,7 +24,6 @@ from mrpctl.interop import (
     to_time_response,
 )
 from mrpctl.model import plant_model
-from mrpctl import simulate
 
 
 def _spectral_roots(a: np.ndarray, a_d: np.ndarray, tau: float, m: int = 60) -> np.ndarray:

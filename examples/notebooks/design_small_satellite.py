@@ -23,11 +23,10 @@
 import control
 import numpy as np
 
-from mrpctl import DelayAware, Spacecraft, mrp, plots
+from mrpctl import DelayAware, Spacecraft, mrp, plots, simulate
 from mrpctl.design import linearized_loop, pd_gains, synthesize_pd
 from mrpctl.interop import delayed_loop, loop_margins
 from mrpctl.model import state
-from mrpctl import simulate
 
 TAU = 0.2  # s
 sc = Spacecraft([12, 15, 9])

@@ -22,9 +22,8 @@
 # %matplotlib inline
 import matplotlib.pyplot as plt  # the notebook's backend shows the figures; mrpctl selects none
 
-from mrpctl import DelayAware, OnDelayed, paper, plots
+from mrpctl import DelayAware, OnDelayed, paper, plots, simulate
 from mrpctl.design import linearized_loop
-from mrpctl import simulate
 
 print(linearized_loop(paper.SPACECRAFT, paper.GAIN).delay_margin())
 

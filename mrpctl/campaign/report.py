@@ -51,7 +51,7 @@ def wilson_interval(successes: int, trials: int, *, confidence: float = 0.95) ->
     """
     if trials == 0:
         return 0.0, 1.0
-    from scipy.stats import norm  # type: ignore[import-untyped]
+    from scipy.stats import norm
 
     z = float(norm.ppf(0.5 + confidence / 2.0)) if confidence != 0.95 else _Z95
     p = successes / trials
@@ -65,7 +65,7 @@ def clopper_pearson_interval(successes: int, trials: int, *, confidence: float =
     """Exact (Clopper–Pearson 1934) interval of a binomial proportion, from the beta quantiles."""
     if trials == 0:
         return 0.0, 1.0
-    from scipy.stats import beta  # type: ignore[import-untyped]
+    from scipy.stats import beta
 
     alpha = 1.0 - confidence
     low = 0.0 if successes == 0 else float(beta.ppf(alpha / 2.0, successes, trials - successes + 1))

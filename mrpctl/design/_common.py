@@ -40,7 +40,7 @@ def balancing(a: np.ndarray, a_d: np.ndarray) -> np.ndarray:
     T⁻¹AT, T⁻¹A_dT have the characteristic roots of (A, A_d) and, for LMIs, congruent certificates;
     the balanced matrices are what the eigenvalue and LMI computations see (LAPACK gebal, scaling only).
     """
-    import scipy.linalg  # type: ignore[import-untyped]
+    import scipy.linalg
 
     mag = np.abs(a) + np.abs(a_d)
     if a.shape[0] == 1 or not np.any(mag - np.diag(np.diag(mag))):

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.linalg  # type: ignore[import-untyped]
+import scipy.linalg
 
 from mrpctl._validation import integer
 from mrpctl.design._common import balancing, similarity, system_matrices

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import scipy.linalg  # type: ignore[import-untyped]
+import scipy.linalg
 
 from mrpctl._validation import finite_array, integer, positive_scalar
 from mrpctl.design._common import order_value

@@ -131,7 +131,7 @@ def _w_bound(zeta: float) -> float:
 @functools.lru_cache(maxsize=64)
 def _best_w(zeta: float) -> tuple[float, complex]:
     """The w = ωₙτ in (0, w_bound(ζ)) that minimises Re of the rightmost root, and that root."""
-    from scipy.optimize import minimize_scalar  # type: ignore[import-untyped]
+    from scipy.optimize import minimize_scalar
 
     bound = _w_bound(zeta)
     res = minimize_scalar(
@@ -153,7 +153,7 @@ def _best_w_zeta(zeta_min: float) -> tuple[float, float, complex]:
     it is compared with the 1-D optimum on the boundary ζ = zeta_min. The answer does not depend on
     the spacecraft or on τ, so it is computed once per process.
     """
-    from scipy.optimize import minimize  # type: ignore[import-untyped]
+    from scipy.optimize import minimize
 
     zeta_max = _ZETA_RANGE[1]
 
