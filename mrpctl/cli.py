@@ -24,7 +24,7 @@ from typing import IO, TYPE_CHECKING, Any, TextIO
 import numpy as np
 
 from mrpctl import __version__, paper
-from mrpctl._validation import finite_array, integer, positive_scalar
+from mrpctl._validation import finite_array, integer, nonnegative_scalar, positive_scalar
 from mrpctl.errors import DimensionError, MrpctlError, SpecificationError
 from mrpctl.scenario import (
     RULE_NAMES,
@@ -504,6 +504,66 @@ def _design(args: argparse.Namespace) -> int:
     return 0
 
 
+def _flown_checks(
+    args: argparse.Namespace, spacecraft: Spacecraft, gain: np.ndarray, tau: float
+) -> list[dict[str, Any]]:
+    """The certificates of the loop as flown that the options ask for, as rows (name, verdict, text)."""
+    from mrpctl.design import (
+        certify_interval,
+        certify_polytope,
+        certify_sampled,
+        inertia_polytope,
+        linearized_loop,
+        sampled_stability,
+        spacecraft_axes,
+    )
+
+    rows: list[dict[str, Any]] = []
+    if args.jitter_rate is not None and args.jitter is None:
+        raise SpecificationError("--jitter-rate applies only with --jitter TAU_MIN")
+    if args.product_bound and args.inertia_tolerance is None:
+        raise SpecificationError("--product-bound applies only with --inertia-tolerance TOL")
+    if (args.jitter is not None or args.sampled is not None or args.inertia_tolerance is not None) and tau <= 0:
+        raise SpecificationError("--jitter, --sampled and --inertia-tolerance need a delay --tau > 0")
+    if args.jitter is not None:
+        tau_min = nonnegative_scalar("--jitter", args.jitter)
+        if tau_min >= tau:
+            raise SpecificationError(f"--jitter TAU_MIN must be < tau = {tau:g} s, got {tau_min:g}")
+        loop = linearized_loop(spacecraft, gain)
+        pairs = loop.axes if loop.split else ((loop.A, loop.A_d),)
+        certificates = [certify_interval(a, a_d, tau, tau_min=tau_min, rate=args.jitter_rate) for a, a_d in pairs]
+        ok = all(c.certified for c in certificates)
+        rows.append({"check": "jitter", "certified": ok, "text": "\n".join(str(c) for c in certificates)})
+    if args.sampled is not None:
+        rate = positive_scalar("--sampled", args.sampled)
+        d = round(tau * rate)
+        if abs(tau * rate - d) > 1e-9 * max(1.0, tau * rate):
+            raise SpecificationError(f"--sampled: tau * HZ must be a whole number of samples, got {tau * rate!r}")
+        exact = [
+            sampled_stability(a, b, k, 1.0 / rate, delay_samples=d) for a, b, k in spacecraft_axes(spacecraft, gain)
+        ]
+        certified = [
+            certify_sampled(a, b, k, 1.0 / rate, delay_samples=d, order=0)
+            for a, b, k in spacecraft_axes(spacecraft, gain)
+        ]
+        rows.append(
+            {
+                "check": "sampled",
+                "certified": all(c.certified for c in certified),
+                "exact_stable": all(e.stable for e in exact),
+                "spectral_radius": max(e.spectral_radius for e in exact),
+                "text": "\n".join([str(e) for e in exact] + [str(c) for c in certified]),
+            }
+        )
+    if args.inertia_tolerance is not None:
+        tolerance = positive_scalar("--inertia-tolerance", args.inertia_tolerance)
+        bound = nonnegative_scalar("--product-bound", args.product_bound)
+        polytope = inertia_polytope(spacecraft, tolerance, product_bound=bound)
+        certificate = certify_polytope(polytope, gain, tau)
+        rows.append({"check": "inertia", "certified": certificate.certified, "text": f"{polytope}\n{certificate}"})
+    return rows
+
+
 def _verify(args: argparse.Namespace) -> int:
     from mrpctl.design import analyze_gains, criterion_name, linearized_loop
 
@@ -543,12 +603,14 @@ def _verify(args: argparse.Namespace) -> int:
                     "ratio_to_exact": search.tau / margin.margin if finite else float("nan"),
                 }
             )
+    flown = _flown_checks(args, spacecraft, gain, tau)
     if args.json:
         _print_json(
             {
                 "tau": tau,
                 "K": gain,
                 "inertia": spacecraft.inertia,
+                "flown": [{key: value for key, value in row.items() if key != "text"} for row in flown],
                 "exact_delay_margin": margin.margin,
                 "stable_at_tau": margin.is_stable(tau) if tau > 0 else undelayed.stable,
                 "undelayed_stable": undelayed.stable,
@@ -574,6 +636,9 @@ def _verify(args: argparse.Namespace) -> int:
             f"{row['criterion']:<24} {row['status']:<16} {row['max_certified_tau']:>26.6g} "
             f"{row['ratio_to_exact']:>15.4f}"
         )
+    for row in flown:
+        print(f"{row['check']}: {'certified' if row['certified'] else 'NOT certified'}")
+        print("  " + row["text"].replace("\n", "\n  "))
     return 0
 
 
@@ -963,6 +1028,31 @@ def _add_verify(commands: Any) -> None:
     _add_plant_options(parser, "the paper's 140 100 80")
     parser.add_argument("--tau", type=float, help="delay to certify (s); default the scenario's or 0.5")
     parser.add_argument("--orders", type=int, nargs="+", default=[0, 1, 2, 3], help="LMI orders")
+    flown = parser.add_argument_group("the loop as flown (each adds a certificate; see design/lmi.md section 7)")
+    flown.add_argument(
+        "--jitter",
+        type=float,
+        metavar="TAU_MIN",
+        help="time-varying delay tau(t) in [TAU_MIN, tau]: interval certificate (Wirtinger + reciprocal convexity)",
+    )
+    flown.add_argument(
+        "--jitter-rate", type=float, metavar="MU", help="with --jitter: |d tau/dt| <= MU (default: rate unknown)"
+    )
+    flown.add_argument(
+        "--sampled",
+        type=float,
+        metavar="HZ",
+        help="sampled-data loop at HZ with ZOH and d = tau*HZ samples: exact lifted check and Jensen certificate",
+    )
+    flown.add_argument(
+        "--inertia-tolerance",
+        type=float,
+        metavar="TOL",
+        help="every inertia with J_ii within +-TOL (relative): one LK functional over the polytope's vertices",
+    )
+    flown.add_argument(
+        "--product-bound", type=float, default=0.0, metavar="P", help="with --inertia-tolerance: |J_ij| <= P kg m^2"
+    )
     _add_json(parser)
     parser.set_defaults(handler=_verify)
 

@@ -175,6 +175,29 @@ def test_verify_per_axis_gains(capsys: pytest.CaptureFixture[str]) -> None:
     assert per_axis["criteria"] == full["criteria"] and full["criteria"][0]["certified"] is True
 
 
+def test_verify_the_loop_as_flown(capsys: pytest.CaptureFixture[str]) -> None:
+    """--jitter, --sampled and --inertia-tolerance add certificates, checked against the exact answers."""
+    from mrpctl.design import sampled_stability, spacecraft_axes
+
+    argv = ["verify", "--tau", "0.5", "--orders", "1", "--json", "--jitter", "0.4", "--sampled", "100"]
+    assert main([*argv, "--inertia-tolerance", "0.1"]) == 0
+    flown = {row["check"]: row for row in json.loads(capsys.readouterr().out)["flown"]}
+    assert flown["jitter"]["certified"] and flown["inertia"]["certified"]
+    exact = [
+        sampled_stability(a, b, k, 0.01, delay_samples=50) for a, b, k in spacecraft_axes(paper.SPACECRAFT, paper.GAIN)
+    ]
+    assert flown["sampled"]["exact_stable"] and flown["sampled"]["certified"]
+    assert flown["sampled"]["spectral_radius"] == max(e.spectral_radius for e in exact) < 1.0
+    # Beyond the exact limit nothing is certified: at tau = 1.6 s the continuous loop is unstable (margin 1.5555 s).
+    assert main(["verify", "--tau", "1.6", "--orders", "1", "--json", "--sampled", "100"]) == 0
+    beyond = json.loads(capsys.readouterr().out)["flown"][0]
+    assert not beyond["exact_stable"] and not beyond["certified"]
+    assert main(["verify", "--jitter-rate", "0.5"]) == USER_ERROR
+    _one_line_error(capsys, "--jitter-rate")
+    assert main(["verify", "--tau", "0.5", "--jitter", "0.6"]) == USER_ERROR
+    _one_line_error(capsys, "--jitter")
+
+
 def test_verify_beyond_the_margin_is_not_certified(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["verify", "--inertia", "140", "100", "80", "--tau", "2.0", "--orders", "1"]) == 0
     out = capsys.readouterr().out
