@@ -91,7 +91,7 @@ def test_metrics_equal_an_independent_simulate_batch_call(spec, reference):
         assert bool(dataset["converged"][i]) == run.converged
         assert float(dataset["max_sigma"][i]) == run.max_sigma
         u = np.asarray(run.u)
-        assert float(dataset["peak_torque"][i]) == pytest.approx(np.max(np.sqrt(np.sum(u * u, axis=1))), rel=1e-15)
+        assert float(dataset["peak_torque"][i]) == np.max(np.abs(u))  # max_k |u_k|_inf, as the engine accumulates it
 
 
 def test_chunk_size_does_not_change_the_result(spec, reference, tmp_path):

@@ -421,7 +421,7 @@ def interval_blocks(
     return blocks
 
 
-def _margins(blocks: dict[str, np.ndarray]) -> tuple[BlockMargin, ...]:
+def interval_margins(blocks: dict[str, np.ndarray]) -> tuple[BlockMargin, ...]:
     out = []
     for name, block in blocks.items():
         eig = float(np.linalg.eigvalsh(block)[0])
@@ -431,7 +431,7 @@ def _margins(blocks: dict[str, np.ndarray]) -> tuple[BlockMargin, ...]:
 
 
 @dataclass(frozen=True)
-class _Unknown:
+class UnknownRate:
     """One matrix of decision variables: name, shape, symmetric or not."""
 
     name: str
@@ -451,8 +451,8 @@ class _Unknown:
         return out
 
 
-def _solve_lmi(
-    unknowns: Sequence[_Unknown],
+def solve_lmi(
+    unknowns: Sequence[UnknownRate],
     blocks: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]],
     fixed: dict[str, np.ndarray],
     normalise: Sequence[str],
@@ -499,7 +499,7 @@ def _solve_lmi(
     return outcome, values, float(t.value)
 
 
-def _solve_interval(
+def solve_interval(
     plants: Sequence[tuple[np.ndarray, np.ndarray]],
     tau_min: float,
     tau_max: float,
@@ -513,21 +513,21 @@ def _solve_interval(
     has0 = h1 > 0.0
     scaled = [(tau_max * a, tau_max * a_d) for a, a_d in plants]
     nx = _xi_size(n, order, has0, rate)
-    unknowns = [_Unknown("P", nx, nx, True), _Unknown("S2", n, n, True), _Unknown("R2", n, n, True)]
+    unknowns = [UnknownRate("P", nx, nx, True), UnknownRate("S2", n, n, True), UnknownRate("R2", n, n, True)]
     if has0:
-        unknowns += [_Unknown("S1", n, n, True), _Unknown("R1", n, n, True)]
+        unknowns += [UnknownRate("S1", n, n, True), UnknownRate("R1", n, n, True)]
     if rate.kind is RateKind.BOUNDED:
-        unknowns.append(_Unknown("Q", n, n, True))
+        unknowns.append(UnknownRate("Q", n, n, True))
     if _fridman(rate, has0):
-        unknowns += [_Unknown("U", n, n, True), _Unknown("Z", n, n, True)]
-    unknowns.append(_Unknown("X", (order + 1) * n, (order + 1) * n, False))
+        unknowns += [UnknownRate("U", n, n, True), UnknownRate("Z", n, n, True)]
+    unknowns.append(UnknownRate("X", (order + 1) * n, (order + 1) * n, False))
     fixed = {k: np.zeros((n, n)) for k in ("S1", "R1", "Q", "U", "Z")}
 
     def blocks(mats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return interval_blocks(scaled, h1, rate, mats, order=order)
 
     start = time.perf_counter()
-    outcome, values, t_opt = _solve_lmi(unknowns, blocks, fixed, [u.name for u in unknowns if u.symmetric])
+    outcome, values, t_opt = solve_lmi(unknowns, blocks, fixed, [u.name for u in unknowns if u.symmetric])
     elapsed = time.perf_counter() - start
     base: dict[str, Any] = {
         "order": order,
@@ -549,7 +549,7 @@ def _solve_interval(
             **base,
         )
     mats = {**fixed, **values}
-    margins = _margins(blocks(mats))
+    margins = interval_margins(blocks(mats))
     worst = min(margins, key=lambda m: m.relative)
     ok = worst.relative >= margin_tol
     reason = (
@@ -567,7 +567,7 @@ def _solve_interval(
     )
 
 
-def _rate_value(rate: Any) -> DelayRate:
+def rate_value(rate: Any) -> DelayRate:
     if rate is None:
         return DelayRate.unknown()
     if isinstance(rate, DelayRate):
@@ -630,8 +630,8 @@ def certify_interval(
     """
     plants = _plants(A, A_d)
     lo, hi = _interval(tau_min, tau_max)
-    return _solve_interval(
-        plants, lo, hi, _rate_value(rate), order_value(order), positive_scalar("margin_tol", margin_tol)
+    return solve_interval(
+        plants, lo, hi, rate_value(rate), order_value(order), positive_scalar("margin_tol", margin_tol)
     )
 
 
@@ -670,7 +670,7 @@ def max_certified_interval_delay(
 
     (a, a_d) = _plants(A, A_d)[0]
     lo = nonnegative_scalar("tau_min", tau_min)
-    rate_v = _rate_value(rate)
+    rate_v = rate_value(rate)
     order = order_value(order)
     rtol = positive_scalar("rtol", rtol)
     if rtol >= 0.5:
@@ -683,7 +683,7 @@ def max_certified_interval_delay(
 
     def test(hi: float) -> IntervalCertificate:
         nonlocal solves, total
-        cert = _solve_interval([(a, a_d)], lo, hi, rate_v, order, margin_tol)
+        cert = solve_interval([(a, a_d)], lo, hi, rate_v, order, margin_tol)
         solves += 1
         total += cert.solve_time
         return cert

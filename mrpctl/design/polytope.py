@@ -33,11 +33,11 @@ from mrpctl.design._common import frozen, order_value
 from mrpctl.design.interval import (
     DelayRate,
     IntervalCertificate,
-    _margins,
-    _rate_value,
-    _solve_interval,
-    _solve_lmi,
-    _Unknown,
+    UnknownRate,
+    interval_margins,
+    rate_value,
+    solve_interval,
+    solve_lmi,
 )
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, lmi_blocks
 from mrpctl.errors import SpecificationError
@@ -249,7 +249,7 @@ def _common_constant(
     n = plants[0][0].shape[0]
     scaled = [(tau * a, tau * a_d) for a, a_d in plants]
     size = (order + 1) * n
-    unknowns = [_Unknown("P", size, size, True), _Unknown("S", n, n, True), _Unknown("R", n, n, True)]
+    unknowns = [UnknownRate("P", size, size, True), UnknownRate("S", n, n, True), UnknownRate("R", n, n, True)]
 
     def blocks(mats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}
@@ -260,11 +260,11 @@ def _common_constant(
         return out
 
     start = time.perf_counter()
-    outcome, values, _ = _solve_lmi(unknowns, blocks, {}, ["positivity[vertex 0]", "S[vertex 0]", "R[vertex 0]"])
+    outcome, values, _ = solve_lmi(unknowns, blocks, {}, ["positivity[vertex 0]", "S[vertex 0]", "R[vertex 0]"])
     elapsed = time.perf_counter() - start
     if values is None:
         return CertificateStatus.SOLVER_FAILED, (), elapsed, outcome.error or f"solver status {outcome.status!r}"
-    margins = _margins(blocks(values))
+    margins = interval_margins(blocks(values))
     worst = min(margins, key=lambda m: m.relative)
     ok = worst.relative >= margin_tol
     status = CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED
@@ -307,7 +307,7 @@ def certify_polytope(
             lo = nonnegative_scalar("tau_min", tau_min)
             if not tau > lo:
                 raise SpecificationError(f"tau must exceed tau_min, got [{lo}, {tau}]")
-            cert = _solve_interval(plants, lo, tau, _rate_value(rate), order, margin_tol)
+            cert = solve_interval(plants, lo, tau, rate_value(rate), order, margin_tol)
             intervals.append(cert)
             st, mg, tm, why = cert.status, cert.margins, cert.solve_time, cert.reason
         total += tm

@@ -17,7 +17,7 @@ from typing import Any
 from mrpctl._validation import check_spacecraft, integer, nonnegative_scalar, positive_scalar
 from mrpctl.design._common import order_value
 from mrpctl.design.gains import PDGains, pd_gains
-from mrpctl.design.interval import DelayRate, _rate_value
+from mrpctl.design.interval import DelayRate, rate_value
 from mrpctl.design.margin import delay_margin
 from mrpctl.design.polytope import PolytopeCertificate, certify_polytope, exact_polytope_margin, inertia_polytope
 from mrpctl.design.sampled import sampled_stability, spacecraft_axes
@@ -144,7 +144,7 @@ def synthesize_robust_pd(
         lo = nonnegative_scalar("tau_min", tau_min)
         if not tau > lo:
             raise SpecificationError(f"tau must exceed tau_min, got [{lo}, {tau}]")
-        model, hi, rate_v = DelayModel.INTERVAL, tau, _rate_value(rate)
+        model, hi, rate_v = DelayModel.INTERVAL, tau, rate_value(rate)
     else:
         model, lo, hi, rate_v = DelayModel.CONSTANT, tau, tau, DelayRate.unknown()
     solves = 0

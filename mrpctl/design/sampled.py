@@ -24,7 +24,7 @@ import scipy.linalg
 
 from mrpctl._validation import finite_array, integer, positive_scalar
 from mrpctl.design._common import order_value
-from mrpctl.design.interval import DelayRate, IntervalCertificate, _solve_interval
+from mrpctl.design.interval import DelayRate, IntervalCertificate, solve_interval
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, SearchStatus, criterion_name
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.spacecraft import Spacecraft
@@ -288,7 +288,7 @@ def certify_sampled(
     a, b, k = _system(A, B, K)
     h = positive_scalar("period", period)
     d = integer("delay_samples", delay_samples, minimum=0)
-    return _solve_interval(
+    return solve_interval(
         [(a, b @ k)],
         d * h,
         (d + 1) * h,
@@ -362,7 +362,7 @@ def max_certified_period(
     def test(h: float) -> IntervalCertificate:
         nonlocal solves
         solves += 1
-        return _solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+        return solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
 
     if math.isnan(exact):
         return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, 0, "no stable period")
@@ -443,7 +443,7 @@ def max_certified_delay_samples(
     def test(d: int) -> IntervalCertificate:
         nonlocal solves
         solves += 1
-        return _solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+        return solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
 
     top = test(d_max)
     if top.certified:
