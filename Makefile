@@ -1,11 +1,11 @@
 # Two set-up commands, both idempotent on a fresh machine with python3, make and gcc:
 #   make demo   create .venv, install mrpctl, run the paper example
-#   make test   create .venv, install mrpctl with its test extras, run the whole suite
+#   make test   create .venv, install mrpctl with its test extras, ruff + mypy, then the whole suite and doctests
 VENV ?= .venv
 PYTHON := $(VENV)/bin/python
 STAMP := $(VENV)/.mrpctl-installed
 
-.PHONY: demo test lint bench clean docs wheel-check
+.PHONY: demo test check lint typecheck bench clean docs wheel-check
 
 $(PYTHON):
 	python3 -m venv $(VENV)
@@ -21,20 +21,25 @@ demo: $(STAMP)
 # One BLAS thread per xdist worker: two workers on two cores, no oversubscription.
 BLAS1 := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-test: $(STAMP)
-	$(BLAS1) $(PYTHON) -m pytest -q -n 2
+# The whole check: lint, types, then the suite with the doctests of the package.
+test: check
+	$(BLAS1) $(PYTHON) -m pytest -q -n 2 --doctest-modules mrpctl tests
+
+check: lint typecheck
 
 lint: $(STAMP)
-	$(PYTHON) -m pip install --quiet ruff
 	$(VENV)/bin/ruff check mrpctl tests examples bench
 	$(VENV)/bin/ruff format --check mrpctl tests examples bench
+
+typecheck: $(STAMP)
+	$(VENV)/bin/mypy
 
 bench: $(STAMP)
 	$(PYTHON) bench/design.py
 	$(PYTHON) bench/simulate.py
 
 clean:
-	rm -rf $(VENV) results build *.egg-info .pytest_cache
+	rm -rf $(VENV) results build dist site *.egg-info .pytest_cache .mypy_cache .ruff_cache
 
 # The documentation site (mkdocs-material + mkdocstrings) into site/, warnings are errors.
 docs: $(STAMP)
