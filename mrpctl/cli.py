@@ -752,7 +752,7 @@ def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, s
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from mrpctl.simulation import simulate_batch
+    from mrpctl.simulation import BatchResult, simulate_batch
 
     base = load_scenario(args.scenario) if args.scenario else _paper_base()
     base = _apply_overrides(base, args)
@@ -761,6 +761,7 @@ def _sweep(args: argparse.Namespace) -> int:
     values, label, runs = _sweep_runs(args, base)
     _check_sweep_fits(base, len(runs), [r.get("tau", base.tau) for r in runs], chunk)
     rows: list[tuple[Any, ...]] = []
+    batches: list[Any] = []
     with _progress(len(runs), f"sweep {args.parameter}") as bar:
         for start in range(0, len(runs), chunk):
             part = runs[start : start + chunk]
@@ -776,6 +777,7 @@ def _sweep(args: argparse.Namespace) -> int:
                 history=base.history,
                 substeps=base.substeps,
             )
+            batches.append(batch)
             for i in range(len(part)):
                 sigma0, omega0 = x0[i, :3], 4.0 * x0[i, 3:]
                 rows.append(
@@ -800,13 +802,25 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.plot is not None:
         from mrpctl import plots
 
-        fig = plots.plot_sweep(
-            [r[0] for r in rows],
-            switch_count=[r[column["switches"]] for r in rows],
-            settling_time=[r[column["settling_s"]] for r in rows],
-            converged=[r[column["converged"]] for r in rows],
-            parameter_label=label,
-        )
+        if args.parameter == "tumble":
+            # Independent runs: distributions and a scatter against the initial state, not a line over run index.
+            fig = plots.plot_monte_carlo(BatchResult.concatenate(batches))
+        else:
+            margin = None
+            if args.parameter == "tau":
+                from mrpctl.design import linearized_loop
+
+                margin = linearized_loop(base.spacecraft, base.K).delay_margin().margin
+            fig = plots.plot_sweep(
+                [r[0] for r in rows],
+                switch_count=[r[column["switches"]] for r in rows],
+                settling_time=[r[column["settling_s"]] for r in rows],
+                converged=[r[column["converged"]] for r in rows],
+                diverged=[r[column["diverged"]] for r in rows],
+                max_sigma=[r[column["max_abs_sigma"]] for r in rows],
+                parameter_label=label,
+                margin=margin,
+            )
         files["plot"] = _save_plot(fig, Path(args.plot))
     if args.csv is not None:
         path = Path(args.csv)

@@ -293,3 +293,28 @@ def test_one_engine_serves_every_spacecraft_of_a_layout() -> None:
     x1 = np.array([0.5, 0.2, -0.1, 0.05, 0.0, 0.02])
     runs = [simulate(craft, paper.GAIN, x1, tau=0.02, rule=OnDelayed(), t_final=2.0) for craft in (a, b)]
     assert not np.array_equal(runs[0].sigma, runs[1].sigma)
+
+
+def test_concatenated_batches_equal_one_batch() -> None:
+    """BatchResult.concatenate of two batches equals the batch of all their runs, field by field."""
+    import dataclasses
+
+    from mrpctl import BatchResult, DelayAware, paper, simulate_batch
+
+    x0 = np.array([[0.93, 0, 0, 0.46 / 4, 0, 0], [0.5, 0.2, 0, 0, 0.1, 0], [0.1, 0, 0.3, 0, 0, 0.2]])
+    run = dict(tau=0.05, rule=DelayAware(), t_final=2.0, rate=100.0)
+    whole = simulate_batch(paper.SPACECRAFT, paper.GAIN, x0, **run)
+    parts = BatchResult.concatenate(
+        [
+            simulate_batch(paper.SPACECRAFT, paper.GAIN, x0[:2], **run),
+            simulate_batch(paper.SPACECRAFT, paper.GAIN, x0[2:], **run),
+        ]
+    )
+    for f in dataclasses.fields(BatchResult):
+        a, b = getattr(parts, f.name), getattr(whole, f.name)
+        if isinstance(a, np.ndarray):
+            assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), f.name
+        else:
+            assert a == b, f.name
+    with pytest.raises(SpecificationError, match="batches"):
+        BatchResult.concatenate([whole, simulate_batch(paper.SPACECRAFT, paper.GAIN, x0, **{**run, "t_final": 1.0})])

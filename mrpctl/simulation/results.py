@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from mrpctl._validation import readonly, sealed
+from mrpctl.errors import SpecificationError
 from mrpctl.simulation._engine import RunOutput
 from mrpctl.simulation._stats import DIVERGENCE_BOUND, Metrics
 from mrpctl.spacecraft import Spacecraft
@@ -194,6 +196,29 @@ def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: d
     )
 
 
+def _same_history(a: Any, b: Any) -> bool:
+    if isinstance(a, str) or isinstance(b, str):
+        return bool(a == b)
+    return bool(np.array_equal(a, b))
+
+
+#: The per-run arrays of a BatchResult (concatenated along the run axis).
+_BATCH_ARRAYS = (
+    "x0",
+    "K",
+    "tau",
+    "switch_count",
+    "first_switch_time",
+    "last_switch_time",
+    "sign_flips",
+    "settling_time",
+    "converged",
+    "diverged",
+    "max_sigma",
+    "peak_torque",
+)
+
+
 @dataclass(frozen=True, eq=False)
 class BatchResult:
     """Metrics of many closed-loop runs (one entry per run, in input order).
@@ -252,6 +277,42 @@ class BatchResult:
 
     def __len__(self) -> int:
         return len(self.switch_count)
+
+    @classmethod
+    def concatenate(cls, batches: Sequence[BatchResult]) -> BatchResult:
+        """One batch of the runs of ``batches`` in order (they must share rate, horizon, substeps and history).
+
+        Raises
+        ------
+        SpecificationError
+            If ``batches`` is empty or the shared inputs differ.
+        """
+        if not batches:
+            raise SpecificationError("batches: give at least one BatchResult")
+        first = batches[0]
+        for other in batches[1:]:
+            same = (other.rate, other.t_final, other.substeps) == (first.rate, first.t_final, first.substeps)
+            if not same or not _same_history(other.history, first.history):
+                raise SpecificationError(
+                    "batches: every batch must share rate, t_final, substeps and history to be concatenated"
+                )
+        arrays = {
+            name: readonly(np.concatenate([getattr(b, name) for b in batches]), getattr(first, name).dtype)
+            for name in _BATCH_ARRAYS
+        }
+        runs = None
+        if all(b.runs is not None for b in batches):
+            runs = tuple(run for b in batches for run in (b.runs or ()))
+        return cls(
+            **arrays,
+            rules=tuple(rule for b in batches for rule in b.rules),
+            rate=first.rate,
+            t_final=first.t_final,
+            substeps=first.substeps,
+            history=first.history,
+            spacecraft=tuple(sc for b in batches for sc in b.spacecraft),
+            runs=runs,
+        )
 
     def plot(self, **kwargs: Any) -> Any:
         """Plot the batch: :func:`mrpctl.plots.plot_batch` (``kwargs`` passed on)."""
