@@ -32,3 +32,13 @@ def test_setup_commands_exist() -> None:
 def test_gallery_images_exist() -> None:
     for name in re.findall(r"\]\((docs/gallery/[^)]+\.png)\)", README):
         assert (ROOT / name).read_bytes()[:4] == b"\x89PNG", name
+
+
+def test_flown_loop_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    """The "loop as flown" block runs as written and every certificate it prints is certified."""
+    section = README.split("## The loop as flown", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    exec(compile(code, "README.md", "exec"), {})
+    out = capsys.readouterr().out
+    assert out.count(": certified") == 3 and "not certified" not in out
+    assert ": stable (spectral radius" in out
