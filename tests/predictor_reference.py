@@ -121,6 +121,7 @@ class Run:
     t: np.ndarray
     x: np.ndarray  # (n, 6) plant state at t_k (short set)
     sigma_hat: np.ndarray  # (n, 3) the controller's σ̂ (after its switching rule)
+    x_hat: np.ndarray  # (n, 6) the prediction [σ̂; ω̂/4] the torque is computed from
     u: np.ndarray  # (n, 3)
     switches: list[int]
     attitude_error: np.ndarray  # (n,) angle (rad) between predicted and true attitude
@@ -154,6 +155,7 @@ def run(
     us = np.zeros((n, 3))
     zs = np.empty((n, 6))
     sigma_hats = np.empty((n, 3))
+    x_hats = np.empty((n, 6))
     att_err = np.empty(n)
     rate_err = np.empty(n)
     switches: list[int] = []
@@ -190,7 +192,8 @@ def run(
         sigma_hats[k] = sigma_hat
         att_err[k] = angle_between(c_hat, dcm(x[:3]))
         rate_err[k] = float(np.linalg.norm(omega_hat - 4.0 * x[3:]))
-        u = gain @ np.concatenate((sigma_hat, omega_hat / 4.0))
+        x_hats[k] = np.concatenate((sigma_hat, omega_hat / 4.0))
+        u = gain @ x_hats[k]
         us[k] = u
         x = to_short(rk4(inertia, inverse, x, u, h, plant_substeps))
         z = to_short(rk4(model, model_inverse, z, u, h, 1))
@@ -202,6 +205,7 @@ def run(
         t=np.arange(n) / rate,
         x=xs,
         sigma_hat=sigma_hats,
+        x_hat=x_hats[:n],
         u=us,
         switches=switches,
         attitude_error=att_err[:n],
@@ -243,12 +247,16 @@ def linear_run(
     preds = np.empty((n, size))
     us = np.empty((n, gain.shape[0]))
     x = np.asarray(x0, float)
+    powers = [np.eye(size)]
+    for _ in range(d):
+        powers.append(phi @ powers[-1])
+    columns = [p @ gamma_m for p in powers]
     for k in range(n):
         xs[k] = x
         start = max(k - d, 0)
-        pred = np.linalg.matrix_power(phi, k - start) @ xs[start]
+        pred = powers[k - start] @ xs[start]
         for j in range(start, k):
-            pred = pred + np.linalg.matrix_power(phi, k - 1 - j) @ gamma_m @ us[j]
+            pred = pred + columns[k - 1 - j] @ us[j]
         preds[k] = pred
         us[k] = gain @ pred
         x = phi @ x + gamma @ us[k]
