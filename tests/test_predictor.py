@@ -28,7 +28,7 @@ from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import OnCurrent
 
 sys.path.insert(0, str(Path(__file__).parent))
-import predictor_reference as ref  # noqa: E402
+import predictor_reference as ref
 
 SC = paper.SPACECRAFT
 J = np.diag(SC.inertia)
@@ -60,7 +60,7 @@ def test_sampled_recursion_equals_closed_form_fsa_prediction() -> None:
     a = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
     b = np.vstack((np.zeros((3, 3)), np.linalg.inv(plant.inertia) / 4))
     b_m = np.vstack((np.zeros((3, 3)), np.linalg.inv(model.inertia) / 4))
-    xs, preds = ref.linear_run(a, b, b_m, gain, X0 * 1e-3, d=d, h=1 / rate, n=6 * d)
+    _, preds = ref.linear_run(a, b, b_m, gain, X0 * 1e-3, d=d, h=1 / rate, n=6 * d)
     f0, f1, _ = sampled_predictor_matrices(model, gain, tau, plant=plant, rate=rate)
     for k in range(2 * d, 6 * d - 1):
         expected = preds[k + 1]
