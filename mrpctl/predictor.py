@@ -45,6 +45,7 @@ __all__ = [
     "PredictorStability",
     "StabilityMethod",
     "inertia_mismatch_margin",
+    "lifted_spectral_radius",
     "perturbed_spacecraft",
     "predictor_loop_matrices",
     "predictor_stability",
