@@ -1,0 +1,670 @@
+"""Delay compensation by prediction: the linearised predictor loop, its exact stability and its inertia margin.
+
+The controller sees y(t) = x(t − τ) and applies u = K x̂ with the prediction (finite spectrum
+assignment, Manitius-Olbrot / Artstein) made with its own model inertia J_m (B_m = [0; ¼ J_m⁻¹])::
+
+    x̂(t) = e^{Aτ} y(t) + ∫_{t−τ}^{t} e^{A(t−s)} B_m u(s) ds                    (continuous)
+    x̂_k = Φ^d y_k + Σ_{j=0}^{d−1} Φ^{d−1−j} Γ_m u_{k−d+j},  y_k = x_{k−d}       (sampled, τ = d h)
+
+while the plant ẋ = A x + B u has B = [0; ¼ J⁻¹], J ≠ J_m. Differentiating the prediction and using
+the plant equation eliminates x: the prediction itself obeys a delay equation,
+
+    dx̂/dt = (A + B_m K) x̂(t) + e^{Aτ} (B − B_m) K x̂(t − τ)                    (continuous)
+    x̂_{k+1} = (Φ + Γ_m K) x̂_k + Φ^d (Γ − Γ_m) K x̂_{k−d}                         (sampled)
+
+and x → 0 exactly when x̂ → 0 (Φ^d is invertible). With J = J_m the delayed term vanishes and the
+loop is the undelayed one (the finite spectrum of A + B K); the inertia error alone limits the gains.
+Exact tests: the continuous equation by the crossing method of :func:`mrpctl.design.delay_margin`
+(at the given τ, with the delayed matrix that itself depends on τ); the sampled one by the spectral
+radius of the lifted (block companion) matrix of size n (d + 1), reduced per axis to the roots of a
+scalar polynomial of degree d + 2 when the loop splits into three axes. See ``design/predictor.md``.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from mrpctl._validation import check_spacecraft, finite_scalar, integer, positive_scalar, readonly
+from mrpctl.errors import InertiaWarning, SpecificationError
+from mrpctl.model import STATE_SIZE, gain_matrix, pd_from_gain, plant_model
+from mrpctl.simulate import delay_samples
+from mrpctl.spacecraft import Spacecraft
+
+__all__ = [
+    "MarginInterval",
+    "MismatchMargin",
+    "PredictorDesign",
+    "PredictorStability",
+    "StabilityMethod",
+    "inertia_mismatch_margin",
+    "lifted_spectral_radius",
+    "perturbed_spacecraft",
+    "predictor_loop_matrices",
+    "predictor_stability",
+    "sampled_predictor_matrices",
+    "synthesize_predictor_pd",
+]
+
+#: Smallest |e| scanned by the margin search, and the scan's geometric ratio.
+_SCAN_START = 1e-3
+_SCAN_RATIO = 1.25
+#: The negative side stops at e = −(1 − this): J_plant = 1e-3 J_model.
+_NEGATIVE_END = 1.0 - 1e-3
+_MAX_BISECTIONS = 200
+_DESIGN_GRID = 10
+
+
+class StabilityMethod(enum.Enum):
+    """How the exact stability test was made."""
+
+    #: Continuous loop: imaginary-axis crossings of the quasi-polynomial (crossing method).
+    CROSSING = "crossing"
+    #: Sampled loop: spectral radius of the lifted block-companion matrix.
+    LIFTED = "lifted"
+    #: Sampled loop split per axis: roots of the scalar characteristic polynomial of degree d + 2.
+    AXIS_POLYNOMIAL = "axis-polynomial"
+
+
+@dataclass(frozen=True, eq=False)
+class PredictorStability:
+    """Exact stability of the linearised predictor loop for one (model, plant, K, τ, rate).
+
+    Attributes
+    ----------
+    stable : bool
+        True when the loop is exponentially stable.
+    method : StabilityMethod
+    spectral_radius : float
+        Sampled loop: the largest |λ| (dimensionless); ``nan`` for the continuous test.
+    tau : float
+        Delay τ (s).
+    rate : float or None
+        Measurement rate (Hz), None for the continuous loop.
+    """
+
+    stable: bool
+    method: StabilityMethod
+    spectral_radius: float
+    tau: float
+    rate: float | None
+
+    def __str__(self) -> str:
+        verdict = "stable" if self.stable else "UNSTABLE"
+        where = "continuous" if self.rate is None else f"sampled at {self.rate:g} Hz"
+        radius = "" if math.isnan(self.spectral_radius) else f", spectral radius {self.spectral_radius:.9f}"
+        return f"predictor loop {verdict} at tau = {self.tau:g} s ({where}, {self.method.value}{radius})"
+
+
+@dataclass(frozen=True)
+class MarginInterval:
+    """The interval of relative inertia errors e (J_plant = (1 + e) J_model) containing 0 that keeps K stable.
+
+    Attributes
+    ----------
+    lower, upper : float
+        Stable for every scanned e in (lower, upper); ``lower`` < 0 < ``upper``. Each end is the stable
+        side of a bracket [stable, unstable] narrower than the relative tolerance, or the search limit.
+    lower_capped, upper_capped : bool
+        True when the end is the search limit (still stable there), not a stability boundary.
+    """
+
+    lower: float
+    upper: float
+    lower_capped: bool
+    upper_capped: bool
+
+    @property
+    def symmetric(self) -> float:
+        """min(−lower, upper): the ± margin."""
+        return min(-self.lower, self.upper)
+
+    def __str__(self) -> str:
+        lo = f"{self.lower:+.4%}" + (" (limit)" if self.lower_capped else "")
+        hi = f"{self.upper:+.4%}" + (" (limit)" if self.upper_capped else "")
+        return f"e in ({lo}, {hi})"
+
+
+@dataclass(frozen=True, eq=False)
+class MismatchMargin:
+    """Result of :func:`inertia_mismatch_margin`.
+
+    Attributes
+    ----------
+    uniform : MarginInterval
+        J_plant = (1 + e) J_model.
+    per_axis : tuple of MarginInterval
+        Axis i alone: J_plant = S J_model S with S = diag(1, .., √(1 + e), .., 1) (for a diagonal
+        J_model, J_ii → (1 + e) J_ii); empty when not requested.
+    tau : float
+        Delay τ (s).
+    rate : float or None
+        Measurement rate (Hz), None for the continuous loop.
+    evaluations : int
+        Number of exact stability tests made.
+    """
+
+    uniform: MarginInterval
+    per_axis: tuple[MarginInterval, ...]
+    tau: float
+    rate: float | None
+    evaluations: int
+
+    @property
+    def symmetric(self) -> float:
+        """The largest m with every case (uniform and each axis) stable on (−m, m)."""
+        return min([self.uniform.symmetric] + [m.symmetric for m in self.per_axis])
+
+    def __str__(self) -> str:
+        where = "continuous" if self.rate is None else f"sampled at {self.rate:g} Hz"
+        lines = [f"inertia mismatch margin at tau = {self.tau:g} s ({where}): +/-{self.symmetric:.4%}"]
+        lines.append(f"  uniform  {self.uniform}")
+        lines += [f"  axis {i + 1}   {m}" for i, m in enumerate(self.per_axis)]
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True, eq=False)
+class PredictorDesign:
+    """Result of :func:`synthesize_predictor_pd`: the fastest PD at ζ whose predictor loop keeps the margin.
+
+    Attributes
+    ----------
+    K : numpy.ndarray
+        (3, 6) gain on x = [σ; ω/4] (N m), K = [4 J K₁, 4 J K₂] with K₁ = −ωₙ² I, K₂ = −2ζωₙ I.
+    omega_n : float
+        ωₙ (rad/s), the stable side of a bracket narrower than ``rtol``.
+    zeta : float
+    required : float
+        The required ± relative inertia error.
+    margin : MismatchMargin
+        The margin of the returned gain.
+    """
+
+    K: np.ndarray = field(repr=False)
+    omega_n: float
+    zeta: float
+    required: float
+    margin: MismatchMargin
+
+    def __str__(self) -> str:
+        return (
+            f"predictor PD: omega_n = {self.omega_n:.6g} rad/s, zeta = {self.zeta:g}, keeps +/-{self.required:.2%} "
+            f"inertia error (margin +/-{self.margin.symmetric:.4%})"
+        )
+
+
+# ========================================================================== matrices
+def _inputs(spacecraft: Any, K: Any, tau: Any, plant: Any) -> tuple[Spacecraft, np.ndarray, float, Spacecraft]:
+    model = check_spacecraft(spacecraft, "spacecraft")
+    gain = gain_matrix(K)
+    tau_value = finite_scalar("tau", tau)
+    if tau_value < 0.0:
+        raise SpecificationError(f"tau must be >= 0 s, got {tau_value}")
+    true_plant = model if plant is None else check_spacecraft(plant, "plant")
+    return model, gain, tau_value, true_plant
+
+
+def predictor_loop_matrices(
+    spacecraft: Spacecraft, K: Any, tau: float, *, plant: Spacecraft | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(A₀, A₁) of the continuous predictor loop dx̂/dt = A₀ x̂(t) + A₁ x̂(t − τ), linearised at x = 0.
+
+    A₀ = A + B_m K and A₁ = e^{Aτ} (B − B_m) K, with B_m from the controller's model ``spacecraft``
+    and B from ``plant`` (default: the model itself, then A₁ = 0).
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The controller's model (inertia J_m, kg m²).
+    K : array_like
+        (3, 6) gain on x = [σ; ω/4] (N m): u = K x̂.
+    tau : float
+        Measurement delay τ >= 0 (s).
+    plant : Spacecraft, keyword-only
+        The true plant (inertia J, kg m²).
+    """
+    model, gain, tau_value, true_plant = _inputs(spacecraft, K, tau, plant)
+    a = plant_model(model).A
+    b_m = plant_model(model).B
+    b = plant_model(true_plant).B
+    a0 = a + b_m @ gain
+    a1 = scipy.linalg.expm(a * tau_value) @ (b - b_m) @ gain
+    return readonly(a0), readonly(a1)
+
+
+def sampled_predictor_matrices(
+    spacecraft: Spacecraft, K: Any, tau: float, *, plant: Spacecraft | None = None, rate: float = 1000.0
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """(F₀, F₁, d) of the sampled predictor loop x̂_{k+1} = F₀ x̂_k + F₁ x̂_{k−d} (zero-order hold, h = 1/rate).
+
+    F₀ = Φ + Γ_m K and F₁ = Φ^d (Γ − Γ_m) K with Φ = e^{Ah}, Γ = ∫₀ʰ e^{As} ds B (exact discretisation, by
+    the matrix exponential of the augmented matrix [[A, B], [0, 0]] h).
+
+    Raises
+    ------
+    SpecificationError
+        If τ · rate is not a whole number of samples (the message names tau).
+    """
+    model, gain, tau_value, true_plant = _inputs(spacecraft, K, tau, plant)
+    d = delay_samples(tau_value, rate)
+    h = 1.0 / positive_scalar("rate", rate)
+    phi, gamma_m = _zoh(plant_model(model).A, plant_model(model).B, h)
+    _, gamma = _zoh(plant_model(true_plant).A, plant_model(true_plant).B, h)
+    f0 = phi + gamma_m @ gain
+    f1 = np.linalg.matrix_power(phi, d) @ (gamma - gamma_m) @ gain
+    return readonly(f0), readonly(f1), d
+
+
+def _zoh(a: np.ndarray, b: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    n, m = b.shape
+    augmented = np.zeros((n + m, n + m))
+    augmented[:n, :n] = a
+    augmented[:n, n:] = b
+    exp = scipy.linalg.expm(augmented * h)
+    return exp[:n, :n], exp[:n, n:]
+
+
+# ========================================================================= stability
+def predictor_stability(
+    spacecraft: Spacecraft,
+    K: Any,
+    tau: float,
+    *,
+    plant: Spacecraft | None = None,
+    rate: float | None = 1000.0,
+    radius: bool = False,
+) -> PredictorStability:
+    """Exact stability of the linearised predictor loop with model ``spacecraft`` and true ``plant``.
+
+    When the loop splits into three axes (diagonal J_m, J and gain blocks) each 2×2 axis is tested
+    alone: continuous, by the crossing method of :func:`mrpctl.design.delay_margin`; sampled, by the
+    number of roots of the axis polynomial λ^d det(λI − F₀) − c(λ) inside the unit circle (the winding
+    number of λ^{−d}-scaled values on |λ| = 1, on a grid refined until every phase step is < π/2).
+    Otherwise the 6×6 loop is tested: crossing method, or the eigenvalues of the lifted matrix of size
+    6 (d + 1) (slow for d in the hundreds).
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The controller's model (J_m).
+    K : array_like
+        (3, 6) gain on x = [σ; ω/4] (N m).
+    tau : float
+        Delay τ (s); with ``rate`` a whole number d of samples.
+    plant : Spacecraft, keyword-only
+        The true plant (default: the model).
+    rate : float or None, keyword-only
+        Measurement rate (Hz) of the sampled loop (default 1000); None tests the continuous loop.
+    radius : bool, keyword-only
+        Sampled, split loop: also compute the spectral radius (bisection on the circle radius; about 1e-5
+        accurate, the resolution of the refined grid); the lifted test always gives it.
+
+    Returns
+    -------
+    PredictorStability
+    """
+    model, gain, tau_value, true_plant = _inputs(spacecraft, K, tau, plant)
+    if rate is None:
+        a0, a1 = predictor_loop_matrices(model, gain, tau_value, plant=true_plant)
+        if _splits(a0, a1):
+            ok = all(_continuous_stable(a0[np.ix_(ix, ix)], a1[np.ix_(ix, ix)], tau_value) for ix in _AXES)
+        else:
+            ok = _continuous_stable(a0, a1, tau_value)
+        return PredictorStability(ok, StabilityMethod.CROSSING, math.nan, tau_value, None)
+    rate_value = positive_scalar("rate", rate)
+    f0, f1, d = sampled_predictor_matrices(model, gain, tau_value, plant=true_plant, rate=rate_value)
+    if _splits(f0, f1) and d > 0:
+        polys = [_axis_polynomial(f0[np.ix_(ix, ix)], f1[np.ix_(ix, ix)]) for ix in _AXES]
+        if all(p is not None for p in polys):
+            ok = all(_inside(a, c, d, 1.0) == d + 2 for a, c in polys if a is not None and c is not None)
+            rho = (
+                max(_axis_spectral_radius(a, c, d) for a, c in polys if a is not None and c is not None)
+                if radius
+                else math.nan
+            )
+            return PredictorStability(ok, StabilityMethod.AXIS_POLYNOMIAL, rho, tau_value, rate_value)
+    rho = lifted_spectral_radius(f0, f1, d)
+    return PredictorStability(bool(rho < 1.0), StabilityMethod.LIFTED, float(rho), tau_value, rate_value)
+
+
+_AXES = tuple([i, 3 + i] for i in range(3))
+
+
+def _continuous_stable(a0: np.ndarray, a1: np.ndarray, tau: float) -> bool:
+    from mrpctl.design import delay_margin
+
+    if not np.any(a1):
+        return bool(np.all(np.linalg.eigvals(a0).real < 0.0))
+    margin = delay_margin(a0, a1)
+    return bool(margin.is_stable(tau)) if tau > 0.0 else margin.stable_without_delay
+
+
+def _splits(f0: np.ndarray, f1: np.ndarray) -> bool:
+    mask = np.zeros((STATE_SIZE, STATE_SIZE), dtype=bool)
+    for ix in _AXES:
+        mask[np.ix_(ix, ix)] = True
+    return bool(not np.any(f0[~mask]) and not np.any(f1[~mask]))
+
+
+def lifted_spectral_radius(f0: Any, f1: Any, d: int) -> float:
+    """Spectral radius of the lifted matrix of x̂_{k+1} = F₀ x̂_k + F₁ x̂_{k−d} (state [x̂_k; ...; x̂_{k−d}]).
+
+    The block-companion matrix has size n (d + 1); for d = 0 it is F₀ + F₁.
+    """
+    f0 = np.asarray(f0, dtype=float)
+    f1 = np.asarray(f1, dtype=float)
+    d = integer("d", d, minimum=0)
+    n = f0.shape[0]
+    if d == 0:
+        return float(np.max(np.abs(np.linalg.eigvals(f0 + f1))))
+    size = n * (d + 1)
+    lifted = np.zeros((size, size))
+    lifted[:n, :n] = f0
+    lifted[:n, n * d :] = f1
+    lifted[n:, : n * d] = np.eye(n * d)
+    return float(np.max(np.abs(np.linalg.eigvals(lifted))))
+
+
+def _axis_polynomial(f0: np.ndarray, f1: np.ndarray) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
+    """(a, c) with det(λ^{d+1} I − λ^d F₀ − F₁) = λ^d (λ^d a(λ) − c(λ)) for 2×2 blocks and rank F₁ <= 1.
+
+    det(λ^d M − F₁) with M = λI − F₀ is λ^{2d} det M − λ^d c(λ) + det F₁, where
+    c = M₀₀ F₁,₁₁ + M₁₁ F₁,₀₀ − M₀₁ F₁,₁₀ − M₁₀ F₁,₀₁ (degree 1) and a = det M (degree 2). F₁ = Φ^d ΔΓ K
+    has rank <= 1, so det F₁ = 0: the nonzero roots solve λ^d a(λ) − c(λ) = 0 (degree d + 2); the d
+    roots at 0 of the lifted matrix do not change its spectral radius. (None, None) if det F₁ ≠ 0.
+    """
+    a = np.array([1.0, -(f0[0, 0] + f0[1, 1]), f0[0, 0] * f0[1, 1] - f0[0, 1] * f0[1, 0]])
+    m00 = np.array([1.0, -f0[0, 0]])
+    m11 = np.array([1.0, -f0[1, 1]])
+    c = m00 * f1[1, 1] + m11 * f1[0, 0] + np.array([0.0, f0[0, 1] * f1[1, 0] + f0[1, 0] * f1[0, 1]])
+    det_f1 = f1[0, 0] * f1[1, 1] - f1[0, 1] * f1[1, 0]
+    scale = max(1e-300, float(np.max(np.abs(f1))))
+    if abs(det_f1) > 1e-12 * scale**2:
+        return None, None
+    return a, c
+
+
+def _inside(a: np.ndarray, c: np.ndarray, d: int, rho: float) -> int:
+    """Number of roots of λ^d a(λ) − c(λ) in |λ| < ρ: the winding number of its values on |λ| = ρ.
+
+    The values are scaled by λ^{−d} (ρ >= 1) or used as they are (ρ < 1) so that nothing overflows;
+    the θ grid is doubled until every phase step is below π/2 (at most 2^8 · 16 (d + 2) points).
+    """
+    points = 16 * (d + 2)
+    for _ in range(9):
+        theta = np.linspace(0.0, 2.0 * np.pi, points + 1)
+        lam = rho * np.exp(1j * theta)
+        if rho >= 1.0:
+            values = np.polyval(a, lam) - np.polyval(c, lam) * np.exp(-d * np.log(rho) - 1j * d * theta)
+            offset = d
+        else:
+            values = np.exp(d * np.log(rho) + 1j * d * theta) * np.polyval(a, lam) - np.polyval(c, lam)
+            offset = 0
+        steps = np.angle(values[1:] / values[:-1])
+        if np.all(np.isfinite(steps)) and np.max(np.abs(steps)) < 0.5 * np.pi:
+            return offset + round(float(np.sum(steps)) / (2.0 * np.pi))
+        points *= 2
+    return -1  # a root on (or numerically at) the circle: not strictly inside
+
+
+def _axis_spectral_radius(a: np.ndarray, c: np.ndarray, d: int) -> float:
+    """Largest |λ| of λ^d a(λ) − c(λ), by bisection on ρ of the count of roots in |λ| < ρ (about 1e-5)."""
+    coefficients = np.concatenate((a, np.zeros(d)))
+    coefficients[-2:] -= c
+    low, high = 0.0, 1.0 + float(np.max(np.abs(coefficients[1:])))  # Cauchy's bound
+    while high - low > 1e-10:
+        middle = 0.5 * (low + high)
+        if middle > 0.0 and _inside(a, c, d, middle) == d + 2:
+            high = middle
+        else:
+            low = middle
+    return high
+
+
+# ============================================================================ margin
+def perturbed_spacecraft(spacecraft: Spacecraft, e: float, axis: int | None = None) -> Spacecraft:
+    """The plant with relative inertia error e: (1 + e) J, or S J S with S = I + (√(1 + e) − 1) e_i e_iᵀ on axis i."""
+    model = check_spacecraft(spacecraft, "spacecraft")
+    e = finite_scalar("e", e)
+    if e <= -1.0:
+        raise SpecificationError(f"e (relative inertia error) must be > -1, got {e}")
+    if axis is None:
+        matrix = (1.0 + e) * model.inertia
+    else:
+        axis = integer("axis", axis, minimum=0, maximum=2)
+        s = np.eye(3)
+        s[axis, axis] = math.sqrt(1.0 + e)
+        matrix = s @ model.inertia @ s
+    with warnings.catch_warnings():
+        # A hypothetical plant of a robustness study may break the triangle inequality: not an error here.
+        warnings.simplefilter("ignore", InertiaWarning)
+        return Spacecraft(matrix)
+
+
+def _side(stable: Callable[[float], bool], sign: float, end: float, rtol: float) -> tuple[float, bool]:
+    """Scan |e| geometrically from 1e-3 to ``end``; bisect the first [stable, unstable] pair to ``rtol``."""
+    good = 0.0
+    magnitude = _SCAN_START
+    while True:
+        magnitude = min(magnitude, end)
+        if not stable(sign * magnitude):
+            bad = magnitude
+            break
+        good = magnitude
+        if magnitude >= end:
+            return sign * end, True
+        magnitude *= _SCAN_RATIO
+    for _ in range(_MAX_BISECTIONS):
+        if bad - good <= rtol * bad:
+            break
+        middle = 0.5 * (good + bad)
+        if stable(sign * middle):
+            good = middle
+        else:
+            bad = middle
+    return sign * good, False
+
+
+def inertia_mismatch_margin(
+    spacecraft: Spacecraft,
+    K: Any,
+    tau: float,
+    *,
+    rate: float | None = 1000.0,
+    per_axis: bool = True,
+    rtol: float = 1e-3,
+    e_max: float = 10.0,
+) -> MismatchMargin:
+    """The largest relative inertia errors (J_plant = (1 + e) J_model, both signs) that keep K stable.
+
+    The predictor uses the model ``spacecraft``; the plant's inertia is perturbed uniformly and, when
+    ``per_axis``, on one axis at a time. On each side |e| is scanned geometrically (ratio 1.25) from
+    1e-3 to the search limit (``e_max`` above, J_plant = 1e-3 J_model below) with the exact test of
+    :func:`predictor_stability`, and the first [stable, unstable] pair is bisected to relative width
+    ``rtol``: the search always terminates (at most ~50 + 200 tests per side). A stable island
+    narrower than one scan step beyond the first instability is not reported (the answer is the
+    interval around 0).
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The controller's model J_m (kg m²).
+    K : array_like
+        (3, 6) gain on x = [σ; ω/4] (N m).
+    tau : float
+        Delay τ (s), a whole number of samples at ``rate``.
+    rate : float or None, keyword-only
+        Measurement rate (Hz), default 1000; None analyses the continuous loop.
+    per_axis : bool, keyword-only
+        Also give the margin of each axis alone.
+    rtol : float, keyword-only
+        Relative width of the final brackets (default 1e-3).
+    e_max : float, keyword-only
+        Upper search limit for e (default 10, J_plant = 11 J_model).
+
+    Returns
+    -------
+    MismatchMargin
+
+    Raises
+    ------
+    SpecificationError
+        If the loop is unstable at e = 0 (no margin to speak of), or an argument is invalid.
+    """
+    model, gain, tau_value, _ = _inputs(spacecraft, K, tau, None)
+    if not isinstance(per_axis, bool):
+        raise SpecificationError(f"per_axis must be True or False, got {per_axis!r}")
+    rtol = positive_scalar("rtol", rtol)
+    e_max = positive_scalar("e_max", e_max)
+    if rate is not None:
+        delay_samples(tau_value, rate)
+    evaluations = 0
+    cache: dict[tuple[bytes, float], bool] = {}
+
+    def stable_at(e: float, axis: int | None) -> bool:
+        nonlocal evaluations
+        plant = perturbed_spacecraft(model, e, axis)
+        key = (plant.inertia.tobytes(), e)
+        if key not in cache:
+            evaluations += 1
+            cache[key] = predictor_stability(model, gain, tau_value, plant=plant, rate=rate).stable
+        return cache[key]
+
+    if not predictor_stability(model, gain, tau_value, rate=rate).stable:
+        raise SpecificationError(
+            f"K is not stable with the predictor even with an exact model (tau = {tau_value:g} s): "
+            "the delay-free loop A + B K must be stable; choose stabilising gains first"
+        )
+
+    def interval(axis: int | None) -> MarginInterval:
+        upper, upper_capped = _side(lambda e: stable_at(e, axis), 1.0, e_max, rtol)
+        lower, lower_capped = _side(lambda e: stable_at(e, axis), -1.0, _NEGATIVE_END, rtol)
+        return MarginInterval(lower, upper, lower_capped, upper_capped)
+
+    uniform = interval(None)
+    axes: tuple[MarginInterval, ...] = ()
+    if per_axis:
+        k1, k2 = pd_from_gain(model, gain)
+        if model.is_diagonal and _is_diag(k1) and _is_diag(k2):
+            # Decoupled: axis i alone perturbs only its own 2x2 loop; identical axes share the answer.
+            seen: dict[tuple[float, float], MarginInterval] = {}
+            found = []
+            for i in range(3):
+                key = (float(k1[i, i]), float(k2[i, i]))
+                if key not in seen:
+                    seen[key] = interval(i)
+                found.append(seen[key])
+            axes = tuple(found)
+        else:
+            axes = tuple(interval(i) for i in range(3))
+    return MismatchMargin(uniform, axes, tau_value, None if rate is None else float(rate), evaluations)
+
+
+def _is_diag(m: np.ndarray) -> bool:
+    return bool(np.all(m == np.diag(np.diag(m))))
+
+
+# ============================================================================ design
+def synthesize_predictor_pd(
+    spacecraft: Spacecraft,
+    tau: float,
+    *,
+    mismatch: float = 0.1,
+    zeta: float = 1.0,
+    rate: float | None = 1000.0,
+    rtol: float = 1e-3,
+) -> PredictorDesign:
+    """The fastest PD gains (largest ωₙ at ζ) whose predictor loop keeps a ± ``mismatch`` inertia margin.
+
+    The requirement is tested exactly (:func:`predictor_stability`) at e = ±m j/10, j = 1..10,
+    uniform and per axis (the uniform test covers the axes when J_m is diagonal: the loop then splits
+    and the uniform error is stable exactly when each axis loop is). ωₙ is doubled from
+    0.05/τ until the requirement fails (at most 40 doublings) and the bracket is bisected to ``rtol``.
+    The returned ωₙ is the requirement-keeping side of the final bracket.
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The controller's model J_m (kg m²); the gains are K = [4 J_m K₁, 4 J_m K₂].
+    tau : float
+        Delay τ > 0 (s).
+    mismatch : float, keyword-only
+        Required relative inertia error m in (0, 1) that must stay stable on both sides (default 0.1).
+    zeta : float, keyword-only
+        Damping ratio ζ > 0 (default 1).
+    rate : float or None, keyword-only
+        Measurement rate (Hz), default 1000; None designs for the continuous loop.
+    rtol : float, keyword-only
+        Relative width of the final ωₙ bracket.
+
+    Returns
+    -------
+    PredictorDesign
+
+    Raises
+    ------
+    SpecificationError
+        On invalid input, or when no ωₙ down to 0.05/τ keeps the margin.
+    """
+    from mrpctl.design import pd_gains
+
+    model = check_spacecraft(spacecraft, "spacecraft")
+    tau_value = positive_scalar("tau", tau)
+    m = positive_scalar("mismatch", mismatch)
+    if m >= 1.0:
+        raise SpecificationError(f"mismatch must be < 1 (a relative inertia error), got {m}")
+    zeta = positive_scalar("zeta", zeta)
+    rtol = positive_scalar("rtol", rtol)
+    if rate is not None:
+        delay_samples(tau_value, rate)
+
+    # Decoupled axes: the uniform error is stable iff every axis loop is, which covers each axis alone.
+    axes: list[int | None] = [None] if model.is_diagonal else [None, 0, 1, 2]
+
+    def gain(omega_n: float) -> np.ndarray:
+        return pd_gains(model, zeta=zeta, omega_n=omega_n, allow_underdamped=True).K
+
+    def keeps(omega_n: float) -> bool:
+        k = gain(omega_n)
+        if not predictor_stability(model, k, tau_value, rate=rate).stable:
+            return False
+        grid = [m * j / _DESIGN_GRID for j in range(1, _DESIGN_GRID + 1)]
+        for e in grid:
+            for sign in (1.0, -1.0):
+                for axis in axes:
+                    plant = perturbed_spacecraft(model, sign * e, axis)
+                    if not predictor_stability(model, k, tau_value, plant=plant, rate=rate).stable:
+                        return False
+        return True
+
+    good = 0.05 / tau_value
+    if not keeps(good):
+        raise SpecificationError(
+            f"no omega_n down to {good:.4g} rad/s keeps a +/-{m:.2%} inertia margin at tau = {tau_value:g} s"
+        )
+    bad = good
+    for _ in range(40):
+        bad *= 2.0
+        if not keeps(bad):
+            break
+        good = bad
+    else:
+        raise SpecificationError(f"the margin is kept up to omega_n = {bad:.4g} rad/s: no finite fastest gain")
+    for _ in range(_MAX_BISECTIONS):
+        if bad - good <= rtol * bad:
+            break
+        middle = 0.5 * (good + bad)
+        if keeps(middle):
+            good = middle
+        else:
+            bad = middle
+    k = gain(good)
+    margin = inertia_mismatch_margin(model, k, tau_value, rate=rate, rtol=rtol)
+    return PredictorDesign(readonly(k), good, zeta, m, margin)
