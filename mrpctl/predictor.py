@@ -34,8 +34,8 @@ import scipy.linalg
 
 from mrpctl._validation import check_spacecraft, finite_scalar, integer, positive_scalar, readonly
 from mrpctl.errors import InertiaWarning, SpecificationError
+from mrpctl.loop import delay_samples
 from mrpctl.model import STATE_SIZE, gain_matrix, pd_from_gain, plant_model
-from mrpctl.simulate import delay_samples
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = [

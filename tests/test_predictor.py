@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from mrpctl import paper
+from mrpctl import paper, simulate
 from mrpctl.design import pd_gains
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.predictor import (
@@ -23,7 +23,6 @@ from mrpctl.predictor import (
     sampled_predictor_matrices,
     synthesize_predictor_pd,
 )
-from mrpctl.simulate import simulate
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import OnCurrent
 
