@@ -49,12 +49,16 @@ class Crossing:
     direction : int
         +1 when the pair moves into the right half-plane as τ increases, −1 when it moves out
         (the sign of Re ds/dτ, the same for every k).
+    multiplicity : int
+        How many root pairs cross together (the dimension of the null space of
+        iωI − A − A_d e^{−iωτ₀}; e.g. 3 for three identical decoupled axes).
     """
 
     frequency: float
     delay: float
     period: float
     direction: int
+    multiplicity: int = 1
 
     def __str__(self) -> str:
         way = "destabilising" if self.direction > 0 else "stabilising"
@@ -143,8 +147,9 @@ def delay_margin(A: Any, A_d: Any, *, max_events: int = DEFAULT_MAX_EVENTS) -> D
     σ_min(A + A_d) <= 1e-12 (‖A‖₂ + ‖A_d‖₂).
 
     Termination: the crossings are swept in τ lazily and the sweep stops as soon as the number of
-    right-half-plane roots exceeds 2 × (number of crossing families); then it can never return to
-    zero, because from any τ on the destabilising families add at least 2((τ' − τ)/T − 1) roots and
+    right-half-plane roots exceeds 2 × (the root pairs of all crossing families, with multiplicity);
+    then it can never return to zero, because from any τ on the destabilising families add at least
+    2((τ' − τ)/T − 1) roots and
     the stabilising ones remove at most 2((τ' − τ)/T + 1), and Σ_up ω >= Σ_down ω. At most
     ``max_events`` crossings are swept: if that limit is reached first the intervals are exact
     only up to ``resolved_to`` and ``complete`` is False (the margin itself is always exact).
@@ -197,8 +202,8 @@ def delay_margin(A: Any, A_d: Any, *, max_events: int = DEFAULT_MAX_EVENTS) -> D
     on_axis = bool(np.any(np.abs(eig0.real) <= axis_tol))
     stable0 = unstable0 == 0 and not on_axis
     crossings = [
-        Crossing(frequency=c * w, delay=theta / (c * w), period=2.0 * math.pi / (c * w), direction=d)
-        for w, theta, d in _crossings(an, adn, n, norm_sum)
+        Crossing(frequency=c * w, delay=theta / (c * w), period=2.0 * math.pi / (c * w), direction=d, multiplicity=m)
+        for w, theta, d, m in _crossings(an, adn, n, norm_sum)
     ]
     crossings.sort(key=lambda x: x.delay)
     sweep = _stable_intervals(unstable0 + (2 if on_axis else 0), crossings, max_events)
@@ -243,8 +248,8 @@ def _frequency_at(crossings: list[Crossing], tau: float) -> float:
     return math.nan
 
 
-def _crossings(a: np.ndarray, a_d: np.ndarray, n: int, norm_sum: float) -> list[tuple[float, float, int]]:
-    """(ω, θ = ωτ₀ ∈ [0, 2π), direction) of every crossing family of the normalised system (‖·‖ <= 1)."""
+def _crossings(a: np.ndarray, a_d: np.ndarray, n: int, norm_sum: float) -> list[tuple[float, float, int, int]]:
+    """(ω, θ = ωτ₀ ∈ [0, 2π), direction, multiplicity) of every crossing family of the normalised system."""
     eye = np.eye(n)
     m2 = np.kron(a_d, eye)
     m1 = np.kron(a, eye) + np.kron(eye, a)
@@ -257,7 +262,7 @@ def _crossings(a: np.ndarray, a_d: np.ndarray, n: int, norm_sum: float) -> list[
     alpha, beta = scipy.linalg.eig(pencil_a, pencil_b, right=False, homogeneous_eigvals=True)
     finite = np.abs(beta) > 1e-12 * np.abs(alpha)
     z_values = alpha[finite] / beta[finite]
-    found: list[tuple[float, float, int]] = []
+    found: list[tuple[float, float, int, int]] = []
     for z in z_values:
         if not np.isfinite(z) or abs(abs(z) - 1.0) > _UNIT_CIRCLE_CANDIDATE:
             continue
@@ -274,10 +279,18 @@ def _crossings(a: np.ndarray, a_d: np.ndarray, n: int, norm_sum: float) -> list[
             theta = math.fmod(theta, 2.0 * math.pi)
             if theta < 0.0:
                 theta += 2.0 * math.pi
-            if any(_same(omega, theta, w, t) for w, t, _ in found):
+            if any(_same(omega, theta, w, t) for w, t, _, _ in found):
                 continue
-            found.append((omega, theta, _direction(a, a_d, omega, theta / omega)))
+            found.append((omega, theta, _direction(a, a_d, omega, theta / omega), _multiplicity(a, a_d, omega, theta)))
     return found
+
+
+def _multiplicity(a: np.ndarray, a_d: np.ndarray, omega: float, theta: float) -> int:
+    """Root pairs on the axis at (ω, θ): singular values of iωI − A − A_d e^{−iθ} at the level of the smallest."""
+    m = 1j * omega * np.eye(a.shape[0]) - a - a_d * np.exp(-1j * theta)
+    singular = np.linalg.svd(m, compute_uv=False)
+    level = max(1e3 * float(singular[-1]), 1e-9 * (omega + float(np.linalg.norm(a, 2)) + float(np.linalg.norm(a_d, 2))))
+    return max(1, int(np.sum(singular <= level)))
 
 
 def _same(omega: float, theta: float, w: float, t: float) -> bool:
@@ -342,10 +355,10 @@ def _stable_intervals(unstable0: int, crossings: list[Crossing], max_events: int
     """Sweep the crossings in τ (lazily, a heap of one next event per family), counting RHP roots."""
     if not crossings:
         return _Sweep([(0.0, math.inf)] if unstable0 == 0 else [], True, math.inf)
-    families = len(crossings)
     has_down = any(c.direction < 0 for c in crossings)
     # Σ_up ω >= Σ_down ω holds for a retarded system; the stopping rule below relies on it.
-    rate_ok = sum(c.frequency * c.direction for c in crossings) >= 0.0
+    rate_ok = sum(c.frequency * c.direction * c.multiplicity for c in crossings) >= 0.0
+    pairs = sum(c.multiplicity for c in crossings)
     heap = [(c.delay, i, 0) for i, c in enumerate(crossings)]
     heapq.heapify(heap)
     intervals: list[tuple[float, float]] = []
@@ -356,14 +369,14 @@ def _stable_intervals(unstable0: int, crossings: list[Crossing], max_events: int
         c = crossings[i]
         heapq.heappush(heap, (c.delay + (k + 1) * c.period, i, k + 1))
         before = count
-        count = max(0, count + 2 * c.direction)
+        count = max(0, count + 2 * c.direction * c.multiplicity)
         if before == 0 and count > 0 and start is not None:
             if tau > start:
                 intervals.append((start, tau))
             start = None
         elif before > 0 and count == 0:
             start = tau
-        if count > 0 and (not has_down or (rate_ok and count > 2 * families)):
+        if count > 0 and (not has_down or (rate_ok and count > 2 * pairs)):
             return _Sweep(intervals, True, math.inf)
     next_tau = heap[0][0]
     if start is not None:
