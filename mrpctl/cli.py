@@ -564,6 +564,16 @@ def _flown_checks(
     return rows
 
 
+def _phase_margins(spacecraft: Spacecraft, gain: np.ndarray) -> Any:
+    """Per-axis phase margin and crossover (python-control), or None when the axes are coupled."""
+    from mrpctl.interop import loop_margins
+
+    try:
+        return loop_margins(spacecraft, gain)
+    except SpecificationError:
+        return None
+
+
 def _verify(args: argparse.Namespace) -> int:
     from mrpctl.design import analyze_gains, criterion_name, linearized_loop
 
@@ -604,6 +614,7 @@ def _verify(args: argparse.Namespace) -> int:
                 }
             )
     flown = _flown_checks(args, spacecraft, gain, tau)
+    margins = _phase_margins(spacecraft, gain)
     if args.json:
         _print_json(
             {
@@ -611,6 +622,17 @@ def _verify(args: argparse.Namespace) -> int:
                 "K": gain,
                 "inertia": spacecraft.inertia,
                 "flown": [{key: value for key, value in row.items() if key != "text"} for row in flown],
+                "phase_margins": None
+                if margins is None
+                else [
+                    {
+                        "axis": m.axis,
+                        "phase_margin_deg": math.degrees(m.phase_margin),
+                        "crossover_rad_s": m.crossover,
+                        "delay_margin_s": m.delay_margin,
+                    }
+                    for m in margins.axes
+                ],
                 "exact_delay_margin": margin.margin,
                 "stable_at_tau": margin.is_stable(tau) if tau > 0 else undelayed.stable,
                 "undelayed_stable": undelayed.stable,
@@ -630,6 +652,8 @@ def _verify(args: argparse.Namespace) -> int:
         print(f"exact delay margin: {margin.margin:.6g} s (largest delay this gain tolerates)")
         return 0
     print(f"exact delay margin: {margin.margin:.6g} s (stable at tau = {tau:g} s: {margin.is_stable(tau)})")
+    if margins is not None:
+        print(str(margins))
     print(f"{'criterion':<24} {'at tau':<16} {'largest certified tau (s)':>26} {'ratio to exact':>15}")
     for row in rows:
         print(

@@ -175,6 +175,18 @@ def test_verify_per_axis_gains(capsys: pytest.CaptureFixture[str]) -> None:
     assert per_axis["criteria"] == full["criteria"] and full["criteria"][0]["certified"] is True
 
 
+def test_verify_prints_phase_margins(capsys: pytest.CaptureFixture[str]) -> None:
+    """Per-axis phase margins (python-control) give the exact delay margin as min PM/crossover."""
+    assert main(["verify", "--orders", "1", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    implied = [m["phase_margin_deg"] * np.pi / 180 / m["crossover_rad_s"] for m in out["phase_margins"]]
+    assert np.allclose(implied, [m["delay_margin_s"] for m in out["phase_margins"]], rtol=1e-12)
+    assert min(implied) == pytest.approx(out["exact_delay_margin"], rel=1e-8)
+    # Coupled axes have no per-axis phase margin: reported as null, not an error.
+    assert main(["verify", "--K", *map(str, np.arange(1.0, 19.0) * -1.0), "--orders", "1", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["phase_margins"] is None
+
+
 def test_verify_the_loop_as_flown(capsys: pytest.CaptureFixture[str]) -> None:
     """--jitter, --sampled and --inertia-tolerance add certificates, checked against the exact answers."""
     from mrpctl.design import sampled_stability, spacecraft_axes
