@@ -24,7 +24,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl._validation import finite_array, readonly
+from mrpctl._validation import check_spacecraft, finite_array, readonly
 from mrpctl.mrp import b_matrix_expr, skew_expr
 from mrpctl.spacecraft import Spacecraft
 
@@ -108,8 +108,7 @@ class PlantModel:
 
 def plant_model(spacecraft: Spacecraft) -> PlantModel:
     """Build the CasADi plant of ``spacecraft`` (cheap: a few SX nodes)."""
-    if not isinstance(spacecraft, Spacecraft):
-        raise TypeError(f"spacecraft must be a mrpctl.Spacecraft, got {type(spacecraft).__name__}")
+    spacecraft = check_spacecraft(spacecraft)
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", INPUT_SIZE)
     xdot = dynamics_expr(spacecraft, x, u)

@@ -109,7 +109,7 @@ def test_state_helpers() -> None:
 
 
 def test_bad_inputs() -> None:
-    with pytest.raises(TypeError, match="spacecraft"):
+    with pytest.raises(SpecificationError, match="spacecraft"):
         plant_model(np.eye(3))  # type: ignore[arg-type]
     model = plant_model(paper.SPACECRAFT)
     with pytest.raises(DimensionError, match=r"K: expected shape \(3, 6\) but found \(3, 3\)"):

@@ -63,7 +63,7 @@ def order_value(order: Any) -> int:
     return int(order)
 
 
-def frozen(array: Any, *, dtype: Any = float) -> np.ndarray:
+def readonly(array: Any, *, dtype: Any = float) -> np.ndarray:
     """A read-only copy of ``array`` keeping complex values when ``dtype`` is complex."""
     out = np.array(array, dtype=dtype, copy=True)
     out.setflags(write=False)

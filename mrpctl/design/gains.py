@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, finite_array
-from mrpctl.design._common import frozen, is_diagonal
+from mrpctl._validation import check_spacecraft, finite_array, readonly
+from mrpctl.design._common import is_diagonal
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, plant_model
 from mrpctl.spacecraft import Spacecraft
@@ -124,12 +124,12 @@ def pd_gains(
     k2 = -np.diag(2.0 * z * w)
     return PDGains(
         spacecraft=spacecraft,
-        zeta=frozen(z),
-        omega_n=frozen(w),
-        K1=frozen(k1),
-        K2=frozen(k2),
-        K=frozen(gain_from_pd(spacecraft, k1, k2)),
-        poles=frozen([_axis_poles(-k1[i, i], -k2[i, i]) for i in range(3)], dtype=complex),
+        zeta=readonly(z),
+        omega_n=readonly(w),
+        K1=readonly(k1),
+        K2=readonly(k2),
+        K=readonly(gain_from_pd(spacecraft, k1, k2)),
+        poles=readonly([_axis_poles(-k1[i, i], -k2[i, i]) for i in range(3)], dtype=complex),
     )
 
 
@@ -273,11 +273,11 @@ def analyze_gains(spacecraft: Spacecraft, K: Any) -> GainAnalysis:
         axes = tuple(_axis_damping(i, float(k1[i, i]), float(k2[i, i])) for i in range(3))
     return GainAnalysis(
         spacecraft=spacecraft,
-        K=frozen(k),
-        K1=frozen(k1),
-        K2=frozen(k2),
+        K=readonly(k),
+        K1=readonly(k1),
+        K2=readonly(k2),
         axes=axes,
-        poles=frozen(poles, dtype=complex),
+        poles=readonly(poles, dtype=complex),
     )
 
 
@@ -302,7 +302,7 @@ def _axis_damping(i: int, k1: float, k2: float) -> AxisDamping:
         K2=k2,
         omega_n=omega_n,
         zeta=zeta,
-        poles=frozen(_axis_poles(-k1, -k2), dtype=complex),
+        poles=readonly(_axis_poles(-k1, -k2), dtype=complex),
     )
 
 

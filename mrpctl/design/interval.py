@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import finite_scalar, nonnegative_scalar, positive_scalar
-from mrpctl.design._common import OPTIMAL, SolveOutcome, frozen, order_value, solve, system_matrices
+from mrpctl._validation import finite_scalar, nonnegative_scalar, positive_scalar, readonly
+from mrpctl.design._common import OPTIMAL, SolveOutcome, order_value, solve, system_matrices
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, SearchStatus, criterion_name
 from mrpctl.errors import SpecificationError
 
@@ -559,7 +559,7 @@ def solve_interval(
     )
     return IntervalCertificate(
         status=CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED,
-        matrices={k: frozen(v) for k, v in mats.items()},
+        matrices={k: readonly(v) for k, v in mats.items()},
         margins=margins,
         solver_margin=t_opt,
         reason=reason,

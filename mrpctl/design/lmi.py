@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import positive_scalar
-from mrpctl.design._common import OPTIMAL, balancing, frozen, order_value, similarity, solve, system_matrices
+from mrpctl._validation import positive_scalar, readonly
+from mrpctl.design._common import OPTIMAL, balancing, order_value, similarity, solve, system_matrices
 from mrpctl.errors import SpecificationError
 
 __all__ = [
@@ -638,9 +638,9 @@ def certify_checked(
         )
     return Certificate(
         status=status,
-        P=frozen(p),
-        S=frozen(s),
-        R=frozen(r),
+        P=readonly(p),
+        S=readonly(s),
+        R=readonly(r),
         margins=margins,
         solver_margin=t_opt,
         reason=reason,

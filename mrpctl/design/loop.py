@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, positive_scalar
-from mrpctl.design._common import frozen, is_diagonal, order_value
+from mrpctl._validation import check_spacecraft, positive_scalar, readonly
+from mrpctl.design._common import is_diagonal, order_value
 from mrpctl.design.lmi import (
     DEFAULT_MARGIN_TOL,
     Certificate,
@@ -198,9 +198,9 @@ class LinearizedLoop:
         ok = worst.relative >= margin_tol
         return Certificate(
             status=CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED,
-            P=frozen(p),
-            S=frozen(s),
-            R=frozen(r),
+            P=readonly(p),
+            S=readonly(s),
+            R=readonly(r),
             margins=margins,
             solver_status="optimal (3 axes)",
             solver_margin=min(c.solver_margin for c in certs),
@@ -236,6 +236,6 @@ def linearized_loop(spacecraft: Spacecraft, K: Any) -> LinearizedLoop:
     k1, k2 = pd_from_gain(spacecraft, k)
     axes: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
     if is_diagonal(k1) and is_diagonal(k2):
-        a_axis = frozen(plant.A[np.ix_((0, 3), (0, 3))])  # the (σ₁, ω₁/4) block of the one model's A
-        axes = tuple((a_axis, frozen([[0.0, 0.0], [k1[i, i], k2[i, i]]])) for i in range(3))
-    return LinearizedLoop(spacecraft=spacecraft, K=frozen(k), A=frozen(a), A_d=frozen(a_d), axes=axes)
+        a_axis = readonly(plant.A[np.ix_((0, 3), (0, 3))])  # the (σ₁, ω₁/4) block of the one model's A
+        axes = tuple((a_axis, readonly([[0.0, 0.0], [k1[i, i], k2[i, i]]])) for i in range(3))
+    return LinearizedLoop(spacecraft=spacecraft, K=readonly(k), A=readonly(a), A_d=readonly(a_d), axes=axes)

@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar
-from mrpctl.design._common import frozen, order_value
+from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar, readonly
+from mrpctl.design._common import order_value
 from mrpctl.design.interval import (
     DelayRate,
     IntervalCertificate,
@@ -165,7 +165,7 @@ def inertia_polytope(spacecraft: Spacecraft, tolerance: float, *, product_bound:
         inertias = np.sort(1.0 / eig)
         if inertias[2] > inertias[0] + inertias[1]:
             bad += 1
-    return InertiaPolytope(sc, tol, p, frozen(lower), frozen(upper), frozen(np.array(corners)), bad)
+    return InertiaPolytope(sc, tol, p, readonly(lower), readonly(upper), readonly(np.array(corners)), bad)
 
 
 def _vertex_loops(poly: InertiaPolytope, K: Any) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar
-from mrpctl.design._common import OPTIMAL, frozen, order_value, solve
+from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar, readonly
+from mrpctl.design._common import OPTIMAL, order_value, solve
 from mrpctl.design.gains import PDGains, damping_kind, pd_gains
 from mrpctl.design.lmi import (
     DEFAULT_MARGIN_TOL,
@@ -681,7 +681,7 @@ def synthesize_lmi(
         tau,
         alpha,
         order,
-        frozen(k),
+        readonly(k),
         eps,
         cert,
         decay_cert,
