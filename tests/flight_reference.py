@@ -354,8 +354,9 @@ def reference_loop(
 
 
 # ============================================================================ the study of design/flight.md
-def _tumbles(count: int, omega_max: float, seed: int) -> np.ndarray:
-    """Initial [σ; ω/4]: attitude uniform on SO(3) (short set), ω of uniform direction and |ω| uniform in [0, ω_max]."""
+def _tumbles(count: int, omega_max: float, seed: int, *, fixed_rate: bool = False) -> np.ndarray:
+    """Initial [σ; ω/4]: attitude uniform on SO(3) (short set), ω of uniform direction and |ω| uniform in
+    [0, ω_max] (or |ω| = ω_max with ``fixed_rate``)."""
     rng = np.random.default_rng(seed)
     q = rng.standard_normal((count, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
@@ -363,11 +364,12 @@ def _tumbles(count: int, omega_max: float, seed: int) -> np.ndarray:
     sigma = q[:, 1:] / (1.0 + q[:, :1])
     direction = rng.standard_normal((count, 3))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    omega = direction * rng.uniform(0.0, omega_max, (count, 1))
+    magnitude = rng.uniform(0.0, omega_max, (count, 1))
+    omega = direction * (omega_max if fixed_rate else magnitude)
     return np.hstack((sigma, omega / 4.0))
 
 
-def study(part: str, out: str, rate: float = 1000.0) -> None:  # pragma: no cover - a measurement script
+def study(part: str, out: str, rate: float = 1000.0, fixed_rate: bool = False) -> None:  # pragma: no cover - a measurement script
     """The measurements of design/flight.md: part "noise" (noise x delta table) or "tumble" (200 tumbles)."""
     import json
     import time
@@ -376,7 +378,7 @@ def study(part: str, out: str, rate: float = 1000.0) -> None:  # pragma: no cove
     from mrpctl.design import pd_gains, synthesize_pd
     from mrpctl.flight import Hysteretic, SensorModel
 
-    results: dict[str, Any] = {"rate": rate}
+    results: dict[str, Any] = {"rate": rate, "fixed_rate": fixed_rate}
     if part == "noise":
         alphas = (1.0, 1.05, 1.2, 1.5)
         noises = (0.0, 0.001, 0.01)
@@ -413,7 +415,7 @@ def study(part: str, out: str, rate: float = 1000.0) -> None:  # pragma: no cove
             json.dump(results, handle, indent=1)
         return
     count = 200
-    x0 = _tumbles(count, 5.0, 2026)
+    x0 = _tumbles(count, 5.0, 2026, fixed_rate=fixed_rate)
     study_deltas = (0.0, Hysteretic.from_alpha(1.2).delta)
     for tau in (0.5, 1.0):
         started = time.time()
@@ -465,4 +467,4 @@ def study(part: str, out: str, rate: float = 1000.0) -> None:  # pragma: no cove
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    study(sys.argv[1], sys.argv[2], float(sys.argv[3]) if len(sys.argv) > 3 else 1000.0)
+    study(sys.argv[1], sys.argv[2], float(sys.argv[3]), fixed_rate=len(sys.argv) > 4 and sys.argv[4] == "fixed")
