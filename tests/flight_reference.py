@@ -369,7 +369,9 @@ def _tumbles(count: int, omega_max: float, seed: int, *, fixed_rate: bool = Fals
     return np.hstack((sigma, omega / 4.0))
 
 
-def study(part: str, out: str, rate: float = 1000.0, fixed_rate: bool = False) -> None:  # pragma: no cover - a measurement script
+def study(
+    part: str, out: str, rate: float = 1000.0, fixed_rate: bool = False
+) -> None:  # pragma: no cover - a measurement script
     """The measurements of design/flight.md: part "noise" (noise x delta table) or "tumble" (200 tumbles)."""
     import json
     import time

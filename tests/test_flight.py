@@ -418,7 +418,7 @@ def test_no_logic_switch_when_the_noise_stays_below_delta():
 
 def test_saturation_large_limit_is_the_unsaturated_run_and_small_limit_holds():
     x0 = _tumbling_batch(4, 3.0, 3)
-    kwargs = dict(rate=100.0, t_final=6.0, delays=20, delta=0.1, sensors=SensorModel(attitude_noise=0.001, seed=4))
+    kwargs = dict(rate=100.0, t_final=3.0, delays=20, delta=0.1, sensors=SensorModel(attitude_noise=0.001, seed=4))
     free = reference_loop(paper.SPACECRAFT.inertia, paper.GAIN, x0, **kwargs)
     large = reference_loop(paper.SPACECRAFT.inertia, paper.GAIN, x0, u_max=1e6, norm_max=1e7, **kwargs)
     for name in ("sigma", "omega", "u_applied", "h"):
@@ -441,8 +441,8 @@ def test_saturation_large_limit_is_the_unsaturated_run_and_small_limit_holds():
 
 def test_jitter_with_equal_bounds_is_the_constant_delay_and_records_the_delay_used():
     x0 = _tumbling_batch(3, 2.0, 5)
-    kwargs = dict(rate=100.0, t_final=5.0, delta=0.05, sensors=SensorModel(attitude_noise=0.003, seed=6))
-    n = 501
+    kwargs = dict(rate=100.0, t_final=3.0, delta=0.05, sensors=SensorModel(attitude_noise=0.003, seed=6))
+    n = 301
     constant = reference_loop(paper.SPACECRAFT.inertia, paper.GAIN, x0, delays=10, **kwargs)
     equal = DelayModel.jitter(0.1, 0.1, seed=9).samples(100.0, 0, n)
     jittered = reference_loop(paper.SPACECRAFT.inertia, paper.GAIN, x0, delays=equal, **kwargs)
