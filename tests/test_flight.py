@@ -553,3 +553,17 @@ def test_casadi_builders_in_a_loop_match_the_reference_with_noise_saturation_jit
     assert np.array_equal(loop["h"], ref.h[0])
     assert np.max(np.abs(loop["sigma"] - ref.sigma[0])) < 1e-12
     assert np.max(np.abs(loop["u"] - ref.u_applied[0])) < 1e-12 * np.max(np.abs(ref.u_applied))
+
+
+def test_option_values_print_their_parameters_and_compare_without_raising():
+    assert "0.01 rad" in str(SensorModel(attitude_noise=0.01)) and str(SensorModel()) == "SensorModel (ideal)"
+    assert "|u| <= 5" in str(ActuatorModel(2.0, norm_max=5.0)) and "clip" in str(
+        ActuatorModel(1.0, mode=Saturation.CLIP)
+    )
+    assert "jitter in [0.1, 0.2] s" in str(DelayModel.jitter(0.1, 0.2))
+    assert "constant tau = 0.5 s" in str(DelayModel.constant(0.5))
+    assert "3 given delays" in str(DelayModel.sequence([0.1, 0.1, 0.2], tau_min=0.1, tau_max=0.2))
+    assert "constant [1, 0, 0]" in str(Disturbance([1.0, 0.0, 0.0]))
+    sensor = SensorModel(gyro_bias=[1.0, 2.0, 3.0])
+    assert sensor == sensor and sensor != SensorModel(gyro_bias=[1.0, 2.0, 3.0])  # eq=False: identity, never raises
+    assert not sensor.gyro_bias.flags.writeable
