@@ -381,12 +381,13 @@ def study(
     from mrpctl.flight import Hysteretic, SensorModel
 
     results: dict[str, Any] = {"rate": rate, "fixed_rate": fixed_rate}
-    if part == "noise":
+    if part in ("noise", "seeds"):
         alphas = (1.0, 1.05, 1.2, 1.5)
-        noises = (0.0, 0.001, 0.01)
+        noises = (0.0, 0.001, 0.01) if part == "noise" else (0.001, 0.01)
+        seeds = (1,) if part == "noise" else (1, 2, 3, 4, 5)
         started = time.time()
         deltas = [Hysteretic.from_alpha(a).delta for a in alphas]
-        cases = [(s, a, d) for s in noises for a, d in zip(alphas, deltas, strict=True)]
+        cases = [(s, a, d, seed) for s in noises for a, d in zip(alphas, deltas, strict=True) for seed in seeds]
         ref = reference_loop(
             paper.SPACECRAFT.inertia,
             paper.GAIN,
@@ -395,7 +396,7 @@ def study(
             t_final=60.0,
             delta=[c[2] for c in cases],
             delays=round(0.5 * rate),
-            sensors=[SensorModel(attitude_noise=c[0], seed=1) for c in cases],
+            sensors=[SensorModel(attitude_noise=c[0], seed=c[3]) for c in cases],
             trajectories=False,
         )
         results["noise_delta"] = [
@@ -403,6 +404,7 @@ def study(
                 noise=c[0],
                 alpha=c[1],
                 delta=c[2],
+                seed=c[3],
                 switches=int(ref.logic_switch_count[i]),
                 first=int(ref.logic_first[i]),
                 min_dwell=float(ref.min_dwell[i]),
