@@ -1,0 +1,650 @@
+"""The loop as flown: sensor, actuator, delay and disturbance models, and controller-side set selection.
+
+The paper's loop (``mrpctl.switching``) switches the *plant's* MRP and the controller reads back
+whatever set the plant was in τ ago. Flight software works differently: a star tracker reports an
+attitude, the plant's MRP set is a simulation detail, and the controller alone chooses which MRP set
+to feed its control law, from the delayed (noisy) measurement, keeping that choice in its own memory.
+This module holds the pieces of that loop (see ``design/flight.md`` for the equations):
+
+* option values, frozen and validated: :class:`SensorModel`, :class:`ActuatorModel`,
+  :class:`DelayModel`, :class:`Disturbance`, and the controller-side rule :class:`Hysteretic`
+  (Mayhew, Sanfelice and Teel 2011);
+* seeded noise and jitter streams that depend only on (seed, sample index), never on how the
+  horizon is sliced (:meth:`SensorModel.noise`, :meth:`DelayModel.samples`);
+* the newest-arrived measurement schedule of a time-varying delay (:func:`newest_arrived`);
+* the CasADi expression builders of one flight sample, each also a small pure-SX
+  ``casadi.Function`` with named ports: :func:`measurement_function`,
+  :func:`hysteresis_function`, :func:`selection_function`, :func:`actuator_function`.
+
+Conventions are those of :mod:`mrpctl.mrp`: σ = tan(Φ/4) ê, quaternions scalar first,
+[BN] passive, x = [σ; ω/4].
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
+from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.mrp import skew_expr
+
+__all__ = [
+    "NOISE_BLOCK",
+    "ActuatorModel",
+    "DelayKind",
+    "DelayModel",
+    "Disturbance",
+    "Hysteretic",
+    "Saturation",
+    "SensorModel",
+    "actuator_function",
+    "compose_mrp_expr",
+    "hysteresis_function",
+    "measurement_function",
+    "newest_arrived",
+    "quaternion_from_mrp_expr",
+    "rotation_vector_to_mrp_expr",
+    "selection_function",
+    "short_expr",
+]
+
+#: Samples per block of the counter-based random streams: the generator of block b is keyed by
+#: (seed, stream, b), so sample k's value never depends on the slice it was asked for in.
+NOISE_BLOCK = 4096
+_STREAM_ATTITUDE, _STREAM_RATE, _STREAM_JITTER = 0, 1, 2
+_DELAY_TOLERANCE = 1e-9
+_SMALL_ANGLE = 1e-4
+
+
+# ================================================================== random streams
+def _block_generator(seed: int, stream: int, block: int) -> np.random.Generator:
+    return np.random.Generator(np.random.Philox(np.random.SeedSequence(seed, spawn_key=(stream, block))))
+
+
+def _stream_normals(seed: int, stream: int, k0: int, k1: int) -> np.ndarray:
+    """(k1 − k0, 3) standard normals of samples k0 … k1 − 1 of one stream."""
+    out = np.empty((k1 - k0, 3))
+    for block in range(k0 // NOISE_BLOCK, (k1 - 1) // NOISE_BLOCK + 1 if k1 > k0 else k0 // NOISE_BLOCK):
+        start = block * NOISE_BLOCK
+        values = _block_generator(seed, stream, block).standard_normal((NOISE_BLOCK, 3))
+        lo, hi = max(k0, start), min(k1, start + NOISE_BLOCK)
+        out[lo - k0 : hi - k0] = values[lo - start : hi - start]
+    return out
+
+
+def _stream_integers(seed: int, stream: int, k0: int, k1: int, low: int, high: int) -> np.ndarray:
+    """(k1 − k0,) integers uniform in [low, high] of samples k0 … k1 − 1 of one stream."""
+    out = np.empty(k1 - k0, dtype=np.int64)
+    for block in range(k0 // NOISE_BLOCK, (k1 - 1) // NOISE_BLOCK + 1 if k1 > k0 else k0 // NOISE_BLOCK):
+        start = block * NOISE_BLOCK
+        values = _block_generator(seed, stream, block).integers(low, high, size=NOISE_BLOCK, endpoint=True)
+        lo, hi = max(k0, start), min(k1, start + NOISE_BLOCK)
+        out[lo - k0 : hi - k0] = values[lo - start : hi - start]
+    return out
+
+
+def _slice(k0: Any, k1: Any) -> tuple[int, int]:
+    start = integer("k0", k0, minimum=0)
+    stop = integer("k1", k1, minimum=start)
+    return start, stop
+
+
+def _seed(seed: Any) -> int:
+    return integer("seed", seed, minimum=0)
+
+
+# ================================================================== option values
+@dataclass(frozen=True, eq=False)
+class SensorModel:
+    """Star tracker and gyro: attitude noise as a small random rotation, white rate noise, gyro bias.
+
+    The measured attitude is the true one followed by a small rotation θ_k (rad) about the body
+    axes: [B̃N] = [B̃B](θ_k) [BN], with the components of the rotation vector θ_k i.i.d.
+    N(0, σ_θ²). The error angle |θ_k| is then σ_θ·χ₃ (χ with 3 degrees of freedom): RMS angle
+    √3 σ_θ, mean 2√(2/π) σ_θ ≈ 1.596 σ_θ. The measured rate is ω̃_k = ω_k + b + η_k with η_k
+    i.i.d. N(0, σ_ω² I₃) and b constant. Sample k's noise depends only on (seed, k).
+
+    Parameters
+    ----------
+    attitude_noise : float
+        σ_θ >= 0, 1σ per body axis of the attitude error rotation vector (rad). Default 0.
+    rate_noise : float
+        σ_ω >= 0, 1σ per axis of the white rate noise (rad/s). Default 0.
+    gyro_bias : array_like
+        Constant gyro bias b (3,) (rad/s). Default zero.
+    seed : int
+        Seed (>= 0) of the noise streams. Default 0.
+    """
+
+    attitude_noise: float = 0.0
+    rate_noise: float = 0.0
+    gyro_bias: Any = field(default=(0.0, 0.0, 0.0))
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "attitude_noise", nonnegative_scalar("attitude_noise", self.attitude_noise))
+        object.__setattr__(self, "rate_noise", nonnegative_scalar("rate_noise", self.rate_noise))
+        object.__setattr__(self, "gyro_bias", readonly(finite_array("gyro_bias", self.gyro_bias, (3,))))
+        object.__setattr__(self, "seed", _seed(self.seed))
+
+    @property
+    def ideal(self) -> bool:
+        """True when the sensor adds nothing (no noise, zero bias)."""
+        return self.attitude_noise == 0.0 and self.rate_noise == 0.0 and not np.any(self.gyro_bias)
+
+    def noise(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
+        """The noise of measurement samples k0 … k1 − 1.
+
+        Returns
+        -------
+        rotation, rate : numpy.ndarray
+            (k1 − k0, 3) attitude error rotation vectors θ_k (rad) and rate noise η_k (rad/s).
+            Exactly zero when the corresponding 1σ is zero. Identical for any slicing of the
+            horizon (counter-based: block b of :data:`NOISE_BLOCK` samples is keyed by
+            (seed, stream, b)).
+        """
+        start, stop = _slice(k0, k1)
+        rotation = np.zeros((stop - start, 3))
+        rate = np.zeros((stop - start, 3))
+        if self.attitude_noise > 0.0:
+            rotation = self.attitude_noise * _stream_normals(self.seed, _STREAM_ATTITUDE, start, stop)
+        if self.rate_noise > 0.0:
+            rate = self.rate_noise * _stream_normals(self.seed, _STREAM_RATE, start, stop)
+        return rotation, rate
+
+    def __str__(self) -> str:
+        if self.ideal:
+            return "SensorModel (ideal)"
+        bias = ", ".join(f"{b:g}" for b in self.gyro_bias)
+        return (
+            f"SensorModel (attitude 1sigma {self.attitude_noise:g} rad per axis, rate 1sigma "
+            f"{self.rate_noise:g} rad/s, gyro bias [{bias}] rad/s, seed {self.seed})"
+        )
+
+
+class Saturation(enum.Enum):
+    """How a torque limit acts on a commanded torque u."""
+
+    #: One factor s ∈ (0, 1] on the whole vector: direction preserved, every limit met.
+    SCALE = "scale"
+    #: Each axis clipped on its own (independent actuators), then the norm limit by scaling.
+    CLIP = "clip"
+
+
+@dataclass(frozen=True, eq=False)
+class ActuatorModel:
+    """Torque limits: per axis |u_i| <= u_max,i and optionally |u| <= u_norm (N m).
+
+    Parameters
+    ----------
+    u_max : float or array_like
+        Per-axis limit u_max > 0 (N m), scalar or (3,).
+    norm_max : float or None
+        Limit on the Euclidean norm |u| (N m), > 0; None (default) for none.
+    mode : Saturation
+        :attr:`Saturation.SCALE` (default; direction-preserving) or :attr:`Saturation.CLIP`.
+    """
+
+    u_max: Any
+    norm_max: float | None = None
+    mode: Saturation = Saturation.SCALE
+
+    def __post_init__(self) -> None:
+        limits = finite_array("u_max", self.u_max)
+        if limits.shape == ():
+            limits = np.full(3, float(limits))
+        if limits.shape != (3,):
+            raise DimensionError(f"u_max: expected a scalar or shape (3,) but found {limits.shape}")
+        if np.any(limits <= 0.0):
+            raise SpecificationError(f"u_max (per-axis torque limit, N m) must be > 0 on every axis, got {limits}")
+        object.__setattr__(self, "u_max", readonly(limits))
+        if self.norm_max is not None:
+            object.__setattr__(self, "norm_max", positive_scalar("norm_max", self.norm_max))
+        if not isinstance(self.mode, Saturation):
+            raise SpecificationError(f"mode must be a mrpctl.flight.Saturation, got {self.mode!r}")
+
+    @property
+    def norm_limit(self) -> float:
+        """The norm limit (N m), ``inf`` when there is none (the value fed to the sample Function)."""
+        return math.inf if self.norm_max is None else float(self.norm_max)
+
+    def __str__(self) -> str:
+        limits = ", ".join(f"{u:g}" for u in self.u_max)
+        norm = "" if self.norm_max is None else f", |u| <= {self.norm_max:g}"
+        return f"ActuatorModel (|u_i| <= [{limits}] N m{norm}, {self.mode.value})"
+
+
+class DelayKind(enum.Enum):
+    """Kinds of measurement delay."""
+
+    CONSTANT = "constant"
+    SEQUENCE = "sequence"
+    JITTER = "jitter"
+
+
+def _to_samples(name: str, seconds: np.ndarray, rate: float) -> np.ndarray:
+    samples = seconds * rate
+    rounded = np.rint(samples)
+    bad = np.abs(samples - rounded) > _DELAY_TOLERANCE
+    if np.any(bad):
+        first = float(np.asarray(seconds).ravel()[np.flatnonzero(bad.ravel())[0]])
+        raise SpecificationError(
+            f"{name} must be whole numbers of measurement periods: {first!r} s at rate = {rate!r} Hz "
+            f"gives {first * rate!r} periods; choose delays as multiples of 1/rate"
+        )
+    return rounded.astype(np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class DelayModel:
+    """Measurement delay: constant, a given per-sample sequence, or seeded random jitter.
+
+    Measurement k (taken at t_k) reaches the controller at sample k + d_k. At sample k the
+    controller uses the newest measurement that has arrived, j*(k) = max{j : j + d_j <= k};
+    a measurement overtaken by a newer one is never used (:func:`newest_arrived`). Build with
+    :meth:`constant`, :meth:`sequence` or :meth:`jitter`.
+
+    Attributes
+    ----------
+    kind : DelayKind
+    tau_min, tau_max : float
+        Bounds of the delay (s); equal for a constant delay.
+    delays : numpy.ndarray or None
+        The per-sample delays (s) of a sequence.
+    seed : int
+        Seed of the jitter stream.
+    """
+
+    kind: DelayKind
+    tau_min: float
+    tau_max: float
+    delays: np.ndarray | None = field(default=None, repr=False)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.kind, DelayKind):
+            raise SpecificationError(f"kind must be a mrpctl.flight.DelayKind, got {self.kind!r}")
+        tau_min = nonnegative_scalar("tau_min", self.tau_min)
+        tau_max = nonnegative_scalar("tau_max", self.tau_max)
+        if tau_max < tau_min:
+            raise SpecificationError(f"tau_max must be >= tau_min, got tau_min = {tau_min} s, tau_max = {tau_max} s")
+        if self.kind is DelayKind.CONSTANT and tau_min != tau_max:
+            raise SpecificationError("a constant delay needs tau_min == tau_max")
+        object.__setattr__(self, "tau_min", tau_min)
+        object.__setattr__(self, "tau_max", tau_max)
+        object.__setattr__(self, "seed", _seed(self.seed))
+        if self.kind is DelayKind.SEQUENCE:
+            if self.delays is None:
+                raise SpecificationError("delays: a delay sequence needs an array of per-sample delays (s)")
+            delays = finite_array("delays", self.delays)
+            if delays.ndim != 1 or delays.size == 0:
+                raise DimensionError(f"delays: expected shape (n,) (one delay per sample) but found {delays.shape}")
+            outside = (delays < tau_min) | (delays > tau_max)
+            if np.any(outside):
+                k = int(np.flatnonzero(outside)[0])
+                raise SpecificationError(
+                    f"delays must lie in [tau_min, tau_max] = [{tau_min:g}, {tau_max:g}] s; "
+                    f"delays[{k}] = {delays[k]!r} s"
+                )
+            object.__setattr__(self, "delays", readonly(delays))
+        elif self.delays is not None:
+            raise SpecificationError(f"delays: only a {DelayKind.SEQUENCE.value!r} delay takes an array")
+
+    # --------------------------------------------------------------- constructors
+    @classmethod
+    def constant(cls, tau: float) -> DelayModel:
+        """A constant delay τ >= 0 (s)."""
+        tau = nonnegative_scalar("tau", tau)
+        return cls(DelayKind.CONSTANT, tau, tau)
+
+    @classmethod
+    def sequence(cls, delays: Any, *, tau_min: float, tau_max: float) -> DelayModel:
+        """Per-sample delays d_k (s), one per measurement sample, each in [tau_min, tau_max]."""
+        return cls(DelayKind.SEQUENCE, tau_min, tau_max, delays=delays)
+
+    @classmethod
+    def jitter(cls, tau_min: float, tau_max: float, *, seed: int = 0) -> DelayModel:
+        """Seeded random delays, uniform over the whole periods in [tau_min, tau_max] (s)."""
+        return cls(DelayKind.JITTER, tau_min, tau_max, seed=seed)
+
+    # --------------------------------------------------------------------- use
+    def bounds(self, rate: float) -> tuple[int, int]:
+        """(d_min, d_max) in samples at ``rate`` (Hz); each bound a whole number of periods."""
+        rate = positive_scalar("rate", rate)
+        low, high = _to_samples("tau_min, tau_max", np.array([self.tau_min, self.tau_max]), rate)
+        return int(low), int(high)
+
+    def check_horizon(self, n: int) -> None:
+        """Raise :class:`DimensionError` if a sequence does not hold exactly n delays."""
+        n = integer("n", n, minimum=1)
+        if self.delays is not None and self.delays.shape != (n,):
+            raise DimensionError(
+                f"delays: expected shape (n,) = ({n},) (one delay per measurement sample) but found {self.delays.shape}"
+            )
+
+    def samples(self, rate: float, k0: int, k1: int) -> np.ndarray:
+        """Delays d_k in samples of measurement samples k0 … k1 − 1 (int64), at ``rate`` (Hz).
+
+        Jitter is uniform over the integers in [d_min, d_max], keyed by (seed, k).
+        """
+        start, stop = _slice(k0, k1)
+        low, high = self.bounds(rate)
+        if self.kind is DelayKind.CONSTANT:
+            return np.full(stop - start, low, dtype=np.int64)
+        if self.kind is DelayKind.JITTER:
+            if low == high:
+                return np.full(stop - start, low, dtype=np.int64)
+            return _stream_integers(self.seed, _STREAM_JITTER, start, stop, low, high)
+        assert self.delays is not None  # a SEQUENCE always has delays (checked in __post_init__)
+        if stop > len(self.delays):
+            raise DimensionError(
+                f"delays: samples up to {stop - 1} were asked for but the sequence has {len(self.delays)} entries"
+            )
+        return _to_samples("delays", self.delays[start:stop], float(rate))
+
+    def __str__(self) -> str:
+        if self.kind is DelayKind.CONSTANT:
+            return f"DelayModel (constant tau = {self.tau_min:g} s)"
+        if self.kind is DelayKind.SEQUENCE:
+            assert self.delays is not None
+            return f"DelayModel ({len(self.delays)} given delays in [{self.tau_min:g}, {self.tau_max:g}] s)"
+        return f"DelayModel (jitter in [{self.tau_min:g}, {self.tau_max:g}] s, seed {self.seed})"
+
+
+def newest_arrived(delays: Any, *, history: int) -> tuple[np.ndarray, np.ndarray]:
+    """The measurement each sample uses under a time-varying delay, and the delay that implies.
+
+    Measurement j (j >= 0) arrives at sample j + d_j. The history m_{−D}, …, m_{−1}
+    (D = ``history``, normally d_max) arrives at j + D, as a constant delay D would have it;
+    so for a constant delay d = D, j*(k) = k − d exactly. At sample k the controller uses
+    j*(k) = max{j >= −D : arrival(j) <= k}: the newest measurement that has arrived.
+    j* never decreases, so a measurement overtaken by a newer one is never used.
+
+    Parameters
+    ----------
+    delays : array_like of int
+        (n,) d_k >= 0 in samples, with d_k <= D.
+    history : int
+        D >= 0, keyword-only.
+
+    Returns
+    -------
+    used, delay_used : numpy.ndarray
+        (n,) j*(k) (negative: a history sample) and k − j*(k) (samples), int64, read-only.
+    """
+    d = np.asarray(delays)
+    if d.ndim != 1 or d.size == 0:
+        raise DimensionError(f"delays: expected shape (n,) but found {d.shape}")
+    if not np.issubdtype(d.dtype, np.integer):
+        raise SpecificationError(f"delays must be integers (samples), got dtype {d.dtype}")
+    depth = integer("history", history, minimum=0)
+    if np.any(d < 0) or np.any(d > depth):
+        raise SpecificationError(f"delays must lie in [0, history] = [0, {depth}] samples")
+    n = d.size
+    j = np.arange(n, dtype=np.int64)
+    arrival = j + d.astype(np.int64)
+    best = np.full(n, -1 - depth, dtype=np.int64)
+    on_time = arrival < n
+    np.maximum.at(best, arrival[on_time], j[on_time])
+    k = np.arange(n, dtype=np.int64)
+    history_best = np.minimum(k - depth, -1)  # newest history sample arrived by k
+    used = np.maximum(np.maximum.accumulate(best), history_best)
+    return readonly(used, np.int64), readonly(k - used, np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class Disturbance:
+    """External torque w in body axes (N m) added to the torque the plant sees: constant or per sample.
+
+    Parameters
+    ----------
+    torque : array_like
+        (3,) constant, or (n, 3) one row per measurement sample (held over the period).
+    """
+
+    torque: Any
+
+    def __post_init__(self) -> None:
+        torque = finite_array("torque", self.torque)
+        if torque.shape != (3,) and (torque.ndim != 2 or torque.shape[1] != 3 or torque.shape[0] == 0):
+            raise DimensionError(f"torque: expected shape (3,) or (n, 3) but found {torque.shape}")
+        object.__setattr__(self, "torque", readonly(torque))
+
+    @property
+    def constant(self) -> bool:
+        """True for a constant torque."""
+        return bool(self.torque.ndim == 1)
+
+    def check_horizon(self, n: int) -> None:
+        """Raise :class:`DimensionError` if a per-sample torque does not have n rows."""
+        n = integer("n", n, minimum=1)
+        if not self.constant and self.torque.shape != (n, 3):
+            raise DimensionError(
+                f"torque: expected shape (n, 3) = ({n}, 3) (one row per measurement sample) but found "
+                f"{self.torque.shape}"
+            )
+
+    def samples(self, k0: int, k1: int) -> np.ndarray:
+        """(k1 − k0, 3) torque over samples k0 … k1 − 1 (N m)."""
+        start, stop = _slice(k0, k1)
+        if self.constant:
+            return np.tile(self.torque, (stop - start, 1))
+        if stop > len(self.torque):
+            raise DimensionError(f"torque: samples up to {stop - 1} were asked for but it has {len(self.torque)} rows")
+        return np.array(self.torque[start:stop])
+
+    def __str__(self) -> str:
+        if self.constant:
+            return "Disturbance (constant [" + ", ".join(f"{w:g}" for w in self.torque) + "] N m)"
+        return f"Disturbance ({len(self.torque)} samples, max |w| {np.linalg.norm(self.torque, axis=1).max():g} N m)"
+
+
+@dataclass(frozen=True)
+class Hysteretic:
+    """Controller-side MRP set selection with hysteresis (Mayhew, Sanfelice and Teel 2011).
+
+    The controller keeps a logic variable h ∈ {−1, +1}. On the delayed, noisy measured
+    quaternion q (made continuous in time, see :func:`selection_function`) it sets
+    h ← −h when h q₀ < −δ, and feeds σ_c = h q_v / (1 + h q₀) to its control law.
+    After the rule h q₀ >= −δ, so |σ_c| <= α = √((1 + δ)/(1 − δ)). δ = 0 picks the short set
+    of the measurement at every sample. Between two switches q₀ must move by more than 2δ,
+    and |q̇₀| <= |ω|/2, so switches are at least 4δ/max|ω| apart; attitude noise that moves
+    q₀ by less than δ never causes a switch.
+
+    Parameters
+    ----------
+    delta : float
+        Hysteresis half-width δ ∈ [0, 1) (dimensionless, on q₀). Default 0.
+    """
+
+    delta: float = 0.0
+
+    def __post_init__(self) -> None:
+        delta = finite_scalar("delta", self.delta)
+        if not 0.0 <= delta < 1.0:
+            raise SpecificationError(f"delta (hysteresis on the quaternion scalar q0) must be in [0, 1), got {delta}")
+        object.__setattr__(self, "delta", delta)
+
+    @classmethod
+    def from_alpha(cls, alpha: float) -> Hysteretic:
+        """The rule whose bound on |σ_c| is α >= 1: δ = (α² − 1)/(α² + 1)."""
+        alpha = finite_scalar("alpha", alpha)
+        if alpha < 1.0:
+            raise SpecificationError(f"alpha (bound on |sigma_c|) must be >= 1, got {alpha}")
+        return cls((alpha**2 - 1.0) / (alpha**2 + 1.0))
+
+    @property
+    def alpha(self) -> float:
+        """α = √((1 + δ)/(1 − δ)), the bound on |σ_c| (the MRP threshold at which h flips)."""
+        return math.sqrt((1.0 + self.delta) / (1.0 - self.delta))
+
+    def min_dwell_time(self, omega_max: float) -> float:
+        """4δ/ω_max (s): the shortest time between two switches when |ω| <= ω_max (rad/s)."""
+        return 4.0 * self.delta / positive_scalar("omega_max", omega_max)
+
+    def __str__(self) -> str:
+        return f"Hysteretic (h flips when h q0 < -{self.delta:g}; |sigma_c| <= alpha = {self.alpha:.6g})"
+
+
+# ================================================================== CasADi expressions
+def rotation_vector_to_mrp_expr(theta: Any) -> Any:
+    """σ = tan(|θ|/4) θ/|θ| of a rotation vector θ (rad, |θ| < 2π), exactly 0 at θ = 0 (SX)."""
+    angle_squared = ca.dot(theta, theta)
+    angle = ca.sqrt(angle_squared)
+    small = angle < _SMALL_ANGLE
+    safe = ca.if_else(small, 1.0, angle)
+    # tan(Φ/4)/Φ and its series 1/4 + Φ²/192 + Φ⁴/7680 near 0.
+    factor = ca.if_else(small, 0.25 + angle_squared / 192.0 + angle_squared**2 / 7680.0, ca.tan(safe / 4.0) / safe)
+    return factor * theta
+
+
+def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
+    """σ(F/N) of [FN] = [FB][BN] from σ_first = σ(B/N) and σ_second = σ(F/B) (SX).
+
+    σ = ((1 − |σ₁|²) σ₂ + (1 − |σ₂|²) σ₁ − 2 σ₂ × σ₁) / (1 + |σ₁|² |σ₂|² − 2 σ₁·σ₂)
+    (Schaub & Junkins Eq. 3.152), the quaternion product written in MRPs. The result may be
+    the long set. With σ₂ = 0 it returns σ₁ exactly (bit for bit).
+    """
+    s1 = ca.dot(sigma_first, sigma_first)
+    s2 = ca.dot(sigma_second, sigma_second)
+    numerator = (1 - s1) * sigma_second + (1 - s2) * sigma_first - 2 * (skew_expr(sigma_second) @ sigma_first)
+    return numerator / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second))
+
+
+def short_expr(sigma: Any) -> Any:
+    """The short set (|σ| <= 1) of σ (SX): σ unchanged when |σ|² <= 1, else −σ/|σ|²."""
+    long_set = ca.dot(sigma, sigma) > 1
+    return ca.if_else(long_set, _safe_shadow_expr(sigma), sigma)
+
+
+def _safe_shadow_expr(sigma: Any) -> Any:
+    # Both if_else branches are evaluated: keep the unused shadow of σ = 0 finite.
+    squared = ca.dot(sigma, sigma)
+    return -sigma / ca.if_else(squared > 0, squared, 1.0)
+
+
+def quaternion_from_mrp_expr(sigma: Any) -> Any:
+    """β = ((1 − |σ|²)/(1 + |σ|²), 2σ/(1 + |σ|²)) (scalar first) of σ (SX); β₀ >= 0 for a short σ."""
+    squared = ca.dot(sigma, sigma)
+    return ca.vertcat((1 - squared) / (1 + squared), 2 * sigma / (1 + squared))
+
+
+@lru_cache(maxsize=1)
+def measurement_function() -> ca.Function:
+    """``measurement(x, rotation_noise, rate_noise, bias) -> (x_meas, q_meas)`` (pure SX).
+
+    x = [σ; ω/4] is the true state (σ in either set). The sensor reports the short set of
+    the measured attitude, σ̃ = short(σ ⊕ σ(θ)) with [B̃N] = [B̃B](θ)[BN], the rate
+    ω̃ = ω + b + η, and x_meas = [σ̃; ω̃/4]; q_meas is σ̃'s quaternion (β₀ >= 0). With zero
+    noise and bias and a short σ, x_meas is x bit for bit.
+    """
+    x = ca.SX.sym("x", 6)
+    theta = ca.SX.sym("rotation_noise", 3)
+    eta = ca.SX.sym("rate_noise", 3)
+    bias = ca.SX.sym("bias", 3)
+    sigma_meas = short_expr(compose_mrp_expr(x[0:3], rotation_vector_to_mrp_expr(theta)))
+    omega_meas = 4 * x[3:6] + bias + eta
+    x_meas = ca.vertcat(sigma_meas, omega_meas / 4)
+    return ca.Function(
+        "measurement",
+        [x, theta, eta, bias],
+        [x_meas, quaternion_from_mrp_expr(sigma_meas)],
+        ["x", "rotation_noise", "rate_noise", "bias"],
+        ["x_meas", "q_meas"],
+    )
+
+
+@lru_cache(maxsize=1)
+def hysteresis_function() -> ca.Function:
+    """``hysteresis(h, q, delta) -> (h_next, sigma_c, switched)`` (pure SX): the Mayhew-Sanfelice-Teel rule.
+
+    q (4, scalar first, unit) is the measured quaternion, continuous in time (its sign
+    chosen by continuity, not by β₀ >= 0). h_next = −h when h q₀ < −δ, else h;
+    σ_c = h_next q_v / (1 + h_next q₀); switched = 1.0 when h flipped.
+    """
+    h = ca.SX.sym("h")
+    q = ca.SX.sym("q", 4)
+    delta = ca.SX.sym("delta")
+    switched = ca.if_else(h * q[0] < -delta, 1.0, 0.0)
+    h_next = ca.if_else(switched, -h, h)
+    sigma_c = h_next * q[1:4] / (1 + h_next * q[0])
+    return ca.Function(
+        "hysteresis", [h, q, delta], [h_next, sigma_c, switched], ["h", "q", "delta"], ["h_next", "sigma_c", "switched"]
+    )
+
+
+@lru_cache(maxsize=1)
+def selection_function() -> ca.Function:
+    """``selection(h, c, sigma_meas, sigma_prev, delta) -> (h_next, c_next, sigma_c, switched)`` (pure SX).
+
+    The controller-side rule on the sensor's short-set MRP σ̃ (β̃₀ >= 0), in the form the
+    flight sample uses. The controller's continuous quaternion is q̂ = c β̃: c ∈ {−1, +1}
+    flips when β̃ and the previous measurement's β̃' point to opposite hemispheres,
+    β̃·β̃' < 0 ⇔ (1 − |σ̃|²)(1 − |σ̃'|²) + 4 σ̃·σ̃' < 0 (the attitude passed Φ = 180°).
+    Then the rule of :func:`hysteresis_function` on q̂: with e = h c, h flips when
+    e β̃₀ < −δ ⇔ e < 0 and (1 + δ)|σ̃|² < 1 − δ. σ_c = σ̃ when h_next c_next = +1 (bit for
+    bit) and its shadow −σ̃/|σ̃|² otherwise. Identical to :func:`hysteresis_function` on q̂ up
+    to rounding; with δ = 0 σ_c is σ̃ at every sample.
+    """
+    h = ca.SX.sym("h")
+    c = ca.SX.sym("c")
+    sigma = ca.SX.sym("sigma_meas", 3)
+    previous = ca.SX.sym("sigma_prev", 3)
+    delta = ca.SX.sym("delta")
+    s_now = ca.dot(sigma, sigma)
+    s_prev = ca.dot(previous, previous)
+    flipped = (1 - s_now) * (1 - s_prev) + 4 * ca.dot(sigma, previous) < 0
+    c_next = ca.if_else(flipped, -c, c)
+    effective = h * c_next
+    switched = ca.if_else(ca.logic_and(effective < 0, (1 + delta) * s_now < 1 - delta), 1.0, 0.0)
+    h_next = ca.if_else(switched, -h, h)
+    sigma_c = ca.if_else(h_next * c_next > 0, sigma, _safe_shadow_expr(sigma))
+    return ca.Function(
+        "selection",
+        [h, c, sigma, previous, delta],
+        [h_next, c_next, sigma_c, switched],
+        ["h", "c", "sigma_meas", "sigma_prev", "delta"],
+        ["h_next", "c_next", "sigma_c", "switched"],
+    )
+
+
+@lru_cache(maxsize=2)
+def actuator_function(mode: Saturation = Saturation.SCALE) -> ca.Function:
+    """``actuator(u, u_max, norm_max, w) -> (u_applied, u_plant, saturated)`` (pure SX).
+
+    ``SCALE``: u_applied = u / r with r = max(maxᵢ |uᵢ|/u_max,ᵢ, |u|/u_norm) when r > 1
+    (direction preserved), then clipped per axis so that rounding never exceeds u_max.
+    ``CLIP``: uᵢ clipped to [−u_max,ᵢ, u_max,ᵢ], then scaled by u_norm/|u| if |u| > u_norm.
+    A limit that is not reached leaves u bit for bit; ``norm_max`` = inf means no norm limit.
+    u_plant = u_applied + w (the disturbance torque). saturated = 1.0 when a limit acted.
+    """
+    if not isinstance(mode, Saturation):
+        raise SpecificationError(f"mode must be a mrpctl.flight.Saturation, got {mode!r}")
+    u = ca.SX.sym("u", 3)
+    u_max = ca.SX.sym("u_max", 3)
+    norm_max = ca.SX.sym("norm_max")
+    w = ca.SX.sym("w", 3)
+    if mode is Saturation.SCALE:
+        ratio = ca.fmax(ca.mmax(ca.fabs(u) / u_max), ca.norm_2(u) / norm_max)
+        saturated = ratio > 1
+        scaled = ca.if_else(saturated, u / ratio, u)
+        applied = ca.fmin(ca.fmax(scaled, -u_max), u_max)
+    else:
+        clipped = ca.fmin(ca.fmax(u, -u_max), u_max)
+        ratio = ca.norm_2(clipped) / norm_max
+        applied = ca.if_else(ratio > 1, clipped / ratio, clipped)
+        saturated = ca.logic_or(ca.mmax(ca.fabs(u) - u_max) > 0, ratio > 1)
+    return ca.Function(
+        "actuator",
+        [u, u_max, norm_max, w],
+        [applied, applied + w, ca.if_else(saturated, 1.0, 0.0)],
+        ["u", "u_max", "norm_max", "w"],
+        ["u_applied", "u_plant", "saturated"],
+    )
