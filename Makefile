@@ -23,7 +23,7 @@ BLAS1 := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 # The whole check: lint, types, then the suite with the doctests of the package.
 test: check
-	$(BLAS1) $(PYTHON) -m pytest -q -n 2 --doctest-modules mrpctl tests
+	$(BLAS1) $(PYTHON) -m pytest -q -n 2 --dist loadgroup --doctest-modules mrpctl tests
 
 check: lint typecheck
 

@@ -47,3 +47,11 @@ def blank_figures(monkeypatch: pytest.MonkeyPatch) -> None:
         return [out / name for name in FIGURE_FILES]
 
     monkeypatch.setattr("mrpctl.reproduction._figures", figures)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Every test that uses the paper's reproduction runs on one xdist worker (``--dist loadgroup``),
+    so the 60 s runs are computed once per test session, not once per worker."""
+    for item in items:
+        if "paper_reproduction" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.xdist_group("paper_reproduction"))
