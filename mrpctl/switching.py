@@ -168,10 +168,13 @@ class NoSwitching(SwitchingRule):
 
 @dataclass(frozen=True)
 class OnCurrent(SwitchingRule):
-    """Switch when the current attitude leaves the unit sphere: |σ_k| >= 1.
+    """Switch when the plant's attitude leaves the unit sphere: |σ_k| >= 1.
 
-    Paper section IV, first strategy (it assumes the current σ is known, which a
-    delayed measurement does not provide).
+    Paper section IV, first strategy. It is implementable with delayed data: it keeps the
+    plant's MRP in the short set, so every recorded measurement is a short-set MRP and
+    u = K [short(σ(t − τ)); ω(t − τ)/4] is exactly what a controller computes from the
+    delayed measurement alone (no knowledge of the current σ is needed). The chatter of the
+    paper's Figs. 4-5 needs the state-side model of :class:`OnDelayed`.
     """
 
     label: ClassVar[str] = "on-current"
@@ -243,6 +246,14 @@ class DelayAware(SwitchingRule):
     (saturated at max(d, 1)), and a switch is allowed only when it is >= d, that is when
     k − d >= k_last. With α > 1 it adds a hysteresis of the Mayhew-Sanfelice-Teel kind:
     switching at |σ| > α corresponds to their δ = (α² − 1)/(α² + 1).
+
+    Not sound in general: it is the fix of the paper's state-side model and works with the
+    paper's K, but after a crossing the plant stays in the long set for τ and the torque acts on
+    |σ_long| = tan((180° + |ω|τ)/4), unbounded as |ω|τ → π. With 0.7× the fastest certified
+    critically damped gains and 200 tumbles at |ω| = 5 rad/s it fails to settle in 60 s on 6/200
+    runs at τ = 0.5 s and 42/200 at τ = 1.0 s, where :class:`NoSwitching`, :class:`OnCurrent`
+    and the controller-side hysteretic selection (:class:`mrpctl.flight.Hysteretic`) converge on
+    all 200 (``design/flight.md``). Prefer the controller-side rule for flight designs.
 
     Parameters
     ----------
