@@ -15,8 +15,10 @@
  *   mrpctl_lanes_sample(arg, res)              one sample for all W lanes
  * The loop is the scalar driver's (mrpctl/simulation/_driver.c without kept samples): the carried
  * block alternates between two buffers, the measurement m_k goes to a ring of d + 1 columns and
- * m_{k-d} is read back from it (from the history for k < d). Masking of lanes that diverged or
- * finished is done by the sample itself (its stats freeze), exactly as in the scalar engine.
+ * m_{k-d} is read back from it (from the history for k < d). Lanes that diverged or reached the
+ * horizon are masked by the sample itself (every statistic freezes; only the sample
+ * counter moves on), where the scalar driver stops such a run: mrpctl._vectorize.lane_stats sets
+ * the counter of a diverged lane to the scalar driver's.
  */
 #include <string.h>
 

@@ -43,7 +43,6 @@ import ctypes
 import ctypes.util
 import functools
 import importlib.resources
-import logging
 import math
 import os
 import threading
@@ -78,11 +77,11 @@ __all__ = [
     "simulate_lanes",
 ]
 
-logger = logging.getLogger(__name__)
 
 #: Lanes per batch: measured on the 60 s DelayAware tumbling batch (bench/vector.py, AVX2 host,
-#: CPU time of one thread): W = 4, 8, 16, 32 gave 742, 758, 729, 693 runs/s; 8 lanes are two
-#: 4-wide vectors per operation.
+#: CPU time of one core, 256 runs, best of 5): W = 4, 8, 16, 32 gave 777, 731, 751, 745 runs/s
+#: (an earlier run with 64 runs: 738, 709, 731, 730), within the noise of a shared machine;
+#: 8 lanes are two 4-wide vectors per operation.
 DEFAULT_WIDTH = 8
 
 #: Samples per C call of a lane batch (the scalar engine's slice; a slice of W = 8 lanes of
