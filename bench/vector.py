@@ -38,12 +38,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
+from scipy.spatial.transform import Rotation
 
 from mrpctl import _compile, _vectorize, paper
 from mrpctl.loop import core_function, delay_samples, inertia_input
 from mrpctl.model import state
-from mrpctl.simulation import _engine, _simulate, simulate_batch
+from mrpctl.simulation import BatchResult, _engine, _simulate, simulate_batch
 from mrpctl.switching import DelayAware
 
 T_FINAL = 60.0
@@ -277,7 +277,7 @@ def main() -> None:
     scalar_label = "scalar engine (simulate_batch)"
     batch_label = f"simulate_batch (lanes, W={_vectorize.DEFAULT_WIDTH})"
 
-    def batch(states: np.ndarray, threads: int, lanes: bool) -> object:
+    def batch(states: np.ndarray, threads: int, lanes: bool) -> BatchResult:
         _simulate._LANES = lanes
         try:
             return simulate_batch(
@@ -286,12 +286,12 @@ def main() -> None:
         finally:
             _simulate._LANES = True
 
-    got = batch(x0[:checked], 1, True)
-    assert np.array_equal(got.switch_count, [round(row[2]) for row in reference])
+    batched = batch(x0[:checked], 1, True)
+    assert np.array_equal(batched.switch_count, [round(row[2]) for row in reference])
     scalar_got = batch(x0[:checked], 1, False)
     for name in ("switch_count", "max_sigma", "peak_torque", "settling_time", "first_switch_time"):
         bits[batch_label] = bits.get(batch_label, True) and np.array_equal(
-            np.asarray(getattr(got, name)).view(np.uint8), np.asarray(getattr(scalar_got, name)).view(np.uint8)
+            np.asarray(getattr(batched, name)).view(np.uint8), np.asarray(getattr(scalar_got, name)).view(np.uint8)
         )
     with tempfile.TemporaryDirectory(prefix="mrpctl-bench-") as folder:
         hands = {w: HandLoop(w, flags, Path(folder)) for w in (8, 16)}
