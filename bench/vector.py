@@ -4,15 +4,19 @@ The 60 s DelayAware tumbling batch: the paper's spacecraft and gain, tau = 0.5 s
 attitudes uniform on SO(3) (scipy ``Rotation.random``), body rates uniform in a ball of
 5 rad/s. Runs/s, all in this process and back to back, of
 
-* the lane engine (``LaneEngine``) for several W, with and without fusion, and ISA flags,
-* the scalar engine (``simulate_batch`` without trajectories, the thread pool over one C
-  call per run),
+* ``simulate_batch`` without trajectories, which runs the lane engine (W = the default),
+* the lane engine alone (``simulate_lanes``) for several W, with and without fusion, and ISA flags,
+* the scalar engine (``simulate_batch`` with ``_simulate._LANES = False``: the thread pool
+  over one C call per run and slice),
 * a hand-written structure-of-arrays C loop of the same closed loop (DelayAware rule,
-  u = K m_{k-d}, RK4, the same statistics), W = 8 and 16 lanes, on the same thread pool.
+  u = K m_{k-d}, RK4, the same statistics but the peak torque), W = 8 and 16 lanes, on the same
+  thread pool; its J is a compile-time constant, where the engines take J and J⁻¹ as run-time
+  inputs (the paper's diagonal J: two 3-vectors per lane).
 
 Every lane-engine variant is checked bit for bit against the scalar engine on the batch
-(column "bits"). The first table times one thread by its CPU time (``time.thread_time``), which
-a machine shared with other jobs disturbs least; the second the wall clock on all cores for
+(column "bits"). The first table runs everything on one thread and times it by the process's CPU
+time (``time.process_time``: simulate_batch runs its one worker on a pool thread), which a
+machine shared with other jobs disturbs least; the second the wall clock on all cores for
 the default engine, the hand-written loop and the scalar engine. The rounds are interleaved and
 each entry is the best of the rounds; read the ratios rather than the absolute numbers.
 
@@ -34,11 +38,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
+from scipy.spatial.transform import Rotation
 
 from mrpctl import _compile, _vectorize, paper
-from mrpctl import simulate as engine
+from mrpctl.loop import core_function, delay_samples, inertia_input
 from mrpctl.model import state
+from mrpctl.simulation import BatchResult, _engine, _simulate, simulate_batch
 from mrpctl.switching import DelayAware
 
 T_FINAL = 60.0
@@ -220,24 +225,27 @@ def main() -> None:
     runs = int(sys.argv[1]) if len(sys.argv) > 1 else 64
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 3
     rule = DelayAware()
-    d = engine.delay_samples(TAU, RATE)
-    n = engine._samples(T_FINAL, RATE)[1]
+    d = delay_samples(TAU, RATE)
+    n = _simulate._samples(T_FINAL, RATE)[1]
     x0 = tumbling_batch(runs)
     gains = np.broadcast_to(paper.GAIN, (runs, 3, 6))
     scalar_runs = max(8, runs // 4)
     memory0 = np.full(runs, rule.initial_memory(delay_samples=d))
-    history = np.stack([engine._history("constant", x, d)[0] for x in x0])
+    history = x0[:, :, None]  # the "constant" history: one column
     parameters = np.tile(rule.parameters(), (runs, 1))
-    sample = engine._engine_sample(engine._core_function(paper.SPACECRAFT, rule, d, 1.0 / RATE, 1), d)
+    layout = inertia_input(paper.SPACECRAFT)
+    sample = _engine.engine_sample(core_function(paper.SPACECRAFT, rule, d, 1.0 / RATE, 1, inertia=layout), d)
     checked = min(runs, 16)
+    scalar = _engine.engine(paper.SPACECRAFT, rule, d, 1.0 / RATE, 1)
     reference = np.array(
         [
-            engine._engine(paper.SPACECRAFT, rule, d, 1.0 / RATE, 1).run(
-                x0[i], memory0[i], engine._initial_stats(n), history[i], gains[i], parameters[i], n, False
-            )[0]
+            scalar.run(
+                x0[i], memory0[i], x0[i][None], gains[i], parameters[i], n,
+                spacecraft=paper.SPACECRAFT, keep_every=None, workspace=scalar.workspace(n, switches=False),
+            ).stats
             for i in range(checked)
         ]
-    )
+    )  # fmt: skip
 
     isa = _vectorize.host_isa_flags()
     isa_label = " ".join(isa) or "sse2"
@@ -258,14 +266,33 @@ def main() -> None:
         lane = _vectorize.LaneEngine(sample, d, **options)
         engines[label] = lane
         got = _vectorize.simulate_lanes(
-            lane, x0[:checked], memory0[:checked], history[:checked], gains[:checked], parameters[:checked], n
-        )
+            lane, x0[:checked], memory0[:checked], history[:checked], gains[:checked], parameters[:checked], n,
+            spacecraft=paper.SPACECRAFT,
+        )  # fmt: skip
         bits[label] = np.array_equal(got.view(np.int64), reference.view(np.int64))
         print(f"built {label} ({time.perf_counter() - start:.1f} s), bit-identical: {bits[label]}", flush=True)
 
     flags = (*_vectorize.LANE_FLAGS, *isa)
     default = f"lanes W={_vectorize.DEFAULT_WIDTH} fused {isa_label}"
     scalar_label = "scalar engine (simulate_batch)"
+    batch_label = f"simulate_batch (lanes, W={_vectorize.DEFAULT_WIDTH})"
+
+    def batch(states: np.ndarray, threads: int, lanes: bool) -> BatchResult:
+        _simulate._LANES = lanes
+        try:
+            return simulate_batch(
+                paper.SPACECRAFT, paper.GAIN, states, tau=TAU, rule=rule, t_final=T_FINAL, rate=RATE, threads=threads
+            )
+        finally:
+            _simulate._LANES = True
+
+    batched = batch(x0[:checked], 1, True)
+    assert np.array_equal(batched.switch_count, [round(row[2]) for row in reference])
+    scalar_got = batch(x0[:checked], 1, False)
+    for name in ("switch_count", "max_sigma", "peak_torque", "settling_time", "first_switch_time"):
+        bits[batch_label] = bits.get(batch_label, True) and np.array_equal(
+            np.asarray(getattr(batched, name)).view(np.uint8), np.asarray(getattr(scalar_got, name)).view(np.uint8)
+        )
     with tempfile.TemporaryDirectory(prefix="mrpctl-bench-") as folder:
         hands = {w: HandLoop(w, flags, Path(folder)) for w in (8, 16)}
 
@@ -273,33 +300,25 @@ def main() -> None:
             global THREADS
             THREADS = threads
             measures: dict[str, Callable[[], object]] = {}
+            measures[batch_label] = functools.partial(batch, x0, threads, True)
             for label, lane in engines.items():
                 measures[label] = functools.partial(
-                    _vectorize.simulate_lanes, lane, x0, memory0, history, gains, parameters, n, threads=threads
-                )
+                    _vectorize.simulate_lanes, lane, x0, memory0, history, gains, parameters, n,
+                    spacecraft=paper.SPACECRAFT, threads=threads,
+                )  # fmt: skip
             for w, hand in hands.items():
                 measures[f"hand-written SoA C, W={w}"] = functools.partial(hand.run, x0, gains, np.ones(runs), n, d)
-            measures[scalar_label] = functools.partial(
-                engine.simulate_batch,
-                paper.SPACECRAFT,
-                paper.GAIN,
-                x0[:scalar_runs],
-                tau=TAU,
-                rule=rule,
-                t_final=T_FINAL,
-                rate=RATE,
-                threads=threads,
-            )
+            measures[scalar_label] = functools.partial(batch, x0[:scalar_runs], threads, False)
             return measures
 
         serial = table(1)
         counts = {label: (scalar_runs if label == scalar_label else runs) for label in serial}
-        per_core = best_rates(serial, counts, rounds, time.thread_time)
+        per_core = best_rates(serial, counts, rounds, time.process_time)
         print("serial rounds (CPU time) done", flush=True)
         pooled = table(THREAD_COUNT)
         pooled = {
             label: pooled[label]
-            for label in (default, "hand-written SoA C, W=8", "hand-written SoA C, W=16", scalar_label)
+            for label in (batch_label, default, "hand-written SoA C, W=8", "hand-written SoA C, W=16", scalar_label)
         }
         wall = best_rates(pooled, counts, rounds, time.perf_counter)
         hand_check = hands[8].run(x0[:checked], gains[:checked], np.ones(checked), n, d)
@@ -311,14 +330,14 @@ def main() -> None:
         f"60 s DelayAware tumbling batch (tau = {TAU} s, {RATE:g} Hz, |omega| <= {MAX_RATE} rad/s, "
         f"attitude uniform on SO(3)), {runs} runs, best of {rounds} interleaved rounds"
     )
-    print(f"CPU-time runs/s of one thread (per core); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
+    print(f"CPU-time runs/s on one thread (per core); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     print(f"{'variant':40s} {'runs/s':>8s} {'x scalar':>9s} {'x best hand':>12s}  bits vs scalar engine")
     for label, rate in per_core.items():
         mark = bits.get(label)
         print(
             f"{label:40s} {rate:8.1f} {rate / per_core[scalar_label]:9.2f} {rate / hand_best:12.2f}  "
             + ("" if mark is None else ("identical" if mark else "DIFFERENT"))
-            + ("  <- default" if label == default else "")
+            + ("  <- default W" if label == default else "")
         )
     print()
     print(f"wall-clock runs/s on {THREAD_COUNT} threads (shared machine: absolute numbers are low)")

@@ -13,34 +13,39 @@
  *                                              of a carried input), MRPCTL_ROLE_MEASUREMENT or
  *                                              MRPCTL_ROLE_DROPPED (not computed)
  *   mrpctl_lanes_sample(arg, res)              one sample for all W lanes
- * The loop is the scalar driver's (mrpctl.simulate._DRIVER_C without trajectories): the carried
+ * The loop is the scalar driver's (mrpctl/simulation/_driver.c without kept samples): the carried
  * block alternates between two buffers, the measurement m_k goes to a ring of d + 1 columns and
- * m_{k-d} is read back from it (from the history for k < d). Masking of lanes that diverged or
- * finished is done by the sample itself (its stats freeze), exactly as in the scalar engine.
+ * m_{k-d} is read back from it (from the history for k < d). Lanes that diverged or reached the
+ * horizon are masked by the sample itself (every statistic freezes; only the sample
+ * counter moves on), where the scalar driver stops such a run: mrpctl._vectorize.lane_stats sets
+ * the counter of a diverged lane to the scalar driver's.
  */
 #include <string.h>
 
 #define MRPCTL_BLOCK (MRPCTL_CARRIED * MRPCTL_W)
 #define MRPCTL_COLUMN (MRPCTL_MEASURED * MRPCTL_W)
 
-/* carried: (MRPCTL_CARRIED, W), the initial values in and the values after n samples out.
+/* Samples k0 .. k1-1 of W runs (a horizon is run in slices, so that the caller sees Ctrl-C and
+ * its stop flag between them; slices give the same bits as one call).
+ * carried: (MRPCTL_CARRIED, W), the values before sample k0 in and after sample k1-1 out.
  * constants: (constant nonzeros, W). history: (max(d, 1), MRPCTL_MEASURED, W), m_{-d}.. m_{-1}.
- * ring: (d + 1, MRPCTL_MEASURED, W) work space. Returns 0. */
+ * ring: (d + 1, MRPCTL_MEASURED, W), m_k in column k mod (d + 1); kept by the caller between
+ * slices. Returns 0. */
 __attribute__((visibility("default"))) int mrpctl_lanes_run(double* carried, const double* constants,
-                                                            const double* history, long long n, long long d,
-                                                            double* ring) {
+                                                            const double* history, long long k0, long long k1,
+                                                            long long d, double* ring) {
   static double* const unused = 0;
   double buffers[2][MRPCTL_BLOCK] __attribute__((aligned(64)));
   const double* arg[MRPCTL_N_IN];
   double* res[MRPCTL_N_OUT];
-  long long k, slot = 0, delayed_slot = 0;
-  int i;
+  long long k, slot = k0 % (d + 1), delayed_slot = k0 >= d ? (k0 - d) % (d + 1) : 0;
+  int i, now_index = 0;
   memcpy(buffers[0], carried, sizeof(buffers[0]));
   for (i = 0; i < MRPCTL_N_IN; ++i) arg[i] = constants + mrpctl_in_offset[i] * MRPCTL_W;
   for (i = 0; i < MRPCTL_N_OUT; ++i) res[i] = unused;
-  for (k = 0; k < n; ++k) {
-    double* now = buffers[k & 1];
-    double* next = buffers[(k + 1) & 1];
+  for (k = k0; k < k1; ++k) {
+    double* now = buffers[now_index];
+    double* next = buffers[now_index ^ 1];
     const double* delayed = d == 0 ? history : k < d ? history + MRPCTL_COLUMN * k : ring + MRPCTL_COLUMN * delayed_slot;
     for (i = 0; i < MRPCTL_N_IN; ++i) {
       if (mrpctl_in_role[i] == MRPCTL_ROLE_CARRIED) arg[i] = now + mrpctl_in_offset[i] * MRPCTL_W;
@@ -53,8 +58,9 @@ __attribute__((visibility("default"))) int mrpctl_lanes_run(double* carried, con
     mrpctl_lanes_sample(arg, res);
     if (++slot > d) slot = 0;
     if (k >= d && ++delayed_slot > d) delayed_slot = 0;
+    now_index ^= 1;
   }
-  memcpy(carried, buffers[n & 1], sizeof(buffers[0]));
+  memcpy(carried, buffers[now_index], sizeof(buffers[0]));
   return 0;
 }
 

@@ -30,8 +30,11 @@ from the Function: an input ``p`` with an output ``p_next`` is carried from samp
 the input ``x_delayed`` is fed m_{k-d} from a ring of the output ``x_meas``, every other input
 is a per-lane constant (K, rule parameters, ...), every other output is not computed.
 
-The module is self-contained until the simulation package and ``_compile.compile_source``
-land: :func:`_scalar_parts` and :func:`_build_library` are the two adapters to re-point.
+The closed loop comes from :mod:`mrpctl.simulation._engine` (``engine_sample`` of
+``mrpctl.loop.core_function`` with the run-time inertia: J and J⁻¹ are per-lane constants, so
+one library serves every spacecraft of an inertia layout); :func:`simulate_lanes` gives the
+statistics rows of :mod:`mrpctl.simulation._stats`, bit for bit those of the scalar ``Engine.run``,
+and ``simulate_batch`` uses it for metrics-only batches.
 """
 
 from __future__ import annotations
@@ -39,9 +42,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
-import hashlib
 import importlib.resources
-import logging
 import math
 import os
 import threading
@@ -57,23 +58,36 @@ import numpy as np
 from mrpctl import _compile
 from mrpctl._validation import integer
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+from mrpctl.loop import InertiaInput, core_function, inertia_input, inertia_values
+from mrpctl.simulation._engine import engine_sample, rule_key
+from mrpctl.simulation._stats import S_DIVERGED, S_K, initial_stats
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import SwitchingRule
 
 __all__ = [
     "DEFAULT_WIDTH",
+    "LaneBatches",
     "LaneEngine",
     "LaneProgram",
+    "closed_loop_batches",
     "emit_lanes",
     "host_isa_flags",
     "lane_engine",
+    "lane_stats",
     "simulate_lanes",
 ]
 
-logger = logging.getLogger(__name__)
 
 #: Lanes per batch: measured on the 60 s DelayAware tumbling batch (bench/vector.py, AVX2 host,
-#: CPU time of one thread): W = 4, 8, 16, 32 gave 742, 758, 729, 693 runs/s; 8 lanes are two
-#: 4-wide vectors per operation.
+#: CPU time of one core, 256 runs, best of 5): W = 4, 8, 16, 32 gave 777, 731, 751, 745 runs/s
+#: (an earlier run with 64 runs: 738, 709, 731, 730), within the noise of a shared machine;
+#: 8 lanes are two 4-wide vectors per operation.
 DEFAULT_WIDTH = 8
+
+#: Samples per C call of a lane batch (the scalar engine's slice; a slice of W = 8 lanes of
+#: the paper's loop is about 10 ms of one core): Ctrl-C and a stop flag are seen between slices.
+SLICE_SAMPLES = 2**16
+
 
 _DRIVER_FILE = "_lanes_driver.c"
 _ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT = 0, 1, 2
@@ -456,21 +470,8 @@ LANE_FLAGS: tuple[str, ...] = (*_compile.SIMULATION_FLAGS, "-fno-math-errno", "-
 
 
 def _build_library(code: str, name: str, flags: tuple[str, ...]) -> Path:
-    """Compile ``code`` to a cached shared library and return its path.
-
-    # adapter: re-point at _compile.compile_source(code, name, flags=flags) after the merge.
-    """
-    compiler = _compile.find_compiler()
-    if compiler is None:
-        raise CodegenError("the lane engine needs a C compiler ($CC, gcc or cc); none was found")
-    digest = hashlib.sha256(
-        "\n".join((code, _compile._compiler_identity(compiler), " ".join(flags), _CASADI_VERSION)).encode()
-    ).hexdigest()[:20]
-    library = _compile.cache_dir() / f"{name}_{digest}.so"
-    if not library.exists():
-        seconds = _compile._build(code, library, compiler, flags)
-        logger.info("compiled %s in %.2f s -> %s", name, seconds, library)
-    return library
+    """Compile ``code`` to a cached shared library (:func:`mrpctl._compile.compile_source`)."""
+    return _compile.compile_source(code, name, flags=flags)
 
 
 def _driver_source() -> str:
@@ -588,37 +589,77 @@ class LaneEngine:
             raise CodegenError(f"{self.library} was built for {self._dll.mrpctl_lanes_width()} lanes, not {self.width}")
         self._run = self._dll.mrpctl_lanes_run
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_longlong] * 2 + [ctypes.c_void_p]
+        self._run.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_longlong] * 3 + [ctypes.c_void_p]
 
     @property
     def history_columns(self) -> int:
         """Columns of the initial history: max(d, 1)."""
         return max(self.d, 1)
 
-    def _batch(
+    def batch_bytes(self) -> int:
+        """Bytes of one batch's work buffers (carried block, constants, history, delay ring)."""
+        per_lane = 2 * self.carried_size + self.constant_size + self.measured * (self.d + 1 + self.history_columns)
+        return 8 * self.width * per_lane
+
+    def batches(
         self,
-        carried: np.ndarray,
-        constants: np.ndarray,
-        history: np.ndarray,
+        carried: Mapping[str, Any],
+        constants: Mapping[str, Any],
+        history: Any,
         n: int,
-    ) -> np.ndarray:
-        """One batch of W lanes: SoA arrays in, the carried block (carried_size, W) out."""
-        block = np.ascontiguousarray(carried.T) if self.carried_size else np.zeros((1, self.width))
-        values = np.ascontiguousarray(constants.T) if self.constant_size else np.zeros((1, self.width))
-        columns = np.empty((self.history_columns, self.measured, self.width))  # m_{-d}.., (measured, W) each
-        columns[...] = history.transpose(1, 2, 0)  # broadcasts a constant (1-column) history
-        ring = np.empty((self.d + 1, self.measured, self.width))
-        status = self._run(
-            _compile.address(block),
-            _compile.address(values),
-            _compile.address(columns),
-            n,
-            self.d,
-            _compile.address(ring),
-        )
-        if status != 0:
-            raise CodegenError(f"the lane engine {self.library} failed")
-        return block
+        *,
+        threads: int = 1,
+        slice_samples: int = SLICE_SAMPLES,
+        finished: str | None = None,
+    ) -> LaneBatches:
+        """The N runs packed into batches of W lanes, checked and ready to run (see :meth:`run`).
+
+        ``finished`` names a carried nonzero (``"stats[13]"``-style: port and index) that a
+        lane sets >= 0 when nothing more of it changes but the sample counter; a batch whose
+        lanes all have it stops early (the caller completes the counter).
+        """
+        n = integer("n", n, minimum=0)
+        slice_samples = integer("slice_samples", slice_samples, minimum=1)
+        missing = sorted((set(self.carried) - set(carried)) | (set(self.constants) - set(constants)))
+        extra = sorted(set(carried) - set(self.carried)) + sorted(set(constants) - set(self.constants))
+        if missing or extra:
+            raise SpecificationError(f"lane engine inputs: missing {missing}, unexpected {extra}")
+        history_array = np.asarray(history, dtype=float)
+        runs = history_array.shape[0] if history_array.ndim == 3 else -1
+        shapes = {(runs, self.history_columns, self.measured), (runs, 1, self.measured)}
+        if history_array.shape not in shapes or runs < 1:
+            raise DimensionError(
+                f"history: expected shape (N, {self.history_columns}, {self.measured}) or (N, 1, {self.measured}) "
+                f"but found {history_array.shape}"
+            )
+        per_batch = self.batch_bytes()
+        needed = 8 * runs * (2 * self.carried_size + self.constant_size) + min(threads, runs) * per_batch
+        available = _available_memory()
+        if available is not None and needed > available:
+            raise SpecificationError(
+                f"the lane engine would need about {needed / 2**30:.1f} GiB ({runs} runs; per thread and batch of "
+                f"{self.width} lanes {per_batch / 2**20:.1f} MiB for the delay ring of d + 1 = {self.d + 1} "
+                f"samples) but about {available / 2**30:.1f} GiB are available; run fewer runs per call, "
+                "fewer threads or fewer lanes"
+            )
+        full_carried = np.empty((runs, max(self.carried_size, 1)))
+        full_constants = np.empty((runs, max(self.constant_size, 1)))
+        for target, layout, values in (
+            (full_carried, self.carried, carried),
+            (full_constants, self.constants, constants),
+        ):
+            for name, where in layout.items():
+                array = np.asarray(values[name], dtype=float)
+                if array.shape != (runs, where.stop - where.start):
+                    raise DimensionError(
+                        f"{name}: expected shape ({runs}, {where.stop - where.start}) but found {array.shape}"
+                    )
+                target[:, where] = array
+        row = None
+        if finished is not None:
+            port, _, index = finished.partition("[")
+            row = self.carried[port].start + int(index.rstrip("]"))
+        return LaneBatches(self, full_carried, full_constants, history_array, n, slice_samples, row)
 
     def run(
         self,
@@ -651,57 +692,68 @@ class LaneEngine:
         dict of str to numpy.ndarray
             The (N, nnz) carried values after n samples.
         """
-        n = integer("n", n, minimum=0)
-        missing = sorted((set(self.carried) - set(carried)) | (set(self.constants) - set(constants)))
-        extra = sorted(set(carried) - set(self.carried)) + sorted(set(constants) - set(self.constants))
-        if missing or extra:
-            raise SpecificationError(f"lane engine inputs: missing {missing}, unexpected {extra}")
-        history_array = np.asarray(history, dtype=float)
-        runs = history_array.shape[0] if history_array.ndim == 3 else -1
-        shapes = {(runs, self.history_columns, self.measured), (runs, 1, self.measured)}
-        if history_array.shape not in shapes or runs < 1:
-            raise DimensionError(
-                f"history: expected shape (N, {self.history_columns}, {self.measured}) or (N, 1, {self.measured}) "
-                f"but found {history_array.shape}"
-            )
         workers = _threads(threads)
-        per_batch = 8 * self.width * (2 * self.carried_size + self.constant_size + self.measured * (self.d + 1))
-        per_batch += 8 * self.width * self.measured * self.history_columns
-        needed = 8 * runs * (2 * self.carried_size + self.constant_size) + min(workers, runs) * per_batch
-        available = _available_memory()
-        if available is not None and needed > available:
-            raise SpecificationError(
-                f"the lane engine would need about {needed / 2**30:.1f} GiB ({runs} runs; per thread and batch of "
-                f"{self.width} lanes {per_batch / 2**20:.1f} MiB for the delay ring of d + 1 = {self.d + 1} "
-                f"samples) but about {available / 2**30:.1f} GiB are available; run fewer runs per call, "
-                "fewer threads or fewer lanes"
-            )
-        full_carried = np.empty((runs, max(self.carried_size, 1)))
-        full_constants = np.empty((runs, max(self.constant_size, 1)))
-        for target, layout, values in (
-            (full_carried, self.carried, carried),
-            (full_constants, self.constants, constants),
-        ):
-            for name, where in layout.items():
-                array = np.asarray(values[name], dtype=float)
-                if array.shape != (runs, where.stop - where.start):
-                    raise DimensionError(
-                        f"{name}: expected shape ({runs}, {where.stop - where.start}) but found {array.shape}"
-                    )
-                target[:, where] = array
-        width = self.width
-        batches = -(-runs // width)
-        out = np.empty((runs, max(self.carried_size, 1)))
+        packed = self.batches(carried, constants, history, n, threads=workers)
+        _pool_map(packed.run, packed.count, workers)
+        return {name: packed.out[:, where] for name, where in self.carried.items()}
 
-        def one(b: int) -> None:
-            lanes = np.arange(b * width, (b + 1) * width)
-            lanes[lanes >= runs] = b * width  # padding lanes repeat the batch's first run
-            block = self._batch(full_carried[lanes], full_constants[lanes], history_array[lanes], n)
-            stop = min((b + 1) * width, runs)
-            out[b * width : stop] = block.T[: stop - b * width]
 
-        _pool_map(one, batches, workers)
-        return {name: out[:, where] for name, where in self.carried.items()}
+class LaneBatches:
+    """N runs of one :class:`LaneEngine` packed into ``count`` batches of W lanes.
+
+    :meth:`run` advances one batch to the horizon slice by slice and writes its lanes'
+    carried values into :attr:`out` (N, carried nonzeros); batches are independent (a thread
+    pool may run them in any order: each lane's bits do not depend on it).
+    """
+
+    def __init__(
+        self,
+        engine: LaneEngine,
+        carried: np.ndarray,
+        constants: np.ndarray,
+        history: np.ndarray,
+        n: int,
+        slice_samples: int,
+        finished_row: int | None,
+    ) -> None:
+        self.engine = engine
+        self.runs = len(carried)
+        self.count = -(-self.runs // engine.width)
+        self.n = n
+        self._carried, self._constants, self._history = carried, constants, history
+        self._slice = slice_samples
+        self._finished_row = finished_row
+        self.out = np.empty_like(carried)
+
+    def lanes(self, b: int) -> int:
+        """Runs (not padding) in batch b."""
+        return min((b + 1) * self.engine.width, self.runs) - b * self.engine.width
+
+    def run(self, b: int, stop: Callable[[int], bool] | None = None) -> bool:
+        """Run batch b; ``stop(samples)`` after each slice (samples: run-samples done in this
+        batch) returning True abandons it. Returns True when the batch reached the horizon."""
+        engine, width = self.engine, self.engine.width
+        lanes = np.arange(b * width, (b + 1) * width)
+        lanes[lanes >= self.runs] = b * width  # padding lanes repeat the batch's first run
+        block = np.ascontiguousarray(self._carried[lanes].T)
+        values = np.ascontiguousarray(self._constants[lanes].T)
+        columns = np.empty((engine.history_columns, engine.measured, width))  # m_{-d}.., (measured, W) each
+        columns[...] = self._history[lanes].transpose(1, 2, 0)  # broadcasts a constant (1-column) history
+        ring = np.empty((engine.d + 1, engine.measured, width))
+        pointers = (_compile.address(block), _compile.address(values), _compile.address(columns))
+        real = self.lanes(b)
+        k = 0
+        while k < self.n:
+            k1 = min(k + self._slice, self.n)
+            if engine._run(*pointers, k, k1, engine.d, _compile.address(ring)) != 0:
+                raise CodegenError(f"the lane engine {engine.library} failed")
+            k = k1
+            if stop is not None and stop(k * real):
+                return False
+            if self._finished_row is not None and k < self.n and np.all(block[self._finished_row] >= 0):
+                break  # every lane is done: only their sample counters would still move
+        self.out[b * width : b * width + real] = block.T[:real]
+        return True
 
 
 def _threads(threads: int | None) -> int:
@@ -718,7 +770,7 @@ def _available_memory() -> int | None:
         return None
 
 
-def _pool_map(task: Callable[[int], None], count: int, threads: int) -> None:
+def _pool_map(task: Callable[[int], Any], count: int, threads: int) -> None:
     if threads == 1 or count == 1:
         for b in range(count):
             task(b)
@@ -729,35 +781,104 @@ def _pool_map(task: Callable[[int], None], count: int, threads: int) -> None:
 
 
 # ------------------------------------------------------------------ the closed loop
-def _scalar_parts() -> Any:
-    """The scalar engine's pieces (the sample builder and the stats layout).
-
-    # adapter: the lead re-points this at mrpctl.simulation._engine after the merge.
-    """
-    from mrpctl import simulate as engine
-
-    return engine
-
-
 _ENGINES: dict[tuple[Any, ...], LaneEngine] = {}
 _ENGINES_LOCK = threading.Lock()
 
 
 def lane_engine(
-    spacecraft: Any, rule: Any, d: int, period: float, substeps: int, *, width: int = DEFAULT_WIDTH, **options: Any
+    spacecraft: Spacecraft,
+    rule: SwitchingRule,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    width: int = DEFAULT_WIDTH,
+    **options: Any,
 ) -> LaneEngine:
-    """The (cached) lane engine of the scalar engine's sample for one structure."""
-    parts = _scalar_parts()
-    key = (spacecraft, type(rule), d, period, substeps, width, tuple(sorted(options.items())))
+    """The (cached) lane engine of the scalar engine's sample for one structure.
+
+    The structure is the scalar engine's (:func:`mrpctl.simulation._engine.engine`): the
+    inertia layout of ``spacecraft`` (J and J⁻¹ are run-time inputs, one per lane), the
+    rule's expressions, d, h, substeps; plus W and the emitter options.
+
+    Raises
+    ------
+    CodegenError
+        If the sample has an operation without a bit-identical lane form, or the compiler fails.
+    """
+    layout = inertia_input(spacecraft)
+    key = (layout, type(rule), rule_key(rule, d), d, period, substeps, width, tuple(sorted(options.items())))
     with _ENGINES_LOCK:
-        engine = _ENGINES.get(key)
-        if engine is None:
-            core = parts._core_function(spacecraft, rule, d, period, substeps)
-            label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}"
-            sample = parts._engine_sample(core, d, f"mrpctl_lanes_{label}")
-            engine = LaneEngine(sample, d, width=width, **options)
-            _ENGINES[key] = engine
-        return engine
+        found = _ENGINES.get(key)
+        if found is None:
+            core = core_function(spacecraft, rule, d, period, substeps, inertia=layout)
+            label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{layout.value}"
+            sample = engine_sample(core, d, f"mrpctl_lanes_{label}")
+            found = LaneEngine(sample, d, width=width, **options)
+            _ENGINES[key] = found
+        return found
+
+
+def closed_loop_batches(
+    engine: LaneEngine,
+    x0: np.ndarray,
+    memory0: np.ndarray,
+    history: np.ndarray,
+    gains: np.ndarray,
+    parameters: np.ndarray,
+    n: int,
+    *,
+    spacecraft: Spacecraft | Sequence[Spacecraft],
+    threads: int = 1,
+    slice_samples: int = SLICE_SAMPLES,
+) -> LaneBatches:
+    """The closed-loop runs packed for :meth:`LaneBatches.run` (arguments as :func:`simulate_lanes`);
+    read the statistics with :func:`lane_stats` once every batch has run."""
+    runs = len(x0)
+    crafts = (spacecraft,) * runs if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
+    if len(crafts) != runs:
+        raise DimensionError(f"spacecraft: expected 1 or {runs} entries (one per run) but found {len(crafts)}")
+    constants = {
+        "K": np.asarray(gains).transpose(0, 2, 1).reshape(runs, -1),  # column-major 3 x 6, as Engine.run
+        "parameters": np.reshape(parameters, (runs, -1)),
+    }
+    if "J" in engine.constants:
+        where = engine.constants["J"]
+        layout = InertiaInput.DIAGONAL if where.stop - where.start == 3 else InertiaInput.FULL
+        inertia = np.empty((runs, 2, where.stop - where.start))
+        cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for i, craft in enumerate(crafts):
+            values = cache.get(id(craft))
+            if values is None:
+                if inertia_input(craft) is not layout:  # the scalar engine of craft has the other layout
+                    raise SpecificationError(
+                        f"spacecraft[{i}]: this lane engine takes a {layout.value} inertia, got {craft}"
+                    )
+                values = cache[id(craft)] = inertia_values(craft, layout)
+            inertia[i, 0], inertia[i, 1] = values[0].ravel(), values[1].ravel()  # column-major, as Engine.run
+        constants["J"], constants["J_inv"] = inertia[:, 0], inertia[:, 1]
+    return engine.batches(
+        {"x": x0, "memory": np.reshape(memory0, (runs, -1)), "stats": np.tile(initial_stats(n), (runs, 1))},
+        constants,
+        np.asarray(history).transpose(0, 2, 1),
+        n,
+        threads=threads,
+        slice_samples=slice_samples,
+        finished=f"stats[{S_DIVERGED}]",
+    )
+
+
+def lane_stats(batches: LaneBatches) -> np.ndarray:
+    """The (N, STATS_SIZE) statistics after every batch ran, as the scalar ``Engine.run`` gives them.
+
+    The scalar driver stops a run after its diverging sample; a lane goes on to the horizon
+    (or its batch stops early) with every statistic frozen but the sample counter, which is
+    set to the scalar driver's count: the diverging sample's index + 1.
+    """
+    stats = batches.out[:, batches.engine.carried["stats"]].copy()
+    diverged = stats[:, S_DIVERGED] >= 0
+    stats[diverged, S_K] = stats[diverged, S_DIVERGED] + 1.0
+    return stats
 
 
 def simulate_lanes(
@@ -769,9 +890,10 @@ def simulate_lanes(
     parameters: np.ndarray,
     n: int,
     *,
+    spacecraft: Spacecraft | Sequence[Spacecraft],
     threads: int | None = None,
 ) -> np.ndarray:
-    """The stats (N, STATS) of N runs of the closed loop, as the scalar engine's ``run`` gives them.
+    """The stats (N, STATS_SIZE) of N runs of the closed loop, bit for bit the scalar ``Engine.run``'s.
 
     Parameters
     ----------
@@ -782,25 +904,23 @@ def simulate_lanes(
     memory0 : numpy.ndarray
         (N,) initial rule memories.
     history : numpy.ndarray
-        (N, 6, max(d, 1)) initial history blocks, as the scalar engine takes them, or
-        (N, 6, 1) for a history constant in time.
+        (N, 6, max(d, 1)) initial history blocks m_{-d}, ..., m_{-1} as columns, or (N, 6, 1)
+        for a history constant in time.
     gains : numpy.ndarray
         (N, 3, 6) gains K (N m).
     parameters : numpy.ndarray
         (N, P) rule parameters.
     n : int
         Samples.
+    spacecraft : Spacecraft or sequence of Spacecraft, keyword-only
+        The plant, or one per run (of the engine's inertia layout; J, J⁻¹ in kg m² are
+        per-lane inputs).
     threads : int, keyword-only
         Worker threads.
     """
-    parts = _scalar_parts()
-    runs = len(x0)
-    stats0 = np.tile(parts._initial_stats(n), (runs, 1))
-    end = engine.run(
-        {"x": x0, "memory": np.reshape(memory0, (runs, -1)), "stats": stats0},
-        {"K": np.asarray(gains).transpose(0, 2, 1).reshape(runs, -1), "parameters": np.reshape(parameters, (runs, -1))},
-        np.asarray(history).transpose(0, 2, 1),
-        n,
-        threads=threads,
+    workers = _threads(threads)
+    packed = closed_loop_batches(
+        engine, x0, memory0, history, gains, parameters, n, spacecraft=spacecraft, threads=workers
     )
-    return end["stats"]
+    _pool_map(packed.run, packed.count, workers)
+    return lane_stats(packed)

@@ -2,7 +2,8 @@
 
 Independent references: CasADi's own generated C of the same Function compiled with the
 simulator's flags (bit for bit), CasADi's virtual machine (to an ulp), and the scalar engine
-of mrpctl.simulate run after run (bit for bit, every statistic).
+of mrpctl.simulation run after run (bit for bit, every statistic), directly and through
+simulate_batch (whose metrics-only path is the lane engine).
 """
 
 from __future__ import annotations
@@ -10,16 +11,20 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import math
+from typing import Any
 
 import casadi as ca
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
+from scipy.spatial.transform import Rotation
 
 from mrpctl import _compile, _vectorize, paper
-from mrpctl import simulate as engine
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+from mrpctl.loop import InertiaInput, core_function
 from mrpctl.model import state
+from mrpctl.simulation import _engine, _simulate, simulate_batch
+from mrpctl.simulation._stats import STATS_SIZE, initial_stats
+from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 RATE = 1000.0
@@ -46,15 +51,21 @@ def lanes_eval(function: ca.Function, inputs: list[np.ndarray], *, fuse: bool) -
 
 
 def casadi_c_eval(function: ca.Function, inputs: list[np.ndarray]) -> list[np.ndarray]:
-    """CasADi's generated scalar C (simulator flags), lane by lane."""
-    direct = _compile.compile_function(function, flags=_compile.SIMULATION_FLAGS).direct()
-    assert direct is not None
+    """CasADi's generated scalar C (simulator flags), lane by lane, called through ctypes."""
+    compiled = _compile.compile_function(function, flags=_compile.SIMULATION_FLAGS)
+    assert compiled.compiled and compiled.library is not None
+    evaluate = getattr(ctypes.CDLL(str(compiled.library)), function.name())
+    evaluate.restype = ctypes.c_int
+    iw = np.zeros(max(function.sz_iw(), 1), dtype=np.int64)
+    w = np.zeros(max(function.sz_w(), 1))
     width = inputs[0].shape[0]
     outputs = [np.zeros((width, function.nnz_out(i))) for i in range(function.n_out())]
     for lane in range(width):
         row_in = [np.ascontiguousarray(value[lane]) for value in inputs]
         row_out = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
-        direct(row_in, row_out)
+        arg = (ctypes.c_void_p * max(function.sz_arg(), 1))(*[_compile.address(a) for a in row_in])
+        res = (ctypes.c_void_p * max(function.sz_res(), 1))(*[_compile.address(a) for a in row_out])
+        assert evaluate(arg, res, ctypes.c_void_p(_compile.address(iw)), ctypes.c_void_p(_compile.address(w)), 0) == 0
         for i, value in enumerate(row_out):
             outputs[i][lane] = value
     return outputs
@@ -117,7 +128,22 @@ def libm_function() -> ca.Function:
 
 def engine_sample_function(rule) -> ca.Function:
     d = 7
-    return engine._engine_sample(engine._core_function(paper.SPACECRAFT, rule, d, PERIOD, 1), d, "sample_t")
+    core = core_function(paper.SPACECRAFT, rule, d, PERIOD, 1, inertia=InertiaInput.FULL)
+    return _engine.engine_sample(core, d, "sample_t")
+
+
+def tilted(rng: np.random.Generator, count: int) -> list[Spacecraft]:
+    """The paper's spacecraft with dispersed principal inertias (+-10 %) in random body axes:
+    full inertia matrices (products of inertia), physically valid."""
+    principal = np.diag(paper.SPACECRAFT.inertia)
+    crafts = []
+    for rotation in Rotation.random(count, random_state=rng):
+        axes = rotation.as_matrix()
+        j = axes @ np.diag(principal * rng.uniform(0.9, 1.1, 3)) @ axes.T
+        crafts.append(Spacecraft((j + j.T) / 2))
+    # run 0: the paper's J with a 1e-6 kg m^2 product of inertia (a full matrix; the paper's chatter)
+    crafts[0] = Spacecraft(paper.SPACECRAFT.inertia + 1e-6 * (np.ones((3, 3)) - np.eye(3)))
+    return crafts
 
 
 @pytest.mark.parametrize("fuse", [True, False])
@@ -177,7 +203,7 @@ def test_emitter_on_the_engine_sample(rng: np.random.Generator, rule) -> None:
     width = 16
     x = state(Rotation.random(width, random_state=rng).as_mrp() * rng.uniform(0.5, 1.9, (width, 1)),
               rng.uniform(-5, 5, (width, 3)))  # fmt: skip
-    stats = np.tile(engine._initial_stats(100), (width, 1))
+    stats = np.tile(initial_stats(100), (width, 1))
     stats[:, 0] = rng.integers(0, 120, width)  # some lanes past the horizon: masked
     stats[::5, 13] = 3.0  # some already diverged: masked
     inputs = [
@@ -188,6 +214,8 @@ def test_emitter_on_the_engine_sample(rng: np.random.Generator, rule) -> None:
         np.tile(paper.GAIN.T.ravel(), (width, 1)) * rng.uniform(0.5, 1.5, (width, 1)),
         np.full((width, 1), rule.parameters()[0]),
     ]
+    crafts = tilted(rng, width)
+    inputs += [np.array([c.inertia.T.ravel() for c in crafts]), np.array([c.inertia_inverse.T.ravel() for c in crafts])]
     got = lanes_eval(function, inputs, fuse=True)
     compiled = casadi_c_eval(function, inputs)
     vm = vm_eval(function, inputs)
@@ -230,35 +258,40 @@ def dispersed_batch(rng: np.random.Generator, rule_class, count: int = 13):
     return x0, gains, rules
 
 
-def scalar_stats(x0, gains, rules, d: int, n: int) -> np.ndarray:
-    scalar = engine._engine(paper.SPACECRAFT, rules[0], d, PERIOD, 1)
-    return np.array(
-        [
+def scalar_stats(x0, gains, rules, d: int, n: int, crafts=None) -> np.ndarray:
+    """The scalar engine, run after run (Engine.run: one C call per slice, stops at divergence)."""
+    crafts = crafts or [paper.SPACECRAFT] * len(x0)
+    rows = []
+    for i in range(len(x0)):
+        scalar = _engine.engine(crafts[i], rules[i], d, PERIOD, 1)
+        rows.append(
             scalar.run(
                 x0[i],
                 rules[i].initial_memory(delay_samples=d),
-                engine._initial_stats(n),
-                engine._history("constant", x0[i], d)[0],
+                _simulate._history("constant", x0[i], d)[0],
                 gains[i],
                 np.array(rules[i].parameters()),
                 n,
-                trajectories=False,
-            )[0]
-            for i in range(len(x0))
-        ]
-    )
+                spacecraft=crafts[i],
+                keep_every=None,
+                workspace=scalar.workspace(n, switches=False),
+            ).stats
+        )
+    return np.array(rows)
 
 
-def lane_stats(x0, gains, rules, d: int, n: int, *, width: int, threads: int | None = None) -> np.ndarray:
-    lanes = _vectorize.lane_engine(paper.SPACECRAFT, rules[0], d, PERIOD, 1, width=width)
+def lane_stats(x0, gains, rules, d: int, n: int, *, width: int, threads: int | None = None, crafts=None):
+    crafts = crafts or [paper.SPACECRAFT] * len(x0)
+    lanes = _vectorize.lane_engine(crafts[0], rules[0], d, PERIOD, 1, width=width)
     return _vectorize.simulate_lanes(
         lanes,
         x0,
         np.array([rule.initial_memory(delay_samples=d) for rule in rules]),
-        np.stack([engine._history("constant", x, d)[0] for x in x0]),
+        np.stack([_simulate._history("constant", x, d)[0].T for x in x0]),
         gains,
         np.array([rule.parameters() for rule in rules]),
         n,
+        spacecraft=crafts,
         threads=threads,
     )
 
@@ -272,8 +305,9 @@ RULES = [NoSwitching, OnCurrent, OnDelayed, BoundaryLayer, DelayAware]
 def test_every_lane_bit_identical_to_the_scalar_engine(rng: np.random.Generator, rule_class, d: int) -> None:
     n = 1501  # 1.5 s at 1 kHz: the paper's case crosses |sigma| = 1 at 0.44 s
     x0, gains, rules = dispersed_batch(rng, rule_class)
-    expected = scalar_stats(x0, gains, rules, d, n)
-    got = lane_stats(x0, gains, rules, d, n, width=4)  # 13 runs: 3 full batches and one padded
+    crafts = tilted(rng, len(x0))  # per-lane J, J^-1 (full matrices)
+    expected = scalar_stats(x0, gains, rules, d, n, crafts)
+    got = lane_stats(x0, gains, rules, d, n, width=4, crafts=crafts)  # 13 runs: 3 full batches and one padded
     np.testing.assert_array_equal(bits(got), bits(expected))
     # the batch holds what it should: a diverged run, settled and unsettled ones, switching ones
     assert expected[1, 13] >= 0 and (expected[:, 13] < 0).sum() >= 10
@@ -294,8 +328,15 @@ def test_lanes_default_width_threads_and_padding(rng: np.random.Generator) -> No
     np.testing.assert_array_equal(bits(serial), bits(expected))
     lanes = _vectorize.lane_engine(paper.SPACECRAFT, rules[0], d, PERIOD, 1, width=_vectorize.DEFAULT_WIDTH)
     constant_history = _vectorize.simulate_lanes(
-        lanes, x0, np.full(len(x0), 0.0), x0[:, :, None], gains, np.array([r.parameters() for r in rules]), n
-    )  # (N, 6, 1): the "constant" history without d copies
+        lanes,
+        x0,
+        np.array([r.initial_memory(delay_samples=d) for r in rules]),
+        np.repeat(x0[:, :, None], d, axis=2),
+        gains,
+        np.array([r.parameters() for r in rules]),
+        n,
+        spacecraft=paper.SPACECRAFT,
+    )  # (N, 6, d): the "constant" history written out as d columns (lane_stats gives one column)
     np.testing.assert_array_equal(bits(constant_history), bits(expected))
     alone = lane_stats(x0[5:6], gains[5:6], rules[5:6], d, n, width=_vectorize.DEFAULT_WIDTH)
     np.testing.assert_array_equal(bits(alone), bits(expected[5:6]))  # padding lanes do not leak in
@@ -304,14 +345,15 @@ def test_lanes_default_width_threads_and_padding(rng: np.random.Generator) -> No
 def test_lane_engine_reads_its_ports_and_checks_inputs(monkeypatch: pytest.MonkeyPatch) -> None:
     lanes = _vectorize.lane_engine(paper.SPACECRAFT, OnDelayed(), 150, PERIOD, 1, width=_vectorize.DEFAULT_WIDTH)
     assert set(lanes.carried) == {"x", "memory", "stats"}
-    assert set(lanes.constants) == {"K", "parameters"}
+    assert set(lanes.constants) == {"K", "parameters", "J", "J_inv"}
+    assert lanes.constants["J"].stop - lanes.constants["J"].start == 3  # the paper's J is diagonal
     assert lanes.program.dropped == ("u", "switched")
     assert lanes.history_columns == 150
-    good = {"x": np.zeros((2, 6)), "memory": np.zeros((2, 1)), "stats": np.zeros((2, engine._STATS_SIZE))}
-    constants = {"K": np.zeros((2, 18)), "parameters": np.zeros((2, 1))}
+    good = {"x": np.zeros((2, 6)), "memory": np.zeros((2, 1)), "stats": np.zeros((2, STATS_SIZE))}
+    constants = {"K": np.zeros((2, 18)), "parameters": np.zeros((2, 1)), "J": np.ones((2, 3)), "J_inv": np.ones((2, 3))}
     history = np.zeros((2, 150, 6))
     with pytest.raises(SpecificationError, match="missing \\['K'\\]"):
-        lanes.run(good, {"parameters": np.zeros((2, 1))}, history, 10)
+        lanes.run(good, {"parameters": np.zeros((2, 1)), "J": np.ones((2, 3)), "J_inv": np.ones((2, 3))}, history, 10)
     with pytest.raises(DimensionError, match="history: expected shape \\(N, 150, 6\\) or \\(N, 1, 6\\)"):
         lanes.run(good, constants, np.zeros((2, 149, 6)), 10)
     with pytest.raises(DimensionError, match="x: expected shape \\(2, 6\\)"):
@@ -321,12 +363,128 @@ def test_lane_engine_reads_its_ports_and_checks_inputs(monkeypatch: pytest.Monke
     assert math.isfinite(lanes.run(good, constants, history, 3)["stats"][0, 0])
     monkeypatch.setattr(_vectorize, "_available_memory", lambda: 2**30)
     with pytest.raises(
-        SpecificationError, match=r"about 4\.5 GiB .* about 1\.0 GiB are available; run fewer runs per call"
+        SpecificationError, match=r"about 5\.1 GiB .* about 1\.0 GiB are available; run fewer runs per call"
     ):
-        huge = 10**7  # 8 * (2 * 21 + 19) bytes per run: refused before anything is allocated
+        huge = 10**7  # 8 * (2 * 22 + 25) bytes per run: refused before anything is allocated
         lanes.run(
             {key: np.broadcast_to(value[:1], (huge, value.shape[1])) for key, value in good.items()},
             {key: np.broadcast_to(value[:1], (huge, value.shape[1])) for key, value in constants.items()},
             np.broadcast_to(history[:1, :1], (huge, 1, 6)),
             10,
         )
+
+
+# ------------------------------------------------------------------ simulate_batch on the lanes
+def scalar_batch(monkeypatch: pytest.MonkeyPatch, *args, **kwargs):
+    """simulate_batch on the scalar engine (one C call per run and slice): the reference."""
+    with monkeypatch.context() as patch:
+        patch.setattr(_simulate, "_LANES", False)
+        return simulate_batch(*args, **kwargs)
+
+
+def assert_batches_identical(got, expected) -> None:
+    for name in ("switch_count", "first_switch_time", "last_switch_time", "sign_flips", "settling_time",
+                 "converged", "diverged", "max_sigma", "peak_torque"):  # fmt: skip
+        a, b = np.asarray(getattr(got, name)), np.asarray(getattr(expected, name))
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        np.testing.assert_array_equal(a.view(np.uint8), b.view(np.uint8), err_msg=name)
+
+
+def test_simulate_batch_lanes_bit_identical_to_the_scalar_path(
+    rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every rule in one batch (a lane group each), per-run spacecraft (full inertias, and the
+    diagonal paper one), per-run K and rule parameters, two delays, diverging and chattering
+    runs, 27 runs (not a multiple of W = 8); thread pool and series."""
+    count = 27
+    x0, gains, _ = dispersed_batch(rng, OnDelayed, count)
+    x0[2] = paper.INITIAL_STATE * [1, 1, 1, -1, 1, 1]
+    x0[4] = state([2e-4, -1e-4, 5e-5], [0.0, 0.0, 0.0])  # settled from the start: converged
+    rules: list[SwitchingRule] = []
+    for i in range(count):
+        kind = RULES[i % len(RULES)]
+        if kind is BoundaryLayer:
+            rules.append(BoundaryLayer(float(rng.uniform(0.001, 0.2))))
+        elif kind is DelayAware:
+            rules.append(DelayAware(float(rng.uniform(1.0, 1.3))))
+        else:
+            rules.append(kind())
+    rules[0] = OnDelayed()  # the paper's chattering case: run 0
+    crafts = tilted(rng, count)
+    crafts[3::4] = [paper.SPACECRAFT] * len(crafts[3::4])  # the diagonal layout too
+    tau = np.where(np.arange(count) % 3 == 2, 0.0, 0.15)
+    tau[0] = tau[1] = 0.15
+    common: dict[str, Any] = dict(tau=tau, rule=rules, t_final=1.5, rate=RATE)
+    expected = scalar_batch(monkeypatch, crafts, gains, x0, **common, threads=1)
+    assert expected.switch_count[0] > 50 and expected.diverged[1]  # chattering and diverging runs present
+    assert expected.converged.any() and (~expected.converged & ~expected.diverged).any()
+    pooled = simulate_batch(crafts, gains, x0, **common, threads=2)
+    serial = simulate_batch(crafts, gains, x0, **common, threads=1)
+    assert_batches_identical(pooled, expected)
+    assert_batches_identical(serial, expected)
+    keys = {(c.is_diagonal, type(r), t) for c, r, t in zip(crafts, rules, tau, strict=True)}
+    assert len(keys) >= 15  # many lane groups, most not a multiple of W
+
+
+def test_simulate_batch_lanes_histories_and_fallback(rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch) -> None:
+    """zero-input and array histories through the lanes equal the scalar path; a rule without a
+    lane form (remainder) is run by the scalar engine, with the same result."""
+    count = 11
+    x0, gains, rules = dispersed_batch(rng, DelayAware, count)
+    d = 30
+    history = state(rng.normal(scale=0.3, size=(d, 3)), rng.uniform(-1, 1, (d, 3)))
+    for kind in ("zero-input", history):
+        common: dict[str, Any] = dict(tau=d / RATE, rule=rules, t_final=0.8, rate=RATE, history=kind)
+        assert_batches_identical(
+            simulate_batch(paper.SPACECRAFT, gains, x0, **common),
+            scalar_batch(monkeypatch, paper.SPACECRAFT, gains, x0, **common),
+        )
+
+    class Remainder(OnCurrent):  # |sigma|^2 + (remainder(sigma_1, 1e9) - sigma_1) >= 1: OnCurrent's values
+        def _condition(self, sigma, sigma_meas, memory, parameters, d):
+            return ca.sumsqr(sigma) + (ca.remainder(sigma[0], 1e9) - sigma[0]) >= 1
+
+    with pytest.raises(CodegenError, match="OP_REMAINDER"):
+        _vectorize.lane_engine(paper.SPACECRAFT, Remainder(), d, PERIOD, 1)
+    common = dict(tau=d / RATE, rule=Remainder(), t_final=0.3, rate=RATE)
+    fallback = simulate_batch(paper.SPACECRAFT, gains[:3], x0[:3], **common)
+    assert_batches_identical(fallback, scalar_batch(monkeypatch, paper.SPACECRAFT, gains[:3], x0[:3], **common))
+
+
+def test_simulate_batch_lanes_stop_between_slices(rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A lane batch runs its horizon in slices and sees the stop flag between them: a batch's
+    stop hook is called once per slice, and True abandons the batch; through simulate_batch, a
+    KeyboardInterrupt raised by progress stops the batch long before its end and propagates."""
+    x0, gains, rules = dispersed_batch(rng, OnDelayed, 3)
+    lanes = _vectorize.lane_engine(paper.SPACECRAFT, rules[0], 150, PERIOD, 1)
+    packed = _vectorize.closed_loop_batches(
+        lanes, x0, np.zeros(3), x0[:, :, None], gains, np.ones((3, 1)), 1000,
+        spacecraft=paper.SPACECRAFT, slice_samples=300,
+    )  # fmt: skip
+    calls: list[int] = []
+
+    def hook(answer: bool):
+        def stop(done: int) -> bool:
+            calls.append(done)
+            return answer
+
+        return stop
+
+    assert packed.run(0, hook(False))
+    assert calls == [300 * 3, 600 * 3, 900 * 3, 1000 * 3]  # run-samples after each slice
+    calls.clear()
+    assert not packed.run(0, hook(True))
+    assert calls == [300 * 3]
+
+    monkeypatch.setattr(_simulate, "slice_samples", lambda substeps: 1000)
+    seen: list[int] = []
+
+    def progress(done: int, total: int) -> None:
+        seen.append(done)
+        if done > 0:
+            raise KeyboardInterrupt
+
+    t_final = 3000.0  # 3e6 samples of 8 lanes: seconds of work, stopped after the first slices
+    with pytest.raises(KeyboardInterrupt):
+        simulate_batch(paper.SPACECRAFT, gains, x0, tau=0.15, rule=rules, t_final=t_final, rate=RATE, progress=progress)
+    assert 0 < seen[-1] < 3 * (t_final * RATE) / 10
