@@ -1,4 +1,4 @@
-"""The wheel installs into a fresh venv outside the source tree; `python -m mrpctl` and `mrpctl reproduce` run from it."""
+"""The wheel installs into a fresh venv outside the source tree; `python -m mrpctl` and `reproduce` run from it."""
 
 from __future__ import annotations
 
