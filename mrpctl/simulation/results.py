@@ -21,8 +21,24 @@ __all__ = ["BatchResult", "SimulationResult"]
 logger = logging.getLogger("mrpctl.simulation")
 
 
+class _Conversions:
+    """``to_xarray()`` and ``to_pandas()`` of a result, through :mod:`mrpctl.data`."""
+
+    def to_xarray(self) -> Any:
+        """The result as a labelled ``xarray.Dataset`` (:func:`mrpctl.data.to_xarray`)."""
+        from mrpctl.data import to_xarray
+
+        return to_xarray(self)  # type: ignore[arg-type]
+
+    def to_pandas(self) -> Any:
+        """The result as a ``pandas.DataFrame`` (:func:`mrpctl.data.to_pandas`)."""
+        from mrpctl.data import to_pandas
+
+        return to_pandas(self)  # type: ignore[arg-type]
+
+
 @dataclass(frozen=True, eq=False)
-class SimulationResult:
+class SimulationResult(_Conversions):
     """One closed-loop run, sampled at the measurement instants t_k = k h.
 
     ``sigma``, ``omega`` are the state at t_k *after* the switching rule (the recorded
@@ -116,18 +132,6 @@ class SimulationResult:
 
         return plot_response(self, **kwargs)
 
-    def to_xarray(self) -> Any:
-        """The result as a labelled ``xarray.Dataset`` (:func:`mrpctl.data.to_xarray`)."""
-        from mrpctl.data import to_xarray
-
-        return to_xarray(self)
-
-    def to_pandas(self) -> Any:
-        """The result as a ``pandas.DataFrame`` (:func:`mrpctl.data.to_pandas`)."""
-        from mrpctl.data import to_pandas
-
-        return to_pandas(self)
-
     def __str__(self) -> str:
         history = self.history if isinstance(self.history, str) else f"array {self.history.shape}"
         if self.diverged:
@@ -220,7 +224,7 @@ _BATCH_ARRAYS = (
 
 
 @dataclass(frozen=True, eq=False)
-class BatchResult:
+class BatchResult(_Conversions):
     """Metrics of many closed-loop runs (one entry per run, in input order).
 
     Attributes
@@ -319,18 +323,6 @@ class BatchResult:
         from mrpctl.plots import plot_batch
 
         return plot_batch(self, **kwargs)
-
-    def to_xarray(self) -> Any:
-        """The result as a labelled ``xarray.Dataset`` (:func:`mrpctl.data.to_xarray`)."""
-        from mrpctl.data import to_xarray
-
-        return to_xarray(self)
-
-    def to_pandas(self) -> Any:
-        """The result as a ``pandas.DataFrame`` (:func:`mrpctl.data.to_pandas`)."""
-        from mrpctl.data import to_pandas
-
-        return to_pandas(self)
 
     def __str__(self) -> str:
         n = len(self)
