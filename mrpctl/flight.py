@@ -26,7 +26,7 @@ import enum
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Any
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -34,8 +34,10 @@ import numpy as np
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.mrp import skew_expr
+from mrpctl.switching import SwitchingRule
 
 __all__ = [
+    "FLIGHT_MEMORY_SIZE",
     "NOISE_BLOCK",
     "ActuatorModel",
     "DelayKind",
@@ -58,6 +60,8 @@ __all__ = [
 #: Samples per block of the counter-based random streams: the generator of block b is keyed by
 #: (seed, stream, b), so sample k's value never depends on the slice it was asked for in.
 NOISE_BLOCK = 4096
+#: The memory a controller-side rule carries in the compiled engine: (h, c, σ̃_prev).
+FLIGHT_MEMORY_SIZE = 5
 _STREAM_ATTITUDE, _STREAM_RATE, _STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 _SMALL_ANGLE = 1e-4
@@ -447,7 +451,7 @@ class Disturbance:
 
 
 @dataclass(frozen=True)
-class Hysteretic:
+class Hysteretic(SwitchingRule):
     """Controller-side MRP set selection with hysteresis (Mayhew, Sanfelice and Teel 2011).
 
     The controller keeps a logic variable h ∈ {−1, +1}. On the delayed, noisy measured
@@ -458,11 +462,20 @@ class Hysteretic:
     and |q̇₀| <= |ω|/2, so switches are at least 4δ/max|ω| apart; attitude noise that moves
     q₀ by less than δ never causes a switch.
 
+    As a rule of :func:`mrpctl.simulate` (``rule=Hysteretic(delta)``) it runs in the compiled
+    flight sample (:func:`mrpctl.loop.flight_core_function`): the plant's MRP is kept in the
+    short set for bookkeeping only (no physical effect), the controller's h, c and previous
+    measurement are the rule memory, u = K [σ_c; ω(t − τ)/4], and the run's switches are the
+    logic switches of h. Its :meth:`expressions` as a plain :class:`SwitchingRule` are that
+    bookkeeping only (the ``OnCurrent`` test); the selection is in the flight sample.
+
     Parameters
     ----------
     delta : float
         Hysteresis half-width δ ∈ [0, 1) (dimensionless, on q₀). Default 0.
     """
+
+    label: ClassVar[str] = "hysteretic"
 
     delta: float = 0.0
 
@@ -484,6 +497,14 @@ class Hysteretic:
     def alpha(self) -> float:
         """α = √((1 + δ)/(1 − δ)), the bound on |σ_c| (the MRP threshold at which h flips)."""
         return math.sqrt((1.0 + self.delta) / (1.0 - self.delta))
+
+    def parameters(self) -> tuple[float]:
+        """(δ,): the run-time parameter of the flight sample."""
+        return (self.delta,)
+
+    def _condition(self, sigma: Any, sigma_meas: Any, memory: Any, parameters: Any, d: int) -> Any:
+        # The plant bookkeeping (no physical effect): the OnCurrent test.
+        return ca.dot(sigma, sigma) >= 1
 
     def min_dwell_time(self, omega_max: float) -> float:
         """4δ/ω_max (s): the shortest time between two switches when |ω| <= ω_max (rad/s)."""

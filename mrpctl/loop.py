@@ -27,9 +27,10 @@ import numpy as np
 
 from mrpctl._validation import check_spacecraft, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import FLIGHT_MEMORY_SIZE, Hysteretic, selection_function, short_expr
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, gain_matrix, plant_model
 from mrpctl.spacecraft import Spacecraft
-from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, SwitchingRule
+from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
 
 __all__ = [
     "MAX_SUBSTEPS",
@@ -40,6 +41,7 @@ __all__ = [
     "closed_loop_functions",
     "core_function",
     "delay_samples",
+    "flight_core_function",
     "inertia_input",
     "inertia_values",
     "step_function",
@@ -171,6 +173,10 @@ def core_function(
     ``core(x, memory, x_delayed, K, parameters) -> (x_next, memory_next, x_meas, u, switched)``;
     with ``inertia``, J and J⁻¹ are two more inputs (``..., parameters, J, J_inv``).
     """
+    if isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            "rule: Hysteretic is a controller-side rule; build its sample with flight_core_function"
+        )
     step = step_function(spacecraft, period, substeps, inertia=inertia)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", MEMORY_SIZE)
@@ -182,6 +188,54 @@ def core_function(
     x_meas, memory_next, switched = rule.expressions(x, seen_by_rule, memory, delay_samples=d, parameters=parameters)
     u = gain @ (x_delayed if d > 0 else x_meas)
     x_next = step(x_meas, u, *extra)
+    return ca.Function(
+        "core",
+        [x, memory, x_delayed, gain, parameters, *extra],
+        [x_next, memory_next, x_meas, u, switched],
+        ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []),
+        ["x_next", "memory_next", "x_meas", "u", "switched"],
+    )
+
+
+def flight_core_function(
+    spacecraft: Spacecraft,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+) -> ca.Function:
+    """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
+
+    ``core(x, memory, x_delayed, K, parameters[, J, J_inv]) -> (x_next, memory_next, x_meas, u, switched)``,
+    the ports of :func:`core_function` with memory (h, c, σ̃_prev) of
+    :data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE` and parameters (δ,). At sample k:
+
+    1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
+       no physical effect); the result is the measurement m_k (x_meas, the ring's entry);
+    2. the controller reads the delayed measurement m_{k−d} (m_k when d = 0), takes its short
+       set σ̃ and applies :func:`~mrpctl.flight.selection_function` with its memory
+       (h, c, σ̃_prev) and δ: σ_c, and ``switched`` = 1.0 when h flipped (the run's switches);
+    3. u = K [σ_c; ω_{k−d}/4], held over the period while the plant is integrated by RK4.
+
+    With δ = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s K m_{k−d} bit for bit.
+    """
+    step = step_function(spacecraft, period, substeps, inertia=inertia)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
+    seen = x_delayed if d > 0 else x_meas
+    sigma_seen = short_expr(seen[0:3])
+    h_next, c_next, sigma_c, switched = selection_function()(
+        memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
+    )
+    u = gain @ ca.vertcat(sigma_c, seen[3:6])
+    x_next = step(x_meas, u, *extra)
+    memory_next = ca.vertcat(h_next, c_next, sigma_seen)
     return ca.Function(
         "core",
         [x, memory, x_delayed, gain, parameters, *extra],
@@ -310,6 +364,10 @@ def closed_loop_functions(
     spacecraft = check_spacecraft(spacecraft)
     gain = gain_matrix(K)
     rule = check_rule(rule)
+    if isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            "rule: the controller-side rule Hysteretic runs in mrpctl.simulate only; it cannot be exported yet"
+        )
     d = delay_samples(tau, rate)
     rate = float(rate)
     substeps = check_substeps(substeps)

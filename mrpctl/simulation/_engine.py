@@ -31,7 +31,8 @@ import numpy as np
 
 from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
 from mrpctl.errors import CodegenError
-from mrpctl.loop import core_function, inertia_input, inertia_values
+from mrpctl.flight import Hysteretic
+from mrpctl.loop import core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.simulation._stats import (
     DIVERGENCE_BOUND,
@@ -69,6 +70,19 @@ SLICE_SAMPLES = 2**16
 STATE_BLOCK = STATE_SIZE + MEMORY_SIZE + STATS_SIZE  # x, memory, stats: the driver's carried state
 
 
+def flight_memory(x0: np.ndarray, history: np.ndarray, d: int) -> np.ndarray:
+    """The flight sample's memory at k = 0: h = c = +1 and σ̃_prev the σ̃ the controller sees at k = 0.
+
+    That is short(σ) of the first history row for d > 0, the bookkept σ0 (shadow when
+    |σ0|² >= 1) for d = 0, so that the continuity test makes no flip at k = 0.
+    """
+    sigma = np.array(history[0][0:3] if d > 0 else x0[0:3], dtype=float)
+    squared = float(sigma @ sigma)
+    if squared > 1.0 or (d == 0 and squared >= 1.0):
+        sigma = -sigma / squared
+    return np.concatenate(([1.0, 1.0], sigma))
+
+
 def slice_samples(substeps: int) -> int:
     """Samples per slice for ``substeps`` RK4 substeps (the work per slice stays about the same)."""
     return max(1, SLICE_SAMPLES // substeps)
@@ -81,7 +95,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     (x_next, memory_next, stats_next, x_meas, u, switched)``; J, J⁻¹ when ``core`` has them.
     """
     x = ca.SX.sym("x", STATE_SIZE)
-    memory = ca.SX.sym("memory", MEMORY_SIZE)
+    memory = ca.SX.sym("memory", core.size1_in(1))  # MEMORY_SIZE; FLIGHT_MEMORY_SIZE for the flight sample
     stats = ca.SX.sym("stats", STATS_SIZE)
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
@@ -133,6 +147,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
 
 def _driver_source(sample: ca.Function) -> str:
     """``_driver.c`` with the #defines that bind it to ``sample``."""
+    memory_size = sample.size1_in(1)
     defines = {
         "MRPCTL_SAMPLE": sample.name(),
         "MRPCTL_RUN": sample.name() + "_run",
@@ -140,9 +155,9 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_SZ_RES": max(sample.sz_res(), 6),
         "MRPCTL_SZ_IW": max(sample.sz_iw(), 1),
         "MRPCTL_SZ_W": max(sample.sz_w(), 1),
-        "MRPCTL_STATE": STATE_BLOCK,
+        "MRPCTL_STATE": STATE_SIZE + memory_size + STATS_SIZE,
         "MRPCTL_X": STATE_SIZE,
-        "MRPCTL_X_MEMORY": STATE_SIZE + MEMORY_SIZE,
+        "MRPCTL_X_MEMORY": STATE_SIZE + memory_size,
         "MRPCTL_S_DIVERGED": S_DIVERGED,
         "MRPCTL_INERTIA_INPUT": int(sample.n_in() > 6),
     }
@@ -182,7 +197,12 @@ class Engine:
         self.d = d
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
-        core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
+        self.flight = isinstance(rule, Hysteretic)
+        if self.flight:
+            core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia)
+        else:
+            core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
+        self.memory_size = core.size1_in(1)
         label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
         self.compiled: CompiledFunction = compile_function(
@@ -213,7 +233,7 @@ class Engine:
     def workspace(self, n: int, switches: bool) -> Workspace:
         """Buffers for runs of n samples (``switches``: collect switch instants)."""
         return Workspace(
-            state=np.empty(STATE_BLOCK),
+            state=np.empty(STATE_SIZE + self.memory_size + STATS_SIZE),
             ring=np.empty((self.ring_size(n), STATE_SIZE)),
             switched=np.empty(min(slice_samples(self.substeps), n)) if switches else None,
         )
@@ -252,10 +272,11 @@ class Engine:
             returns what it has). KeyboardInterrupt raised by it propagates.
         """
         state = workspace.state
-        state[:STATE_SIZE] = x0
-        state[STATE_SIZE] = memory0
-        state[STATE_SIZE + MEMORY_SIZE :] = initial_stats(n)
         history = np.ascontiguousarray(history, dtype=float)
+        memory_end = STATE_SIZE + self.memory_size
+        state[:STATE_SIZE] = x0
+        state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
+        state[memory_end:] = initial_stats(n)
         history_stride = STATE_SIZE if history.shape[0] > 1 else 0
         gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
         parameters = np.ascontiguousarray(parameters, dtype=float)
@@ -278,7 +299,7 @@ class Engine:
             ring = measurements  # every sample kept: m_{k-d} is read back from the result (no copy)
         step = slice_samples(self.substeps)
         k = 0
-        diverged = STATE_SIZE + MEMORY_SIZE + S_DIVERGED
+        diverged = memory_end + S_DIVERGED
         while k < n:
             k1 = min(k + step, n)
             done = self._run_c(
@@ -313,7 +334,7 @@ class Engine:
                 break  # the driver stopped after the diverging sample
         switch_indices = np.concatenate(indices) if indices else np.zeros(0, np.int64)
         return RunOutput(
-            stats=state[STATE_SIZE + MEMORY_SIZE :].copy(),
+            stats=state[memory_end:].copy(),
             samples=k,
             measurements=measurements,
             u=u,
@@ -331,7 +352,7 @@ def rule_key(rule: SwitchingRule, d: int) -> Any:
     """What distinguishes the engines of rules: the class for a built-in rule, else a
     digest of the rule's expressions with symbolic parameters (about 5 ms; memoised per
     rule value when the rule is hashable)."""
-    if type(rule) in _BUILT_IN_RULES:
+    if type(rule) in _BUILT_IN_RULES or type(rule) is Hysteretic:
         return type(rule)
     try:
         hash(rule)
@@ -369,7 +390,7 @@ def engine(spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, s
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
 
-                found = VirtualMachineEngine(found.sample, d, found.inertia)
+                found = VirtualMachineEngine(found.sample, d, found.inertia, flight=found.flight)
             _ENGINES[key] = found
         return found
 

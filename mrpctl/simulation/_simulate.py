@@ -17,6 +17,7 @@ import numpy as np
 from mrpctl._compile import find_compiler
 from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+from mrpctl.flight import Hysteretic
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.simulation._engine import STATE_BLOCK, RunOutput, engine, rule_key, slice_samples
@@ -517,6 +518,9 @@ def _run_lanes(
     for members in groups.values():
         first = members[0]
         d = samples_by_run[first]
+        if isinstance(rules[first], Hysteretic):  # the flight sample has no lane form yet
+            left.extend(members)
+            continue
         try:
             lanes = _vectorize.lane_engine(crafts[first], rules[first], d, 1.0 / rate, substeps)
         except CodegenError as error:

@@ -18,10 +18,9 @@ import numpy as np
 
 from mrpctl.loop import InertiaInput, inertia_values
 from mrpctl.model import STATE_SIZE
-from mrpctl.simulation._engine import RunOutput, Workspace
+from mrpctl.simulation._engine import RunOutput, Workspace, flight_memory
 from mrpctl.simulation._stats import S_DIVERGED, STATS_SIZE, initial_stats
 from mrpctl.spacecraft import Spacecraft
-from mrpctl.switching import MEMORY_SIZE
 
 _BLOCK_TARGET = 500  # samples per block (a whole number of chunks)
 
@@ -37,7 +36,7 @@ def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function
     chunks = max(1, round(_BLOCK_TARGET / length))
     samples = chunks * length
     x = ca.MX.sym("x", STATE_SIZE)
-    memory = ca.MX.sym("memory", MEMORY_SIZE)
+    memory = ca.MX.sym("memory", sample.size1_in(1))
     stats = ca.MX.sym("stats", STATS_SIZE)
     history = ca.MX.sym("history", STATE_SIZE, length)
     constants = _constant_symbols(sample)
@@ -88,8 +87,9 @@ class VirtualMachineEngine:
 
     compiled_code = False
 
-    def __init__(self, sample: ca.Function, d: int, inertia: InertiaInput) -> None:
+    def __init__(self, sample: ca.Function, d: int, inertia: InertiaInput, *, flight: bool = False) -> None:
         self.d = d
+        self.flight = flight
         self.inertia = inertia
         self.sample = sample
         self.history_columns = max(d, 1)
@@ -129,6 +129,8 @@ class VirtualMachineEngine:
         """As :meth:`mrpctl.simulation._engine.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
         inertia = inertia_values(spacecraft, self.inertia)
+        if self.flight:
+            memory0 = flight_memory(x0, np.ascontiguousarray(history, dtype=float), self.d)  # type: ignore[assignment]
         out = self.horizon(self.blocks(n), trajectories)(
             x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *inertia
         )
@@ -172,7 +174,7 @@ class VirtualMachineEngine:
 
     def _build_horizon(self, blocks: int, trajectories: bool) -> ca.Function:
         x = ca.MX.sym("x", STATE_SIZE)
-        memory = ca.MX.sym("memory", MEMORY_SIZE)
+        memory = ca.MX.sym("memory", self.sample.size1_in(1))
         stats = ca.MX.sym("stats", STATS_SIZE)
         history = ca.MX.sym("history", STATE_SIZE, self.history_columns)
         constants = _constant_symbols(self.sample)

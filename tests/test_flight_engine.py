@@ -1,0 +1,159 @@
+"""The flight loop in the compiled engine (issue 10, phase 2), against the NumPy reference loop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from flight_reference import reference_loop
+
+from mrpctl import OnCurrent, closed_loop_functions, mrp, paper, simulate, simulate_batch
+from mrpctl.errors import SpecificationError
+from mrpctl.flight import Hysteretic
+from mrpctl.simulation import _engine
+from mrpctl.spacecraft import Spacecraft
+
+PAPER_D = 500
+ALPHA_12 = Hysteretic.from_alpha(1.2).delta
+
+
+def _tumbles(count: int, omega_max: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    sigma = mrp.short(rng.normal(size=(count, 3)))
+    direction = rng.normal(size=(count, 3))
+    omega = direction / np.linalg.norm(direction, axis=1, keepdims=True) * rng.uniform(1.0, omega_max, (count, 1))
+    return np.hstack((sigma, omega / 4))
+
+
+def test_delta_zero_equals_on_current_bit_for_bit():
+    common = dict(tau=0.5, t_final=1.5)
+    plant_side = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=OnCurrent(), **common)
+    flight = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(0.0), **common)
+    assert np.array_equal(flight.sigma, plant_side.sigma)
+    assert np.array_equal(flight.omega, plant_side.omega)
+    assert np.array_equal(flight.u, plant_side.u)
+    # the run's switches are the controller's logic switches: the crossing reaches it one delay later
+    assert plant_side.switch_indices.tolist() == [444]
+    assert flight.switch_indices.tolist() == [444 + PAPER_D]
+    assert flight.switch_count == 1
+
+
+@pytest.mark.parametrize("delta", [0.0, 0.05, ALPHA_12])
+def test_engine_equals_the_reference_loop_on_the_paper_case(delta):
+    run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.5, rule=Hysteretic(delta), t_final=2.0)
+    ref = reference_loop(
+        paper.SPACECRAFT.inertia, paper.GAIN, paper.INITIAL_STATE, rate=1000.0, t_final=2.0, delta=delta, delays=PAPER_D
+    )
+    assert run.switch_indices.tolist() == ref.logic_switch_samples().tolist()
+    assert run.switch_count == ref.logic_switch_count[0]
+    assert np.max(np.abs(ref.sigma[0] - run.sigma)) < 1e-12
+    assert np.max(np.abs(ref.omega[0] - run.omega)) < 1e-12
+    assert np.max(np.abs(ref.u_applied[0] - run.u)) < 1e-12 * np.max(np.abs(run.u))
+    assert np.max(np.abs(run.sigma)) <= 1.0  # the plant's bookkeeping keeps it short
+
+
+def test_engine_equals_the_reference_loop_on_tumbles():
+    delta = 0.15
+    gains = 0.05 * paper.GAIN  # slow control: the tumbles pass Φ = 180° several times
+    x0 = _tumbles(4, 5.0, 1)
+    ref = reference_loop(paper.SPACECRAFT.inertia, gains, x0, rate=100.0, t_final=8.0, delta=delta, delays=5)
+    assert np.sum(ref.logic_switch_count) >= 8  # the comparison covers many logic switches
+    for i in range(len(x0)):
+        run = simulate(paper.SPACECRAFT, gains, x0[i], tau=0.05, rate=100.0, rule=Hysteretic(delta), t_final=8.0)
+        assert run.switch_indices.tolist() == ref.logic_switch_samples(i).tolist()
+        scale = np.max(np.abs(ref.omega[i]))
+        assert np.max(np.abs(ref.sigma[i] - run.sigma)) < 1e-12
+        assert np.max(np.abs(ref.omega[i] - run.omega)) < 1e-12 * scale
+        assert np.max(np.abs(ref.u_applied[i] - run.u)) < 1e-12 * np.max(np.abs(run.u))
+
+
+def test_zero_delay_and_a_full_inertia_equal_the_reference_loop():
+    craft = Spacecraft(np.array([[140.0, 4.0, -2.0], [4.0, 100.0, 3.0], [-2.0, 3.0, 80.0]]))
+    gains = 0.02 * paper.GAIN
+    x0 = _tumbles(1, 5.0, 9)[0]
+    run = simulate(craft, gains, x0, tau=0.0, rate=100.0, rule=Hysteretic(0.1), t_final=6.0)
+    ref = reference_loop(craft.inertia, gains, x0, rate=100.0, t_final=6.0, delta=0.1, delays=0)
+    assert ref.logic_switch_count[0] >= 2
+    assert run.switch_indices.tolist() == ref.logic_switch_samples().tolist()
+    assert np.max(np.abs(ref.sigma[0] - run.sigma)) < 1e-12
+    assert np.max(np.abs(ref.omega[0] - run.omega)) < 1e-12 * np.max(np.abs(ref.omega[0]))
+
+
+@pytest.mark.parametrize("trajectories", [True, False])
+def test_simulate_batch_equals_simulate(trajectories):
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(3, 5.0, 2)
+    rules = [Hysteretic(0.0), Hysteretic(0.15), Hysteretic(ALPHA_12)]
+    common = dict(tau=0.05, rate=100.0, t_final=8.0)
+    batch = simulate_batch(paper.SPACECRAFT, gains, x0, rule=rules, trajectories=trajectories, **common)
+    for i in range(3):
+        run = simulate(paper.SPACECRAFT, gains, x0[i], rule=rules[i], **common)
+        assert batch.switch_count[i] == run.switch_count
+        assert batch.peak_torque[i] == run.peak_torque
+        assert np.array_equal(batch.max_sigma[i], run.max_sigma)
+        if trajectories:
+            assert batch.runs is not None
+            assert np.array_equal(batch.runs[i].sigma, run.sigma)
+            assert np.array_equal(batch.runs[i].u, run.u)
+            assert np.array_equal(batch.runs[i].switch_indices, run.switch_indices)
+    assert np.sum(batch.switch_count) >= 3
+
+
+def test_slices_of_the_c_driver_give_the_same_run(monkeypatch):
+    """The horizon cut into slices of 97 samples: the memory (h, c, σ̃_prev) is carried across them."""
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(1, 5.0, 3)[0]
+    seen: list[int] = []
+    whole = simulate(paper.SPACECRAFT, gains, x0, tau=0.05, rate=100.0, rule=Hysteretic(0.15), t_final=8.0)
+    monkeypatch.setattr(_engine, "SLICE_SAMPLES", 97)
+    again = simulate(
+        paper.SPACECRAFT,
+        gains,
+        x0,
+        tau=0.05,
+        rate=100.0,
+        rule=Hysteretic(0.15),
+        t_final=8.0,
+        keep_every=2,
+        progress=lambda done, n: seen.append(done),
+    )
+    assert seen[0] == 97 and seen[-1] == 801
+    assert np.array_equal(again.sigma, whole.sigma[::2])
+    assert again.switch_count == whole.switch_count >= 2
+    assert np.array_equal(again.switch_times[: len(again.switch_times)], whole.switch_times)
+
+
+def test_the_flight_rule_is_not_exported_yet():
+    with pytest.raises(SpecificationError, match="rule"):
+        closed_loop_functions(paper.SPACECRAFT, paper.GAIN, tau=0.5, rule=Hysteretic(0.1))
+
+
+def test_the_virtual_machine_fallback_equals_the_compiled_engine():
+    from mrpctl.simulation._vm import VirtualMachineEngine
+
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(1, 5.0, 1)[0]
+    rule = Hysteretic(0.15)
+    compiled = _engine.engine(paper.SPACECRAFT, rule, 5, 0.01, 1)
+    assert compiled.compiled_code
+    machine = VirtualMachineEngine(compiled.sample, 5, compiled.inertia, flight=True)
+    outputs = []
+    for found in (compiled, machine):
+        outputs.append(
+            found.run(
+                x0,
+                0.0,
+                x0[None],
+                gains,
+                np.array(rule.parameters()),
+                400,
+                spacecraft=paper.SPACECRAFT,
+                keep_every=1,
+                workspace=found.workspace(400, switches=True),
+                switch_limit=400,
+            )
+        )
+    ref = reference_loop(paper.SPACECRAFT.inertia, gains, x0, rate=100.0, t_final=3.99, delta=0.15, delays=5)
+    assert ref.logic_switch_count[0] >= 2
+    for out in outputs:
+        assert out.switch_indices.tolist() == ref.logic_switch_samples().tolist()
+        assert np.max(np.abs(out.measurements[:, 0:3] - ref.sigma[0])) < 1e-12
