@@ -37,6 +37,7 @@ from mrpctl.mrp import skew_expr
 from mrpctl.switching import SwitchingRule
 
 __all__ = [
+    "FLIGHT_CONSTANTS_SIZE",
     "FLIGHT_MEMORY_SIZE",
     "NOISE_BLOCK",
     "ActuatorModel",
@@ -60,8 +61,11 @@ __all__ = [
 #: Samples per block of the counter-based random streams: the generator of block b is keyed by
 #: (seed, stream, b), so sample k's value never depends on the slice it was asked for in.
 NOISE_BLOCK = 4096
-#: The memory a controller-side rule carries in the compiled engine: (h, c, σ̃_prev).
-FLIGHT_MEMORY_SIZE = 5
+#: The memory a controller-side rule carries in the compiled engine: (h, c, σ̃_prev) and the
+#: actuator accumulators (saturated samples, peak commanded |u_c,i| per axis, peak |u_c|).
+FLIGHT_MEMORY_SIZE = 10
+#: The flight sample's run-time constant input ``flight``: (u_max (3), u_norm, w (3)).
+FLIGHT_CONSTANTS_SIZE = 7
 _STREAM_ATTITUDE, _STREAM_RATE, _STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 _SMALL_ANGLE = 1e-4

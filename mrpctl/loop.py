@@ -27,7 +27,15 @@ import numpy as np
 
 from mrpctl._validation import check_spacecraft, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
-from mrpctl.flight import FLIGHT_MEMORY_SIZE, Hysteretic, selection_function, short_expr
+from mrpctl.flight import (
+    FLIGHT_CONSTANTS_SIZE,
+    FLIGHT_MEMORY_SIZE,
+    Hysteretic,
+    Saturation,
+    actuator_function,
+    selection_function,
+    short_expr,
+)
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, gain_matrix, plant_model
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
@@ -204,21 +212,26 @@ def flight_core_function(
     substeps: int,
     *,
     inertia: InertiaInput | None = None,
+    saturation: Saturation = Saturation.SCALE,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
 
-    ``core(x, memory, x_delayed, K, parameters[, J, J_inv]) -> (x_next, memory_next, x_meas, u, switched)``,
-    the ports of :func:`core_function` with memory (h, c, σ̃_prev) of
-    :data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE` and parameters (δ,). At sample k:
+    ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight) -> (x_next, memory_next, x_meas, u, switched)``,
+    the ports of :func:`core_function` with memory (h, c, σ̃_prev, n_sat, peak |u_c,i| (3), peak |u_c|)
+    of :data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`, parameters (δ,) and the run-time constants
+    ``flight`` = (u_max (3), u_norm, w (3)) (N m; inf: no limit). At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect); the result is the measurement m_k (x_meas, the ring's entry);
     2. the controller reads the delayed measurement m_{k−d} (m_k when d = 0), takes its short
        set σ̃ and applies :func:`~mrpctl.flight.selection_function` with its memory
        (h, c, σ̃_prev) and δ: σ_c, and ``switched`` = 1.0 when h flipped (the run's switches);
-    3. u = K [σ_c; ω_{k−d}/4], held over the period while the plant is integrated by RK4.
+    3. u_c = K [σ_c; ω_{k−d}/4]; the actuator (:func:`~mrpctl.flight.actuator_function` of
+       ``saturation``) gives the applied torque u (the ``u`` output), and u + w is held over
+       the period while the plant is integrated by RK4.
 
-    With δ = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s K m_{k−d} bit for bit.
+    With δ = 0, no limit (inf) and w = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s
+    K m_{k−d} bit for bit.
     """
     step = step_function(spacecraft, period, substeps, inertia=inertia)
     x = ca.SX.sym("x", STATE_SIZE)
@@ -227,20 +240,30 @@ def flight_core_function(
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
     extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
     x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
     seen = x_delayed if d > 0 else x_meas
     sigma_seen = short_expr(seen[0:3])
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
-    u = gain @ ca.vertcat(sigma_c, seen[3:6])
-    x_next = step(x_meas, u, *extra)
-    memory_next = ca.vertcat(h_next, c_next, sigma_seen)
+    command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+    x_next = step(x_meas, u_plant, *extra)
+    size = ca.fabs(command)
+    memory_next = ca.vertcat(
+        h_next,
+        c_next,
+        sigma_seen,
+        memory[5] + saturated,
+        ca.fmax(memory[6:9], size),
+        ca.fmax(memory[9], ca.norm_2(command)),
+    )
     return ca.Function(
         "core",
-        [x, memory, x_delayed, gain, parameters, *extra],
+        [x, memory, x_delayed, gain, parameters, *extra, flight],
         [x_next, memory_next, x_meas, u, switched],
-        ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []),
+        ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"],
         ["x_next", "memory_next", "x_meas", "u", "switched"],
     )
 

@@ -7,8 +7,8 @@ import pytest
 from flight_reference import reference_loop
 
 from mrpctl import OnCurrent, closed_loop_functions, mrp, paper, simulate, simulate_batch
-from mrpctl.errors import SpecificationError
-from mrpctl.flight import Hysteretic
+from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, Saturation
 from mrpctl.simulation import _engine
 from mrpctl.spacecraft import Spacecraft
 
@@ -157,3 +157,92 @@ def test_the_virtual_machine_fallback_equals_the_compiled_engine():
     for out in outputs:
         assert out.switch_indices.tolist() == ref.logic_switch_samples().tolist()
         assert np.max(np.abs(out.measurements[:, 0:3] - ref.sigma[0])) < 1e-12
+
+
+# ============================================================================ step 2: actuator and disturbance
+def test_a_large_limit_and_zero_disturbance_equal_the_unsaturated_run_bit_for_bit():
+    common = dict(tau=0.5, t_final=1.5, rule=Hysteretic(0.05))
+    free = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **common)
+    for mode in Saturation:
+        large = simulate(
+            paper.SPACECRAFT,
+            paper.GAIN,
+            paper.INITIAL_STATE,
+            actuator=ActuatorModel(1e6, norm_max=1e7, mode=mode),
+            disturbance=np.zeros(3),
+            **common,
+        )
+        assert np.array_equal(large.sigma, free.sigma)
+        assert np.array_equal(large.omega, free.omega)
+        assert np.array_equal(large.u, free.u)
+        assert large.saturated_fraction == 0.0
+        # the peak command is the largest |u_c| the controller asked for (here = the applied torque)
+        assert large.peak_command is not None
+        assert np.array_equal(large.peak_command[0:3], np.max(np.abs(free.u), axis=0))
+        assert large.peak_command[3] == pytest.approx(np.max(np.linalg.norm(free.u, axis=1)), rel=1e-15)
+    assert free.saturated_fraction == 0.0
+
+
+@pytest.mark.parametrize("mode", list(Saturation))
+def test_the_applied_torque_never_exceeds_a_small_limit_and_the_reference_agrees(mode):
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(3, 3.0, 3)
+    limit, norm = np.array([0.4, 0.3, 0.5]), 0.55
+    w = np.array([0.02, -0.01, 0.015])
+    ref = reference_loop(
+        paper.SPACECRAFT.inertia,
+        gains,
+        x0,
+        rate=100.0,
+        t_final=6.0,
+        delta=0.15,
+        delays=5,
+        u_max=limit,
+        norm_max=norm,
+        clip=mode is Saturation.CLIP,
+        disturbance=w,
+    )
+    actuator = ActuatorModel(limit, norm_max=norm, mode=mode)
+    for i in range(len(x0)):
+        run = simulate(
+            paper.SPACECRAFT,
+            gains,
+            x0[i],
+            tau=0.05,
+            rate=100.0,
+            rule=Hysteretic(0.15),
+            t_final=6.0,
+            actuator=actuator,
+            disturbance=Disturbance(w),
+        )
+        assert np.all(np.abs(run.u) <= limit)
+        assert np.all(np.linalg.norm(run.u, axis=1) <= norm * (1 + 1e-15))
+        assert run.saturated_fraction is not None and run.peak_command is not None
+        assert 0.05 < run.saturated_fraction == ref.saturated_fraction[i]
+        assert np.max(run.peak_command[0:3]) > np.max(limit)  # the command really exceeded the limit
+        assert np.allclose(run.peak_command[0:3], ref.peak_command[i], rtol=1e-12, atol=0)
+        assert run.peak_command[3] == pytest.approx(ref.peak_command_norm[i], rel=1e-12)
+        assert run.switch_indices.tolist() == ref.logic_switch_samples(i).tolist()
+        assert np.max(np.abs(ref.sigma[i] - run.sigma)) < 1e-12
+        assert np.max(np.abs(ref.u_applied[i] - run.u)) < 1e-12
+
+
+def test_flight_options_refuse_bad_input():
+    common = dict(tau=0.0, t_final=0.1)
+    with pytest.raises(SpecificationError, match="actuator, disturbance"):
+        simulate(
+            paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=OnCurrent(), actuator=ActuatorModel(1.0), **common
+        )
+    with pytest.raises(SpecificationError, match="actuator"):
+        simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(), actuator=1.0, **common)
+    with pytest.raises(DimensionError, match="disturbance"):
+        simulate(
+            paper.SPACECRAFT,
+            paper.GAIN,
+            paper.INITIAL_STATE,
+            rule=Hysteretic(),
+            disturbance=np.zeros((101, 3)),
+            **common,
+        )
+    with pytest.raises(DimensionError, match="torque"):
+        simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(), disturbance=[1.0, 2.0], **common)

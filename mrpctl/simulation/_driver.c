@@ -1,7 +1,7 @@
 /* mrpctl: the horizon driver appended to CasADi's C code of one engine sample.
  *
  * MRPCTL_SAMPLE is the generated sample function
- *   sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv])
+ *   sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv][, flight])
  *     -> (x_next, memory_next, stats_next, x_meas, u, switched)
  * and MRPCTL_RUN the exported driver; both, and the sizes below, are #defined by
  * mrpctl/simulation/_engine.py in front of this file.
@@ -20,7 +20,8 @@
  */
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
-    const casadi_real* inertia, const casadi_real* inertia_inverse, long long k0, long long k1,
+    const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
+    long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
     casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
@@ -46,6 +47,11 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #else
   (void)inertia;
   (void)inertia_inverse;
+#endif
+#if MRPCTL_FLIGHT_INPUT
+  arg[6 + 2 * MRPCTL_INERTIA_INPUT] = flight;
+#else
+  (void)flight;
 #endif
   for (k = k0; k < k1; ++k) {
     casadi_real* now = buffers[now_index];

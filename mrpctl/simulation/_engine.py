@@ -31,7 +31,7 @@ import numpy as np
 
 from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
 from mrpctl.errors import CodegenError
-from mrpctl.flight import Hysteretic
+from mrpctl.flight import FLIGHT_MEMORY_SIZE, Hysteretic, Saturation
 from mrpctl.loop import core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.simulation._stats import (
@@ -80,7 +80,14 @@ def flight_memory(x0: np.ndarray, history: np.ndarray, d: int) -> np.ndarray:
     squared = float(sigma @ sigma)
     if squared > 1.0 or (d == 0 and squared >= 1.0):
         sigma = -sigma / squared
-    return np.concatenate(([1.0, 1.0], sigma))
+    memory = np.zeros(FLIGHT_MEMORY_SIZE)  # the actuator accumulators start at 0
+    memory[0:2] = 1.0
+    memory[2:5] = sigma
+    return memory
+
+
+#: The flight sample's constants without actuator limits or disturbance: u_max = u_norm = inf, w = 0.
+NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0])
 
 
 def slice_samples(substeps: int) -> int:
@@ -159,7 +166,8 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_X": STATE_SIZE,
         "MRPCTL_X_MEMORY": STATE_SIZE + memory_size,
         "MRPCTL_S_DIVERGED": S_DIVERGED,
-        "MRPCTL_INERTIA_INPUT": int(sample.n_in() > 6),
+        "MRPCTL_INERTIA_INPUT": int("J" in sample.name_in()),
+        "MRPCTL_FLIGHT_INPUT": int("flight" in sample.name_in()),
     }
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
     body = resources.files("mrpctl.simulation").joinpath("_driver.c").read_text(encoding="utf-8")
@@ -184,6 +192,7 @@ class RunOutput:
     measurements: np.ndarray | None
     u: np.ndarray | None
     switch_indices: np.ndarray | None
+    memory: np.ndarray | None = None  # the rule memory after the run (the flight accumulators)
 
 
 class Engine:
@@ -193,17 +202,27 @@ class Engine:
     :class:`~mrpctl.loop.InertiaInput` layout (diagonal, or full).
     """
 
-    def __init__(self, spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> None:
+    def __init__(
+        self,
+        spacecraft: Spacecraft,
+        rule: SwitchingRule,
+        d: int,
+        period: float,
+        substeps: int,
+        saturation: Saturation = Saturation.SCALE,
+    ) -> None:
         self.d = d
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
         self.flight = isinstance(rule, Hysteretic)
         if self.flight:
-            core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia)
+            core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation)
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
         self.memory_size = core.size1_in(1)
         label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
+        if self.flight:
+            label += f"_{saturation.value}"
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
         self.compiled: CompiledFunction = compile_function(
             self.sample, flags=SIMULATION_FLAGS, appendix=_driver_source(self.sample)
@@ -215,7 +234,7 @@ class Engine:
             self._run_c.restype = ctypes.c_longlong
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
-                + [ctypes.c_void_p] * 4
+                + [ctypes.c_void_p] * 5
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 3
@@ -252,6 +271,7 @@ class Engine:
         workspace: Workspace,
         switch_limit: int = 0,
         stop: Callable[[int], bool] | None = None,
+        flight_options: np.ndarray | None = None,
     ) -> RunOutput:
         """One run of n samples, slice by slice.
 
@@ -270,6 +290,9 @@ class Engine:
         stop : callable, optional
             Called after each slice with the samples done; True stops the run (it then
             returns what it has). KeyboardInterrupt raised by it propagates.
+        flight_options : numpy.ndarray, optional
+            The flight sample's constants (u_max (3), u_norm, w (3)); default
+            :data:`NO_FLIGHT_OPTIONS`. Ignored by the other engines.
         """
         state = workspace.state
         history = np.ascontiguousarray(history, dtype=float)
@@ -283,6 +306,7 @@ class Engine:
         if inertia_input(spacecraft) is not self.inertia:
             raise ValueError(f"this engine takes a {self.inertia.value} inertia, got {spacecraft}")
         inertia, inertia_inverse = inertia_values(spacecraft, self.inertia)
+        options = np.ascontiguousarray(NO_FLIGHT_OPTIONS if flight_options is None else flight_options, dtype=float)
         if keep_every is None:
             measurements = u = None
             keep = 0
@@ -310,6 +334,7 @@ class Engine:
                 address(parameters),
                 address(inertia),
                 address(inertia_inverse),
+                address(options) if self.flight else None,
                 k,
                 k1,
                 self.d,
@@ -339,6 +364,7 @@ class Engine:
             measurements=measurements,
             u=u,
             switch_indices=switch_indices if switched is not None else None,
+            memory=state[STATE_SIZE:memory_end].copy(),
         )
 
 
@@ -380,13 +406,25 @@ _ENGINES: dict[tuple[Any, ...], Any] = {}
 _ENGINES_LOCK = threading.Lock()
 
 
-def engine(spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> Any:
-    """The engine of this structure (compiled, or the virtual machine's without a compiler), cached."""
-    key = (inertia_input(spacecraft), type(rule), rule_key(rule, d), d, period, substeps)
+def engine(
+    spacecraft: Spacecraft,
+    rule: SwitchingRule,
+    d: int,
+    period: float,
+    substeps: int,
+    saturation: Saturation = Saturation.SCALE,
+) -> Any:
+    """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
+
+    ``saturation`` (the actuator's mode) is part of the structure of the flight sample only.
+    """
+    if not isinstance(rule, Hysteretic):
+        saturation = Saturation.SCALE
+    key = (inertia_input(spacecraft), type(rule), rule_key(rule, d), d, period, substeps, saturation)
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
-            found = Engine(spacecraft, rule, d, period, substeps)
+            found = Engine(spacecraft, rule, d, period, substeps, saturation)
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
 

@@ -17,7 +17,7 @@ import numpy as np
 from mrpctl._compile import find_compiler
 from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
-from mrpctl.flight import Hysteretic
+from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, Saturation
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.simulation._engine import STATE_BLOCK, RunOutput, engine, rule_key, slice_samples
@@ -111,6 +111,33 @@ def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: 
     )
 
 
+def _flight_options(rule: Any, actuator: Any, disturbance: Any) -> tuple[np.ndarray | None, Saturation]:
+    """The flight sample's constants (u_max (3), u_norm, w (3)) and the saturation mode."""
+    if actuator is None and disturbance is None:
+        return None, Saturation.SCALE
+    if not isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            "actuator, disturbance: the actuator and disturbance models run in the flight loop only; "
+            f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
+        )
+    if actuator is not None and not isinstance(actuator, ActuatorModel):
+        raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel or None, got {actuator!r}")
+    if disturbance is not None and not isinstance(disturbance, Disturbance):
+        disturbance = Disturbance(disturbance)
+    if disturbance is not None and not disturbance.constant:
+        raise DimensionError(
+            f"disturbance: the engine takes a constant torque of shape (3,) so far, got {disturbance.torque.shape}"
+        )
+    options = np.zeros(7)
+    options[0:4] = np.inf
+    if actuator is not None:
+        options[0:3] = actuator.u_max
+        options[3] = actuator.norm_limit
+    if disturbance is not None:
+        options[4:7] = disturbance.torque
+    return options, Saturation.SCALE if actuator is None else actuator.mode
+
+
 # ======================================================================= simulate
 def simulate(
     spacecraft: Spacecraft,
@@ -126,6 +153,8 @@ def simulate(
     keep_every: int | None = 1,
     memory_limit: float | None = None,
     progress: Callable[[int, int], Any] | None = None,
+    actuator: ActuatorModel | None = None,
+    disturbance: Any = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -164,6 +193,13 @@ def simulate(
     progress : callable, keyword-only
         ``progress(samples_done, n)`` after each slice; an exception raised by it
         (KeyboardInterrupt included) stops the run and propagates.
+    actuator : mrpctl.flight.ActuatorModel, keyword-only
+        Torque limits of the flight loop (``rule=Hysteretic(...)`` only); None: none. The
+        result's ``u`` is then the applied torque, ``saturated_fraction`` and
+        ``peak_command`` report the limits.
+    disturbance : mrpctl.flight.Disturbance or array_like (3,), keyword-only
+        A constant body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)``
+        only; a per-sample torque is not supported by the engine yet).
 
     Returns
     -------
@@ -187,9 +223,10 @@ def simulate(
     keep = _keep_every(keep_every)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
+    options, saturation = _flight_options(rule, actuator, disturbance)
     _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps), limit, t_final=t_final, keep_every=keep)
 
-    found = engine(spacecraft, rule, d, 1.0 / rate, substeps)
+    found = engine(spacecraft, rule, d, 1.0 / rate, substeps, saturation)
     stop = None
     if progress is not None:
 
@@ -209,6 +246,7 @@ def simulate(
         workspace=found.workspace(n, switches=True),
         switch_limit=n if keep == 1 else SWITCH_LIMIT,
         stop=stop,
+        flight_options=options,
     )
     common = dict(
         spacecraft=spacecraft,

@@ -18,7 +18,7 @@ import numpy as np
 
 from mrpctl.loop import InertiaInput, inertia_values
 from mrpctl.model import STATE_SIZE
-from mrpctl.simulation._engine import RunOutput, Workspace, flight_memory
+from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, RunOutput, Workspace, flight_memory
 from mrpctl.simulation._stats import S_DIVERGED, STATS_SIZE, initial_stats
 from mrpctl.spacecraft import Spacecraft
 
@@ -125,14 +125,17 @@ class VirtualMachineEngine:
         workspace: Workspace,
         switch_limit: int = 0,
         stop: Callable[[int], bool] | None = None,
+        flight_options: np.ndarray | None = None,
     ) -> RunOutput:
         """As :meth:`mrpctl.simulation._engine.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
         inertia = inertia_values(spacecraft, self.inertia)
+        constants = list(inertia)
         if self.flight:
             memory0 = flight_memory(x0, np.ascontiguousarray(history, dtype=float), self.d)  # type: ignore[assignment]
+            constants.append(NO_FLIGHT_OPTIONS if flight_options is None else flight_options)
         out = self.horizon(self.blocks(n), trajectories)(
-            x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *inertia
+            x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *constants
         )
         if not trajectories:
             return self.output(np.asarray(out).ravel(), n, None, None, None, keep_every, workspace, switch_limit)
