@@ -40,6 +40,7 @@ __all__ = [
     "FLIGHT_CONSTANTS_SIZE",
     "FLIGHT_MEMORY_SIZE",
     "NOISE_BLOCK",
+    "NOISE_SIZE",
     "ActuatorModel",
     "DelayKind",
     "DelayModel",
@@ -64,8 +65,10 @@ NOISE_BLOCK = 4096
 #: The memory a controller-side rule carries in the compiled engine: (h, c, σ̃_prev) and the
 #: actuator accumulators (saturated samples, peak commanded |u_c,i| per axis, peak |u_c|).
 FLIGHT_MEMORY_SIZE = 10
-#: The flight sample's run-time constant input ``flight``: (u_max (3), u_norm, w (3)).
-FLIGHT_CONSTANTS_SIZE = 7
+#: The flight sample's run-time constant input ``flight``: (u_max (3), u_norm, w (3), gyro bias b (3)).
+FLIGHT_CONSTANTS_SIZE = 10
+#: The flight sample's per-sample input ``noise``: (θ_k (3), η_k (3)).
+NOISE_SIZE = 6
 _STREAM_ATTITUDE, _STREAM_RATE, _STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 _SMALL_ANGLE = 1e-4

@@ -8,7 +8,7 @@ from flight_reference import reference_loop
 
 from mrpctl import OnCurrent, closed_loop_functions, mrp, paper, simulate, simulate_batch
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, Saturation
+from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.simulation import _engine
 from mrpctl.spacecraft import Spacecraft
 
@@ -135,7 +135,7 @@ def test_the_virtual_machine_fallback_equals_the_compiled_engine():
     rule = Hysteretic(0.15)
     compiled = _engine.engine(paper.SPACECRAFT, rule, 5, 0.01, 1)
     assert compiled.compiled_code
-    machine = VirtualMachineEngine(compiled.sample, 5, compiled.inertia, flight=True)
+    machine = VirtualMachineEngine(compiled.virtual_machine_sample(), 5, compiled.inertia, flight=True)
     outputs = []
     for found in (compiled, machine):
         outputs.append(
@@ -246,3 +246,108 @@ def test_flight_options_refuse_bad_input():
         )
     with pytest.raises(DimensionError, match="torque"):
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(), disturbance=[1.0, 2.0], **common)
+
+
+# ============================================================================ step 3: sensor noise
+NOISY = SensorModel(attitude_noise=0.01, rate_noise=2e-4, gyro_bias=[1e-4, -2e-4, 5e-5], seed=11)
+
+
+def test_noise_on_the_paper_case_equals_the_reference_loop():
+    """α = 1 chatters under 0.01 rad noise near Φ = 180°, α = 1.2 does not (design/flight.md)."""
+    counts = {}
+    for alpha in (1.0, 1.2):
+        delta = Hysteretic.from_alpha(alpha).delta
+        run = simulate(
+            paper.SPACECRAFT,
+            paper.GAIN,
+            paper.INITIAL_STATE,
+            tau=0.5,
+            rule=Hysteretic(delta),
+            t_final=3.0,
+            sensor=NOISY,
+        )
+        ref = reference_loop(
+            paper.SPACECRAFT.inertia,
+            paper.GAIN,
+            paper.INITIAL_STATE,
+            rate=1000.0,
+            t_final=3.0,
+            delta=delta,
+            delays=PAPER_D,
+            sensors=NOISY,
+        )
+        assert run.switch_indices.tolist() == ref.logic_switch_samples().tolist()
+        assert np.max(np.abs(ref.sigma[0] - run.sigma)) < 1e-12
+        assert np.max(np.abs(ref.omega[0] - run.omega)) < 1e-12
+        assert np.max(np.abs(ref.u_applied[0] - run.u)) < 1e-12 * np.max(np.abs(run.u))
+        counts[alpha] = run.switch_count
+    assert counts[1.0] > 10 and counts[1.2] <= 1
+
+
+def test_every_option_on_tumbles_equals_the_reference_loop():
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(3, 4.0, 5)
+    limit, w = np.array([0.5, 0.4, 0.6]), np.array([0.01, 0.02, -0.01])
+    sensor = SensorModel(attitude_noise=0.02, rate_noise=1e-3, gyro_bias=[2e-3, 0.0, -1e-3], seed=3)
+    ref = reference_loop(
+        paper.SPACECRAFT.inertia,
+        gains,
+        x0,
+        rate=100.0,
+        t_final=8.0,
+        delta=0.1,
+        delays=5,
+        sensors=sensor,
+        u_max=limit,
+        norm_max=0.7,
+        disturbance=w,
+    )
+    assert np.sum(ref.logic_switch_count) >= 6
+    for i in range(len(x0)):
+        run = simulate(
+            paper.SPACECRAFT,
+            gains,
+            x0[i],
+            tau=0.05,
+            rate=100.0,
+            rule=Hysteretic(0.1),
+            t_final=8.0,
+            actuator=ActuatorModel(limit, norm_max=0.7),
+            disturbance=w,
+            sensor=sensor,
+        )
+        assert run.switch_indices.tolist() == ref.logic_switch_samples(i).tolist()
+        assert run.saturated_fraction == ref.saturated_fraction[i]
+        assert np.max(np.abs(ref.sigma[i] - run.sigma)) < 1e-12
+        assert np.max(np.abs(ref.omega[i] - run.omega)) < 1e-12 * np.max(np.abs(ref.omega[i]))
+        assert np.max(np.abs(ref.u_applied[i] - run.u)) < 1e-12
+
+
+def test_noise_is_the_same_in_any_slicing_and_on_a_rerun_and_changes_with_the_seed(monkeypatch):
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(1, 5.0, 4)[0]
+    sensor = SensorModel(attitude_noise=0.05, rate_noise=1e-3, seed=8)
+    common = dict(tau=0.05, rate=100.0, rule=Hysteretic(0.05), t_final=8.0)
+    whole = simulate(paper.SPACECRAFT, gains, x0, sensor=sensor, **common)
+    again = simulate(
+        paper.SPACECRAFT, gains, x0, sensor=SensorModel(attitude_noise=0.05, rate_noise=1e-3, seed=8), **common
+    )
+    other = simulate(
+        paper.SPACECRAFT, gains, x0, sensor=SensorModel(attitude_noise=0.05, rate_noise=1e-3, seed=9), **common
+    )
+    monkeypatch.setattr(_engine, "SLICE_SAMPLES", 97)
+    sliced = simulate(paper.SPACECRAFT, gains, x0, sensor=sensor, keep_every=3, **common)
+    assert whole.switch_count >= 2
+    assert np.array_equal(again.sigma, whole.sigma) and np.array_equal(again.u, whole.u)
+    assert np.array_equal(sliced.sigma, whole.sigma[::3]) and np.array_equal(sliced.u, whole.u[::3])
+    assert sliced.switch_count == whole.switch_count
+    assert not np.array_equal(other.u, whole.u)
+
+
+def test_an_ideal_sensor_is_no_sensor_bit_for_bit():
+    common = dict(tau=0.5, t_final=1.5, rule=Hysteretic(0.0))
+    free = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **common)
+    ideal = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, sensor=SensorModel(), **common)
+    assert np.array_equal(ideal.sigma, free.sigma) and np.array_equal(ideal.u, free.u)
+    with pytest.raises(SpecificationError, match="sensor"):
+        simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, sensor=0.01, **common)

@@ -21,7 +21,7 @@
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
-    long long k0, long long k1,
+    const casadi_real* noise, long long noise_stride, long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
     casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
@@ -29,7 +29,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   casadi_int iw[MRPCTL_SZ_IW];
   casadi_real w[MRPCTL_SZ_W];
   casadi_real buffers[2][MRPCTL_STATE];
-  casadi_real u_scratch[3], switched_scratch[1];
+  casadi_real u_scratch[3], switched_scratch[1], x_scratch[6];
   long long k, slot, delayed_slot = 0, phase = 1, kept_column = 0;
   int i, now_index = 0;
   for (i = 0; i < MRPCTL_STATE; ++i) buffers[0][i] = state[i];
@@ -53,6 +53,11 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #else
   (void)flight;
 #endif
+#if !MRPCTL_SENSOR
+  (void)noise;
+  (void)noise_stride;
+  (void)x_scratch;
+#endif
   for (k = k0; k < k1; ++k) {
     casadi_real* now = buffers[now_index];
     casadi_real* next = buffers[now_index ^ 1];
@@ -68,12 +73,19 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     res[0] = next;
     res[1] = next + MRPCTL_X;
     res[2] = next + MRPCTL_X_MEMORY;
+#if MRPCTL_SENSOR
+    /* the flight sample: the sensor's measurement goes to the ring, the true state to the kept array */
+    arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise + noise_stride * (k - k0);
+    res[3] = kept ? kept_measurements + 6 * kept_column : x_scratch;
+    res[6] = ring + 6 * slot;
+#else
     res[3] = ring + 6 * slot;
+#endif
     res[4] = kept ? kept_u + 3 * kept_column : u_scratch;
     res[5] = switched ? switched + (k - k0) : switched_scratch;
     if (MRPCTL_SAMPLE(arg, res, iw, w, 0)) return -1;
     if (kept) {
-      if (kept_measurements != ring)
+      if (!MRPCTL_SENSOR && kept_measurements != ring)
         for (i = 0; i < 6; ++i) kept_measurements[6 * kept_column + i] = ring[6 * slot + i];
       ++kept_column;
     }

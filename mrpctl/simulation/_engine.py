@@ -31,7 +31,7 @@ import numpy as np
 
 from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
 from mrpctl.errors import CodegenError
-from mrpctl.flight import FLIGHT_MEMORY_SIZE, Hysteretic, Saturation
+from mrpctl.flight import FLIGHT_MEMORY_SIZE, NOISE_SIZE, Hysteretic, Saturation, SensorModel
 from mrpctl.loop import core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.simulation._stats import (
@@ -87,7 +87,8 @@ def flight_memory(x0: np.ndarray, history: np.ndarray, d: int) -> np.ndarray:
 
 
 #: The flight sample's constants without actuator limits or disturbance: u_max = u_norm = inf, w = 0.
-NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0])
+NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+_NO_NOISE = np.zeros(NOISE_SIZE)
 
 
 def slice_samples(substeps: int) -> int:
@@ -108,7 +109,9 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
     extra = [ca.SX.sym(core.name_in(i), core.sparsity_in(i)) for i in range(5, core.n_in())]
-    x_raw, memory_rule, x_meas, u, switched = core(x, memory, x_delayed, gain, parameters, *extra)
+    outs = core(x, memory, x_delayed, gain, parameters, *extra)
+    x_raw, memory_rule, x_meas, u, switched = outs[0:5]
+    more, more_names = list(outs[5:]), [core.name_out(i) for i in range(5, core.n_out())]  # the flight measurement
 
     k = stats[S_K]
     counted = ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
@@ -146,9 +149,9 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     return ca.Function(
         name,
         [x, memory, stats, x_delayed, gain, parameters, *extra],
-        [x_next, memory_next, stats_next, x_meas, u, switched],
+        [x_next, memory_next, stats_next, x_meas, u, switched, *more],
         ["x", "memory", "stats", "x_delayed", "K", "parameters"] + [core.name_in(i) for i in range(5, core.n_in())],
-        ["x_next", "memory_next", "stats_next", "x_meas", "u", "switched"],
+        ["x_next", "memory_next", "stats_next", "x_meas", "u", "switched", *more_names],
     )
 
 
@@ -168,6 +171,7 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_S_DIVERGED": S_DIVERGED,
         "MRPCTL_INERTIA_INPUT": int("J" in sample.name_in()),
         "MRPCTL_FLIGHT_INPUT": int("flight" in sample.name_in()),
+        "MRPCTL_SENSOR": int("noise" in sample.name_in()),
     }
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
     body = resources.files("mrpctl.simulation").joinpath("_driver.c").read_text(encoding="utf-8")
@@ -215,6 +219,7 @@ class Engine:
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
         self.flight = isinstance(rule, Hysteretic)
+        self._structure = (spacecraft, d, period, substeps, saturation)
         if self.flight:
             core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation)
         else:
@@ -234,11 +239,21 @@ class Engine:
             self._run_c.restype = ctypes.c_longlong
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
-                + [ctypes.c_void_p] * 5
-                + [ctypes.c_longlong] * 3
+                + [ctypes.c_void_p] * 6
+                + [ctypes.c_longlong] * 4
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 3
             )
+
+    def virtual_machine_sample(self) -> ca.Function:
+        """The sample for the virtual machine: the flight sample without its per-sample sensor ports."""
+        if not self.flight:
+            return self.sample
+        spacecraft, d, period, substeps, saturation = self._structure
+        core = flight_core_function(
+            spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation, sensor=False
+        )
+        return engine_sample(core, d, self.sample.name() + "_vm")
 
     @property
     def compiled_code(self) -> bool:
@@ -272,6 +287,7 @@ class Engine:
         switch_limit: int = 0,
         stop: Callable[[int], bool] | None = None,
         flight_options: np.ndarray | None = None,
+        sensor: SensorModel | None = None,
     ) -> RunOutput:
         """One run of n samples, slice by slice.
 
@@ -293,6 +309,10 @@ class Engine:
         flight_options : numpy.ndarray, optional
             The flight sample's constants (u_max (3), u_norm, w (3)); default
             :data:`NO_FLIGHT_OPTIONS`. Ignored by the other engines.
+        sensor : SensorModel, optional
+            The flight sample's noise: θ_k, η_k of each slice's samples are generated in
+            NumPy (:meth:`SensorModel.noise`, slice independent) and handed to the driver;
+            its gyro bias is in ``flight_options``. None: no noise.
         """
         state = workspace.state
         history = np.ascontiguousarray(history, dtype=float)
@@ -319,13 +339,19 @@ class Engine:
         indices: list[np.ndarray] = []
         stored = 0
         ring = workspace.ring
-        if keep == 1 and measurements is not None:
+        noisy = self.flight and sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
+        if keep == 1 and measurements is not None and not self.flight:
             ring = measurements  # every sample kept: m_{k-d} is read back from the result (no copy)
         step = slice_samples(self.substeps)
         k = 0
         diverged = memory_end + S_DIVERGED
         while k < n:
             k1 = min(k + step, n)
+            noise, noise_stride = _NO_NOISE, 0
+            if noisy:
+                assert sensor is not None
+                noise = np.ascontiguousarray(np.hstack(sensor.noise(k, k1)))
+                noise_stride = NOISE_SIZE
             done = self._run_c(
                 address(state),
                 address(history),
@@ -335,6 +361,8 @@ class Engine:
                 address(inertia),
                 address(inertia_inverse),
                 address(options) if self.flight else None,
+                address(noise),
+                noise_stride,
                 k,
                 k1,
                 self.d,
@@ -428,7 +456,7 @@ def engine(
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
 
-                found = VirtualMachineEngine(found.sample, d, found.inertia, flight=found.flight)
+                found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)
             _ENGINES[key] = found
         return found
 

@@ -17,7 +17,7 @@ import numpy as np
 from mrpctl._compile import find_compiler
 from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
-from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, Saturation
+from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.simulation._engine import STATE_BLOCK, RunOutput, engine, rule_key, slice_samples
@@ -111,13 +111,15 @@ def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: 
     )
 
 
-def _flight_options(rule: Any, actuator: Any, disturbance: Any) -> tuple[np.ndarray | None, Saturation]:
-    """The flight sample's constants (u_max (3), u_norm, w (3)) and the saturation mode."""
-    if actuator is None and disturbance is None:
+def _flight_options(
+    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None
+) -> tuple[np.ndarray | None, Saturation]:
+    """The flight sample's constants (u_max (3), u_norm, w (3), bias (3)) and the saturation mode."""
+    if actuator is None and disturbance is None and sensor is None:
         return None, Saturation.SCALE
     if not isinstance(rule, Hysteretic):
         raise SpecificationError(
-            "actuator, disturbance: the actuator and disturbance models run in the flight loop only; "
+            "actuator, disturbance, sensor: the actuator, disturbance and sensor models run in the flight loop only; "
             f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
         )
     if actuator is not None and not isinstance(actuator, ActuatorModel):
@@ -128,8 +130,12 @@ def _flight_options(rule: Any, actuator: Any, disturbance: Any) -> tuple[np.ndar
         raise DimensionError(
             f"disturbance: the engine takes a constant torque of shape (3,) so far, got {disturbance.torque.shape}"
         )
-    options = np.zeros(7)
+    if sensor is not None and not isinstance(sensor, SensorModel):
+        raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
+    options = np.zeros(10)
     options[0:4] = np.inf
+    if sensor is not None:
+        options[7:10] = sensor.gyro_bias
     if actuator is not None:
         options[0:3] = actuator.u_max
         options[3] = actuator.norm_limit
@@ -155,6 +161,7 @@ def simulate(
     progress: Callable[[int, int], Any] | None = None,
     actuator: ActuatorModel | None = None,
     disturbance: Any = None,
+    sensor: SensorModel | None = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -200,6 +207,11 @@ def simulate(
     disturbance : mrpctl.flight.Disturbance or array_like (3,), keyword-only
         A constant body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)``
         only; a per-sample torque is not supported by the engine yet).
+    sensor : mrpctl.flight.SensorModel, keyword-only
+        Attitude and rate noise and gyro bias of the flight loop's measurements
+        (``rule=Hysteretic(...)`` only); the noise of each slice of samples is generated in
+        NumPy from (seed, sample index), so a run is the same however it is sliced. The
+        result's ``sigma``, ``omega`` stay the true (bookkept) state.
 
     Returns
     -------
@@ -223,7 +235,7 @@ def simulate(
     keep = _keep_every(keep_every)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
-    options, saturation = _flight_options(rule, actuator, disturbance)
+    options, saturation = _flight_options(rule, actuator, disturbance, sensor)
     _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps), limit, t_final=t_final, keep_every=keep)
 
     found = engine(spacecraft, rule, d, 1.0 / rate, substeps, saturation)
@@ -247,6 +259,7 @@ def simulate(
         switch_limit=n if keep == 1 else SWITCH_LIMIT,
         stop=stop,
         flight_options=options,
+        sensor=sensor,
     )
     common = dict(
         spacecraft=spacecraft,

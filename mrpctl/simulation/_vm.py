@@ -16,6 +16,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from mrpctl.errors import CodegenError
 from mrpctl.loop import InertiaInput, inertia_values
 from mrpctl.model import STATE_SIZE
 from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, RunOutput, Workspace, flight_memory
@@ -126,11 +127,14 @@ class VirtualMachineEngine:
         switch_limit: int = 0,
         stop: Callable[[int], bool] | None = None,
         flight_options: np.ndarray | None = None,
+        sensor: Any = None,
     ) -> RunOutput:
         """As :meth:`mrpctl.simulation._engine.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
         inertia = inertia_values(spacecraft, self.inertia)
         constants = list(inertia)
+        if self.flight and sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0):
+            raise CodegenError("sensor noise in the flight loop needs the compiled engine (a C compiler)")
         if self.flight:
             memory0 = flight_memory(x0, np.ascontiguousarray(history, dtype=float), self.d)  # type: ignore[assignment]
             constants.append(NO_FLIGHT_OPTIONS if flight_options is None else flight_options)
