@@ -351,3 +351,29 @@ def test_an_ideal_sensor_is_no_sensor_bit_for_bit():
     assert np.array_equal(ideal.sigma, free.sigma) and np.array_equal(ideal.u, free.u)
     with pytest.raises(SpecificationError, match="sensor"):
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, sensor=0.01, **common)
+
+
+def test_simulate_batch_with_every_option_equals_simulate():
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(3, 4.0, 6)
+    options = dict(
+        actuator=ActuatorModel([0.5, 0.4, 0.6], norm_max=0.7, mode=Saturation.CLIP),
+        disturbance=[0.01, 0.0, -0.02],
+        sensor=SensorModel(attitude_noise=0.02, rate_noise=1e-3, gyro_bias=[1e-3, 0.0, 0.0], seed=4),
+    )
+    common = dict(tau=0.05, rate=100.0, t_final=8.0)
+    rules = [Hysteretic(0.0), Hysteretic(0.1), Hysteretic(ALPHA_12)]
+    for trajectories in (True, False):
+        batch = simulate_batch(
+            paper.SPACECRAFT, gains, x0, rule=rules, trajectories=trajectories, threads=2, **common, **options
+        )
+        for i in range(3):
+            run = simulate(paper.SPACECRAFT, gains, x0[i], rule=rules[i], **common, **options)
+            assert batch.switch_count[i] == run.switch_count
+            assert batch.peak_torque[i] == run.peak_torque
+            if trajectories:
+                assert batch.runs is not None
+                assert np.array_equal(batch.runs[i].sigma, run.sigma)
+                assert np.array_equal(batch.runs[i].u, run.u)
+    with pytest.raises(SpecificationError, match="flight loop only"):
+        simulate_batch(paper.SPACECRAFT, gains, x0, rule=[Hysteretic(), OnCurrent(), Hysteretic()], **common, **options)

@@ -304,6 +304,9 @@ def simulate_batch(
     threads: int | None = None,
     memory_limit: float | None = None,
     progress: Callable[[int, int], Any] | None = None,
+    actuator: ActuatorModel | None = None,
+    disturbance: Any = None,
+    sensor: SensorModel | None = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -347,6 +350,10 @@ def simulate_batch(
     progress : callable, keyword-only
         ``progress(samples_done, samples_total)``, called from the calling thread while
         the workers run; an exception raised by it stops the batch and propagates.
+
+    actuator, disturbance, sensor : keyword-only
+        The flight loop's models (as in :func:`simulate`), shared by every run; each rule
+        must then be a :class:`mrpctl.flight.Hysteretic`. Flight runs take the scalar engine.
 
     Returns
     -------
@@ -403,6 +410,10 @@ def simulate_batch(
         estimate += lane_bytes(n_runs, max(samples_by_run), workers)
     _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
 
+    options, saturation = None, Saturation.SCALE
+    for one in rules:  # the flight options are shared by the runs; every rule must be the flight rule
+        options, saturation = _flight_options(one, actuator, disturbance, sensor)
+
     stats = np.full((n_runs, STATS_SIZE), np.nan)
     scalar_runs = list(range(n_runs))
     if not trajectories and _LANES and find_compiler() is not None:
@@ -427,7 +438,7 @@ def simulate_batch(
     for i in scalar_runs:
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i])
         if key not in by_structure:
-            by_structure[key] = engine(crafts[i], rules[i], samples_by_run[i], 1.0 / rate, substeps)
+            by_structure[key] = engine(crafts[i], rules[i], samples_by_run[i], 1.0 / rate, substeps, saturation)
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
     stop_flag = threading.Event()
@@ -466,6 +477,8 @@ def simulate_batch(
                 workspace=space,
                 switch_limit=n if keep == 1 else SWITCH_LIMIT,
                 stop=stop,
+                flight_options=options,
+                sensor=sensor,
             )
             previous += n
             done_samples[slot] = previous
