@@ -53,6 +53,7 @@ __all__ = [
     "hysteresis_function",
     "measurement_function",
     "newest_arrived",
+    "newest_arrived_slice",
     "quaternion_from_mrp_expr",
     "rotation_vector_to_mrp_expr",
     "selection_function",
@@ -408,6 +409,28 @@ def newest_arrived(delays: Any, *, history: int) -> tuple[np.ndarray, np.ndarray
     history_best = np.minimum(k - depth, -1)  # newest history sample arrived by k
     used = np.maximum(np.maximum.accumulate(best), history_best)
     return readonly(used, np.int64), readonly(k - used, np.int64)
+
+
+def newest_arrived_slice(
+    model: DelayModel, rate: float, depth: int, k0: int, k1: int, newest_before: int
+) -> np.ndarray:
+    """j*(k) of :func:`newest_arrived` for the samples k0 … k1 − 1 only, in bounded memory.
+
+    ``newest_before`` is j*(k0 − 1) (−1 − ``depth`` for k0 = 0). Only the measurements
+    j ∈ [k0 − depth, k1) can arrive in the slice, so the delays of those are generated
+    (:meth:`DelayModel.samples`, slice independent). Concatenating the slices of any slicing
+    gives :func:`newest_arrived` of the whole horizon (int64).
+    """
+    start, stop = _slice(k0, k1)
+    depth = integer("depth", depth, minimum=0)
+    low = max(0, start - depth)
+    j = np.arange(low, stop, dtype=np.int64)
+    arrival = j + model.samples(rate, low, stop)
+    inside = (arrival >= start) & (arrival < stop)
+    best = np.full(stop - start, int(newest_before), dtype=np.int64)
+    np.maximum.at(best, arrival[inside] - start, j[inside])
+    k = np.arange(start, stop, dtype=np.int64)
+    return np.maximum(np.maximum.accumulate(best), np.minimum(k - depth, -1))
 
 
 @dataclass(frozen=True, eq=False)

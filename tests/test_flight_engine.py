@@ -2,13 +2,24 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from flight_reference import reference_loop
 
 from mrpctl import OnCurrent, closed_loop_functions, mrp, paper, simulate, simulate_batch
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, Saturation, SensorModel
+from mrpctl.flight import (
+    ActuatorModel,
+    DelayModel,
+    Disturbance,
+    Hysteretic,
+    Saturation,
+    SensorModel,
+    newest_arrived,
+    newest_arrived_slice,
+)
 from mrpctl.simulation import _engine
 from mrpctl.spacecraft import Spacecraft
 
@@ -377,3 +388,92 @@ def test_simulate_batch_with_every_option_equals_simulate():
                 assert np.array_equal(batch.runs[i].u, run.u)
     with pytest.raises(SpecificationError, match="flight loop only"):
         simulate_batch(paper.SPACECRAFT, gains, x0, rule=[Hysteretic(), OnCurrent(), Hysteretic()], **common, **options)
+
+
+# ============================================================================ step 4: time-varying delay
+def test_newest_arrived_slices_equal_the_whole_schedule():
+    model = DelayModel.jitter(0.01, 0.2, seed=5)
+    rate, n, depth = 100.0, 1000, 20
+    whole = newest_arrived(model.samples(rate, 0, n), history=depth)[0]
+    for cuts in ([0, n], [0, 1, 7, 300, 301, n], [*list(range(0, n, 33)), n]):
+        newest, parts = -1 - depth, []
+        for k0, k1 in itertools.pairwise(cuts):
+            parts.append(newest_arrived_slice(model, rate, depth, k0, k1, newest))
+            newest = int(parts[-1][-1])
+        assert np.array_equal(np.concatenate(parts), whole)
+
+
+def test_equal_jitter_bounds_equal_the_constant_delay_bit_for_bit():
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(1, 5.0, 1)[0]
+    common = dict(tau=0.05, rate=100.0, rule=Hysteretic(0.15), t_final=8.0)
+    constant = simulate(paper.SPACECRAFT, gains, x0, **common)
+    jitter = simulate(paper.SPACECRAFT, gains, x0, delay=DelayModel.jitter(0.05, 0.05, seed=1), **common)
+    assert constant.switch_count >= 2
+    assert np.array_equal(jitter.sigma, constant.sigma) and np.array_equal(jitter.u, constant.u)
+    assert np.array_equal(jitter.switch_indices, constant.switch_indices)
+
+
+def test_jitter_and_a_delay_sequence_equal_the_reference_loop(monkeypatch):
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(2, 5.0, 2)
+    rate, t_final = 100.0, 8.0
+    n = 801
+    sensor = SensorModel(attitude_noise=0.01, rate_noise=1e-4, seed=2)
+    jitter = DelayModel.jitter(0.02, 0.12, seed=9)
+    rng = np.random.default_rng(4)
+    sequence = DelayModel.sequence(rng.integers(1, 13, n) / rate, tau_min=0.01, tau_max=0.12)
+    monkeypatch.setattr(_engine, "SLICE_SAMPLES", 150)  # the schedule is carried across slices
+    for model in (jitter, sequence):
+        delays = model.samples(rate, 0, n)
+        ref = reference_loop(
+            paper.SPACECRAFT.inertia,
+            gains,
+            x0,
+            rate=rate,
+            t_final=t_final,
+            delta=0.1,
+            delays=delays,
+            history=12,
+            sensors=sensor,
+        )
+        assert np.any(np.diff(ref.used) == 0) and np.any(np.diff(ref.used) > 1)  # held and skipped measurements
+        assert np.sum(ref.logic_switch_count) >= 2
+        for i in range(len(x0)):
+            run = simulate(
+                paper.SPACECRAFT,
+                gains,
+                x0[i],
+                tau=0.12,
+                rate=rate,
+                rule=Hysteretic(0.1),
+                t_final=t_final,
+                sensor=sensor,
+                delay=model,
+            )
+            assert run.switch_indices.tolist() == ref.logic_switch_samples(i).tolist()
+            assert np.max(np.abs(ref.sigma[i] - run.sigma)) < 1e-12
+            assert np.max(np.abs(ref.u_applied[i] - run.u)) < 1e-12
+
+
+def test_varying_delay_refuses_bad_input():
+    common = dict(rate=100.0, t_final=1.0, rule=Hysteretic(0.1))
+    x0 = paper.INITIAL_STATE
+    with pytest.raises(SpecificationError, match="tau_max"):
+        simulate(paper.SPACECRAFT, paper.GAIN, x0, tau=0.1, delay=DelayModel.jitter(0.01, 0.2), **common)
+    with pytest.raises(SpecificationError, match="tau_min"):
+        simulate(paper.SPACECRAFT, paper.GAIN, x0, tau=0.2, delay=DelayModel.jitter(0.0, 0.2), **common)
+    with pytest.raises(DimensionError, match="delays"):
+        short = DelayModel.sequence(np.full(50, 0.02), tau_min=0.01, tau_max=0.02)
+        simulate(paper.SPACECRAFT, paper.GAIN, x0, tau=0.02, delay=short, **common)
+    with pytest.raises(SpecificationError, match="flight loop only"):
+        simulate(
+            paper.SPACECRAFT,
+            paper.GAIN,
+            x0,
+            tau=0.2,
+            delay=DelayModel.jitter(0.01, 0.2),
+            rate=100.0,
+            t_final=1.0,
+            rule=OnCurrent(),
+        )

@@ -21,7 +21,7 @@
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
-    const casadi_real* noise, long long noise_stride, long long k0, long long k1,
+    const casadi_real* noise, long long noise_stride, const long long* used, long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
     casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
@@ -69,6 +69,11 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
       arg[3] = history;
     } else {
       arg[3] = k < d ? history + history_stride * k : ring + 6 * delayed_slot;
+    }
+    if (used) {
+      /* a time-varying delay: the newest arrived measurement j*(k) in [k - d, k - 1] (d = d_max) */
+      long long j = used[k - k0];
+      arg[3] = j < 0 ? history + history_stride * (j + d) : ring + 6 * (j % ring_size);
     }
     res[0] = next;
     res[1] = next + MRPCTL_X;

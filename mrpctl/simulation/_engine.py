@@ -31,7 +31,15 @@ import numpy as np
 
 from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
 from mrpctl.errors import CodegenError
-from mrpctl.flight import FLIGHT_MEMORY_SIZE, NOISE_SIZE, Hysteretic, Saturation, SensorModel
+from mrpctl.flight import (
+    FLIGHT_MEMORY_SIZE,
+    NOISE_SIZE,
+    DelayModel,
+    Hysteretic,
+    Saturation,
+    SensorModel,
+    newest_arrived_slice,
+)
 from mrpctl.loop import core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.simulation._stats import (
@@ -240,7 +248,8 @@ class Engine:
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 6
-                + [ctypes.c_longlong] * 4
+                + [ctypes.c_longlong, ctypes.c_void_p]
+                + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 3
             )
@@ -288,6 +297,8 @@ class Engine:
         stop: Callable[[int], bool] | None = None,
         flight_options: np.ndarray | None = None,
         sensor: SensorModel | None = None,
+        delay: DelayModel | None = None,
+        rate: float = 1.0,
     ) -> RunOutput:
         """One run of n samples, slice by slice.
 
@@ -313,6 +324,10 @@ class Engine:
             The flight sample's noise: θ_k, η_k of each slice's samples are generated in
             NumPy (:meth:`SensorModel.noise`, slice independent) and handed to the driver;
             its gyro bias is in ``flight_options``. None: no noise.
+        delay, rate : DelayModel, float, optional
+            A time-varying delay (d_max = this engine's d, d_min >= 1) at ``rate`` (Hz): the
+            newest-arrived index j*(k) of each slice is computed in NumPy
+            (:func:`~mrpctl.flight.newest_arrived_slice`) and handed to the driver.
         """
         state = workspace.state
         history = np.ascontiguousarray(history, dtype=float)
@@ -343,6 +358,8 @@ class Engine:
         if keep == 1 and measurements is not None and not self.flight:
             ring = measurements  # every sample kept: m_{k-d} is read back from the result (no copy)
         step = slice_samples(self.substeps)
+        newest = -1 - self.d
+        schedule: np.ndarray | None = None
         k = 0
         diverged = memory_end + S_DIVERGED
         while k < n:
@@ -352,6 +369,9 @@ class Engine:
                 assert sensor is not None
                 noise = np.ascontiguousarray(np.hstack(sensor.noise(k, k1)))
                 noise_stride = NOISE_SIZE
+            if delay is not None:
+                schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
+                newest = int(schedule[-1])
             done = self._run_c(
                 address(state),
                 address(history),
@@ -363,6 +383,7 @@ class Engine:
                 address(options) if self.flight else None,
                 address(noise),
                 noise_stride,
+                None if schedule is None else schedule.ctypes.data,
                 k,
                 k1,
                 self.d,

@@ -17,7 +17,7 @@ import numpy as np
 from mrpctl._compile import find_compiler
 from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
-from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, Saturation, SensorModel
+from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.simulation._engine import STATE_BLOCK, RunOutput, engine, rule_key, slice_samples
@@ -144,6 +144,32 @@ def _flight_options(
     return options, Saturation.SCALE if actuator is None else actuator.mode
 
 
+def _varying_delay(rule: Any, delay: Any, d: int, rate: float, n: int) -> DelayModel | None:
+    """The delay model the engine schedules (None: the constant delay d)."""
+    if delay is None:
+        return None
+    if not isinstance(delay, DelayModel):
+        raise SpecificationError(f"delay must be a mrpctl.flight.DelayModel or None, got {delay!r}")
+    if not isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            f"delay: a time-varying delay runs in the flight loop only (rule=Hysteretic), got {rule}"
+        )
+    low, high = delay.bounds(rate)
+    if high != d:
+        raise SpecificationError(
+            f"delay: tau must equal delay.tau_max (the history depth): tau is {d} periods, tau_max {high} periods"
+        )
+    if delay.kind is DelayKind.CONSTANT:
+        return None
+    if low < 1:
+        raise SpecificationError(
+            f"delay: tau_min must be >= 1/rate = {1.0 / rate:g} s in the engine (a measurement is used one period "
+            f"after it is taken at the earliest), got {delay.tau_min:g} s"
+        )
+    delay.check_horizon(n)
+    return delay
+
+
 # ======================================================================= simulate
 def simulate(
     spacecraft: Spacecraft,
@@ -162,6 +188,7 @@ def simulate(
     actuator: ActuatorModel | None = None,
     disturbance: Any = None,
     sensor: SensorModel | None = None,
+    delay: DelayModel | None = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -212,6 +239,10 @@ def simulate(
         (``rule=Hysteretic(...)`` only); the noise of each slice of samples is generated in
         NumPy from (seed, sample index), so a run is the same however it is sliced. The
         result's ``sigma``, ``omega`` stay the true (bookkept) state.
+    delay : mrpctl.flight.DelayModel, keyword-only
+        A time-varying delay (``rule=Hysteretic(...)`` only): a sequence of n delays or seeded
+        jitter in [tau_min, tau_max], with ``tau`` = tau_max (the history depth) and
+        tau_min >= 1/rate; the controller uses the newest measurement that has arrived.
 
     Returns
     -------
@@ -236,6 +267,7 @@ def simulate(
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
     options, saturation = _flight_options(rule, actuator, disturbance, sensor)
+    varying = _varying_delay(rule, delay, d, rate, n)
     _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps), limit, t_final=t_final, keep_every=keep)
 
     found = engine(spacecraft, rule, d, 1.0 / rate, substeps, saturation)
@@ -260,6 +292,8 @@ def simulate(
         stop=stop,
         flight_options=options,
         sensor=sensor,
+        delay=varying,
+        rate=rate,
     )
     common = dict(
         spacecraft=spacecraft,

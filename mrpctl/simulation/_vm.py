@@ -128,11 +128,15 @@ class VirtualMachineEngine:
         stop: Callable[[int], bool] | None = None,
         flight_options: np.ndarray | None = None,
         sensor: Any = None,
+        delay: Any = None,
+        rate: float = 1.0,
     ) -> RunOutput:
         """As :meth:`mrpctl.simulation._engine.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
         inertia = inertia_values(spacecraft, self.inertia)
         constants = list(inertia)
+        if delay is not None:
+            raise CodegenError("a time-varying delay needs the compiled engine (a C compiler)")
         if self.flight and sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0):
             raise CodegenError("sensor noise in the flight loop needs the compiled engine (a C compiler)")
         if self.flight:
