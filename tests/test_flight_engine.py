@@ -371,6 +371,7 @@ def test_simulate_batch_with_every_option_equals_simulate():
         actuator=ActuatorModel([0.5, 0.4, 0.6], norm_max=0.7, mode=Saturation.CLIP),
         disturbance=[0.01, 0.0, -0.02],
         sensor=SensorModel(attitude_noise=0.02, rate_noise=1e-3, gyro_bias=[1e-3, 0.0, 0.0], seed=4),
+        delay=DelayModel.jitter(0.01, 0.05, seed=3),
     )
     common = dict(tau=0.05, rate=100.0, t_final=8.0)
     rules = [Hysteretic(0.0), Hysteretic(0.1), Hysteretic(ALPHA_12)]

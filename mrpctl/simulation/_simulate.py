@@ -341,6 +341,7 @@ def simulate_batch(
     actuator: ActuatorModel | None = None,
     disturbance: Any = None,
     sensor: SensorModel | None = None,
+    delay: DelayModel | None = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -385,7 +386,7 @@ def simulate_batch(
         ``progress(samples_done, samples_total)``, called from the calling thread while
         the workers run; an exception raised by it stops the batch and propagates.
 
-    actuator, disturbance, sensor : keyword-only
+    actuator, disturbance, sensor, delay : keyword-only
         The flight loop's models (as in :func:`simulate`), shared by every run; each rule
         must then be a :class:`mrpctl.flight.Hysteretic`. Flight runs take the scalar engine.
 
@@ -447,6 +448,7 @@ def simulate_batch(
     options, saturation = None, Saturation.SCALE
     for one in rules:  # the flight options are shared by the runs; every rule must be the flight rule
         options, saturation = _flight_options(one, actuator, disturbance, sensor)
+    varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
 
     stats = np.full((n_runs, STATS_SIZE), np.nan)
     scalar_runs = list(range(n_runs))
@@ -513,6 +515,8 @@ def simulate_batch(
                 stop=stop,
                 flight_options=options,
                 sensor=sensor,
+                delay=varying[i],
+                rate=rate,
             )
             previous += n
             done_samples[slot] = previous
