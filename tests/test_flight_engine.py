@@ -50,9 +50,9 @@ def test_delta_zero_equals_on_current_bit_for_bit():
 
 @pytest.mark.parametrize("delta", [0.0, 0.05, ALPHA_12])
 def test_engine_equals_the_reference_loop_on_the_paper_case(delta):
-    run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.5, rule=Hysteretic(delta), t_final=2.0)
+    run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.5, rule=Hysteretic(delta), t_final=1.5)
     ref = reference_loop(
-        paper.SPACECRAFT.inertia, paper.GAIN, paper.INITIAL_STATE, rate=1000.0, t_final=2.0, delta=delta, delays=PAPER_D
+        paper.SPACECRAFT.inertia, paper.GAIN, paper.INITIAL_STATE, rate=1000.0, t_final=1.5, delta=delta, delays=PAPER_D
     )
     assert run.switch_indices.tolist() == ref.logic_switch_samples().tolist()
     assert run.switch_count == ref.logic_switch_count[0]
@@ -274,7 +274,7 @@ def test_noise_on_the_paper_case_equals_the_reference_loop():
             paper.INITIAL_STATE,
             tau=0.5,
             rule=Hysteretic(delta),
-            t_final=3.0,
+            t_final=2.0,
             sensor=NOISY,
         )
         ref = reference_loop(
@@ -282,7 +282,7 @@ def test_noise_on_the_paper_case_equals_the_reference_loop():
             paper.GAIN,
             paper.INITIAL_STATE,
             rate=1000.0,
-            t_final=3.0,
+            t_final=2.0,
             delta=delta,
             delays=PAPER_D,
             sensors=NOISY,
