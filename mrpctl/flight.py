@@ -26,7 +26,7 @@ import enum
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Any
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -34,9 +34,13 @@ import numpy as np
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.mrp import skew_expr
+from mrpctl.switching import SwitchingRule
 
 __all__ = [
+    "FLIGHT_CONSTANTS_SIZE",
+    "FLIGHT_MEMORY_SIZE",
     "NOISE_BLOCK",
+    "NOISE_SIZE",
     "ActuatorModel",
     "DelayKind",
     "DelayModel",
@@ -49,6 +53,7 @@ __all__ = [
     "hysteresis_function",
     "measurement_function",
     "newest_arrived",
+    "newest_arrived_slice",
     "quaternion_from_mrp_expr",
     "rotation_vector_to_mrp_expr",
     "selection_function",
@@ -58,6 +63,13 @@ __all__ = [
 #: Samples per block of the counter-based random streams: the generator of block b is keyed by
 #: (seed, stream, b), so sample k's value never depends on the slice it was asked for in.
 NOISE_BLOCK = 4096
+#: The memory a controller-side rule carries in the compiled engine: (h, c, σ̃_prev) and the
+#: actuator accumulators (saturated samples, peak commanded |u_c,i| per axis, peak |u_c|).
+FLIGHT_MEMORY_SIZE = 10
+#: The flight sample's run-time constant input ``flight``: (u_max (3), u_norm, w (3), gyro bias b (3)).
+FLIGHT_CONSTANTS_SIZE = 10
+#: The flight sample's per-sample input ``noise``: (θ_k (3), η_k (3)).
+NOISE_SIZE = 6
 _STREAM_ATTITUDE, _STREAM_RATE, _STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 _SMALL_ANGLE = 1e-4
@@ -399,6 +411,28 @@ def newest_arrived(delays: Any, *, history: int) -> tuple[np.ndarray, np.ndarray
     return readonly(used, np.int64), readonly(k - used, np.int64)
 
 
+def newest_arrived_slice(
+    model: DelayModel, rate: float, depth: int, k0: int, k1: int, newest_before: int
+) -> np.ndarray:
+    """j*(k) of :func:`newest_arrived` for the samples k0 … k1 − 1 only, in bounded memory.
+
+    ``newest_before`` is j*(k0 − 1) (−1 − ``depth`` for k0 = 0). Only the measurements
+    j ∈ [k0 − depth, k1) can arrive in the slice, so the delays of those are generated
+    (:meth:`DelayModel.samples`, slice independent). Concatenating the slices of any slicing
+    gives :func:`newest_arrived` of the whole horizon (int64).
+    """
+    start, stop = _slice(k0, k1)
+    depth = integer("depth", depth, minimum=0)
+    low = max(0, start - depth)
+    j = np.arange(low, stop, dtype=np.int64)
+    arrival = j + model.samples(rate, low, stop)
+    inside = (arrival >= start) & (arrival < stop)
+    best = np.full(stop - start, int(newest_before), dtype=np.int64)
+    np.maximum.at(best, arrival[inside] - start, j[inside])
+    k = np.arange(start, stop, dtype=np.int64)
+    return np.maximum(np.maximum.accumulate(best), np.minimum(k - depth, -1))
+
+
 @dataclass(frozen=True, eq=False)
 class Disturbance:
     """External torque w in body axes (N m) added to the torque the plant sees: constant or per sample.
@@ -447,7 +481,7 @@ class Disturbance:
 
 
 @dataclass(frozen=True)
-class Hysteretic:
+class Hysteretic(SwitchingRule):
     """Controller-side MRP set selection with hysteresis (Mayhew, Sanfelice and Teel 2011).
 
     The controller keeps a logic variable h ∈ {−1, +1}. On the delayed, noisy measured
@@ -458,11 +492,20 @@ class Hysteretic:
     and |q̇₀| <= |ω|/2, so switches are at least 4δ/max|ω| apart; attitude noise that moves
     q₀ by less than δ never causes a switch.
 
+    As a rule of :func:`mrpctl.simulate` (``rule=Hysteretic(delta)``) it runs in the compiled
+    flight sample (:func:`mrpctl.loop.flight_core_function`): the plant's MRP is kept in the
+    short set for bookkeeping only (no physical effect), the controller's h, c and previous
+    measurement are the rule memory, u = K [σ_c; ω(t − τ)/4], and the run's switches are the
+    logic switches of h. Its :meth:`expressions` as a plain :class:`SwitchingRule` are that
+    bookkeeping only (the ``OnCurrent`` test); the selection is in the flight sample.
+
     Parameters
     ----------
     delta : float
         Hysteresis half-width δ ∈ [0, 1) (dimensionless, on q₀). Default 0.
     """
+
+    label: ClassVar[str] = "hysteretic"
 
     delta: float = 0.0
 
@@ -484,6 +527,14 @@ class Hysteretic:
     def alpha(self) -> float:
         """α = √((1 + δ)/(1 − δ)), the bound on |σ_c| (the MRP threshold at which h flips)."""
         return math.sqrt((1.0 + self.delta) / (1.0 - self.delta))
+
+    def parameters(self) -> tuple[float]:
+        """(δ,): the run-time parameter of the flight sample."""
+        return (self.delta,)
+
+    def _condition(self, sigma: Any, sigma_meas: Any, memory: Any, parameters: Any, d: int) -> Any:
+        # The plant bookkeeping (no physical effect): the OnCurrent test.
+        return ca.dot(sigma, sigma) >= 1
 
     def min_dwell_time(self, omega_max: float) -> float:
         """4δ/ω_max (s): the shortest time between two switches when |ω| <= ω_max (rad/s)."""

@@ -27,9 +27,20 @@ import numpy as np
 
 from mrpctl._validation import check_spacecraft, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import (
+    FLIGHT_CONSTANTS_SIZE,
+    FLIGHT_MEMORY_SIZE,
+    NOISE_SIZE,
+    Hysteretic,
+    Saturation,
+    actuator_function,
+    measurement_function,
+    selection_function,
+    short_expr,
+)
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, gain_matrix, plant_model
 from mrpctl.spacecraft import Spacecraft
-from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, SwitchingRule
+from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
 
 __all__ = [
     "MAX_SUBSTEPS",
@@ -40,6 +51,7 @@ __all__ = [
     "closed_loop_functions",
     "core_function",
     "delay_samples",
+    "flight_core_function",
     "inertia_input",
     "inertia_values",
     "step_function",
@@ -171,6 +183,10 @@ def core_function(
     ``core(x, memory, x_delayed, K, parameters) -> (x_next, memory_next, x_meas, u, switched)``;
     with ``inertia``, J and J⁻¹ are two more inputs (``..., parameters, J, J_inv``).
     """
+    if isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            "rule: Hysteretic is a controller-side rule; build its sample with flight_core_function"
+        )
     step = step_function(spacecraft, period, substeps, inertia=inertia)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", MEMORY_SIZE)
@@ -188,6 +204,88 @@ def core_function(
         [x_next, memory_next, x_meas, u, switched],
         ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []),
         ["x_next", "memory_next", "x_meas", "u", "switched"],
+    )
+
+
+def flight_core_function(
+    spacecraft: Spacecraft,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+    saturation: Saturation = Saturation.SCALE,
+    sensor: bool = True,
+) -> ca.Function:
+    """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
+
+    ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight, noise) ->
+    (x_next, memory_next, x_meas, u, switched, measurement)``:
+    the ports of :func:`core_function` with memory (h, c, σ̃_prev, n_sat, peak |u_c,i| (3), peak |u_c|)
+    of :data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`, parameters (δ,), the run-time constants
+    ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) (N m, rad/s; inf: no limit), and per
+    sample ``noise`` = (θ_k, η_k) (rad, rad/s). Without ``sensor`` the ``noise`` input and the
+    ``measurement`` output are left out and the measurement is the bookkept state (the
+    virtual machine's form). At sample k:
+
+    1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
+       no physical effect): x_meas, the true state recorded in the result;
+    2. the sensor (:func:`~mrpctl.flight.measurement_function`): m_k = [σ̃_k; ω̃_k/4] (the
+       ring's entry; x_meas bit for bit without noise and bias);
+    3. the controller reads the delayed measurement m_{k−d} (m_k when d = 0), takes its short
+       set σ̃ and applies :func:`~mrpctl.flight.selection_function` with its memory
+       (h, c, σ̃_prev) and δ: σ_c, and ``switched`` = 1.0 when h flipped (the run's switches);
+    4. u_c = K [σ_c; ω̃_{k−d}/4]; the actuator (:func:`~mrpctl.flight.actuator_function` of
+       ``saturation``) gives the applied torque u (the ``u`` output), and u + w is held over
+       the period while the plant is integrated by RK4.
+
+    With δ = 0, no limit (inf) and w = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s
+    K m_{k−d} bit for bit.
+    """
+    step = step_function(spacecraft, period, substeps, inertia=inertia)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
+    noise = ca.SX.sym("noise", NOISE_SIZE)
+    x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
+    measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
+    seen = x_delayed if d > 0 else measured
+    sigma_seen = short_expr(seen[0:3])
+    h_next, c_next, sigma_c, switched = selection_function()(
+        memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
+    )
+    command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+    x_next = step(x_meas, u_plant, *extra)
+    size = ca.fabs(command)
+    memory_next = ca.vertcat(
+        h_next,
+        c_next,
+        sigma_seen,
+        memory[5] + saturated,
+        ca.fmax(memory[6:9], size),
+        ca.fmax(memory[9], ca.norm_2(command)),
+    )
+    names = ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"]
+    outputs = ["x_next", "memory_next", "x_meas", "u", "switched"]
+    if not sensor:
+        return ca.Function(
+            "core",
+            [x, memory, x_delayed, gain, parameters, *extra, flight],
+            [x_next, memory_next, x_meas, u, switched],
+            names,
+            outputs,
+        )
+    return ca.Function(
+        "core",
+        [x, memory, x_delayed, gain, parameters, *extra, flight, noise],
+        [x_next, memory_next, x_meas, u, switched, measured],
+        [*names, "noise"],
+        [*outputs, "measurement"],
     )
 
 
@@ -310,6 +408,10 @@ def closed_loop_functions(
     spacecraft = check_spacecraft(spacecraft)
     gain = gain_matrix(K)
     rule = check_rule(rule)
+    if isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            "rule: the controller-side rule Hysteretic runs in mrpctl.simulate only; it cannot be exported yet"
+        )
     d = delay_samples(tau, rate)
     rate = float(rate)
     substeps = check_substeps(substeps)

@@ -1,7 +1,7 @@
 /* mrpctl: the horizon driver appended to CasADi's C code of one engine sample.
  *
  * MRPCTL_SAMPLE is the generated sample function
- *   sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv])
+ *   sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv][, flight])
  *     -> (x_next, memory_next, stats_next, x_meas, u, switched)
  * and MRPCTL_RUN the exported driver; both, and the sizes below, are #defined by
  * mrpctl/simulation/_engine.py in front of this file.
@@ -20,7 +20,8 @@
  */
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
-    const casadi_real* inertia, const casadi_real* inertia_inverse, long long k0, long long k1,
+    const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
+    const casadi_real* noise, long long noise_stride, const long long* used, long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
     casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
@@ -28,7 +29,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   casadi_int iw[MRPCTL_SZ_IW];
   casadi_real w[MRPCTL_SZ_W];
   casadi_real buffers[2][MRPCTL_STATE];
-  casadi_real u_scratch[3], switched_scratch[1];
+  casadi_real u_scratch[3], switched_scratch[1], x_scratch[6];
   long long k, slot, delayed_slot = 0, phase = 1, kept_column = 0;
   int i, now_index = 0;
   for (i = 0; i < MRPCTL_STATE; ++i) buffers[0][i] = state[i];
@@ -47,6 +48,16 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   (void)inertia;
   (void)inertia_inverse;
 #endif
+#if MRPCTL_FLIGHT_INPUT
+  arg[6 + 2 * MRPCTL_INERTIA_INPUT] = flight;
+#else
+  (void)flight;
+#endif
+#if !MRPCTL_SENSOR
+  (void)noise;
+  (void)noise_stride;
+  (void)x_scratch;
+#endif
   for (k = k0; k < k1; ++k) {
     casadi_real* now = buffers[now_index];
     casadi_real* next = buffers[now_index ^ 1];
@@ -59,15 +70,27 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     } else {
       arg[3] = k < d ? history + history_stride * k : ring + 6 * delayed_slot;
     }
+    if (used) {
+      /* a time-varying delay: the newest arrived measurement j*(k) in [k - d, k - 1] (d = d_max) */
+      long long j = used[k - k0];
+      arg[3] = j < 0 ? history + history_stride * (j + d) : ring + 6 * (j % ring_size);
+    }
     res[0] = next;
     res[1] = next + MRPCTL_X;
     res[2] = next + MRPCTL_X_MEMORY;
+#if MRPCTL_SENSOR
+    /* the flight sample: the sensor's measurement goes to the ring, the true state to the kept array */
+    arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise + noise_stride * (k - k0);
+    res[3] = kept ? kept_measurements + 6 * kept_column : x_scratch;
+    res[6] = ring + 6 * slot;
+#else
     res[3] = ring + 6 * slot;
+#endif
     res[4] = kept ? kept_u + 3 * kept_column : u_scratch;
     res[5] = switched ? switched + (k - k0) : switched_scratch;
     if (MRPCTL_SAMPLE(arg, res, iw, w, 0)) return -1;
     if (kept) {
-      if (kept_measurements != ring)
+      if (!MRPCTL_SENSOR && kept_measurements != ring)
         for (i = 0; i < 6; ++i) kept_measurements[6 * kept_column + i] = ring[6 * slot + i];
       ++kept_column;
     }

@@ -31,7 +31,16 @@ import numpy as np
 
 from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
 from mrpctl.errors import CodegenError
-from mrpctl.loop import core_function, inertia_input, inertia_values
+from mrpctl.flight import (
+    FLIGHT_MEMORY_SIZE,
+    NOISE_SIZE,
+    DelayModel,
+    Hysteretic,
+    Saturation,
+    SensorModel,
+    newest_arrived_slice,
+)
+from mrpctl.loop import core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.simulation._stats import (
     DIVERGENCE_BOUND,
@@ -69,6 +78,27 @@ SLICE_SAMPLES = 2**16
 STATE_BLOCK = STATE_SIZE + MEMORY_SIZE + STATS_SIZE  # x, memory, stats: the driver's carried state
 
 
+def flight_memory(x0: np.ndarray, history: np.ndarray, d: int) -> np.ndarray:
+    """The flight sample's memory at k = 0: h = c = +1 and σ̃_prev the σ̃ the controller sees at k = 0.
+
+    That is short(σ) of the first history row for d > 0, the bookkept σ0 (shadow when
+    |σ0|² >= 1) for d = 0, so that the continuity test makes no flip at k = 0.
+    """
+    sigma = np.array(history[0][0:3] if d > 0 else x0[0:3], dtype=float)
+    squared = float(sigma @ sigma)
+    if squared > 1.0 or (d == 0 and squared >= 1.0):
+        sigma = -sigma / squared
+    memory = np.zeros(FLIGHT_MEMORY_SIZE)  # the actuator accumulators start at 0
+    memory[0:2] = 1.0
+    memory[2:5] = sigma
+    return memory
+
+
+#: The flight sample's constants without actuator limits or disturbance: u_max = u_norm = inf, w = 0.
+NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+_NO_NOISE = np.zeros(NOISE_SIZE)
+
+
 def slice_samples(substeps: int) -> int:
     """Samples per slice for ``substeps`` RK4 substeps (the work per slice stays about the same)."""
     return max(1, SLICE_SAMPLES // substeps)
@@ -81,13 +111,15 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     (x_next, memory_next, stats_next, x_meas, u, switched)``; J, J⁻¹ when ``core`` has them.
     """
     x = ca.SX.sym("x", STATE_SIZE)
-    memory = ca.SX.sym("memory", MEMORY_SIZE)
+    memory = ca.SX.sym("memory", core.size1_in(1))  # MEMORY_SIZE; FLIGHT_MEMORY_SIZE for the flight sample
     stats = ca.SX.sym("stats", STATS_SIZE)
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
     extra = [ca.SX.sym(core.name_in(i), core.sparsity_in(i)) for i in range(5, core.n_in())]
-    x_raw, memory_rule, x_meas, u, switched = core(x, memory, x_delayed, gain, parameters, *extra)
+    outs = core(x, memory, x_delayed, gain, parameters, *extra)
+    x_raw, memory_rule, x_meas, u, switched = outs[0:5]
+    more, more_names = list(outs[5:]), [core.name_out(i) for i in range(5, core.n_out())]  # the flight measurement
 
     k = stats[S_K]
     counted = ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
@@ -125,14 +157,15 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     return ca.Function(
         name,
         [x, memory, stats, x_delayed, gain, parameters, *extra],
-        [x_next, memory_next, stats_next, x_meas, u, switched],
+        [x_next, memory_next, stats_next, x_meas, u, switched, *more],
         ["x", "memory", "stats", "x_delayed", "K", "parameters"] + [core.name_in(i) for i in range(5, core.n_in())],
-        ["x_next", "memory_next", "stats_next", "x_meas", "u", "switched"],
+        ["x_next", "memory_next", "stats_next", "x_meas", "u", "switched", *more_names],
     )
 
 
 def _driver_source(sample: ca.Function) -> str:
     """``_driver.c`` with the #defines that bind it to ``sample``."""
+    memory_size = sample.size1_in(1)
     defines = {
         "MRPCTL_SAMPLE": sample.name(),
         "MRPCTL_RUN": sample.name() + "_run",
@@ -140,11 +173,13 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_SZ_RES": max(sample.sz_res(), 6),
         "MRPCTL_SZ_IW": max(sample.sz_iw(), 1),
         "MRPCTL_SZ_W": max(sample.sz_w(), 1),
-        "MRPCTL_STATE": STATE_BLOCK,
+        "MRPCTL_STATE": STATE_SIZE + memory_size + STATS_SIZE,
         "MRPCTL_X": STATE_SIZE,
-        "MRPCTL_X_MEMORY": STATE_SIZE + MEMORY_SIZE,
+        "MRPCTL_X_MEMORY": STATE_SIZE + memory_size,
         "MRPCTL_S_DIVERGED": S_DIVERGED,
-        "MRPCTL_INERTIA_INPUT": int(sample.n_in() > 6),
+        "MRPCTL_INERTIA_INPUT": int("J" in sample.name_in()),
+        "MRPCTL_FLIGHT_INPUT": int("flight" in sample.name_in()),
+        "MRPCTL_SENSOR": int("noise" in sample.name_in()),
     }
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
     body = resources.files("mrpctl.simulation").joinpath("_driver.c").read_text(encoding="utf-8")
@@ -169,6 +204,7 @@ class RunOutput:
     measurements: np.ndarray | None
     u: np.ndarray | None
     switch_indices: np.ndarray | None
+    memory: np.ndarray | None = None  # the rule memory after the run (the flight accumulators)
 
 
 class Engine:
@@ -178,12 +214,28 @@ class Engine:
     :class:`~mrpctl.loop.InertiaInput` layout (diagonal, or full).
     """
 
-    def __init__(self, spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> None:
+    def __init__(
+        self,
+        spacecraft: Spacecraft,
+        rule: SwitchingRule,
+        d: int,
+        period: float,
+        substeps: int,
+        saturation: Saturation = Saturation.SCALE,
+    ) -> None:
         self.d = d
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
-        core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
+        self.flight = isinstance(rule, Hysteretic)
+        self._structure = (spacecraft, d, period, substeps, saturation)
+        if self.flight:
+            core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation)
+        else:
+            core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
+        self.memory_size = core.size1_in(1)
         label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
+        if self.flight:
+            label += f"_{saturation.value}"
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
         self.compiled: CompiledFunction = compile_function(
             self.sample, flags=SIMULATION_FLAGS, appendix=_driver_source(self.sample)
@@ -195,11 +247,22 @@ class Engine:
             self._run_c.restype = ctypes.c_longlong
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
-                + [ctypes.c_void_p] * 4
+                + [ctypes.c_void_p] * 6
+                + [ctypes.c_longlong, ctypes.c_void_p]
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 3
             )
+
+    def virtual_machine_sample(self) -> ca.Function:
+        """The sample for the virtual machine: the flight sample without its per-sample sensor ports."""
+        if not self.flight:
+            return self.sample
+        spacecraft, d, period, substeps, saturation = self._structure
+        core = flight_core_function(
+            spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation, sensor=False
+        )
+        return engine_sample(core, d, self.sample.name() + "_vm")
 
     @property
     def compiled_code(self) -> bool:
@@ -213,7 +276,7 @@ class Engine:
     def workspace(self, n: int, switches: bool) -> Workspace:
         """Buffers for runs of n samples (``switches``: collect switch instants)."""
         return Workspace(
-            state=np.empty(STATE_BLOCK),
+            state=np.empty(STATE_SIZE + self.memory_size + STATS_SIZE),
             ring=np.empty((self.ring_size(n), STATE_SIZE)),
             switched=np.empty(min(slice_samples(self.substeps), n)) if switches else None,
         )
@@ -232,6 +295,10 @@ class Engine:
         workspace: Workspace,
         switch_limit: int = 0,
         stop: Callable[[int], bool] | None = None,
+        flight_options: np.ndarray | None = None,
+        sensor: SensorModel | None = None,
+        delay: DelayModel | None = None,
+        rate: float = 1.0,
     ) -> RunOutput:
         """One run of n samples, slice by slice.
 
@@ -250,18 +317,31 @@ class Engine:
         stop : callable, optional
             Called after each slice with the samples done; True stops the run (it then
             returns what it has). KeyboardInterrupt raised by it propagates.
+        flight_options : numpy.ndarray, optional
+            The flight sample's constants (u_max (3), u_norm, w (3)); default
+            :data:`NO_FLIGHT_OPTIONS`. Ignored by the other engines.
+        sensor : SensorModel, optional
+            The flight sample's noise: θ_k, η_k of each slice's samples are generated in
+            NumPy (:meth:`SensorModel.noise`, slice independent) and handed to the driver;
+            its gyro bias is in ``flight_options``. None: no noise.
+        delay, rate : DelayModel, float, optional
+            A time-varying delay (d_max = this engine's d, d_min >= 1) at ``rate`` (Hz): the
+            newest-arrived index j*(k) of each slice is computed in NumPy
+            (:func:`~mrpctl.flight.newest_arrived_slice`) and handed to the driver.
         """
         state = workspace.state
-        state[:STATE_SIZE] = x0
-        state[STATE_SIZE] = memory0
-        state[STATE_SIZE + MEMORY_SIZE :] = initial_stats(n)
         history = np.ascontiguousarray(history, dtype=float)
+        memory_end = STATE_SIZE + self.memory_size
+        state[:STATE_SIZE] = x0
+        state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
+        state[memory_end:] = initial_stats(n)
         history_stride = STATE_SIZE if history.shape[0] > 1 else 0
         gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
         parameters = np.ascontiguousarray(parameters, dtype=float)
         if inertia_input(spacecraft) is not self.inertia:
             raise ValueError(f"this engine takes a {self.inertia.value} inertia, got {spacecraft}")
         inertia, inertia_inverse = inertia_values(spacecraft, self.inertia)
+        options = np.ascontiguousarray(NO_FLIGHT_OPTIONS if flight_options is None else flight_options, dtype=float)
         if keep_every is None:
             measurements = u = None
             keep = 0
@@ -274,13 +354,24 @@ class Engine:
         indices: list[np.ndarray] = []
         stored = 0
         ring = workspace.ring
-        if keep == 1 and measurements is not None:
+        noisy = self.flight and sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
+        if keep == 1 and measurements is not None and not self.flight:
             ring = measurements  # every sample kept: m_{k-d} is read back from the result (no copy)
         step = slice_samples(self.substeps)
+        newest = -1 - self.d
+        schedule: np.ndarray | None = None
         k = 0
-        diverged = STATE_SIZE + MEMORY_SIZE + S_DIVERGED
+        diverged = memory_end + S_DIVERGED
         while k < n:
             k1 = min(k + step, n)
+            noise, noise_stride = _NO_NOISE, 0
+            if noisy:
+                assert sensor is not None
+                noise = np.ascontiguousarray(np.hstack(sensor.noise(k, k1)))
+                noise_stride = NOISE_SIZE
+            if delay is not None:
+                schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
+                newest = int(schedule[-1])
             done = self._run_c(
                 address(state),
                 address(history),
@@ -289,6 +380,10 @@ class Engine:
                 address(parameters),
                 address(inertia),
                 address(inertia_inverse),
+                address(options) if self.flight else None,
+                address(noise),
+                noise_stride,
+                None if schedule is None else schedule.ctypes.data,
                 k,
                 k1,
                 self.d,
@@ -313,11 +408,12 @@ class Engine:
                 break  # the driver stopped after the diverging sample
         switch_indices = np.concatenate(indices) if indices else np.zeros(0, np.int64)
         return RunOutput(
-            stats=state[STATE_SIZE + MEMORY_SIZE :].copy(),
+            stats=state[memory_end:].copy(),
             samples=k,
             measurements=measurements,
             u=u,
             switch_indices=switch_indices if switched is not None else None,
+            memory=state[STATE_SIZE:memory_end].copy(),
         )
 
 
@@ -331,7 +427,7 @@ def rule_key(rule: SwitchingRule, d: int) -> Any:
     """What distinguishes the engines of rules: the class for a built-in rule, else a
     digest of the rule's expressions with symbolic parameters (about 5 ms; memoised per
     rule value when the rule is hashable)."""
-    if type(rule) in _BUILT_IN_RULES:
+    if type(rule) in _BUILT_IN_RULES or type(rule) is Hysteretic:
         return type(rule)
     try:
         hash(rule)
@@ -359,17 +455,29 @@ _ENGINES: dict[tuple[Any, ...], Any] = {}
 _ENGINES_LOCK = threading.Lock()
 
 
-def engine(spacecraft: Spacecraft, rule: SwitchingRule, d: int, period: float, substeps: int) -> Any:
-    """The engine of this structure (compiled, or the virtual machine's without a compiler), cached."""
-    key = (inertia_input(spacecraft), type(rule), rule_key(rule, d), d, period, substeps)
+def engine(
+    spacecraft: Spacecraft,
+    rule: SwitchingRule,
+    d: int,
+    period: float,
+    substeps: int,
+    saturation: Saturation = Saturation.SCALE,
+) -> Any:
+    """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
+
+    ``saturation`` (the actuator's mode) is part of the structure of the flight sample only.
+    """
+    if not isinstance(rule, Hysteretic):
+        saturation = Saturation.SCALE
+    key = (inertia_input(spacecraft), type(rule), rule_key(rule, d), d, period, substeps, saturation)
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
-            found = Engine(spacecraft, rule, d, period, substeps)
+            found = Engine(spacecraft, rule, d, period, substeps, saturation)
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
 
-                found = VirtualMachineEngine(found.sample, d, found.inertia)
+                found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)
             _ENGINES[key] = found
         return found
 

@@ -17,6 +17,7 @@ import numpy as np
 from mrpctl._compile import find_compiler
 from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.simulation._engine import STATE_BLOCK, RunOutput, engine, rule_key, slice_samples
@@ -110,6 +111,65 @@ def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: 
     )
 
 
+def _flight_options(
+    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None
+) -> tuple[np.ndarray | None, Saturation]:
+    """The flight sample's constants (u_max (3), u_norm, w (3), bias (3)) and the saturation mode."""
+    if actuator is None and disturbance is None and sensor is None:
+        return None, Saturation.SCALE
+    if not isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            "actuator, disturbance, sensor: the actuator, disturbance and sensor models run in the flight loop only; "
+            f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
+        )
+    if actuator is not None and not isinstance(actuator, ActuatorModel):
+        raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel or None, got {actuator!r}")
+    if disturbance is not None and not isinstance(disturbance, Disturbance):
+        disturbance = Disturbance(disturbance)
+    if disturbance is not None and not disturbance.constant:
+        raise DimensionError(
+            f"disturbance: the engine takes a constant torque of shape (3,) so far, got {disturbance.torque.shape}"
+        )
+    if sensor is not None and not isinstance(sensor, SensorModel):
+        raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
+    options = np.zeros(10)
+    options[0:4] = np.inf
+    if sensor is not None:
+        options[7:10] = sensor.gyro_bias
+    if actuator is not None:
+        options[0:3] = actuator.u_max
+        options[3] = actuator.norm_limit
+    if disturbance is not None:
+        options[4:7] = disturbance.torque
+    return options, Saturation.SCALE if actuator is None else actuator.mode
+
+
+def _varying_delay(rule: Any, delay: Any, d: int, rate: float, n: int) -> DelayModel | None:
+    """The delay model the engine schedules (None: the constant delay d)."""
+    if delay is None:
+        return None
+    if not isinstance(delay, DelayModel):
+        raise SpecificationError(f"delay must be a mrpctl.flight.DelayModel or None, got {delay!r}")
+    if not isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            f"delay: a time-varying delay runs in the flight loop only (rule=Hysteretic), got {rule}"
+        )
+    low, high = delay.bounds(rate)
+    if high != d:
+        raise SpecificationError(
+            f"delay: tau must equal delay.tau_max (the history depth): tau is {d} periods, tau_max {high} periods"
+        )
+    if delay.kind is DelayKind.CONSTANT:
+        return None
+    if low < 1:
+        raise SpecificationError(
+            f"delay: tau_min must be >= 1/rate = {1.0 / rate:g} s in the engine (a measurement is used one period "
+            f"after it is taken at the earliest), got {delay.tau_min:g} s"
+        )
+    delay.check_horizon(n)
+    return delay
+
+
 # ======================================================================= simulate
 def simulate(
     spacecraft: Spacecraft,
@@ -125,6 +185,10 @@ def simulate(
     keep_every: int | None = 1,
     memory_limit: float | None = None,
     progress: Callable[[int, int], Any] | None = None,
+    actuator: ActuatorModel | None = None,
+    disturbance: Any = None,
+    sensor: SensorModel | None = None,
+    delay: DelayModel | None = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -163,6 +227,22 @@ def simulate(
     progress : callable, keyword-only
         ``progress(samples_done, n)`` after each slice; an exception raised by it
         (KeyboardInterrupt included) stops the run and propagates.
+    actuator : mrpctl.flight.ActuatorModel, keyword-only
+        Torque limits of the flight loop (``rule=Hysteretic(...)`` only); None: none. The
+        result's ``u`` is then the applied torque, ``saturated_fraction`` and
+        ``peak_command`` report the limits.
+    disturbance : mrpctl.flight.Disturbance or array_like (3,), keyword-only
+        A constant body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)``
+        only; a per-sample torque is not supported by the engine yet).
+    sensor : mrpctl.flight.SensorModel, keyword-only
+        Attitude and rate noise and gyro bias of the flight loop's measurements
+        (``rule=Hysteretic(...)`` only); the noise of each slice of samples is generated in
+        NumPy from (seed, sample index), so a run is the same however it is sliced. The
+        result's ``sigma``, ``omega`` stay the true (bookkept) state.
+    delay : mrpctl.flight.DelayModel, keyword-only
+        A time-varying delay (``rule=Hysteretic(...)`` only): a sequence of n delays or seeded
+        jitter in [tau_min, tau_max], with ``tau`` = tau_max (the history depth) and
+        tau_min >= 1/rate; the controller uses the newest measurement that has arrived.
 
     Returns
     -------
@@ -186,9 +266,11 @@ def simulate(
     keep = _keep_every(keep_every)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
+    options, saturation = _flight_options(rule, actuator, disturbance, sensor)
+    varying = _varying_delay(rule, delay, d, rate, n)
     _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps), limit, t_final=t_final, keep_every=keep)
 
-    found = engine(spacecraft, rule, d, 1.0 / rate, substeps)
+    found = engine(spacecraft, rule, d, 1.0 / rate, substeps, saturation)
     stop = None
     if progress is not None:
 
@@ -208,6 +290,10 @@ def simulate(
         workspace=found.workspace(n, switches=True),
         switch_limit=n if keep == 1 else SWITCH_LIMIT,
         stop=stop,
+        flight_options=options,
+        sensor=sensor,
+        delay=varying,
+        rate=rate,
     )
     common = dict(
         spacecraft=spacecraft,
@@ -252,6 +338,10 @@ def simulate_batch(
     threads: int | None = None,
     memory_limit: float | None = None,
     progress: Callable[[int, int], Any] | None = None,
+    actuator: ActuatorModel | None = None,
+    disturbance: Any = None,
+    sensor: SensorModel | None = None,
+    delay: DelayModel | None = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -295,6 +385,10 @@ def simulate_batch(
     progress : callable, keyword-only
         ``progress(samples_done, samples_total)``, called from the calling thread while
         the workers run; an exception raised by it stops the batch and propagates.
+
+    actuator, disturbance, sensor, delay : keyword-only
+        The flight loop's models (as in :func:`simulate`), shared by every run; each rule
+        must then be a :class:`mrpctl.flight.Hysteretic`. Flight runs take the scalar engine.
 
     Returns
     -------
@@ -351,6 +445,11 @@ def simulate_batch(
         estimate += lane_bytes(n_runs, max(samples_by_run), workers)
     _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
 
+    options, saturation = None, Saturation.SCALE
+    for one in rules:  # the flight options are shared by the runs; every rule must be the flight rule
+        options, saturation = _flight_options(one, actuator, disturbance, sensor)
+    varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
+
     stats = np.full((n_runs, STATS_SIZE), np.nan)
     scalar_runs = list(range(n_runs))
     if not trajectories and _LANES and find_compiler() is not None:
@@ -375,7 +474,7 @@ def simulate_batch(
     for i in scalar_runs:
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i])
         if key not in by_structure:
-            by_structure[key] = engine(crafts[i], rules[i], samples_by_run[i], 1.0 / rate, substeps)
+            by_structure[key] = engine(crafts[i], rules[i], samples_by_run[i], 1.0 / rate, substeps, saturation)
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
     stop_flag = threading.Event()
@@ -414,6 +513,10 @@ def simulate_batch(
                 workspace=space,
                 switch_limit=n if keep == 1 else SWITCH_LIMIT,
                 stop=stop,
+                flight_options=options,
+                sensor=sensor,
+                delay=varying[i],
+                rate=rate,
             )
             previous += n
             done_samples[slot] = previous
@@ -517,6 +620,9 @@ def _run_lanes(
     for members in groups.values():
         first = members[0]
         d = samples_by_run[first]
+        if isinstance(rules[first], Hysteretic):  # the flight sample has no lane form yet
+            left.extend(members)
+            continue
         try:
             lanes = _vectorize.lane_engine(crafts[first], rules[first], d, 1.0 / rate, substeps)
         except CodegenError as error:

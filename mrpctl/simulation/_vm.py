@@ -16,12 +16,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from mrpctl.errors import CodegenError
 from mrpctl.loop import InertiaInput, inertia_values
 from mrpctl.model import STATE_SIZE
-from mrpctl.simulation._engine import RunOutput, Workspace
+from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, RunOutput, Workspace, flight_memory
 from mrpctl.simulation._stats import S_DIVERGED, STATS_SIZE, initial_stats
 from mrpctl.spacecraft import Spacecraft
-from mrpctl.switching import MEMORY_SIZE
 
 _BLOCK_TARGET = 500  # samples per block (a whole number of chunks)
 
@@ -37,7 +37,7 @@ def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function
     chunks = max(1, round(_BLOCK_TARGET / length))
     samples = chunks * length
     x = ca.MX.sym("x", STATE_SIZE)
-    memory = ca.MX.sym("memory", MEMORY_SIZE)
+    memory = ca.MX.sym("memory", sample.size1_in(1))
     stats = ca.MX.sym("stats", STATS_SIZE)
     history = ca.MX.sym("history", STATE_SIZE, length)
     constants = _constant_symbols(sample)
@@ -88,8 +88,9 @@ class VirtualMachineEngine:
 
     compiled_code = False
 
-    def __init__(self, sample: ca.Function, d: int, inertia: InertiaInput) -> None:
+    def __init__(self, sample: ca.Function, d: int, inertia: InertiaInput, *, flight: bool = False) -> None:
         self.d = d
+        self.flight = flight
         self.inertia = inertia
         self.sample = sample
         self.history_columns = max(d, 1)
@@ -125,12 +126,24 @@ class VirtualMachineEngine:
         workspace: Workspace,
         switch_limit: int = 0,
         stop: Callable[[int], bool] | None = None,
+        flight_options: np.ndarray | None = None,
+        sensor: Any = None,
+        delay: Any = None,
+        rate: float = 1.0,
     ) -> RunOutput:
         """As :meth:`mrpctl.simulation._engine.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
         inertia = inertia_values(spacecraft, self.inertia)
+        constants = list(inertia)
+        if delay is not None:
+            raise CodegenError("a time-varying delay needs the compiled engine (a C compiler)")
+        if self.flight and sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0):
+            raise CodegenError("sensor noise in the flight loop needs the compiled engine (a C compiler)")
+        if self.flight:
+            memory0 = flight_memory(x0, np.ascontiguousarray(history, dtype=float), self.d)  # type: ignore[assignment]
+            constants.append(NO_FLIGHT_OPTIONS if flight_options is None else flight_options)
         out = self.horizon(self.blocks(n), trajectories)(
-            x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *inertia
+            x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *constants
         )
         if not trajectories:
             return self.output(np.asarray(out).ravel(), n, None, None, None, keep_every, workspace, switch_limit)
@@ -172,7 +185,7 @@ class VirtualMachineEngine:
 
     def _build_horizon(self, blocks: int, trajectories: bool) -> ca.Function:
         x = ca.MX.sym("x", STATE_SIZE)
-        memory = ca.MX.sym("memory", MEMORY_SIZE)
+        memory = ca.MX.sym("memory", self.sample.size1_in(1))
         stats = ca.MX.sym("stats", STATS_SIZE)
         history = ca.MX.sym("history", STATE_SIZE, self.history_columns)
         constants = _constant_symbols(self.sample)

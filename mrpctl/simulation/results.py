@@ -11,6 +11,7 @@ import numpy as np
 
 from mrpctl._validation import readonly, sealed
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import FLIGHT_MEMORY_SIZE
 from mrpctl.simulation._engine import RunOutput
 from mrpctl.simulation._stats import DIVERGENCE_BOUND, Metrics
 from mrpctl.spacecraft import Spacecraft
@@ -80,6 +81,12 @@ class SimulationResult(_Conversions):
         and the arrays end at the last good sample.
     samples : int
         Samples simulated (n, or up to the diverging one).
+    saturated_fraction : float or None
+        Flight loop (``rule=Hysteretic(...)``, compiled engine): the fraction of the samples at
+        which a torque limit acted; None otherwise.
+    peak_command : numpy.ndarray or None
+        Flight loop: (4,) max over the run of the *commanded* |u_c,i| per axis and of |u_c|
+        (N m), before the actuator limits; None otherwise.
     spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
         The inputs of the run.
     """
@@ -110,6 +117,8 @@ class SimulationResult(_Conversions):
     x0: np.ndarray = field(repr=False)
     t_final: float
     keep_every: int | None = 1
+    saturated_fraction: float | None = None
+    peak_command: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -152,8 +161,16 @@ class SimulationResult(_Conversions):
                 f"  sign flips   u1 {self.sign_flips[0]}, u2 {self.sign_flips[1]}, u3 {self.sign_flips[2]}",
                 f"  max |sigma|  {self.max_sigma:.6f}",
                 f"  peak torque  {self.peak_torque:.6g} N m",
-                f"  status       {status}",
             )
+            + (
+                ()
+                if self.saturated_fraction is None or self.peak_command is None
+                else (
+                    f"  actuator     saturated {100 * self.saturated_fraction:.3g} % of the samples, peak command "
+                    f"|u_c| {self.peak_command[3]:.6g} N m",
+                )
+            )
+            + (f"  status       {status}",)
         )
 
 
@@ -179,6 +196,9 @@ def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: d
         settle_index = metrics.unsettled_index + 1
         settling = settle_index / rate if settle_index < n else None
     first, last = metrics.first_switch_index, metrics.last_switch_index
+    flight: dict[str, Any] = {}
+    if output.memory is not None and output.memory.size == FLIGHT_MEMORY_SIZE:
+        flight = dict(saturated_fraction=float(output.memory[5]) / valid, peak_command=readonly(output.memory[6:10]))
     return SimulationResult(
         t=sealed(t),
         sigma=sealed(measurements[:, 0:3]),
@@ -197,6 +217,7 @@ def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: d
         samples=valid,
         keep_every=keep_every,
         **common,
+        **flight,
     )
 
 
