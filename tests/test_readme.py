@@ -36,7 +36,7 @@ def test_gallery_images_exist() -> None:
 
 def test_flown_loop_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
     """The "loop as flown" block runs as written and every certificate it prints is certified."""
-    section = README.split("## The loop as flown", 1)[1]
+    section = README.split("## The loop as flown: certify it", 1)[1]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     exec(compile(code, "README.md", "exec"), {})
     out = capsys.readouterr().out
@@ -44,3 +44,16 @@ def test_flown_loop_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
     assert len(heads) == 4 and "not certified" not in out and "failed" not in out
     assert ": stable (spectral radius" in heads[1]
     assert all(line.split(":")[-1].strip().startswith("certified") for line in (heads[0], heads[2], heads[3]))
+
+
+def test_flight_loop_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    """The "simulate it" block runs as written and prints what its comments say."""
+    section = README.split("## The loop as flown: simulate it", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    scope: dict[str, object] = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    out = capsys.readouterr().out
+    run = scope["run"]
+    assert run.switch_count == 1 and run.converged and "converged" in out  # type: ignore[attr-defined]
+    assert round(100 * run.saturated_fraction, 1) == 10.3  # type: ignore[attr-defined]
+    assert float(abs(run.u).max()) <= 20.0  # type: ignore[attr-defined]
