@@ -26,7 +26,12 @@ def kernel_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_there_are_notebooks() -> None:
-    assert {p.name for p in NOTEBOOKS} >= {"paper_tour.py", "design_small_satellite.py"}
+    assert {p.name for p in NOTEBOOKS} >= {
+        "paper_tour.py",
+        "design_small_satellite.py",
+        "monte_carlo_rules.py",
+        "flight_loop.py",
+    }
 
 
 @pytest.mark.slow
@@ -55,5 +60,11 @@ def test_notebook_executes_and_shows_figures(
     text = "".join(out.get("text", "") for out in outputs if out.output_type == "stream")
     if source.stem == "paper_tour":
         assert "exact delay margin 1.5555" in text and "DelayAware     2 switches" in text
+    elif source.stem == "monte_carlo_rules":
+        lines = {line.split()[0]: line for line in text.splitlines() if line.strip()}
+        assert "still switching   0%" in lines["DelayAware"] and "still switching   0%" not in lines["OnDelayed"]
+    elif source.stem == "flight_loop":
+        changes = int(text.split("no hysteresis:")[1].split()[0])
+        assert changes > 10 and "alpha = 1.2:   1 set change" in text
     else:
         assert "delay margin" in text and "at tau = 0.2 s: certified" in text and "status       converged" in text
