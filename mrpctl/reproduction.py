@@ -431,6 +431,8 @@ def _figures(results: dict[str, SimulationResult], out: Path) -> list[Path]:
                 switch_count=[r.switch_count for r in eps_runs],
                 settling_time=[np.nan if r.settling_time is None else r.settling_time for r in eps_runs],
                 converged=[r.converged for r in eps_runs],
+                diverged=[r.diverged for r in eps_runs],
+                max_sigma=[r.max_sigma for r in eps_runs],
                 parameter_label="boundary layer thickness eps (-)",
                 title="Boundary layer rule at tau = 0.5 s: effect of eps",
             ),
