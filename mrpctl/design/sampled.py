@@ -15,7 +15,9 @@ For a spacecraft with a gain that splits per axis, :func:`spacecraft_axes` retur
 
 from __future__ import annotations
 
+import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,6 +34,7 @@ from mrpctl.spacecraft import Spacecraft
 __all__ = [
     "MAX_LIFTED_SIZE",
     "SampledCertification",
+    "SampledCriterion",
     "SampledStability",
     "certify_sampled",
     "lifted_matrices",
@@ -298,39 +301,106 @@ def certify_sampled(
     )
 
 
+class SampledCriterion(enum.Enum):
+    """Which sampled-data certificate a :class:`SampledCertification` comes from."""
+
+    #: Input-delay approach: the interval criterion with the sawtooth τ(t) ∈ [d h, (d+1) h] (any d).
+    INPUT_DELAY = "input-delay"
+    #: Looped functional with Wirtinger's inequality (:mod:`mrpctl.design.looped`; d = 0, periodic).
+    LOOPED = "looped"
+
+
 @dataclass(frozen=True, eq=False)
 class SampledCertification:
-    """Result of :func:`max_certified_period`.
+    """Result of :func:`max_certified_period` and :func:`~mrpctl.design.looped.max_looped_period`.
 
     Attributes
     ----------
     status : SearchStatus
     order : int
+        Bessel-Legendre order of the integral inequality (1 for the looped criterion).
     delay_samples : int
     period : float
         Largest certified sampling period h (s); nan when none.
-    certificate : IntervalCertificate or None
+    certificate : IntervalCertificate, LoopedCertificate or None
     solves : int
     reason : str
+    criterion : SampledCriterion
     """
 
     status: SearchStatus
     order: int
     delay_samples: int
     period: float
-    certificate: IntervalCertificate | None = field(repr=False)
+    certificate: Any = field(repr=False)
     solves: int
     reason: str
+    criterion: SampledCriterion = SampledCriterion.INPUT_DELAY
 
     @property
     def certified(self) -> bool:
         return self.status is not SearchStatus.NOT_CERTIFIED
 
     def __str__(self) -> str:
-        head = f"{criterion_name(self.order)} + RCC, sampled (d = {self.delay_samples})"
+        if self.criterion is SampledCriterion.LOOPED:
+            head = "looped functional + Wirtinger, sampled (d = 0)"
+        else:
+            head = f"{criterion_name(self.order)} + RCC, sampled (d = {self.delay_samples})"
         if not self.certified:
             return f"{head}: {self.status.value} ({self.reason})"
         return f"{head}: certified for h <= {self.period:.6g} s ({self.solves} solves; {self.reason})"
+
+
+def _bisect_period(
+    a: np.ndarray,
+    b: np.ndarray,
+    k: np.ndarray,
+    d: int,
+    test: Callable[[float], Any],
+    *,
+    rtol: float,
+    period_limit: float | None,
+    criterion: SampledCriterion,
+    order: int,
+) -> SampledCertification:
+    """Bisection of the certified period below the exact one (which is tested too); <= 206 solves."""
+    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(b @ k, 2)), 1e-12)
+    limit = 1e3 / scale if period_limit is None else positive_scalar("period_limit", period_limit)
+    exact = max_stable_period(a, b, k, delay_samples=d, period_limit=limit)
+    solves = 0
+
+    def run(h: float) -> Any:
+        nonlocal solves
+        solves += 1
+        return test(h)
+
+    def result(status: SearchStatus, period: float, cert: Any, reason: str) -> SampledCertification:
+        return SampledCertification(status, order, d, period, cert, solves, reason, criterion)
+
+    if math.isnan(exact):
+        return result(SearchStatus.NOT_CERTIFIED, math.nan, None, "no stable period")
+    bad = exact
+    good, cert = math.nan, None
+    for f in (1.0, 0.5, 0.2, 0.05, 0.01, 1e-3):
+        trial = run(f * exact)
+        if trial.certified:
+            good, cert = f * exact, trial
+            break
+        bad = f * exact
+    if cert is None:
+        return result(SearchStatus.NOT_CERTIFIED, math.nan, None, "nothing certified")
+    if good >= exact:
+        return result(SearchStatus.CERTIFIED, good, cert, f"certified at the exact bound {exact:.6g} s")
+    for _ in range(200):
+        if bad - good <= rtol * good:
+            break
+        mid = 0.5 * (good + bad)
+        trial = run(mid)
+        if trial.certified:
+            good, cert = mid, trial
+        else:
+            bad = mid
+    return result(SearchStatus.CERTIFIED, good, cert, f"exact period {exact:.6g} s")
 
 
 def max_certified_period(
@@ -344,7 +414,7 @@ def max_certified_period(
     period_limit: float | None = None,
     margin_tol: float = DEFAULT_MARGIN_TOL,
 ) -> SampledCertification:
-    """The largest sampling period h certified by :func:`certify_sampled` (bisection, ≤ 200 solves).
+    """The largest sampling period h certified by :func:`certify_sampled` (bisection, ≤ 206 solves).
 
     The exact period (:func:`max_stable_period`) bounds the search from above: a sound certificate
     cannot exceed it. The bound itself is tested too.
@@ -354,42 +424,13 @@ def max_certified_period(
     order = order_value(order)
     rtol = positive_scalar("rtol", rtol)
     margin_tol = positive_scalar("margin_tol", margin_tol)
-    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(b @ k, 2)), 1e-12)
-    limit = 1e3 / scale if period_limit is None else positive_scalar("period_limit", period_limit)
-    exact = max_stable_period(a, b, k, delay_samples=d, period_limit=limit)
-    solves = 0
 
     def test(h: float) -> IntervalCertificate:
-        nonlocal solves
-        solves += 1
         return solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
 
-    if math.isnan(exact):
-        return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, 0, "no stable period")
-    bad = exact
-    good, cert = math.nan, None
-    for f in (1.0, 0.5, 0.2, 0.05, 0.01, 1e-3):
-        trial = test(f * exact)
-        if trial.certified:
-            good, cert = f * exact, trial
-            break
-        bad = f * exact
-    if cert is None:
-        return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, solves, "nothing certified")
-    if good >= exact:
-        return SampledCertification(
-            SearchStatus.CERTIFIED, order, d, good, cert, solves, f"certified at the exact bound {exact:.6g} s"
-        )
-    for _ in range(200):
-        if bad - good <= rtol * good:
-            break
-        mid = 0.5 * (good + bad)
-        trial = test(mid)
-        if trial.certified:
-            good, cert = mid, trial
-        else:
-            bad = mid
-    return SampledCertification(SearchStatus.CERTIFIED, order, d, good, cert, solves, f"exact period {exact:.6g} s")
+    return _bisect_period(
+        a, b, k, d, test, rtol=rtol, period_limit=period_limit, criterion=SampledCriterion.INPUT_DELAY, order=order
+    )
 
 
 def spacecraft_axes(spacecraft: Spacecraft, K: Any) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
