@@ -3,7 +3,7 @@
 u(t) = K x(t_k) on [t_k, t_k + h), ẋ = A x + B u. With τ = t − t_k ∈ [0, h) and
 ζ = [x(t); x(t_k); v], v = (1/τ)∫_{t_k}^{t} x, the criterion is Seuret's looped functional
 (Seuret, Automatica 48(1), 2012) extended by the Wirtinger-based free-matrix inequality
-(Zeng, He, Wu & She, Automatica 60, 2015): V(x) = xᵀPx and
+(Zeng, He, Wu & She, IEEE TAC 60(10), 2015): V(x) = xᵀPx and
 
     W(τ) = (h − τ)[zᵀ S̄ z + ∫_{t_k}^{t} ẋᵀRẋ] + τ(h − τ) ζᵀXζ,   z = [x − x_k; ∫_{t_k}^t x; x_k],
     S̄ = [[S, S1], [S1ᵀ, 0]],
@@ -13,9 +13,9 @@ d(V + W)/dt < 0 on every sampling interval then V(x(t_{k+1})) < V(x(t_k)): the s
 stable. −∫ẋᵀRẋ is bounded by Wirtinger's inequality in free-matrix form
 (−∫ẋᵀRẋ ≤ τζᵀ(N1R⁻¹N1ᵀ + N2(3R)⁻¹N2ᵀ)ζ + 2ζᵀ(N1(x − x_k) + N2(x + x_k − 2v))), so the derivative
 bound f(τ) is a matrix polynomial of degree 2 in τ; f ≺ 0 on [0, h] follows from f(0) ≺ 0,
-f(h) ≺ 0 (Schur complement) and f(0) − h²f₂ ≺ 0 (f₂ the τ² coefficient; the tangent at τ = h
-bounds a concave f, vertices bound a convex one: Zhang, Han, Seuret & Gouaisbaut, Automatica 84,
-2017). See ``design/lmi.md``, section 7.2.
+f(h) ≺ 0 (Schur complement) and f(0) − h²f₂ ≺ 0 (f₂ the τ² coefficient): vertices bound a convex
+f, the tangent at τ = h bounds a concave one (the quadratic negative-determination lemma, Kim,
+Automatica 64, 2016, cited from memory; the two-line proof is in design/lmi.md, section 7.2).
 
 The certificate is for the *periodic* loop of period h (the loop mrpctl simulates and the exact
 lifted reference tests). The problem is solved in time normalised by h (A·h, BK·h), so it is

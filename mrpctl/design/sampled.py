@@ -662,8 +662,9 @@ def max_certified_delay_samples(
 
     Certified d means the sawtooth τ(t) ∈ [d h, (d+1) h] is certified; the search assumes the
     certified set in d is an interval starting at 0 (the certificate at the answer is returned and
-    the answer + 1 was tested and failed, unless it is ``d_max``). Returns (d, certificate, solves);
-    d = -1 when d = 0 is not certified.
+    the answer + 1 was tested and failed, unless it is ``d_max``). A test that ends in a solver
+    failure (``optimal_inaccurate``) rather than a negative margin is retried at d ± 1, d + 2 before
+    it counts as failed. Returns (d, certificate, solves); d = -1 when d = 0 is not certified.
     """
     a, b, k = _system(A, B, K)
     h = positive_scalar("period", period)
@@ -687,6 +688,14 @@ def max_certified_delay_samples(
     while bad - good > 1:
         mid = (good + bad) // 2
         trial = test(mid)
+        if not trial.certified and trial.status is CertificateStatus.SOLVER_FAILED:
+            # A solver failure is no evidence of infeasibility: probe the neighbours before giving mid up.
+            for probe in (mid + 1, mid - 1, mid + 2):
+                if good < probe < bad:
+                    again = test(probe)
+                    if again.certified:
+                        mid, trial = probe, again
+                        break
         if trial.certified:
             good, cert = mid, trial
         else:
