@@ -155,6 +155,21 @@ def test_paper_loop_at_1khz() -> None:
     assert _stable_by_winding(a, b, k, 1e-3, 500)
 
 
+def test_thread_pool_gives_the_serial_answers() -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    periods = (0.8, 1.5)
+    serial = [certify_looped(SD_A, SD_B, SD_K, h) for h in periods]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        pooled = list(pool.map(lambda h: certify_looped(SD_A, SD_B, SD_K, h), periods))
+    for one, two in zip(serial, pooled, strict=True):
+        assert one.status is two.status
+        assert one.matrices.keys() == two.matrices.keys()
+        for key in one.matrices:
+            assert np.array_equal(one.matrices[key], two.matrices[key])
+    assert "looped functional" in str(serial[0]) and "certified" in str(serial[0])
+
+
 def test_refusals() -> None:
     with pytest.raises(SpecificationError, match="period"):
         certify_looped(SD_A, SD_B, SD_K, 0.0)

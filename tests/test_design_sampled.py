@@ -94,8 +94,8 @@ def test_soundness_on_random_sampled_loops(rng: np.random.Generator) -> None:
         assert not certify_sampled(a, b, k, h, order=checked % 3).certified
         for d in (0, 1):
             if not sampled_stability(a, b, k, h, delay_samples=d).stable:
-                for scale in (False, True):
-                    assert not _solve_preconditioned(a, b @ k, h, d, checked % 3, 1e-9, scale_variables=scale).certified
+                scale = bool((checked + d) % 2)
+                assert not _solve_preconditioned(a, b @ k, h, d, checked % 3, 1e-9, scale_variables=scale).certified
         checked += 1
 
 
