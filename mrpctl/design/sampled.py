@@ -15,23 +15,41 @@ For a spacecraft with a gain that splits per axis, :func:`spacecraft_axes` retur
 
 from __future__ import annotations
 
+import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import scipy.linalg
 
-from mrpctl._validation import finite_array, integer, positive_scalar
+from mrpctl._validation import finite_array, integer, positive_scalar, readonly
 from mrpctl.design._common import order_value
-from mrpctl.design.interval import DelayRate, IntervalCertificate, solve_interval
-from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, SearchStatus, criterion_name
+from mrpctl.design.interval import (
+    DelayRate,
+    IntervalCertificate,
+    UnknownRate,
+    _assemble_rcc,
+    _fridman,
+    _Layout,
+    _layout,
+    _phi,
+    _sym,
+    _vertex_points,
+    _xi_size,
+    interval_margins,
+    solve_interval,
+    solve_lmi,
+)
+from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, CertificateStatus, SearchStatus, criterion_name
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = [
     "MAX_LIFTED_SIZE",
     "SampledCertification",
+    "SampledCriterion",
     "SampledStability",
     "certify_sampled",
     "lifted_matrices",
@@ -270,6 +288,183 @@ def max_stable_period(
     return good
 
 
+# --------------------------------------------------------------------------------------------
+# Preconditioning of the sawtooth problem. In time normalised by τ_max the points and moments of
+# ζ (x(t), x(t − h1), x(t − τ), x(t − h2), Legendre moments) are nearly equal when the dynamics are
+# slow over a segment (‖A‖·h ≪ 1 at 1 kHz, or the 1/(d+1)-wide varying segment for d > 0): Φ ≺ 0
+# must then hold in directions of size ε = ‖A‖·(segment length) next to directions of size 1, and
+# Clarabel returns "optimal_inaccurate" for the Wirtinger/Bessel-Legendre problems. The retry
+# writes ζ in difference coordinates ζ = T ζ' (x1 = x0 + ε0 x1', xτ = x1 + εab xτ', moments of
+# order 0 about the segment's recent end, every difference scaled by the power of two nearest ε)
+# and scales every block by a diagonal power-of-two congruence D (from the diagonal magnitudes of
+# its coefficient matrices). T and D are invertible, so T'ΦT ≺ 0 ⇔ Φ ≺ 0, and with power-of-two
+# entries the selectors and the scaling are exact in floating point: the float64 re-check of the
+# transformed blocks is as strict as the plain one.
+# --------------------------------------------------------------------------------------------
+
+
+def _pow2(x: float) -> float:
+    return float(2.0 ** round(math.log2(x)))
+
+
+class _DifferenceLayout(_Layout):
+    """The interval layout with every selector composed with T (ζ = T ζ')."""
+
+    def __init__(self, base: _Layout, t: np.ndarray) -> None:
+        self.n, self.order, self.has0 = base.n, base.order, base.has0
+        self.index, self.m = base.index, base.m
+        self._sel = {}
+        for name, sel in base._sel.items():
+            out = sel @ t
+            out.setflags(write=False)
+            self._sel[name] = out
+
+
+def _difference_coordinates(lay: _Layout, eps0: float, eps_ab: float) -> np.ndarray:
+    n = lay.n
+    t = np.zeros((lay.m, lay.m))
+
+    def col(name: str) -> slice:
+        i = lay.index[name]
+        return slice(i * n, (i + 1) * n)
+
+    eye = np.eye(n)
+    t[col("x0"), col("x0")] = eye
+    ref_ab = "x1" if lay.has0 else "x0"
+    if lay.has0:
+        t[col("x1"), col("x0")] = eye
+        t[col("x1"), col("x1")] = eps0 * eye
+    for name in ("xt", "x2"):
+        t[col(name), :] += t[col(ref_ab), :]
+        t[col(name), col(name)] += eps_ab * eye
+    for seg in (["0"] if lay.has0 else []) + ["a", "b"]:
+        eps, ref = (eps0, "x0") if seg == "0" else (eps_ab, ref_ab)
+        for k in range(lay.order):
+            name = f"O{seg}{k}"
+            if k == 0:
+                t[col(name), :] += t[col(ref), :]
+            t[col(name), col(name)] += eps * eye
+    return t
+
+
+def _solve_preconditioned(
+    a: np.ndarray, a_d: np.ndarray, h: float, d: int, order: int, margin_tol: float, *, scale_variables: bool
+) -> IntervalCertificate:
+    """The sawtooth criterion of :func:`~mrpctl.design.interval.solve_interval` in difference coordinates."""
+    import time
+
+    rate = DelayRate.sawtooth()
+    n = a.shape[0]
+    tau_min, tau_max = d * h, (d + 1) * h
+    h1 = tau_min / tau_max
+    has0 = h1 > 0.0
+    sa, sad = tau_max * a, tau_max * a_d
+    c = max(float(np.linalg.norm(sa, 2)), float(np.linalg.norm(sad, 2)), 1e-300)
+    eps0 = _pow2(min(1.0, c * h1)) if has0 else 1.0
+    eps_ab = _pow2(min(1.0, c * (1.0 - h1)))
+    lay = _DifferenceLayout(_layout(n, order, has0), _difference_coordinates(_layout(n, order, has0), eps0, eps_ab))
+    nx = _xi_size(n, order, has0, rate)
+    unknowns = [UnknownRate("P", nx, nx, True), UnknownRate("S2", n, n, True), UnknownRate("R2", n, n, True)]
+    if has0:
+        unknowns += [UnknownRate("S1", n, n, True), UnknownRate("R1", n, n, True)]
+    if _fridman(rate, has0):
+        unknowns += [UnknownRate("U", n, n, True), UnknownRate("Z", n, n, True)]
+    unknowns.append(UnknownRate("X", (order + 1) * n, (order + 1) * n, False))
+    fixed = {k: np.zeros((n, n)) for k in ("S1", "R1", "Q", "U", "Z")}
+    # Optionally the integral weights in units of 1/ε (their natural size when the dynamics are slow).
+    var_scale = (
+        {"R1": 1.0 / eps0, "R2": 1.0 / eps_ab, "X": 1.0 / eps_ab, "U": 1.0 / eps_ab, "Z": 1.0 / eps_ab}
+        if scale_variables
+        else {}
+    )
+
+    def raw(matrices: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        mats = {k: var_scale.get(k, 1.0) * v for k, v in matrices.items()}
+        mats["RCC"] = _assemble_rcc(mats["R2"], mats["X"], order, n, numeric=True)
+        out = {"P": _sym(mats["P"]), "S2": _sym(mats["S2"]), "R2": _sym(mats["R2"])}
+        if has0:
+            out["S1"], out["R1"] = _sym(mats["S1"]), _sym(mats["R1"])
+        if _fridman(rate, has0):
+            out["U"], out["Z"] = _sym(mats["U"]), _sym(mats["Z"])
+        out["RCC"] = _sym(mats["RCC"])
+        for tau, rate_d in _vertex_points(h1, rate):
+            phi = _phi(lay, sa, sad, h1, tau, rate, rate_d, mats, np.matmul)
+            out[f"derivative[difference coordinates, tau {tau:.3g}]"] = _sym(-phi)
+        return out
+
+    zero = {u.name: np.zeros((u.rows, u.cols)) for u in unknowns}
+    magnitude: dict[str, np.ndarray] = {}
+    for u in unknowns:
+        for basis in u.basis():
+            for key, block in raw({**fixed, **zero, u.name: basis}).items():
+                magnitude[key] = magnitude.get(key, 0.0) + np.abs(np.diag(block))
+    scale = {
+        key: np.array([_pow2(1.0 / math.sqrt(v)) if v > 0 else 1.0 for v in mag]) for key, mag in magnitude.items()
+    }
+
+    def blocks(matrices: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {key: scale[key][:, None] * b * scale[key][None, :] for key, b in raw(matrices).items()}
+
+    start = time.perf_counter()
+    outcome, values, t_opt = solve_lmi(unknowns, blocks, fixed, [u.name for u in unknowns if u.symmetric])
+    elapsed = time.perf_counter() - start
+    base: dict[str, Any] = {
+        "order": order,
+        "tau_min": tau_min,
+        "tau_max": tau_max,
+        "rate": rate,
+        "plants": 1,
+        "solver_status": outcome.status,
+        "solve_time": elapsed,
+    }
+    if values is None:
+        reason = outcome.error or f"solver status {outcome.status!r} is not 'optimal' (preconditioned): no certificate"
+        return IntervalCertificate(
+            status=CertificateStatus.SOLVER_FAILED,
+            matrices={},
+            margins=(),
+            solver_margin=math.nan,
+            reason=reason,
+            **base,
+        )
+    margins = interval_margins(blocks({**fixed, **values}))
+    mats = {k: var_scale.get(k, 1.0) * v for k, v in {**fixed, **values}.items()}
+    worst = min(margins, key=lambda m: m.relative)
+    ok = worst.relative >= margin_tol
+    reason = (
+        f"every block positive definite (difference coordinates, power-of-two scaling); smallest relative "
+        f"margin {worst.relative:.3g} ({worst.name})"
+        if ok
+        else f"block {worst.name!r} has relative margin {worst.relative:.3g} < {margin_tol:g} (preconditioned)"
+    )
+    return IntervalCertificate(
+        status=CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED,
+        matrices={k: readonly(v) for k, v in mats.items()},
+        margins=margins,
+        solver_margin=t_opt,
+        reason=reason,
+        **base,
+    )
+
+
+def _solve_sawtooth(
+    a: np.ndarray, a_d: np.ndarray, h: float, d: int, order: int, margin_tol: float, *, precondition: bool = True
+) -> IntervalCertificate:
+    """The plain sawtooth problem; when it does not certify, the preconditioned ones (each certificate is sound).
+
+    The retries are (1) difference coordinates + block scaling, (2) the same with the integral weights
+    R1, R2, X, U, Z in units of 1/ε; at most three solves, the first certificate wins.
+    """
+    plain = solve_interval([(a, a_d)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+    if plain.certified or not precondition:
+        return plain
+    for scale_variables in (False, True):
+        retry = _solve_preconditioned(a, a_d, h, d, order, margin_tol, scale_variables=scale_variables)
+        if retry.certified:
+            return retry
+    return plain
+
+
 def certify_sampled(
     A: Any,
     B: Any,
@@ -279,58 +474,124 @@ def certify_sampled(
     delay_samples: int = 0,
     order: int = 1,
     margin_tol: float = DEFAULT_MARGIN_TOL,
+    precondition: bool = True,
 ) -> IntervalCertificate:
     """Certify the sampled loop by the input-delay approach (interval delay with τ̇ = 1).
 
     ẋ = A x + B K x(t − τ(t)), τ(t) = d h + t − t_k ∈ [d h, (d+1) h], τ̇ = 1; see
-    :func:`~mrpctl.design.interval.certify_interval`.
+    :func:`~mrpctl.design.interval.certify_interval`. When the problem as written does not certify
+    (typically Clarabel ``optimal_inaccurate`` for N >= 1 at 1 kHz), it is solved again in difference
+    coordinates with power-of-two block scaling (an equivalent LMI, design/lmi.md 7.3); the returned
+    certificate says which one certified. ``precondition=False`` (keyword-only) skips the retry.
     """
     a, b, k = _system(A, B, K)
     h = positive_scalar("period", period)
     d = integer("delay_samples", delay_samples, minimum=0)
-    return solve_interval(
-        [(a, b @ k)],
-        d * h,
-        (d + 1) * h,
-        DelayRate.sawtooth(),
-        order_value(order),
-        positive_scalar("margin_tol", margin_tol),
+    return _solve_sawtooth(
+        a, b @ k, h, d, order_value(order), positive_scalar("margin_tol", margin_tol), precondition=precondition
     )
+
+
+class SampledCriterion(enum.Enum):
+    """Which sampled-data certificate a :class:`SampledCertification` comes from."""
+
+    #: Input-delay approach: the interval criterion with the sawtooth τ(t) ∈ [d h, (d+1) h] (any d).
+    INPUT_DELAY = "input-delay"
+    #: Looped functional with Wirtinger's inequality (:mod:`mrpctl.design.looped`; d = 0, periodic).
+    LOOPED = "looped"
 
 
 @dataclass(frozen=True, eq=False)
 class SampledCertification:
-    """Result of :func:`max_certified_period`.
+    """Result of :func:`max_certified_period` and :func:`~mrpctl.design.looped.max_looped_period`.
 
     Attributes
     ----------
     status : SearchStatus
     order : int
+        Bessel-Legendre order of the integral inequality (1 for the looped criterion).
     delay_samples : int
     period : float
         Largest certified sampling period h (s); nan when none.
-    certificate : IntervalCertificate or None
+    certificate : IntervalCertificate, LoopedCertificate or None
     solves : int
     reason : str
+    criterion : SampledCriterion
     """
 
     status: SearchStatus
     order: int
     delay_samples: int
     period: float
-    certificate: IntervalCertificate | None = field(repr=False)
+    certificate: Any = field(repr=False)
     solves: int
     reason: str
+    criterion: SampledCriterion = SampledCriterion.INPUT_DELAY
 
     @property
     def certified(self) -> bool:
         return self.status is not SearchStatus.NOT_CERTIFIED
 
     def __str__(self) -> str:
-        head = f"{criterion_name(self.order)} + RCC, sampled (d = {self.delay_samples})"
+        if self.criterion is SampledCriterion.LOOPED:
+            head = "looped functional + Wirtinger, sampled (d = 0)"
+        else:
+            head = f"{criterion_name(self.order)} + RCC, sampled (d = {self.delay_samples})"
         if not self.certified:
             return f"{head}: {self.status.value} ({self.reason})"
         return f"{head}: certified for h <= {self.period:.6g} s ({self.solves} solves; {self.reason})"
+
+
+def _bisect_period(
+    a: np.ndarray,
+    b: np.ndarray,
+    k: np.ndarray,
+    d: int,
+    test: Callable[[float], Any],
+    *,
+    rtol: float,
+    period_limit: float | None,
+    criterion: SampledCriterion,
+    order: int,
+) -> SampledCertification:
+    """Bisection of the certified period below the exact one (which is tested too); <= 206 solves."""
+    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(b @ k, 2)), 1e-12)
+    limit = 1e3 / scale if period_limit is None else positive_scalar("period_limit", period_limit)
+    exact = max_stable_period(a, b, k, delay_samples=d, period_limit=limit)
+    solves = 0
+
+    def run(h: float) -> Any:
+        nonlocal solves
+        solves += 1
+        return test(h)
+
+    def result(status: SearchStatus, period: float, cert: Any, reason: str) -> SampledCertification:
+        return SampledCertification(status, order, d, period, cert, solves, reason, criterion)
+
+    if math.isnan(exact):
+        return result(SearchStatus.NOT_CERTIFIED, math.nan, None, "no stable period")
+    bad = exact
+    good, cert = math.nan, None
+    for f in (1.0, 0.5, 0.2, 0.05, 0.01, 1e-3):
+        trial = run(f * exact)
+        if trial.certified:
+            good, cert = f * exact, trial
+            break
+        bad = f * exact
+    if cert is None:
+        return result(SearchStatus.NOT_CERTIFIED, math.nan, None, "nothing certified")
+    if good >= exact:
+        return result(SearchStatus.CERTIFIED, good, cert, f"certified at the exact bound {exact:.6g} s")
+    for _ in range(200):
+        if bad - good <= rtol * good:
+            break
+        mid = 0.5 * (good + bad)
+        trial = run(mid)
+        if trial.certified:
+            good, cert = mid, trial
+        else:
+            bad = mid
+    return result(SearchStatus.CERTIFIED, good, cert, f"exact period {exact:.6g} s")
 
 
 def max_certified_period(
@@ -344,7 +605,7 @@ def max_certified_period(
     period_limit: float | None = None,
     margin_tol: float = DEFAULT_MARGIN_TOL,
 ) -> SampledCertification:
-    """The largest sampling period h certified by :func:`certify_sampled` (bisection, ≤ 200 solves).
+    """The largest sampling period h certified by :func:`certify_sampled` (bisection, ≤ 206 solves).
 
     The exact period (:func:`max_stable_period`) bounds the search from above: a sound certificate
     cannot exceed it. The bound itself is tested too.
@@ -354,42 +615,13 @@ def max_certified_period(
     order = order_value(order)
     rtol = positive_scalar("rtol", rtol)
     margin_tol = positive_scalar("margin_tol", margin_tol)
-    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(b @ k, 2)), 1e-12)
-    limit = 1e3 / scale if period_limit is None else positive_scalar("period_limit", period_limit)
-    exact = max_stable_period(a, b, k, delay_samples=d, period_limit=limit)
-    solves = 0
 
     def test(h: float) -> IntervalCertificate:
-        nonlocal solves
-        solves += 1
-        return solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+        return _solve_sawtooth(a, b @ k, h, d, order, margin_tol)
 
-    if math.isnan(exact):
-        return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, 0, "no stable period")
-    bad = exact
-    good, cert = math.nan, None
-    for f in (1.0, 0.5, 0.2, 0.05, 0.01, 1e-3):
-        trial = test(f * exact)
-        if trial.certified:
-            good, cert = f * exact, trial
-            break
-        bad = f * exact
-    if cert is None:
-        return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, solves, "nothing certified")
-    if good >= exact:
-        return SampledCertification(
-            SearchStatus.CERTIFIED, order, d, good, cert, solves, f"certified at the exact bound {exact:.6g} s"
-        )
-    for _ in range(200):
-        if bad - good <= rtol * good:
-            break
-        mid = 0.5 * (good + bad)
-        trial = test(mid)
-        if trial.certified:
-            good, cert = mid, trial
-        else:
-            bad = mid
-    return SampledCertification(SearchStatus.CERTIFIED, order, d, good, cert, solves, f"exact period {exact:.6g} s")
+    return _bisect_period(
+        a, b, k, d, test, rtol=rtol, period_limit=period_limit, criterion=SampledCriterion.INPUT_DELAY, order=order
+    )
 
 
 def spacecraft_axes(spacecraft: Spacecraft, K: Any) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
@@ -430,8 +662,9 @@ def max_certified_delay_samples(
 
     Certified d means the sawtooth τ(t) ∈ [d h, (d+1) h] is certified; the search assumes the
     certified set in d is an interval starting at 0 (the certificate at the answer is returned and
-    the answer + 1 was tested and failed, unless it is ``d_max``). Returns (d, certificate, solves);
-    d = -1 when d = 0 is not certified.
+    the answer + 1 was tested and failed, unless it is ``d_max``). A test that ends in a solver
+    failure (``optimal_inaccurate``) rather than a negative margin is retried at d ± 1, d + 2 before
+    it counts as failed. Returns (d, certificate, solves); d = -1 when d = 0 is not certified.
     """
     a, b, k = _system(A, B, K)
     h = positive_scalar("period", period)
@@ -443,7 +676,7 @@ def max_certified_delay_samples(
     def test(d: int) -> IntervalCertificate:
         nonlocal solves
         solves += 1
-        return solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+        return _solve_sawtooth(a, b @ k, h, d, order, margin_tol)
 
     top = test(d_max)
     if top.certified:
@@ -455,6 +688,14 @@ def max_certified_delay_samples(
     while bad - good > 1:
         mid = (good + bad) // 2
         trial = test(mid)
+        if not trial.certified and trial.status is CertificateStatus.SOLVER_FAILED:
+            # A solver failure is no evidence of infeasibility: probe the neighbours before giving mid up.
+            for probe in (mid + 1, mid - 1, mid + 2):
+                if good < probe < bad:
+                    again = test(probe)
+                    if again.certified:
+                        mid, trial = probe, again
+                        break
         if trial.certified:
             good, cert = mid, trial
         else:
