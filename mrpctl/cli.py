@@ -531,13 +531,18 @@ def _design(args: argparse.Namespace) -> int:
     positive_scalar("--tau", args.tau)
     spacecraft = _spacecraft_from(args.inertia)
     toml_path = None if args.toml is None else Path(args.toml)
+    if args.product_bound and args.inertia_tolerance is None:
+        raise SpecificationError("--product-bound applies only with --inertia-tolerance TOL")
+    if args.inertia_tolerance is not None or args.sampled is not None:
+        return _robust_design(args, spacecraft, toml_path)
+    if args.rtol is not None:
+        raise SpecificationError("--rtol applies only with --inertia-tolerance or --sampled")
     rate = 1000.0 if args.rate is None else args.rate
     if toml_path is not None:
         _refuse_existing(toml_path, args.overwrite, "--toml")
         _check_delay(args.tau, rate)
-    design = synthesize_pd(
-        spacecraft, args.tau, zeta=args.zeta, order=args.order, allow_underdamped=args.allow_underdamped
-    )
+    order = 3 if args.order is None else args.order
+    design = synthesize_pd(spacecraft, args.tau, zeta=args.zeta, order=order, allow_underdamped=args.allow_underdamped)
     if not design.synthesized or design.gains is None:
         raise SpecificationError(
             f"no certified gains for tau = {args.tau:g} s at zeta = {args.zeta:g} "
@@ -562,7 +567,7 @@ def _design(args: argparse.Namespace) -> int:
         )
         comment = (
             f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g} "
-            f"--zeta {args.zeta:g} --order {args.order}\n"
+            f"--zeta {args.zeta:g} --order {order}\n"
             f"{design.status.value}: omega_n = {design.omega_n:.6g} rad/s, "
             f"exact delay margin {design.margin.margin if design.margin else float('nan'):.6g} s\n"
             "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
@@ -576,7 +581,7 @@ def _design(args: argparse.Namespace) -> int:
                 "status": design.status.name,
                 "synthesized": design.synthesized,
                 "tau": args.tau,
-                "order": args.order,
+                "order": order,
                 "omega_n": design.omega_n,
                 "zeta": design.gains.zeta,
                 "decay_rate": decay,
@@ -1166,6 +1171,132 @@ def _add_reproduce(commands: Any) -> None:
     parser.set_defaults(handler=_reproduce)
 
 
+def _write_design_toml(
+    path: Path, spacecraft: Spacecraft, K: np.ndarray, args: argparse.Namespace, rate: float, status: str, comment: str
+) -> None:
+    scenario = replace(
+        _paper_base(),
+        name=path.stem,
+        description=f"mrpctl design: tau = {args.tau:g} s, {status}",
+        spacecraft=spacecraft,
+        K=K,
+        tau=float(args.tau),
+        rate=float(rate),
+        t_final=60.0 if args.t_final is None else float(args.t_final),
+        rule=rule_from_name("delay-aware" if args.rule is None else args.rule, eps=args.eps, alpha=args.alpha),
+    )
+    with _atomic_output(path) as stream:
+        stream.write(scenario_toml(scenario, comment=comment))
+
+
+def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Path | None) -> int:
+    """``mrpctl design --inertia-tolerance TOL [--product-bound P] [--sampled HZ]``: synthesize_robust_pd."""
+    from mrpctl.design import analyze_gains
+    from mrpctl.design.robust import RobustStatus, synthesize_robust_pd
+    from mrpctl.scenario import _check_delay
+
+    tolerance = 0.0
+    if args.inertia_tolerance is not None:
+        tolerance = nonnegative_scalar("--inertia-tolerance", args.inertia_tolerance)
+        if tolerance >= 1.0:
+            raise SpecificationError(f"--inertia-tolerance must be < 1 (a relative tolerance), got {tolerance:g}")
+    bound = nonnegative_scalar("--product-bound", args.product_bound)
+    if not spacecraft.is_diagonal:
+        raise SpecificationError(
+            "--inertia: --inertia-tolerance and --sampled need a diagonal nominal inertia (3 principal values)"
+        )
+    period = None
+    rate = 1000.0 if args.rate is None else args.rate
+    if args.sampled is not None:
+        hz = positive_scalar("--sampled", args.sampled)
+        samples = args.tau * hz
+        if abs(samples - round(samples)) > 1e-9 * max(1.0, samples):
+            raise SpecificationError(f"--sampled: tau * HZ must be a whole number of samples, got {samples!r}")
+        if args.rate is not None and args.rate != hz:
+            raise SpecificationError(f"--rate {args.rate:g} differs from --sampled {hz:g}: give one rate")
+        period, rate = 1.0 / hz, hz
+    if toml_path is not None:
+        _refuse_existing(toml_path, args.overwrite, "--toml")
+        _check_delay(args.tau, rate)
+    # Wirtinger and higher orders are numerically inaccurate for the 0.2 % wide sampled interval at 1 kHz
+    # (design/lmi.md section 7.3): the sampled loop defaults to Jensen; the constant delay to N = 2.
+    order = (0 if period is not None else 2) if args.order is None else args.order
+    rtol = 1e-3 if args.rtol is None else positive_scalar("--rtol", args.rtol)
+    result = synthesize_robust_pd(
+        spacecraft,
+        args.tau,
+        zeta=args.zeta,
+        order=order,
+        tolerance=tolerance,
+        product_bound=bound,
+        period=period,
+        rtol=rtol,
+    )
+    if result.gains is None or result.status is RobustStatus.INFEASIBLE:
+        raise SpecificationError(
+            f"no robustly certified gains for tau = {args.tau:g} s at zeta = {args.zeta:g}, "
+            f"inertia +-{100 * tolerance:g} % "
+            f"({result.status.value}): {result.reason}; try another --order, --zeta or a smaller --inertia-tolerance"
+        )
+    if result.status is RobustStatus.NOT_VERIFIED:
+        raise MrpctlError(
+            f"the certified gains failed the exact check (a soundness bug, please report): {result.exact_check}"
+        )
+    K = np.asarray(result.gains.K, dtype=float)
+    analysis = analyze_gains(spacecraft, K)
+    cert = result.certificate
+    written = None
+    if toml_path is not None:
+        comment = (
+            f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g} "
+            f"--zeta {args.zeta:g} --order {order} --inertia-tolerance {tolerance:g} --product-bound {bound:g}"
+            + ("" if period is None else f" --sampled {rate:g}")
+            + f"\n{result.status.value}: omega_n = {result.omega_n:.6g} rad/s; {result.exact_check}\n"
+            "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
+        )
+        _write_design_toml(toml_path, spacecraft, K, args, rate, result.status.value, comment)
+        written = toml_path
+    if args.json:
+        _print_json(
+            {
+                "status": result.status.name,
+                "synthesized": result.status is RobustStatus.SYNTHESIZED,
+                "model": result.model.name,
+                "tau": args.tau,
+                "tau_min": result.tau_min,
+                "tau_max": result.tau_max,
+                "inertia_tolerance": tolerance,
+                "product_bound": bound,
+                "sampled_rate": None if period is None else rate,
+                "order": order,
+                "omega_n": result.omega_n,
+                "zeta": result.gains.zeta,
+                "K": K,
+                "K1": np.diag(analysis.K1),
+                "K2": np.diag(analysis.K2),
+                "certified": cert is not None and cert.certified,
+                "certificate": str(cert) if cert is not None else None,
+                "exact_check": result.exact_check,
+                "reason": result.reason,
+                "toml": written,
+            }
+        )
+        return 0
+    print(result)
+    if cert is not None:
+        print(cert)
+    print("K (3x6, N m) on x = [sigma; omega/4], u = K x(t - tau):")
+    print(np.array2string(K, precision=6, max_line_width=200, suppress_small=False))
+    for axis in analysis.axes:
+        print(
+            f"  axis {axis.axis}: K1 = {axis.K1:.6g} 1/s^2, K2 = {axis.K2:.6g} 1/s, omega_n = {axis.omega_n:.6g} "
+            f"rad/s, zeta = {axis.zeta:.4g} ({_damping_kind(axis.zeta)}) at the nominal inertia"
+        )
+    if written is not None:
+        print(f"scenario written to {written} (run: mrpctl verify {written}; mrpctl simulate {written})")
+    return 0
+
+
 def _add_design(commands: Any) -> None:
     parser = commands.add_parser(
         "design",
@@ -1180,7 +1311,30 @@ def _add_design(commands: Any) -> None:
     parser.add_argument("--tau", type=float, required=True, help="measurement delay (s)")
     parser.add_argument("--zeta", type=float, default=1.0, help="damping ratio (1 = critically damped)")
     parser.add_argument("--allow-underdamped", action="store_true", help="accept --zeta below 1")
-    parser.add_argument("--order", type=int, default=3, help="Bessel-Legendre LMI order (0 Jensen, 1 Wirtinger)")
+    parser.add_argument(
+        "--order",
+        type=int,
+        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); default 3, with --inertia-tolerance 2, with --sampled 0",
+    )
+    robust = parser.add_argument_group("robust design (synthesize_robust_pd; see design/lmi.md section 7.5)")
+    robust.add_argument(
+        "--inertia-tolerance",
+        type=float,
+        metavar="TOL",
+        help="certify for every inertia with J_ii within +-TOL (relative) of --inertia (vertex-dependent functional)",
+    )
+    robust.add_argument(
+        "--product-bound", type=float, default=0.0, metavar="P", help="with --inertia-tolerance: |J_ij| <= P kg m^2"
+    )
+    robust.add_argument(
+        "--sampled",
+        type=float,
+        metavar="HZ",
+        help="certify the sampled loop at HZ with ZOH and d = tau*HZ samples (sawtooth delay); also the --toml rate",
+    )
+    robust.add_argument(
+        "--rtol", type=float, metavar="R", help="relative width of the final omega_n bracket (default 1e-3)"
+    )
     parser.add_argument("--toml", type=Path, help="write a runnable scenario with the designed K to this file")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --toml file")
     parser.add_argument("--rate", type=float, help="measurement rate written with --toml (Hz); default 1000")

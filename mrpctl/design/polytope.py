@@ -11,8 +11,12 @@ image of the J-set (:func:`inverse_box`):
 - otherwise: J = D + E, J⁻¹ = D⁻¹ − D⁻¹ E D⁻¹ + R with ‖R‖₂ ≤ ‖D⁻¹‖³‖E‖²/(1 − ‖D⁻¹‖‖E‖); interval bounds
   of the first two terms plus ±‖R‖₂ on every entry give a box of the 6 entries (64 vertices).
 
-Every plant of the convex hull of the vertices is certified by one common Lyapunov-Krasovskii
-functional (the vertex LMIs are affine in A_d). Vertices of the outer box that are not the
+Every plant of the convex hull of the vertices is certified. Constant delay, by default
+(:attr:`Functional.VERTEX`): a vertex-dependent Lyapunov-Krasovskii functional V(α) = Σ αᵢ Vᵢ with
+(Pᵢ, Sᵢ, Rᵢ) per vertex and one Finsler/descriptor slack M common to the vertices, which makes
+every vertex LMI affine in the vertex's (A, A_d) and the convex combination valid (He, Wu, She &
+Liu, IEEE TAC 49(5), 2004; see :func:`vertex_blocks`); or (:attr:`Functional.COMMON`) one
+functional for all vertices. Interval delay: one common functional. Vertices of the outer box that are not the
 inverse of a physical inertia (not positive definite, or violating the triangle inequality) are
 KEPT: certifying a superset is sound, only more conservative; :attr:`InertiaPolytope.nonphysical`
 counts them.
@@ -20,6 +24,7 @@ counts them.
 
 from __future__ import annotations
 
+import enum
 import itertools
 import math
 import time
@@ -29,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar, readonly
-from mrpctl.design._common import order_value
+from mrpctl.design._common import OPTIMAL, SolveOutcome, balancing, order_value, similarity, solve
 from mrpctl.design.interval import (
     DelayRate,
     IntervalCertificate,
@@ -39,21 +44,31 @@ from mrpctl.design.interval import (
     solve_interval,
     solve_lmi,
 )
-from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, lmi_blocks
+from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, _structure, lmi_blocks
 from mrpctl.errors import SpecificationError
 from mrpctl.model import gain_matrix
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = [
+    "Functional",
     "InertiaPolytope",
     "PolytopeCertificate",
     "certify_polytope",
+    "certify_vertices",
     "exact_polytope_margin",
     "inertia_polytope",
     "inverse_box",
     "max_certified_tolerance",
     "max_stable_tolerance",
+    "vertex_blocks",
 ]
+
+
+class Functional(enum.Enum):
+    """Which Lyapunov-Krasovskii functional :func:`certify_polytope` searches for (constant delay)."""
+
+    COMMON = "one functional common to all vertices"
+    VERTEX = "vertex-dependent functional (descriptor form, common Finsler slack)"
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,6 +183,12 @@ def inertia_polytope(spacecraft: Spacecraft, tolerance: float, *, product_bound:
     return InertiaPolytope(sc, tol, p, readonly(lower), readonly(upper), readonly(np.array(corners)), bad)
 
 
+#: ``functional=None`` uses the vertex-dependent functional up to this many vertices per sub-problem and
+#: the common one above (measured, products of inertia, 64 vertices of the 6×6 loop, N = 0: common 10 s,
+#: vertex-dependent 200 s, most of it inside Clarabel).
+VERTEX_LIMIT = 8
+
+
 def _vertex_loops(poly: InertiaPolytope, K: Any) -> list[tuple[np.ndarray, np.ndarray]]:
     k = gain_matrix(K)
     a = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
@@ -201,13 +222,14 @@ def _axis_loops(poly: InertiaPolytope, K: Any) -> list[list[tuple[np.ndarray, np
 
 @dataclass(frozen=True, eq=False)
 class PolytopeCertificate:
-    """One common-functional certificate over every vertex of an inertia polytope.
+    """One certificate over every vertex of a polytope of plants (an inertia polytope).
 
     Attributes
     ----------
     status : CertificateStatus
         CERTIFIED only when every sub-problem (one per axis when the loop splits) was solved
-        ``optimal`` and re-verified in float64 at every vertex.
+        ``optimal`` and re-verified in float64 at every vertex; SOLVER_FAILED when the solver gave
+        no usable answer after the retries (plain, balanced, bounded slack; see ``reason``).
     order : int
     tau : float
         The constant delay τ (s), or the upper end of the interval.
@@ -216,6 +238,10 @@ class PolytopeCertificate:
     margins : tuple of BlockMargin
     solve_time : float
     reason : str
+    interval : tuple of IntervalCertificate
+        The interval-delay sub-certificates (empty for a constant delay).
+    functional : Functional
+        The functional searched for (interval delays: always COMMON).
     """
 
     status: CertificateStatus
@@ -226,6 +252,7 @@ class PolytopeCertificate:
     solve_time: float
     reason: str
     interval: tuple[IntervalCertificate, ...] = field(default=(), repr=False)
+    functional: Functional = Functional.COMMON
 
     @property
     def certified(self) -> bool:
@@ -233,7 +260,8 @@ class PolytopeCertificate:
 
     def __str__(self) -> str:
         return (
-            f"polytope certificate ({self.vertices} vertices, order {self.order}) at tau = {self.tau:.6g} s: "
+            f"polytope certificate ({self.vertices} vertices, order {self.order}, {self.functional.value}) "
+            f"at tau = {self.tau:.6g} s: "
             f"{self.status.value} ({1e3 * self.solve_time:.1f} ms)\n  {self.reason}"
         )
 
@@ -271,6 +299,226 @@ def _common_constant(
     return status, margins, elapsed, f"smallest relative margin {worst.relative:.3g} ({worst.name})"
 
 
+# --------------------------------------------------------------------------------------------
+# Vertex-dependent functional (descriptor / Finsler form), constant delay, time normalised by τ.
+#
+# ζ̃ = [x(t); x(t − 1); Ω₀ … Ω_{N−1}; ẋ(t)] (m + n entries, m = (N+2)n). At vertex i,
+#   Ψᵢ = He(G̃ᵀ Pᵢ H̃) + diag(Sᵢ, −Sᵢ, 0, 0) + e_ẋᵀ Rᵢ e_ẋ − Σₖ (2k+1) Ẽₖᵀ Rᵢ Ẽₖ,
+#   Φ̃ᵢ = Ψᵢ + He(M Cᵢ),  Cᵢ = [Aᵢ, A_d,ᵢ, 0, −I]  (M common to all vertices),
+# where H̃ = [e_ẋ; Ẽ₀ … Ẽ_{N−1}] no longer contains the plant. Ψ is linear in (Pᵢ, Sᵢ, Rᵢ) and
+# independent of the plant, He(M C) is affine in the plant: Σ αᵢ Φ̃ᵢ = Ψ(α) + He(M C(α)), so
+# Φ̃ᵢ ≺ 0 at every vertex gives, for every convex combination α of the vertices, the functional
+# V(α) = Σ αᵢ Vᵢ (constant α: no α̇ term) whose derivative is ζ̃ᵀ Ψ(α) ζ̃ < 0 on C(α) ζ̃ = 0, i.e.
+# along ẋ = A(α) x + A_d(α) x(t − 1). At a single vertex Finsler's lemma makes this equivalent to
+# the Seuret-Gouaisbaut LMI of lmi_blocks (the restriction of Ψ to ẋ = F₀ζ is Φ_N, tested).
+# Source of the construction: Y. He, M. Wu, J.-H. She, G.-P. Liu, "Parameter-dependent Lyapunov
+# functional for stability of time-delay systems with polytopic-type uncertainties", IEEE TAC
+# 49(5), 828-832, 2004 (free-weighting matrices); E. Fridman, U. Shaked, "An improved
+# stabilization method for linear time-delay systems", IEEE TAC 47(11), 2002 (descriptor form).
+# --------------------------------------------------------------------------------------------
+
+
+def vertex_blocks(A: Any, A_d: Any, P: Any, S: Any, R: Any, M: Any, *, order: int) -> dict[str, np.ndarray]:
+    """The float64 blocks of the vertex-dependent criterion at one vertex, delay normalised to 1.
+
+    Every block must be positive definite: ``"S"`` (Sᵢ), ``"R"`` (Rᵢ), ``"positivity"``
+    (Pᵢ + diag(0, Sᵢ, 3Sᵢ, …)) and ``"derivative"`` (−Φ̃ᵢ, see the comment above this function).
+
+    Parameters
+    ----------
+    A, A_d : array_like
+        (n, n) vertex matrices in time normalised by τ (τA, τA_d).
+    P, S, R : array_like
+        The vertex's decision matrices, ((N+1)n)² and n² symmetric.
+    M : array_like
+        ((N+3)n, n) slack common to the vertices.
+    order : int
+        Bessel-Legendre order N.
+    """
+    a = np.asarray(A, dtype=float)
+    a_d = np.asarray(A_d, dtype=float)
+    n = a.shape[0]
+    p = np.asarray(P, dtype=float)
+    s = np.asarray(S, dtype=float)
+    r = np.asarray(R, dtype=float)
+    mm = np.asarray(M, dtype=float)
+    e_mats, g0, g1 = _structure(n, order)
+    m = (order + 2) * n
+    k = m + n
+    pad = np.zeros((n, n))
+    ext = [np.hstack((e, pad)) for e in e_mats]
+    e_dx = np.zeros((n, k))
+    e_dx[:, m:] = np.eye(n)
+    g = np.hstack((np.vstack((g0, g1)), np.zeros((g0.shape[0] + g1.shape[0], n))))
+    h = np.vstack([e_dx, *ext[:order]])
+    he = g.T @ p @ h
+    phi = he + he.T
+    phi[:n, :n] += s
+    phi[n : 2 * n, n : 2 * n] -= s
+    phi += e_dx.T @ r @ e_dx
+    for j, e in enumerate(ext):
+        phi -= (2 * j + 1) * e.T @ r @ e
+    c = np.zeros((n, k))
+    c[:, :n] = a
+    c[:, n : 2 * n] = a_d
+    c[:, m:] = -np.eye(n)
+    slack = mm @ c
+    phi += slack + slack.T
+    pos = p.copy()
+    for j in range(order):
+        sl = slice((j + 1) * n, (j + 2) * n)
+        pos[sl, sl] += (2 * j + 1) * s
+    return {"S": _sym(s), "R": _sym(r), "positivity": _sym(pos), "derivative": _sym(-phi)}
+
+
+def _sym(m: np.ndarray) -> np.ndarray:
+    return 0.5 * (m + m.T)
+
+
+def _sym_basis(size: int) -> list[np.ndarray]:
+    out = []
+    for i in range(size):
+        for j in range(i, size):
+            b = np.zeros((size, size))
+            b[i, j] = b[j, i] = 1.0
+            out.append(b)
+    return out
+
+
+@dataclass(frozen=True)
+class _Attempt:
+    balanced: bool
+    slack_bound: float | None
+
+
+#: The retries after a solver failure: balanced coordinates, then a bound on the slack M (an
+#: unbounded optimal face in M is what made Clarabel stall), then both.
+_ATTEMPTS = (
+    _Attempt(False, None),
+    _Attempt(True, None),
+    _Attempt(False, 1e3),
+    _Attempt(True, 1e3),
+)
+
+
+def _solve_vertex(
+    plants: list[tuple[np.ndarray, np.ndarray]],
+    order: int,
+    slack_bound: float | None,
+) -> tuple[SolveOutcome, list[dict[str, np.ndarray]] | None, float]:
+    """Maximise t: every block of every vertex ≽ t I, the traces of the S, R, positivity blocks sum to 1."""
+    import cvxpy as cp
+
+    n = plants[0][0].shape[0]
+    size = (order + 1) * n
+    k = (order + 3) * n
+    zero_a = np.zeros((n, n))
+    zeros = {"P": np.zeros((size, size)), "S": np.zeros((n, n)), "R": np.zeros((n, n)), "M": np.zeros((k, n))}
+    bases = [("P", b) for b in _sym_basis(size)] + [("S", b) for b in _sym_basis(n)] + [("R", b) for b in _sym_basis(n)]
+    names = ("S", "R", "positivity", "derivative")
+    # Ψ does not depend on the plant: one linear map for all vertices.
+    cols: dict[str, list[np.ndarray]] = {name: [] for name in names}
+    trace = np.zeros(len(bases))
+    for idx, (name, b) in enumerate(bases):
+        mats = {**zeros, name: b}
+        blocks = vertex_blocks(zero_a, zero_a, mats["P"], mats["S"], mats["R"], mats["M"], order=order)
+        for key in names:
+            cols[key].append(blocks[key].reshape(-1))
+        trace[idx] = sum(float(np.trace(blocks[key])) for key in ("S", "R", "positivity"))
+    psi = {key: np.column_stack(c) for key, c in cols.items()}
+    m_bases = []
+    for i in range(k):
+        for j in range(n):
+            b = np.zeros((k, n))
+            b[i, j] = 1.0
+            m_bases.append(b)
+    v = cp.Variable((len(plants), len(bases)), name="v")
+    w = cp.Variable(len(m_bases), name="m")
+    t = cp.Variable(name="t")
+    cons = []
+    for i, (a, a_d) in enumerate(plants):
+        slack_cols = np.column_stack(
+            [
+                vertex_blocks(a, a_d, zeros["P"], zeros["S"], zeros["R"], b, order=order)["derivative"].reshape(-1)
+                for b in m_bases
+            ]
+        )
+        for key in names:
+            dim = n if key in ("S", "R") else (size if key == "positivity" else k)
+            flat = psi[key] @ v[i] + (slack_cols @ w if key == "derivative" else 0)
+            expr = cp.reshape(flat, (dim, dim), order="C")
+            cons.append(0.5 * (expr + expr.T) >> t * np.eye(dim))
+    cons.append(cp.sum(v @ trace) == 1.0)
+    if slack_bound is not None:
+        cons.append(cp.norm(w, "inf") <= slack_bound)
+    problem = cp.Problem(cp.Maximize(t), cons)
+    outcome = solve(problem)
+    if outcome.error or outcome.status != OPTIMAL or v.value is None or w.value is None or t.value is None:
+        return outcome, None, math.nan
+    m_val = sum((c * b for c, b in zip(np.asarray(w.value, dtype=float), m_bases, strict=True)), zeros["M"])
+    out = []
+    for i in range(len(plants)):
+        mats = {key: zeros[key].copy() for key in ("P", "S", "R")}
+        for c, (name, b) in zip(np.asarray(v.value[i], dtype=float), bases, strict=True):
+            mats[name] = mats[name] + c * b
+        mats["M"] = np.asarray(m_val)
+        out.append(mats)
+    return outcome, out, float(t.value)
+
+
+def _vertex_constant(
+    plants: list[tuple[np.ndarray, np.ndarray]],
+    tau: float,
+    order: int,
+    margin_tol: float,
+) -> tuple[CertificateStatus, tuple[BlockMargin, ...], float, str]:
+    """The vertex-dependent criterion at delay τ, retried on solver failure (see ``_ATTEMPTS``)."""
+    scaled = [(tau * a, tau * a_d) for a, a_d in plants]
+    mag = sum((np.abs(a) + np.abs(a_d) for a, a_d in scaled), np.zeros_like(scaled[0][0]))
+    scale = balancing(mag, np.zeros_like(mag))
+    start = time.perf_counter()
+    failures = []
+    for attempt in _ATTEMPTS:
+        if attempt.balanced and np.all(scale == 1.0):
+            continue
+        use = [(similarity(a, scale), similarity(a_d, scale)) for a, a_d in scaled] if attempt.balanced else scaled
+        outcome, values, _ = _solve_vertex(use, order, attempt.slack_bound)
+        label = f"{'balanced' if attempt.balanced else 'plain'}{'' if attempt.slack_bound is None else ', |M| bounded'}"
+        if values is None:
+            failures.append(f"{label}: {outcome.error or outcome.status}")
+            continue
+        margins: list[BlockMargin] = []
+        for i, ((a, a_d), mats) in enumerate(zip(use, values, strict=True)):
+            blocks = vertex_blocks(a, a_d, mats["P"], mats["S"], mats["R"], mats["M"], order=order)
+            margins += [
+                BlockMargin(f"{m.name}[vertex {i}]", m.eigenvalue, m.relative) for m in interval_margins(blocks)
+            ]
+        worst = min(margins, key=lambda m: m.relative)
+        elapsed = time.perf_counter() - start
+        ok = worst.relative >= margin_tol
+        retry = f" after {len(failures)} solver failure(s) ({'; '.join(failures)})" if failures else ""
+        why = f"vertex-dependent ({label}){retry}: smallest relative margin {worst.relative:.3g} ({worst.name})"
+        return (CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED), tuple(margins), elapsed, why
+    elapsed = time.perf_counter() - start
+    return (
+        CertificateStatus.SOLVER_FAILED,
+        (),
+        elapsed,
+        "vertex-dependent: every attempt failed: " + "; ".join(failures),
+    )
+
+
+def _check_functional(functional: Any) -> None:
+    if functional is not None and not isinstance(functional, Functional):
+        raise SpecificationError(f"functional must be a Functional or None, got {functional!r}")
+
+
+def _use_vertex(functional: Functional | None, vertices: int) -> bool:
+    if functional is None:
+        return vertices <= VERTEX_LIMIT
+    return functional is Functional.VERTEX
+
+
 def certify_polytope(
     polytope: InertiaPolytope,
     K: Any,
@@ -280,19 +528,43 @@ def certify_polytope(
     tau_min: float | None = None,
     rate: DelayRate | float | None = None,
     margin_tol: float = DEFAULT_MARGIN_TOL,
+    functional: Functional | None = None,
 ) -> PolytopeCertificate:
-    """Certify u = K x(t − τ) for every inertia of the polytope with one functional per axis (or 6×6).
+    """Certify u = K x(t − τ) for every inertia of the polytope (per axis when the loop splits, else 6×6).
 
     With ``tau_min=None`` the delay is constant τ and the criterion is the order-N Bessel-Legendre
-    LMI of :func:`~mrpctl.design.lmi.certify` with (P, S, R) common to the vertices (re-checked by
-    :func:`~mrpctl.design.lmi.lmi_blocks` at every vertex). Otherwise the delay varies in
-    [tau_min, tau] with ``rate`` and the interval criterion is used with common matrices.
+    LMI (Seuret & Gouaisbaut 2015): with ``Functional.VERTEX`` (default up to 8 vertices) in descriptor
+    form with (Pᵢ, Sᵢ, Rᵢ) per vertex and a common slack (re-checked by :func:`vertex_blocks` at
+    every vertex); with ``Functional.COMMON`` as in :func:`~mrpctl.design.lmi.certify` with (P, S, R)
+    common to the vertices (re-checked by :func:`~mrpctl.design.lmi.lmi_blocks`). Otherwise the delay
+    varies in [tau_min, tau] with ``rate`` and the interval criterion is used with common matrices
+    (``functional`` is then ignored).
+
+    Parameters
+    ----------
+    polytope : InertiaPolytope
+    K : array_like
+        (3, 6) gain on x = [σ; ω/4] (N m).
+    tau : float
+        Constant delay, or the upper end of the interval (s).
+    order : int, optional
+        Bessel-Legendre order N (default 2).
+    tau_min : float, optional
+        Lower end of a time-varying delay interval (s).
+    rate : DelayRate or float, optional
+        Rate bound of the interval delay (None: unknown).
+    margin_tol : float, optional
+        Relative eigenvalue margin every re-computed block must keep.
+    functional : Functional, optional
+        Which functional (constant delay only); None (default): VERTEX for sub-problems of at most
+        :data:`VERTEX_LIMIT` vertices (every diagonal box: 2 per axis), COMMON above.
     """
     if not isinstance(polytope, InertiaPolytope):
         raise SpecificationError(f"polytope must be an InertiaPolytope, got {type(polytope).__name__}")
     tau = positive_scalar("tau", tau)
     order = order_value(order)
     margin_tol = positive_scalar("margin_tol", margin_tol)
+    _check_functional(functional)
     axes = _axis_loops(polytope, K)
     groups = axes if axes is not None else [_vertex_loops(polytope, K)]
     status = CertificateStatus.CERTIFIED
@@ -302,7 +574,10 @@ def certify_polytope(
     intervals: list[IntervalCertificate] = []
     for gi, plants in enumerate(groups):
         if tau_min is None:
-            st, mg, tm, why = _common_constant(plants, tau, order, margin_tol)
+            if _use_vertex(functional, len(plants)):
+                st, mg, tm, why = _vertex_constant(plants, tau, order, margin_tol)
+            else:
+                st, mg, tm, why = _common_constant(plants, tau, order, margin_tol)
         else:
             lo = nonnegative_scalar("tau_min", tau_min)
             if not tau > lo:
@@ -326,6 +601,64 @@ def certify_polytope(
         solve_time=total,
         reason="; ".join(reasons),
         interval=tuple(intervals),
+        functional=(
+            Functional.VERTEX
+            if tau_min is None and all(_use_vertex(functional, len(g)) for g in groups)
+            else Functional.COMMON
+        ),
+    )
+
+
+def certify_vertices(
+    plants: Any,
+    tau: float,
+    *,
+    order: int = 2,
+    margin_tol: float = DEFAULT_MARGIN_TOL,
+    functional: Functional | None = None,
+) -> PolytopeCertificate:
+    """Certify ẋ = A x + A_d x(t − τ) for every (A, A_d) in the convex hull of the given vertices.
+
+    The general form of :func:`certify_polytope` (constant delay), for any polytope of plants with
+    a constant uncertain parameter.
+
+    Parameters
+    ----------
+    plants : sequence of (A, A_d)
+        The vertices, (n, n) matrices each (1/s).
+    tau : float
+        Constant delay τ (s).
+    order : int, optional
+        Bessel-Legendre order N (default 2).
+    margin_tol : float, optional
+        Relative eigenvalue margin every re-computed block must keep.
+    functional : Functional, optional
+        VERTEX: vertex-dependent functional with a common Finsler slack; COMMON: one functional for
+        all vertices; None (default): VERTEX up to :data:`VERTEX_LIMIT` vertices, else COMMON.
+    """
+    from mrpctl.design._common import system_matrices
+
+    checked = [system_matrices(a, a_d) for a, a_d in plants]
+    if not checked:
+        raise SpecificationError("plants: need at least one vertex (A, A_d)")
+    if len({a.shape for a, _ in checked}) != 1:
+        raise SpecificationError("plants: every vertex must have the same state dimension")
+    tau = positive_scalar("tau", tau)
+    order = order_value(order)
+    margin_tol = positive_scalar("margin_tol", margin_tol)
+    _check_functional(functional)
+    used = Functional.VERTEX if _use_vertex(functional, len(checked)) else Functional.COMMON
+    solver = _vertex_constant if used is Functional.VERTEX else _common_constant
+    st, mg, tm, why = solver(checked, tau, order, margin_tol)
+    return PolytopeCertificate(
+        status=st,
+        order=order,
+        tau=tau,
+        vertices=len(checked),
+        margins=mg,
+        solve_time=tm,
+        reason=why,
+        functional=used,
     )
 
 
