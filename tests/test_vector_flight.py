@@ -88,3 +88,35 @@ def test_inlined_fmax_fmin_return_what_the_libm_returns_on_ties_nans_and_infinit
                 assert math.isnan(got)
             else:
                 assert np.float64(got).view(np.int64) == np.float64(want).view(np.int64), (name, x, y)
+
+
+# ============================================================================ no C compiler
+def test_the_virtual_machine_refuses_noise_bias_and_jitter_clearly_and_runs_an_ideal_sensor(monkeypatch):
+    """Without a compiler the flight sample has no sensor ports: it must refuse, never drop the noise."""
+    import warnings
+
+    from mrpctl import paper, simulate
+    from mrpctl.errors import CodegenError
+    from mrpctl.flight import Hysteretic
+    from mrpctl.simulation import _engine, _simulate
+
+    compiled = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.05, rule=Hysteretic(0.1), t_final=0.3)
+    monkeypatch.setattr(_compile, "find_compiler", lambda: None)
+    monkeypatch.setattr(_simulate, "find_compiler", lambda: None)
+    _engine.clear_engines()
+    try:
+        common = dict(tau=0.05, rule=Hysteretic(0.1), t_final=0.3)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", _compile.CompilerWarning)
+            for option, message in (
+                (dict(sensor=SensorModel(attitude_noise=1e-3)), "sensor: .*compiled engine"),
+                (dict(sensor=SensorModel(gyro_bias=[1e-4, 0.0, 0.0])), "sensor: .*compiled engine"),
+                (dict(tau=0.05, delay=DelayModel.jitter(0.02, 0.05)), "delay: .*compiled engine"),
+            ):
+                with pytest.raises(CodegenError, match=message):
+                    simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **{**common, **option})
+            machine = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, sensor=SensorModel(), **common)
+    finally:
+        _engine.clear_engines()
+    np.testing.assert_allclose(machine.sigma, compiled.sigma, rtol=0, atol=1e-12)
+    assert machine.switch_indices.tolist() == compiled.switch_indices.tolist()
