@@ -237,8 +237,13 @@ class Engine:
         if self.flight:
             label += f"_{saturation.value}"
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
+        from mrpctl._vectorize import inline_min_max  # (it imports this module)
+
+        min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
         self.compiled: CompiledFunction = compile_function(
-            self.sample, flags=SIMULATION_FLAGS, appendix=_driver_source(self.sample)
+            self.sample,
+            flags=(*SIMULATION_FLAGS, *min_max_flags),
+            appendix=_driver_source(self.sample) + min_max_source,
         )
         self._run_c: Any = None
         if self.compiled.compiled:
@@ -360,6 +365,7 @@ class Engine:
         step = slice_samples(self.substeps)
         newest = -1 - self.d
         schedule: np.ndarray | None = None
+        noise_rows: np.ndarray | None = None
         k = 0
         diverged = memory_end + S_DIVERGED
         while k < n:
@@ -367,7 +373,9 @@ class Engine:
             noise, noise_stride = _NO_NOISE, 0
             if noisy:
                 assert sensor is not None
-                noise = np.ascontiguousarray(np.hstack(sensor.noise(k, k1)))
+                if noise_rows is None:
+                    noise_rows = np.empty((min(step, n), NOISE_SIZE))  # one buffer for the run's slices
+                noise = sensor.noise_rows(k, k1, out=noise_rows)
                 noise_stride = NOISE_SIZE
             if delay is not None:
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)

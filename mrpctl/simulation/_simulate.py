@@ -17,10 +17,19 @@ import numpy as np
 from mrpctl._compile import find_compiler
 from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
-from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
+from mrpctl.flight import (
+    FLIGHT_MEMORY_SIZE,
+    ActuatorModel,
+    DelayKind,
+    DelayModel,
+    Disturbance,
+    Hysteretic,
+    Saturation,
+    SensorModel,
+)
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
-from mrpctl.simulation._engine import STATE_BLOCK, RunOutput, engine, rule_key, slice_samples
+from mrpctl.simulation._engine import STATE_BLOCK, RunOutput, engine, flight_memory, rule_key, slice_samples
 from mrpctl.simulation._stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft
@@ -388,7 +397,10 @@ def simulate_batch(
 
     actuator, disturbance, sensor, delay : keyword-only
         The flight loop's models (as in :func:`simulate`), shared by every run; each rule
-        must then be a :class:`mrpctl.flight.Hysteretic`. Flight runs take the scalar engine.
+        must then be a :class:`mrpctl.flight.Hysteretic`. Without trajectories flight runs take
+        the lane engine too (noise and jitter streamed per slice, shared by the lanes), bit
+        for bit the scalar engine's; the result then has ``saturated_fraction`` and
+        ``peak_command``.
 
     Returns
     -------
@@ -451,10 +463,13 @@ def simulate_batch(
     varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
 
     stats = np.full((n_runs, STATS_SIZE), np.nan)
+    any_flight = any(isinstance(one, Hysteretic) for one in rules)
+    flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
     if not trajectories and _LANES and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
+            flight_rows,
             crafts=crafts,
             rules=rules,
             samples_by_run=samples_by_run,
@@ -467,6 +482,7 @@ def simulate_batch(
             substeps=substeps,
             threads=threads,
             progress=progress,
+            flight=(options, saturation, sensor, varying),
         )
 
     by_structure: dict[tuple[int, int, int], Any] = {}  # objects alive during the call: id() is safe
@@ -530,6 +546,8 @@ def simulate_batch(
             output = outputs[i]
             assert output is not None
             stats[i] = output.stats
+            if flight_rows is not None and output.memory is not None and output.memory.size == FLIGHT_MEMORY_SIZE:
+                flight_rows[i] = output.memory
 
     runs: list[SimulationResult] | None = None
     if trajectories:
@@ -560,6 +578,7 @@ def simulate_batch(
         n=n,
         rate=rate,
         runs=runs,
+        flight_memory=flight_rows,
         common=dict(
             x0=readonly(states),
             K=readonly(gains),
@@ -586,6 +605,7 @@ def lane_bytes(runs: int, d: int, workers: int) -> int:
 
 def _run_lanes(
     stats: np.ndarray,
+    flight_rows: np.ndarray | None,
     *,
     crafts: Sequence[Spacecraft],
     rules: Sequence[SwitchingRule],
@@ -599,10 +619,14 @@ def _run_lanes(
     substeps: int,
     threads: int,
     progress: Callable[[int, int], Any] | None,
+    flight: tuple[np.ndarray | None, Saturation, SensorModel | None, list[DelayModel | None]],
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d), W runs per C call, the batches on the thread pool; write the
-    rows of ``stats``. Returns the runs left to the scalar engine (a rule without lane form)."""
+    rows of ``stats`` (and of ``flight_rows``: the flight sample's memory). ``flight`` is the
+    flight loop's (constants, saturation, sensor, per-run varying delay). Returns the runs left
+    to the scalar engine (a rule without lane form)."""
+    flight_options, saturation, sensor, varying = flight
     from mrpctl import _vectorize
 
     groups: dict[Any, list[int]] = {}
@@ -620,11 +644,9 @@ def _run_lanes(
     for members in groups.values():
         first = members[0]
         d = samples_by_run[first]
-        if isinstance(rules[first], Hysteretic):  # the flight sample has no lane form yet
-            left.extend(members)
-            continue
+        is_flight = isinstance(rules[first], Hysteretic)
         try:
-            lanes = _vectorize.lane_engine(crafts[first], rules[first], d, 1.0 / rate, substeps)
+            lanes = _vectorize.lane_engine(crafts[first], rules[first], d, 1.0 / rate, substeps, saturation=saturation)
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
             left.extend(members)
@@ -633,13 +655,17 @@ def _run_lanes(
             rows = np.stack([histories[i][0][0] for i in members])[:, :, None]
         else:  # the array history is shared: a view, copied W runs at a time
             rows = np.broadcast_to(histories[first][0].T, (len(members), STATE_SIZE, d))
+        if is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
+            memory0 = np.array([flight_memory(states[i], histories[i][0], d) for i in members])
+        else:
+            memory0 = np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float)
         packs.append(
             (
                 members,
                 _vectorize.closed_loop_batches(
                     lanes,
                     states[members],
-                    np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float),
+                    memory0,
                     rows,
                     gains[members],
                     np.array([rules[i].parameters() for i in members], dtype=float),
@@ -647,6 +673,10 @@ def _run_lanes(
                     spacecraft=[crafts[i] for i in members],
                     threads=threads,
                     slice_samples=step,
+                    flight_options=flight_options if is_flight else None,
+                    sensor=sensor if is_flight else None,
+                    delay=varying[first] if is_flight else None,
+                    rate=rate,
                 ),
             )
         )
@@ -684,6 +714,8 @@ def _run_lanes(
     _run_polled(jobs, progress, done_samples, total, stop_flag, workers)
     for members, packed in packs:
         stats[members] = _vectorize.lane_stats(packed)
+        if flight_rows is not None and packed.engine.streamed:
+            flight_rows[members] = _vectorize.lane_memory(packed)
     return left
 
 

@@ -274,6 +274,12 @@ class BatchResult(_Conversions):
         (N,) max |σ| over the run.
     peak_torque : numpy.ndarray
         (N,) max over the run of |u|_∞ (N m).
+    saturated_fraction : numpy.ndarray or None
+        Flight loop (``rule=Hysteretic(...)``): (N,) fraction of each run's samples at which a
+        torque limit acted (NaN for a run of another rule); None when no run is a flight run.
+    peak_command : numpy.ndarray or None
+        Flight loop: (N, 4) max over each run of the *commanded* |u_c,i| per axis and of |u_c|
+        (N m), before the actuator limits (NaN rows for runs of another rule); None otherwise.
     runs : tuple of SimulationResult or None
         The full runs when ``trajectories=True`` was asked for.
     rate, t_final, substeps, history
@@ -299,6 +305,8 @@ class BatchResult(_Conversions):
     history: Any = field(repr=False)
     spacecraft: tuple[Spacecraft, ...] = field(default=(), repr=False)
     runs: tuple[SimulationResult, ...] | None = field(default=None, repr=False)
+    saturated_fraction: np.ndarray | None = field(default=None, repr=False)
+    peak_command: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.switch_count)
@@ -328,7 +336,14 @@ class BatchResult(_Conversions):
         runs = None
         if all(b.runs is not None for b in batches):
             runs = tuple(run for b in batches for run in (b.runs or ()))
+        flight: dict[str, Any] = {}
+        if any(b.saturated_fraction is not None for b in batches):  # NaN rows for batches without flight runs
+            flight["saturated_fraction"] = readonly(
+                np.concatenate([_or_nan(b.saturated_fraction, (len(b),)) for b in batches])
+            )
+            flight["peak_command"] = readonly(np.concatenate([_or_nan(b.peak_command, (len(b), 4)) for b in batches]))
         return cls(
+            **flight,
             **arrays,
             rules=tuple(rule for b in batches for rule in b.rules),
             rate=first.rate,
@@ -364,10 +379,22 @@ class BatchResult(_Conversions):
         )
 
 
+def _or_nan(values: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    return np.full(shape, np.nan) if values is None else values
+
+
 def assemble_batch(
-    stats: np.ndarray, *, n: int, rate: float, common: dict[str, Any], runs: list[SimulationResult] | None
+    stats: np.ndarray,
+    *,
+    n: int,
+    rate: float,
+    common: dict[str, Any],
+    runs: list[SimulationResult] | None,
+    flight_memory: np.ndarray | None = None,
 ) -> BatchResult:
-    """The :class:`BatchResult` from the (N, stats) rows of the runs."""
+    """The :class:`BatchResult` from the (N, stats) rows of the runs (and the (N, 10) flight
+    memories after the runs: n_sat at 5, peak |u_c,i| at 6:9, peak |u_c| at 9; NaN rows for
+    runs of other rules)."""
     metrics = [Metrics.from_stats(row) for row in stats]
     n_runs = len(metrics)
     diverged = np.array([m.diverged for m in metrics], dtype=bool)
@@ -375,7 +402,13 @@ def assemble_batch(
     settled = ~diverged & (settle < n)
     first = np.array([m.first_switch_index for m in metrics], dtype=float)
     last = np.array([m.last_switch_index for m in metrics], dtype=float)
+    flight: dict[str, Any] = {}
+    if flight_memory is not None:
+        valid = np.array([m.valid_samples(n) for m in metrics], dtype=float)  # as assemble_run divides
+        flight["saturated_fraction"] = readonly(flight_memory[:, 5] / valid)
+        flight["peak_command"] = readonly(flight_memory[:, 6:10])
     return BatchResult(
+        **flight,
         switch_count=readonly([m.switch_count for m in metrics], np.int64),
         first_switch_time=readonly(np.where(first >= 0, first / rate, np.nan)),
         last_switch_time=readonly(np.where(last >= 0, last / rate, np.nan)),
