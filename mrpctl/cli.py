@@ -909,6 +909,7 @@ def _sweep(args: argparse.Namespace) -> int:
                 rate=base.rate,
                 history=base.history,
                 substeps=base.substeps,
+                **base.flight_options,  # a flight scenario's models, shared by the runs
             )
             batches.append(batch)
             for i in range(len(part)):

@@ -133,3 +133,19 @@ def test_flight_options_are_in_the_help(capsys: pytest.CaptureFixture[str]) -> N
             assert option in out
         assert "--noise-seed" in out and "--disturbance" in out and "--jitter" in out
     assert np.isfinite(load_scenario("flight-paper").tau)
+
+
+def test_a_tumble_sweep_of_a_flight_scenario_keeps_its_models(tmp_path: Path, capsys) -> None:
+    """The sweep hands the scenario's actuator, sensor, disturbance and delay to every run (never drops them)."""
+    out = tmp_path / "sweep.csv"
+    argv = ["sweep", "tumble", "--scenario", "flight-paper", "--count", "2", "--seed", "3", "--t-final", "1.5"]
+    assert main([*argv, "--csv", str(out)]) == 0
+    capsys.readouterr()
+    rows = out.read_text().splitlines()
+    header, first = rows[0].split(","), rows[1].split(",")
+    base = load_scenario("flight-paper")
+    x0 = np.array([float(v) for v in first[1:7]])
+    x0[3:] /= 4.0
+    expected = simulate(base.spacecraft, base.K, x0, tau=base.tau, rule=base.rule, t_final=1.5, **base.flight_options)
+    assert int(first[header.index("switches")]) == expected.switch_count
+    assert float(first[header.index("max_abs_sigma")]) == expected.max_sigma

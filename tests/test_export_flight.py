@@ -320,3 +320,25 @@ def test_flight_options_are_refused_before_writing(tmp_path):
     with pytest.raises(SpecificationError, match="tau_max"):
         export(paper.SPACECRAFT, paper.GAIN, folder, tau=0.4, rule=Hysteretic(0.1), delay=DelayModel.jitter(0.3, 0.5))
     assert not folder.exists()
+
+
+def test_zero_delay_flight_export_reproduces_simulate(tmp_path):
+    """d = 0: the sample's controller acts on its own measurement (no delay line); the logic switch is the crossing."""
+    case = dict(
+        spacecraft=paper.SPACECRAFT,
+        K=paper.GAIN,
+        x0=paper.INITIAL_STATE,
+        tau=0.0,
+        rate=1000.0,
+        rule=Hysteretic(0.0),
+        sensor=SensorModel(attitude_noise=0.002, seed=9),
+        disturbance=Disturbance([0.0, 1e-3, 0.0]),
+    )
+    result = _export(tmp_path / "zero", case, compile=False)
+    reference = simulate(case["spacecraft"], case["K"], case["x0"], t_final=0.7, **_loop_args(case))
+    assert reference.switch_count >= 1
+    functions = _functions(result, "casadi")
+    n = len(reference.t)
+    states, torques, switches, _ = _sample_loop(functions["sample"], case, n, _memory0(case))
+    _check_equal(reference, states, torques, switches)
+    _check_equal(reference, *_controller_loop(functions, case, n, _memory0(case))[:3])

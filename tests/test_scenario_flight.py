@@ -164,3 +164,19 @@ def test_the_shipped_flight_scenario_equals_the_builtin_one_and_runs() -> None:
     run = from_file.simulate()
     assert run.converged and run.switch_count <= 2  # alpha = 1.2: at most a logic switch or two under the noise
     assert np.max(np.abs(run.u)) <= 20.0 and 0.0 < run.saturated_fraction < 0.5
+
+
+def test_a_campaign_refuses_the_flight_tables_instead_of_dropping_them() -> None:
+    from mrpctl.campaign.spec import parse_campaign
+
+    with pytest.raises(SpecificationError, match=r"\[actuator\].*not supported in campaigns"):
+        parse_campaign({**copy.deepcopy(FULL), "count": 2, "seed": 1})
+
+
+def test_a_saved_hysteretic_run_loads_back_with_its_delta(tmp_path) -> None:
+    from mrpctl import data
+
+    run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.5, t_final=0.2, rule=Hysteretic(0.3))
+    path = tmp_path / "run.nc"
+    data.save(run, path)
+    assert data.load(path).rule == Hysteretic(0.3)

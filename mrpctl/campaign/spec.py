@@ -200,6 +200,10 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
     scenario_part = {k: v for k, v in data.items() if k not in _CAMPAIGN_KEYS}
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
     base = parse_scenario(scenario_part, name=name)
+    if base.flight_options:  # the campaign runner does not pass the flight models on: refuse, never drop them
+        raise SpecificationError(
+            f"[{sorted(base.flight_options)[0]}]: the loop-as-flown models are not supported in campaigns yet"
+        )
     for key in ("count", "seed"):
         if key not in data:
             raise SpecificationError(f"campaign needs {key} (an integer)")
