@@ -35,6 +35,7 @@ from mrpctl.flight import (
     Saturation,
     actuator_function,
     measurement_function,
+    quaternion_from_mrp_expr,
     selection_function,
     short_expr,
 )
@@ -44,6 +45,8 @@ from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRu
 
 __all__ = [
     "MAX_SUBSTEPS",
+    "PREDICTOR_MEMORY_SIZE",
+    "PREDICTOR_RING_WIDTH",
     "ClosedLoopFunctions",
     "InertiaInput",
     "check_rule",
@@ -54,6 +57,8 @@ __all__ = [
     "flight_core_function",
     "inertia_input",
     "inertia_values",
+    "predictor_constants_size",
+    "predictor_core_function",
     "step_function",
 ]
 
@@ -287,6 +292,151 @@ def flight_core_function(
         [*names, "noise"],
         [*outputs, "measurement"],
     )
+
+
+#: The predictor sample's memory: (1, 1, σ̂_prev (3), the actuator accumulators of the flight sample (5),
+#: the model copy z (6)); entries 2..9 mean what they mean in the flight sample's memory.
+PREDICTOR_MEMORY_SIZE = FLIGHT_MEMORY_SIZE + STATE_SIZE
+#: One ring entry of the predictor sample: the measurement m_k and the model copy z_k.
+PREDICTOR_RING_WIDTH = 2 * STATE_SIZE
+#: Below this |σ̂|² the continuity test of the predicted MRP is skipped (its shadow is far away).
+_CONTINUITY_FLOOR = 1e-8
+_SMALL_ROTATION = 1e-4
+
+
+def predictor_constants_size(model_inertia: InertiaInput) -> int:
+    """Length of the predictor sample's ``flight`` input: the flight constants, τ, J_m and J_m⁻¹."""
+    per_matrix = 3 if model_inertia is InertiaInput.DIAGONAL else 9
+    return FLIGHT_CONSTANTS_SIZE + 1 + 2 * per_matrix
+
+
+def _quaternion_product(a: Any, b: Any) -> Any:
+    """β of [FN] = C(a) C(b) with a = β(F/B), b = β(B/N) (scalar first; Schaub & Junkins Eq. 3.105)."""
+    scalar = a[0] * b[0] - ca.dot(a[1:4], b[1:4])
+    vector = a[0] * b[1:4] + b[0] * a[1:4] - ca.cross(a[1:4], b[1:4])
+    return ca.vertcat(scalar, vector)
+
+
+def _rotation_quaternion(theta: Any) -> Any:
+    """β of [BN] = exp(−[θ×]) (a rotation by the vector θ, rad): (cos(φ/2), sin(φ/2) θ/φ), φ = |θ|."""
+    squared = ca.dot(theta, theta)
+    angle = ca.sqrt(squared)
+    small = angle < _SMALL_ROTATION
+    safe = ca.if_else(small, 1.0, angle)
+    # sin(φ/2)/φ and its series 1/2 − φ²/48 + φ⁴/3840 near 0 (both if_else branches are evaluated).
+    factor = ca.if_else(small, 0.5 - squared / 48.0 + squared**2 / 3840.0, ca.sin(safe / 2.0) / safe)
+    return ca.vertcat(ca.cos(angle / 2.0), factor * theta)
+
+
+def _short_mrp_from_quaternion(q: Any) -> Any:
+    """The short-set MRP of a unit quaternion (either sign): q_v/(1 + q₀) for q₀ >= 0, else −q_v/(1 − q₀)."""
+    positive = q[0] >= 0
+    return ca.if_else(positive, q[1:4] / (1 + q[0]), -q[1:4] / (1 - q[0]))
+
+
+def predictor_core_function(
+    spacecraft: Spacecraft,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+    model_inertia: InertiaInput = InertiaInput.DIAGONAL,
+    saturation: Saturation = Saturation.SCALE,
+    sensor: bool = False,
+) -> ca.Function:
+    """One sample of the predictor loop (issue 13; ``design/predictor.md``, form (b)) (pure SX).
+
+    ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight[, noise]) ->
+    (x_next, memory_next, x_meas, u, switched, ring)``: memory of :data:`PREDICTOR_MEMORY_SIZE`
+    (1, 1, σ̂_prev, the flight sample's actuator accumulators, the model copy z); ``x_delayed`` and
+    ``ring`` are entries of :data:`PREDICTOR_RING_WIDTH`: (m_k, z_k), read back as (y_k, z_{k−d}) =
+    (m_{k−d}, z_{k−d}); parameters (α,) (inf: never switch); ``flight`` = (u_max (3), u_norm,
+    w (3), gyro bias (3), τ, J_m, J_m⁻¹) with the model's inertia in the layout ``model_inertia``;
+    ``noise`` (with ``sensor``) as in :func:`flight_core_function`. At sample k:
+
+    1. plant bookkeeping (``OnCurrent``, no physical effect): x_meas, recorded in the result;
+    2. the sensor (with ``sensor``): m_k, else m_k = x_meas;
+    3. the prediction from y = m_{k−d} (m_k when d = 0) and the model copy: the inertial attitude
+       error C_E = C(z_{k−d})ᵀ C(y) and the body-rate error δω = ω_y − ω_z(k−d) are carried to now,
+       Ĉ = C(τ δω) C(z_k) C_E and ω̂ = ω_z(k) + δω (quaternion products, no DCM);
+    4. the rule on the prediction: σ̂ is the short MRP of Ĉ, replaced by its shadow when that is
+       nearer σ̂_{k−1} (continuity, when |σ̂|² > 1e-8), then by its shadow when |σ̂| >= α, which is
+       the sample's ``switched``;
+    5. u_c = K [σ̂; ω̂/4]; the actuator gives the applied torque u; the plant is integrated with
+       u + w (``substeps`` RK4 substeps), the model copy with u alone by one RK4 step of J_m, and
+       kept in the short set: z_{k+1} = short(RK4_m(z_k, u)).
+    """
+    step = step_function(spacecraft, period, substeps, inertia=inertia)
+    model_step = step_function(spacecraft, period, 1, inertia=model_inertia)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", PREDICTOR_MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", PREDICTOR_RING_WIDTH)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    flight = ca.SX.sym("flight", predictor_constants_size(model_inertia))
+    noise = ca.SX.sym("noise", NOISE_SIZE)
+    per_matrix = 3 if model_inertia is InertiaInput.DIAGONAL else 9
+    start = FLIGHT_CONSTANTS_SIZE + 1
+    model_j = flight[start : start + per_matrix]
+    model_j_inv = flight[start + per_matrix : start + 2 * per_matrix]
+    if model_inertia is InertiaInput.FULL:
+        model_j, model_j_inv = ca.reshape(model_j, 3, 3), ca.reshape(model_j_inv, 3, 3)
+    tau = flight[FLIGHT_CONSTANTS_SIZE]
+
+    x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
+    measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
+    z = memory[FLIGHT_MEMORY_SIZE:PREDICTOR_MEMORY_SIZE]
+    y, z_old = (x_delayed[0:STATE_SIZE], x_delayed[STATE_SIZE:]) if d > 0 else (measured, z)
+    q_y = quaternion_from_mrp_expr(y[0:3])
+    q_old = quaternion_from_mrp_expr(z_old[0:3])
+    q_z = quaternion_from_mrp_expr(z[0:3])
+    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
+    delta_omega = 4 * (y[3:6] - z_old[3:6])
+    q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
+    sigma_hat = _short_mrp_from_quaternion(q_hat)
+    previous = memory[2:5]
+    shadow = _safe_shadow(sigma_hat)
+    nearer = ca.logic_and(
+        ca.dot(sigma_hat, sigma_hat) > _CONTINUITY_FLOOR,
+        ca.norm_2(shadow - previous) < ca.norm_2(sigma_hat - previous),
+    )
+    sigma_hat = ca.if_else(nearer, shadow, sigma_hat)
+    alpha = parameters[0]
+    switched = ca.if_else(ca.dot(sigma_hat, sigma_hat) >= alpha * alpha, 1.0, 0.0)
+    sigma_hat = ca.if_else(switched, _safe_shadow(sigma_hat), sigma_hat)
+    x_hat = ca.vertcat(sigma_hat, z[3:6] + (y[3:6] - z_old[3:6]))
+
+    command = gain @ x_hat
+    u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+    x_next = step(x_meas, u_plant, *extra)
+    z_next = model_step(z, u, model_j, model_j_inv)
+    z_next = ca.vertcat(short_expr(z_next[0:3]), z_next[3:6])
+    size = ca.fabs(command)
+    memory_next = ca.vertcat(
+        memory[0:2],
+        sigma_hat,
+        memory[5] + saturated,
+        ca.fmax(memory[6:9], size),
+        ca.fmax(memory[9], ca.norm_2(command)),
+        z_next,
+    )
+    inputs = [x, memory, x_delayed, gain, parameters, *extra, flight] + ([noise] if sensor else [])
+    names = ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"]
+    return ca.Function(
+        "core",
+        inputs,
+        [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)],
+        names + (["noise"] if sensor else []),
+        ["x_next", "memory_next", "x_meas", "u", "switched", "ring"],
+    )
+
+
+def _safe_shadow(sigma: Any) -> Any:
+    # Both if_else branches are evaluated: keep the unused shadow of σ = 0 finite.
+    squared = ca.dot(sigma, sigma)
+    return -sigma / ca.if_else(squared > 0, squared, 1.0)
 
 
 def _chunk_function(sample: ca.Function, d: int) -> ca.Function:
