@@ -344,6 +344,7 @@ def predictor_core_function(
     model_inertia: InertiaInput = InertiaInput.DIAGONAL,
     saturation: Saturation = Saturation.SCALE,
     sensor: bool = False,
+    limited: bool = True,
 ) -> ca.Function:
     """One sample of the predictor loop (issue 13; ``design/predictor.md``, form (b)) (pure SX).
 
@@ -353,7 +354,9 @@ def predictor_core_function(
     ``ring`` are entries of :data:`PREDICTOR_RING_WIDTH`: (m_k, z_k), read back as (y_k, z_{k−d}) =
     (m_{k−d}, z_{k−d}); parameters (α,) (inf: never switch); ``flight`` = (u_max (3), u_norm,
     w (3), gyro bias (3), τ, J_m, J_m⁻¹) with the model's inertia in the layout ``model_inertia``;
-    ``noise`` (with ``sensor``) as in :func:`flight_core_function`. At sample k:
+    ``noise`` (with ``sensor``) as in :func:`flight_core_function`. Without ``limited`` the
+    actuator is left out of the expressions (u = u_c; u_max, u_norm unused), which saves its
+    libm calls. At sample k:
 
     1. plant bookkeeping (``OnCurrent``, no physical effect): x_meas, recorded in the result;
     2. the sensor (with ``sensor``): m_k, else m_k = x_meas;
@@ -409,17 +412,23 @@ def predictor_core_function(
     x_hat = ca.vertcat(sigma_hat, z[3:6] + (y[3:6] - z_old[3:6]))
 
     command = gain @ x_hat
-    u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+    if limited:
+        u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+    else:
+        u, u_plant, saturated = command, command + flight[4:7], ca.DM(0.0)
     x_next = step(x_meas, u_plant, *extra)
     z_next = model_step(z, u, model_j, model_j_inv)
     z_next = ca.vertcat(short_expr(z_next[0:3]), z_next[3:6])
-    size = ca.fabs(command)
+    # the peaks by comparisons: casadi_fmax is a libm call per use (no -ffinite-math-only)
+    size = [ca.fabs(command[i]) for i in range(INPUT_SIZE)]
+    peaks = [ca.if_else(size[i] > memory[6 + i], size[i], memory[6 + i]) for i in range(INPUT_SIZE)]
+    norm = ca.norm_2(command)
     memory_next = ca.vertcat(
         memory[0:2],
         sigma_hat,
         memory[5] + saturated,
-        ca.fmax(memory[6:9], size),
-        ca.fmax(memory[9], ca.norm_2(command)),
+        *peaks,
+        ca.if_else(norm > memory[9], norm, memory[9]),
         z_next,
     )
     inputs = [x, memory, x_delayed, gain, parameters, *extra, flight] + ([noise] if sensor else [])

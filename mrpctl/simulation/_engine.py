@@ -258,6 +258,7 @@ class Engine:
         saturation: Saturation = Saturation.SCALE,
         predictor: InertiaInput | None = None,
         sensor: bool = False,
+        limited: bool = True,
     ) -> None:
         self.d = d
         self.substeps = substeps
@@ -275,6 +276,7 @@ class Engine:
                 model_inertia=predictor,
                 saturation=saturation,
                 sensor=sensor,
+                limited=limited,
             )
         elif self.flight:
             core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation)
@@ -286,7 +288,7 @@ class Engine:
         if self.flight:
             label += f"_{saturation.value}"
         if predictor is not None:
-            label += f"_model_{predictor.value}" + ("_sensor" if sensor else "")
+            label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
         self.compiled: CompiledFunction = compile_function(
             self.sample, flags=SIMULATION_FLAGS, appendix=_driver_source(self.sample)
@@ -528,19 +530,20 @@ def engine(
     *,
     predictor: Spacecraft | None = None,
     sensor: bool = False,
+    limited: bool = True,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
     ``saturation`` (the actuator's mode) is part of the structure of the flight and predictor
     samples only. ``predictor``: the controller's model (its inertia layout is part of the
     structure, its values are run-time inputs) for the predictor sample, with a sensor port when
-    ``sensor``; the predictor needs a C compiler.
+    ``sensor`` and the actuator when ``limited``; the predictor needs a C compiler.
     """
     model = None if predictor is None else inertia_input(predictor)
     if not isinstance(rule, Hysteretic) and model is None:
         saturation = Saturation.SCALE
     if model is None:
-        sensor = False
+        sensor, limited = False, True
         key: tuple[Any, ...] = (
             inertia_input(spacecraft),
             type(rule),
@@ -551,11 +554,13 @@ def engine(
             saturation,
         )
     else:
-        key = (inertia_input(spacecraft), "predictor", model, sensor, d, period, substeps, saturation)
+        key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
-            found = Engine(spacecraft, rule, d, period, substeps, saturation, predictor=model, sensor=sensor)
+            found = Engine(
+                spacecraft, rule, d, period, substeps, saturation, predictor=model, sensor=sensor, limited=limited
+            )
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
 

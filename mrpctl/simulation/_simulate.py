@@ -331,6 +331,7 @@ def simulate(
         saturation,
         predictor=None if checked is None else checked.model,
         sensor=sensor is not None,
+        limited=actuator is not None,
     )
     stop = None
     if progress is not None:
@@ -561,6 +562,7 @@ def simulate_batch(
                 saturation,
                 predictor=None if checked is None else checked.model,
                 sensor=sensor is not None,
+                limited=actuator is not None,
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
