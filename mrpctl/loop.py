@@ -31,8 +31,12 @@ from mrpctl.flight import (
     FLIGHT_CONSTANTS_SIZE,
     FLIGHT_MEMORY_SIZE,
     NOISE_SIZE,
+    ActuatorModel,
+    DelayModel,
+    Disturbance,
     Hysteretic,
     Saturation,
+    SensorModel,
     actuator_function,
     measurement_function,
     quaternion_from_mrp_expr,
@@ -44,10 +48,12 @@ from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
 
 __all__ = [
+    "CONTROLLER_MEMORY_SIZE",
     "MAX_SUBSTEPS",
     "PREDICTOR_MEMORY_SIZE",
     "PREDICTOR_RING_WIDTH",
     "ClosedLoopFunctions",
+    "FlightOptions",
     "InertiaInput",
     "check_rule",
     "check_substeps",
@@ -468,6 +474,91 @@ def _chunk_function(sample: ca.Function, d: int) -> ca.Function:
     )
 
 
+#: The controller's own memory in :attr:`ClosedLoopFunctions.flight_controller`: (h, c, σ̃_prev (3)).
+CONTROLLER_MEMORY_SIZE = 5
+#: Names of the flight sample's memory entries (:data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`), in order.
+FLIGHT_MEMORY_LAYOUT = (
+    "h",
+    "c",
+    "sigma_prev_1",
+    "sigma_prev_2",
+    "sigma_prev_3",
+    "saturated_samples",
+    "peak_u_command_1",
+    "peak_u_command_2",
+    "peak_u_command_3",
+    "peak_u_command_norm",
+)
+
+
+def _flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
+    """``chunk(x, memory, history, noise) -> (x_end, memory_end, states, measurements, u, switched)``.
+
+    max(d, 1) samples of the flight ``sample`` (a ``mapaccum``); ``history`` holds the
+    measurements m_{k−d}, …, m_{k−1} (the previous chunk's ``measurements``), ``noise`` one
+    column (θ_k; η_k) per sample, ``states`` the bookkept true states x_k.
+    """
+    length = max(d, 1)
+    accumulated = sample.mapaccum("chunk_samples", length, 2)
+    x = ca.MX.sym("x", STATE_SIZE)
+    memory = ca.MX.sym("memory", FLIGHT_MEMORY_SIZE)
+    history = ca.MX.sym("history", STATE_SIZE, length)
+    noise = ca.MX.sym("noise", NOISE_SIZE, length)
+    xs, memories, states, u, switched, measurements = accumulated(x, memory, history, noise)
+    return ca.Function(
+        "chunk",
+        [x, memory, history, noise],
+        [xs[:, length - 1], memories[:, length - 1], states, measurements, u, switched],
+        ["x", "memory", "history", "noise"],
+        ["x_end", "memory_end", "states", "measurements", "u", "switched"],
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class FlightOptions:
+    """The models of the loop as flown that a :class:`ClosedLoopFunctions` was built with.
+
+    Attributes
+    ----------
+    actuator : mrpctl.flight.ActuatorModel or None
+        Torque limits (None: none).
+    disturbance : mrpctl.flight.Disturbance or None
+        Constant body-frame torque w (N m) (None: zero).
+    sensor : mrpctl.flight.SensorModel or None
+        Noise and gyro bias (None: an ideal sensor). The noise θ_k, η_k is an input of
+        ``sample`` and ``chunk`` (``SensorModel.noise(k0, k1)``); the bias is a constant.
+    delay : mrpctl.flight.DelayModel or None
+        A time-varying delay (None: the constant τ); ``sample`` takes whichever measurement
+        the schedule picks as ``x_delayed``.
+    constants : numpy.ndarray
+        The flight sample's run-time constants (u_max (3), u_norm, w (3), gyro bias (3)) bound
+        into the Functions (N m, rad/s; inf: no limit).
+    saturation : mrpctl.flight.Saturation
+        The actuator's mode (``SCALE`` without an actuator).
+    """
+
+    actuator: ActuatorModel | None
+    disturbance: Disturbance | None
+    sensor: SensorModel | None
+    delay: DelayModel | None
+    constants: np.ndarray = field(repr=False)
+    saturation: Saturation
+
+    def initial_memory(self, x0: Any, delay_samples: int, history: Any = None) -> np.ndarray:
+        """The ``sample`` memory at k = 0 for the initial state x0 (see :data:`FLIGHT_MEMORY_LAYOUT`).
+
+        h = c = +1, σ̃_prev the short set of the σ the controller sees at k = 0 (the first
+        history row for d > 0, by default x0; the bookkept σ0 for d = 0), accumulators 0. The
+        first five entries are the ``flight_controller`` memory.
+        """
+        from mrpctl._validation import finite_array
+        from mrpctl.simulation._engine import flight_memory  # the engine's own initialisation
+
+        x0 = finite_array("x0", x0, (STATE_SIZE,))
+        rows = x0[None, :] if history is None else finite_array("history", history)
+        return flight_memory(x0, rows, integer("delay_samples", delay_samples, minimum=0))
+
+
 @dataclass(frozen=True, eq=False)
 class ClosedLoopFunctions:
     """The closed loop as named CasADi Functions (the building blocks of the simulator).
@@ -476,6 +567,12 @@ class ClosedLoopFunctions:
     constants in the expressions. ``dynamics``, ``controller``, ``switching``, ``step``
     and ``sample`` are pure SX Functions; ``chunk`` is an MX ``mapaccum`` of ``sample``
     (a loop, not an unrolled expression), also code-generatable and serialisable.
+
+    With the controller-side rule :class:`~mrpctl.flight.Hysteretic` (``flight`` is not
+    None) ``sample`` and ``chunk`` are the flight loop's (:func:`flight_core_function` with
+    K, δ and the :class:`FlightOptions` constants bound), and ``flight_controller`` and
+    ``sensor`` are what flight software and a sensor simulation need; see
+    :meth:`functions`.
 
     Attributes
     ----------
@@ -490,12 +587,29 @@ class ClosedLoopFunctions:
     sample : casadi.Function
         ``sample(x, memory, x_delayed) -> (x_next, memory_next, x_meas, u, switched)``:
         one measurement period (rule, record, hold, integrate); ``x_delayed`` is m_{k−d}
-        and is not used when d = 0.
+        and is not used when d = 0. Flight loop: ``sample(x, memory, x_delayed, noise) ->
+        (x_next, memory_next, x_meas, u, switched, measurement)`` with the memory of
+        :data:`FLIGHT_MEMORY_LAYOUT`, ``noise`` = (θ_k; η_k) (rad, rad/s), ``x_meas`` the
+        bookkept true state, ``measurement`` the sensor's m_k (what goes into the delay
+        line) and ``u`` the applied torque (without the disturbance).
     chunk : casadi.Function
         ``chunk(x, memory, history) -> (x_end, memory_end, measurements, u, switched)``:
         max(d, 1) samples; ``history`` (6 × d) is the previous chunk's ``measurements``.
+        Flight loop: ``chunk(x, memory, history, noise) -> (x_end, memory_end, states,
+        measurements, u, switched)``.
     initial_memory : float
-        The rule memory at k = 0.
+        The rule memory at k = 0 (flight loop: see :meth:`FlightOptions.initial_memory`).
+    flight_controller : casadi.Function or None
+        Flight loop only: ``flight_controller(x_meas, memory, delta) -> (u, u_command,
+        memory_next, switched)``: from the delayed measurement [σ̃; ω̃/4] and the
+        controller memory (h, c, σ̃_prev) the set selection with hysteresis δ, the
+        commanded torque u_c = K [σ_c; ω̃/4] and the applied (limited) torque u (N m).
+    sensor : casadi.Function or None
+        Flight loop only: ``sensor(x, noise) -> (x_true, measurement)``: the plant's MRP kept
+        in the short set (no physical effect) and the measurement of it with noise θ_k, η_k
+        and the gyro bias.
+    flight : FlightOptions or None
+        The flight models (None for the paper's state-side rules).
     """
 
     spacecraft: Spacecraft
@@ -512,6 +626,9 @@ class ClosedLoopFunctions:
     step: ca.Function = field(repr=False)
     sample: ca.Function = field(repr=False)
     chunk: ca.Function = field(repr=False)
+    flight_controller: ca.Function | None = field(default=None, repr=False)
+    sensor: ca.Function | None = field(default=None, repr=False)
+    flight: FlightOptions | None = None
 
     @property
     def period(self) -> float:
@@ -519,7 +636,20 @@ class ClosedLoopFunctions:
         return 1.0 / self.rate
 
     def functions(self) -> dict[str, ca.Function]:
-        """The Functions by name, for export."""
+        """The Functions by name, for export.
+
+        Paper rules: dynamics, controller, rule, step, sample, chunk. Flight loop:
+        dynamics, flight_controller, sensor, step, sample, chunk.
+        """
+        if self.flight_controller is not None and self.sensor is not None:
+            return {
+                "dynamics": self.dynamics,
+                "flight_controller": self.flight_controller,
+                "sensor": self.sensor,
+                "step": self.step,
+                "sample": self.sample,
+                "chunk": self.chunk,
+            }
         return {
             "dynamics": self.dynamics,
             "controller": self.controller,
@@ -534,6 +664,9 @@ class ClosedLoopFunctions:
             f"Closed loop: {self.spacecraft}, tau = {self.tau:g} s = {self.delay_samples} samples "
             f"at {self.rate:g} Hz, RK4 with {self.substeps} substep(s), rule {self.rule}"
         ]
+        if self.flight is not None:
+            models = [self.flight.actuator, self.flight.disturbance, self.flight.sensor, self.flight.delay]
+            lines.append("  flight models: " + (", ".join(str(m) for m in models if m is not None) or "none"))
         lines += [f"  {function}" for function in self.functions().values()]
         return "\n".join(lines)
 
@@ -546,6 +679,10 @@ def closed_loop_functions(
     rule: SwitchingRule,
     rate: float = 1000.0,
     substeps: int = 1,
+    actuator: ActuatorModel | None = None,
+    disturbance: Any = None,
+    sensor: SensorModel | None = None,
+    delay: DelayModel | None = None,
 ) -> ClosedLoopFunctions:
     """Build the closed loop's named CasADi Functions (see :class:`ClosedLoopFunctions`).
 
@@ -556,25 +693,79 @@ def closed_loop_functions(
     K : array_like
         (3, 6) gain acting on x = [σ; ω/4]: u = K x(t − τ).
     tau : float, keyword-only
-        Delay τ (s), a whole number d of periods 1/rate.
+        Delay τ (s), a whole number d of periods 1/rate (with ``delay``: its tau_max).
     rule : SwitchingRule, keyword-only
-        The shadow-set switching rule.
+        The shadow-set switching rule, or the controller-side :class:`~mrpctl.flight.Hysteretic`.
     rate : float, keyword-only
         Measurement rate (Hz), default 1000.
     substeps : int, keyword-only
         RK4 substeps per measurement period, default 1.
+    actuator, disturbance, sensor, delay : keyword-only
+        The flight loop's models, as in :func:`mrpctl.simulate` (``rule=Hysteretic(...)``
+        only; the same checks): :class:`~mrpctl.flight.ActuatorModel`, a constant
+        :class:`~mrpctl.flight.Disturbance` (or a (3,) torque, N m),
+        :class:`~mrpctl.flight.SensorModel`, :class:`~mrpctl.flight.DelayModel`.
+
+    Raises
+    ------
+    SpecificationError, DimensionError
+        On invalid parameters, a flight model with a paper rule, or a per-sample disturbance.
     """
+    # The simulator's own checks of the flight options (one copy); imported here because
+    # mrpctl.simulation imports this module.
+    from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS
+    from mrpctl.simulation._simulate import _flight_options, _varying_delay
+
     spacecraft = check_spacecraft(spacecraft)
     gain = gain_matrix(K)
     rule = check_rule(rule)
-    if isinstance(rule, Hysteretic):
-        raise SpecificationError(
-            "rule: the controller-side rule Hysteretic runs in mrpctl.simulate only; it cannot be exported yet"
-        )
     d = delay_samples(tau, rate)
     rate = float(rate)
     substeps = check_substeps(substeps)
     period = 1.0 / rate
+    options, saturation = _flight_options(rule, actuator, disturbance, sensor)
+    sequence = getattr(delay, "delays", None)
+    horizon = 1 if sequence is None else len(sequence)
+    varying = _varying_delay(rule, delay, d, rate, horizon)
+    common = dict(
+        spacecraft=spacecraft,
+        K=readonly(gain),
+        rule=rule,
+        tau=float(tau),
+        rate=rate,
+        delay_samples=d,
+        substeps=substeps,
+        initial_memory=rule.initial_memory(delay_samples=d),
+        dynamics=plant_model(spacecraft).dynamics,
+        switching=rule.function(delay_samples=d),
+        step=step_function(spacecraft, period, substeps),
+    )
+    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
+    controller = ca.Function("controller", [x_meas], [ca.DM(gain) @ x_meas], ["x_meas"], ["u"])
+    if isinstance(rule, Hysteretic):
+        disturbance_value = None
+        if disturbance is not None:
+            disturbance_value = disturbance if isinstance(disturbance, Disturbance) else Disturbance(disturbance)
+        flight = FlightOptions(
+            actuator=actuator,
+            disturbance=disturbance_value,
+            sensor=sensor,
+            delay=varying,
+            constants=readonly(NO_FLIGHT_OPTIONS if options is None else options),
+            saturation=saturation,
+        )
+        sample, flight_controller, sensor_function = _flight_functions(
+            spacecraft, gain, rule, d, period, substeps, flight
+        )
+        return ClosedLoopFunctions(
+            **common,
+            controller=controller,
+            sample=sample,
+            chunk=_flight_chunk_function(sample, d),
+            flight_controller=flight_controller,
+            sensor=sensor_function,
+            flight=flight,
+        )
     core = core_function(spacecraft, rule, d, period, substeps)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", MEMORY_SIZE)
@@ -587,21 +778,64 @@ def closed_loop_functions(
         ["x", "memory", "x_delayed"],
         ["x_next", "memory_next", "x_meas", "u", "switched"],
     )
-    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
-    controller = ca.Function("controller", [x_meas], [ca.DM(gain) @ x_meas], ["x_meas"], ["u"])
     return ClosedLoopFunctions(
-        spacecraft=spacecraft,
-        K=readonly(gain),
-        rule=rule,
-        tau=float(tau),
-        rate=rate,
-        delay_samples=d,
-        substeps=substeps,
-        initial_memory=rule.initial_memory(delay_samples=d),
-        dynamics=plant_model(spacecraft).dynamics,
+        **common,
         controller=controller,
-        switching=rule.function(delay_samples=d),
-        step=step_function(spacecraft, period, substeps),
         sample=sample,
         chunk=_chunk_function(sample, d),
     )
+
+
+def _flight_functions(
+    spacecraft: Spacecraft,
+    gain: np.ndarray,
+    rule: Hysteretic,
+    d: int,
+    period: float,
+    substeps: int,
+    flight: FlightOptions,
+) -> tuple[ca.Function, ca.Function, ca.Function]:
+    """(sample, flight_controller, sensor) of the flight loop with K, δ and the flight constants bound.
+
+    ``sample`` is :func:`flight_core_function` (the simulator's sample) with its run-time
+    inputs bound; ``flight_controller`` and ``sensor`` are written from the same builders
+    (:func:`~mrpctl.flight.selection_function`, :func:`~mrpctl.flight.actuator_function`,
+    :func:`~mrpctl.flight.measurement_function`) in the same order, so that a loop of
+    ``sensor``, ``flight_controller`` and ``step`` gives the sample's numbers bit for bit.
+    """
+    constants = ca.DM(np.asarray(flight.constants))
+    core = flight_core_function(spacecraft, d, period, substeps, saturation=flight.saturation)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    noise = ca.SX.sym("noise", NOISE_SIZE)
+    bound = list(core(x, memory, x_delayed, ca.DM(gain), ca.DM(rule.parameters()), constants, noise))
+    sample = ca.Function(
+        "sample",
+        [x, memory, x_delayed, noise],
+        bound,
+        ["x", "memory", "x_delayed", "noise"],
+        ["x_next", "memory_next", "x_meas", "u", "switched", "measurement"],
+    )
+
+    measured = ca.SX.sym("x_meas", STATE_SIZE)
+    controller_memory = ca.SX.sym("memory", CONTROLLER_MEMORY_SIZE)
+    delta = ca.SX.sym("delta")
+    sigma_seen = short_expr(measured[0:3])
+    h_next, c_next, sigma_c, switched = selection_function()(
+        controller_memory[0], controller_memory[1], sigma_seen, controller_memory[2:5], delta
+    )
+    command = ca.DM(gain) @ ca.vertcat(sigma_c, measured[3:6])
+    u = actuator_function(flight.saturation)(command, constants[0:3], constants[3], ca.DM.zeros(3))[0]
+    flight_controller = ca.Function(
+        "flight_controller",
+        [measured, controller_memory, delta],
+        [u, command, ca.vertcat(h_next, c_next, sigma_seen), switched],
+        ["x_meas", "memory", "delta"],
+        ["u", "u_command", "memory_next", "switched"],
+    )
+
+    true_state = OnCurrent().expressions(x, x, ca.SX.zeros(MEMORY_SIZE), delay_samples=d)[0]
+    measurement = measurement_function()(true_state, noise[0:3], noise[3:6], constants[7:10])[0]
+    sensor = ca.Function("sensor", [x, noise], [true_state, measurement], ["x", "noise"], ["x_true", "measurement"])
+    return sample, flight_controller, sensor

@@ -27,6 +27,7 @@ __all__ = [
     "Claim",
     "Reproduction",
     "Verdict",
+    "flight_scenarios",
     "paper_scenarios",
     "reproduce",
     "run_reproduction",
@@ -189,6 +190,35 @@ def paper_scenarios(*, t_final: float = 60.0) -> dict[str, Scenario]:
             ),
         )
     }
+
+
+def flight_scenarios(*, t_final: float = 60.0) -> dict[str, Scenario]:
+    """The shipped scenarios of the loop as flown (``mrpctl/scenarios/flight-*.toml``), by name.
+
+    ``flight-paper``: the paper's case with the controller-side rule
+    :class:`~mrpctl.flight.Hysteretic` (α = 1.2), 0.01 rad / 1e-4 rad/s sensor noise (seed 1),
+    a 20 N m per-axis torque limit, a 1e-3 N m disturbance about x and a delay jittering in
+    [0.45, 0.5] s (seed 2).
+    """
+    from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
+
+    t_final = positive_scalar("t_final", t_final)
+    base = _paper_scenario(
+        "flight-paper",
+        "The paper's case as flown: hysteretic set selection (alpha = 1.2), noisy sensor, 20 N m torque limit, "
+        "disturbance, jittering delay",
+        paper.TAU,
+        Hysteretic.from_alpha(1.2),
+        t_final,
+    )
+    flown = replace(
+        base,
+        actuator=ActuatorModel(u_max=20.0),
+        sensor=SensorModel(attitude_noise=0.01, rate_noise=1e-4, seed=1),
+        disturbance=Disturbance([1e-3, 0.0, 0.0]),
+        delay=DelayModel.jitter(0.45, paper.TAU, seed=2),
+    )
+    return {flown.name: flown}
 
 
 # ------------------------------------------------------------------------------ measures
