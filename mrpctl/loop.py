@@ -398,24 +398,8 @@ def predictor_core_function(
     measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
     z = memory[FLIGHT_MEMORY_SIZE:PREDICTOR_MEMORY_SIZE]
     y, z_old = (x_delayed[0:STATE_SIZE], x_delayed[STATE_SIZE:]) if d > 0 else (measured, z)
-    q_y = quaternion_from_mrp_expr(y[0:3])
-    q_old = quaternion_from_mrp_expr(z_old[0:3])
-    q_z = quaternion_from_mrp_expr(z[0:3])
-    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
-    delta_omega = 4 * (y[3:6] - z_old[3:6])
-    q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
-    sigma_hat = _short_mrp_from_quaternion(q_hat)
-    previous = memory[2:5]
-    shadow = _safe_shadow(sigma_hat)
-    nearer = ca.logic_and(
-        ca.dot(sigma_hat, sigma_hat) > _CONTINUITY_FLOOR,
-        ca.norm_2(shadow - previous) < ca.norm_2(sigma_hat - previous),
-    )
-    sigma_hat = ca.if_else(nearer, shadow, sigma_hat)
-    alpha = parameters[0]
-    switched = ca.if_else(ca.dot(sigma_hat, sigma_hat) >= alpha * alpha, 1.0, 0.0)
-    sigma_hat = ca.if_else(switched, _safe_shadow(sigma_hat), sigma_hat)
-    x_hat = ca.vertcat(sigma_hat, z[3:6] + (y[3:6] - z_old[3:6]))
+    x_hat, switched = prediction_expr(y, z_old, z, memory[2:5], parameters[0], tau)
+    sigma_hat = x_hat[0:3]
 
     command = gain @ x_hat
     if limited:
@@ -446,6 +430,32 @@ def predictor_core_function(
         names + (["noise"] if sensor else []),
         ["x_next", "memory_next", "x_meas", "u", "switched", "ring"],
     )
+
+
+def prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:
+    """(x̂, switched): the predictor's correction and its switching rule as SX expressions.
+
+    From the delayed measurement y = [σ_y; ω_y/4], the model copy z_{k−d} (``z_old``) and z_k (``z``),
+    the previous σ̂ (``previous``), α and τ (s): Ĉ = C(τ δω) C(z_k) C(z_{k−d})ᵀ C(y) by quaternion
+    products, σ̂ its short MRP, the shadow when nearer ``previous`` (|σ̂|² > 1e-8), then the shadow
+    when |σ̂|² >= α² (``switched`` = 1.0); x̂ = [σ̂; ω_z(k)/4 + (ω_y − ω_z(k−d))/4].
+    """
+    q_y = quaternion_from_mrp_expr(y[0:3])
+    q_old = quaternion_from_mrp_expr(z_old[0:3])
+    q_z = quaternion_from_mrp_expr(z[0:3])
+    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
+    delta_omega = 4 * (y[3:6] - z_old[3:6])
+    q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
+    sigma_hat = _short_mrp_from_quaternion(q_hat)
+    shadow = _safe_shadow(sigma_hat)
+    nearer = ca.logic_and(
+        ca.dot(sigma_hat, sigma_hat) > _CONTINUITY_FLOOR,
+        ca.norm_2(shadow - previous) < ca.norm_2(sigma_hat - previous),
+    )
+    sigma_hat = ca.if_else(nearer, shadow, sigma_hat)
+    switched = ca.if_else(ca.dot(sigma_hat, sigma_hat) >= alpha * alpha, 1.0, 0.0)
+    sigma_hat = ca.if_else(switched, _safe_shadow(sigma_hat), sigma_hat)
+    return ca.vertcat(sigma_hat, z[3:6] + (y[3:6] - z_old[3:6])), switched
 
 
 def _safe_shadow(sigma: Any) -> Any:
@@ -629,6 +639,10 @@ class ClosedLoopFunctions:
     flight_controller: ca.Function | None = field(default=None, repr=False)
     sensor: ca.Function | None = field(default=None, repr=False)
     flight: FlightOptions | None = None
+    predictor: Any = None
+    predictor_controller: ca.Function | None = field(default=None, repr=False)
+    prediction: ca.Function | None = field(default=None, repr=False)
+    model_step: ca.Function | None = field(default=None, repr=False)
 
     @property
     def period(self) -> float:
@@ -639,8 +653,21 @@ class ClosedLoopFunctions:
         """The Functions by name, for export.
 
         Paper rules: dynamics, controller, rule, step, sample, chunk. Flight loop:
-        dynamics, flight_controller, sensor, step, sample, chunk.
+        dynamics, flight_controller, sensor, step, sample, chunk. Predictor: dynamics,
+        predictor_controller, prediction, model_step, sensor, step, sample, chunk.
         """
+        if self.predictor_controller is not None and self.prediction is not None and self.model_step is not None:
+            assert self.sensor is not None
+            return {
+                "dynamics": self.dynamics,
+                "predictor_controller": self.predictor_controller,
+                "prediction": self.prediction,
+                "model_step": self.model_step,
+                "sensor": self.sensor,
+                "step": self.step,
+                "sample": self.sample,
+                "chunk": self.chunk,
+            }
         if self.flight_controller is not None and self.sensor is not None:
             return {
                 "dynamics": self.dynamics,
@@ -683,6 +710,7 @@ def closed_loop_functions(
     disturbance: Any = None,
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
+    predictor: Any = None,
 ) -> ClosedLoopFunctions:
     """Build the closed loop's named CasADi Functions (see :class:`ClosedLoopFunctions`).
 
@@ -705,6 +733,11 @@ def closed_loop_functions(
         only; the same checks): :class:`~mrpctl.flight.ActuatorModel`, a constant
         :class:`~mrpctl.flight.Disturbance` (or a (3,) torque, N m),
         :class:`~mrpctl.flight.SensorModel`, :class:`~mrpctl.flight.DelayModel`.
+    predictor : mrpctl.Predictor, keyword-only
+        The predictor controller (with ``rule=OnPredicted(alpha)``; actuator, disturbance and sensor
+        allowed, no delay model): ``sample`` and ``chunk`` are the engine's predictor sample with K,
+        α, τ, J_m and the flight constants bound, and ``predictor_controller``, ``prediction``,
+        ``model_step`` and ``sensor`` are the flight-software pieces (see :func:`_predictor_loop`).
 
     Raises
     ------
@@ -723,6 +756,10 @@ def closed_loop_functions(
     rate = float(rate)
     substeps = check_substeps(substeps)
     period = 1.0 / rate
+    if predictor is not None or type(rule).__name__ == "OnPredicted":
+        return _predictor_loop(
+            spacecraft, gain, rule, d, float(tau), rate, substeps, actuator, disturbance, sensor, delay, predictor
+        )
     options, saturation = _flight_options(rule, actuator, disturbance, sensor)
     sequence = getattr(delay, "delays", None)
     horizon = 1 if sequence is None else len(sequence)
@@ -839,3 +876,162 @@ def _flight_functions(
     measurement = measurement_function()(true_state, noise[0:3], noise[3:6], constants[7:10])[0]
     sensor = ca.Function("sensor", [x, noise], [true_state, measurement], ["x", "noise"], ["x_true", "measurement"])
     return sample, flight_controller, sensor
+
+
+#: Names of the predictor sample's memory entries (:data:`PREDICTOR_MEMORY_SIZE`), in order.
+PREDICTOR_MEMORY_LAYOUT = (
+    "unused_1",
+    "unused_2",
+    "sigma_hat_prev_1",
+    "sigma_hat_prev_2",
+    "sigma_hat_prev_3",
+    "saturated_samples",
+    "peak_u_command_1",
+    "peak_u_command_2",
+    "peak_u_command_3",
+    "peak_u_command_norm",
+    "z_1",
+    "z_2",
+    "z_3",
+    "z_4",
+    "z_5",
+    "z_6",
+)
+
+
+def _predictor_loop(
+    spacecraft: Spacecraft,
+    gain: np.ndarray,
+    rule: SwitchingRule,
+    d: int,
+    tau: float,
+    rate: float,
+    substeps: int,
+    actuator: Any,
+    disturbance: Any,
+    sensor: Any,
+    delay: Any,
+    predictor: Any,
+) -> ClosedLoopFunctions:
+    """The predictor loop's Functions (K, α, τ, J_m and the flight constants bound into them).
+
+    * ``sample(x, memory, x_delayed, noise) -> (x_next, memory_next, x_meas, u, switched, ring)``:
+      the engine's sample (:func:`predictor_core_function`); memory of :data:`PREDICTOR_MEMORY_LAYOUT`,
+      ``x_delayed`` = (m_{k−d}; z_{k−d}) (12), ``ring`` = (m_k; z_k), the next entry of the delay line;
+    * ``chunk(x, memory, history, noise)``: max(d, 1) samples (``mapaccum``), ``history`` 12 × d;
+    * ``predictor_controller(y, z_delayed, z, sigma_prev) -> (u, u_command, x_hat, switched, z_next)``:
+      what flight software runs each sample, from the delayed measurement y and its own record of the
+      model copy: :func:`prediction_expr`, u_c = K x̂, the actuator, z_{k+1} = short(RK4_m(z_k, u));
+    * ``prediction(y, z_delayed, z, sigma_prev) -> (x_hat, switched)``: the correction and the rule;
+    * ``model_step(z, u) -> z_next``: one RK4 step of J_m over h, kept in the short set;
+    * ``sensor(x, noise) -> (x_true, measurement)``: as in the flight loop.
+
+    The pieces are written from the same builders in the same order as ``sample``.
+    """
+    from mrpctl.simulation._engine import predictor_constants
+    from mrpctl.simulation._simulate import _check_predictor, _flight_constants
+
+    checked = _check_predictor(predictor, rule, "constant", delay, compiled=False)
+    assert checked is not None
+    options, saturation = _flight_constants(actuator, disturbance, sensor)
+    constants_array = predictor_constants(options, tau, checked.model)
+    constants = ca.DM(constants_array)
+    period = 1.0 / rate
+    model_kind = inertia_input(checked.model)
+    core = predictor_core_function(
+        spacecraft, d, period, substeps, model_inertia=model_kind, saturation=saturation, sensor=True
+    )
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", PREDICTOR_MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", PREDICTOR_RING_WIDTH)
+    noise = ca.SX.sym("noise", NOISE_SIZE)
+    alpha = ca.DM(rule.parameters())
+    bound = list(core(x, memory, x_delayed, ca.DM(gain), alpha, constants, noise))
+    outputs = ["x_next", "memory_next", "x_meas", "u", "switched", "ring"]
+    sample = ca.Function("sample", [x, memory, x_delayed, noise], bound, ["x", "memory", "x_delayed", "noise"], outputs)
+
+    length = max(d, 1)
+    accumulated = sample.mapaccum("chunk_samples", length, 2)
+    mx_x = ca.MX.sym("x", STATE_SIZE)
+    mx_memory = ca.MX.sym("memory", PREDICTOR_MEMORY_SIZE)
+    history = ca.MX.sym("history", PREDICTOR_RING_WIDTH, length)
+    mx_noise = ca.MX.sym("noise", NOISE_SIZE, length)
+    xs, memories, states, u_all, switched_all, ring = accumulated(mx_x, mx_memory, history, mx_noise)
+    chunk = ca.Function(
+        "chunk",
+        [mx_x, mx_memory, history, mx_noise],
+        [xs[:, length - 1], memories[:, length - 1], states, ring, u_all, switched_all],
+        ["x", "memory", "history", "noise"],
+        ["x_end", "memory_end", "states", "ring", "u", "switched"],
+    )
+
+    model_j, model_j_inv = inertia_values(checked.model, model_kind)
+    z = ca.SX.sym("z", STATE_SIZE)
+    u_in = ca.SX.sym("u", INPUT_SIZE)
+    raw = step_function(spacecraft, period, 1, inertia=model_kind)(z, u_in, ca.DM(model_j), ca.DM(model_j_inv))
+    model_step = ca.Function(
+        "model_step",
+        [z, u_in],
+        [ca.vertcat(short_expr(raw[0:3]), raw[3:6])],
+        ["z", "u"],
+        ["z_next"],
+    )
+    y = ca.SX.sym("y", STATE_SIZE)
+    z_delayed = ca.SX.sym("z_delayed", STATE_SIZE)
+    previous = ca.SX.sym("sigma_prev", 3)
+    x_hat, switched = prediction_expr(y, z_delayed, z, previous, alpha[0], constants[FLIGHT_CONSTANTS_SIZE])
+    prediction = ca.Function(
+        "prediction",
+        [y, z_delayed, z, previous],
+        [x_hat, switched],
+        ["y", "z_delayed", "z", "sigma_prev"],
+        ["x_hat", "switched"],
+    )
+    command = ca.DM(gain) @ x_hat
+    u = actuator_function(saturation)(command, constants[0:3], constants[3], ca.DM.zeros(3))[0]
+    predictor_controller = ca.Function(
+        "predictor_controller",
+        [y, z_delayed, z, previous],
+        [u, command, x_hat, switched, model_step(z, u)],
+        ["y", "z_delayed", "z", "sigma_prev"],
+        ["u", "u_command", "x_hat", "switched", "z_next"],
+    )
+    true_state = OnCurrent().expressions(x, x, ca.SX.zeros(MEMORY_SIZE), delay_samples=d)[0]
+    measurement = measurement_function()(true_state, noise[0:3], noise[3:6], constants[7:10])[0]
+    sensor_function = ca.Function(
+        "sensor", [x, noise], [true_state, measurement], ["x", "noise"], ["x_true", "measurement"]
+    )
+    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
+    disturbance_value = None
+    if disturbance is not None:
+        disturbance_value = disturbance if isinstance(disturbance, Disturbance) else Disturbance(disturbance)
+    flight = FlightOptions(
+        actuator=actuator,
+        disturbance=disturbance_value,
+        sensor=sensor,
+        delay=None,
+        constants=readonly(constants_array[0:FLIGHT_CONSTANTS_SIZE]),
+        saturation=saturation,
+    )
+    return ClosedLoopFunctions(
+        spacecraft=spacecraft,
+        K=readonly(gain),
+        rule=rule,
+        tau=tau,
+        rate=rate,
+        delay_samples=d,
+        substeps=substeps,
+        initial_memory=0.0,
+        dynamics=plant_model(spacecraft).dynamics,
+        controller=ca.Function("controller", [x_meas], [ca.DM(gain) @ x_meas], ["x_meas"], ["u"]),
+        switching=rule.function(delay_samples=d),
+        step=step_function(spacecraft, period, substeps),
+        sample=sample,
+        chunk=chunk,
+        sensor=sensor_function,
+        flight=flight,
+        predictor=checked,
+        predictor_controller=predictor_controller,
+        prediction=prediction,
+        model_step=model_step,
+    )

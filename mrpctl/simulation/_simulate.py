@@ -153,8 +153,9 @@ def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.
     return options, Saturation.SCALE if actuator is None else actuator.mode
 
 
-def _check_predictor(predictor: Any, rule: Any, history: Any, delay: Any) -> Predictor | None:
-    """The predictor option, checked against the rule, the history and the delay model."""
+def _check_predictor(predictor: Any, rule: Any, history: Any, delay: Any, *, compiled: bool = True) -> Predictor | None:
+    """The predictor option, checked against the rule, the history and the delay model (and, with
+    ``compiled``, that a C compiler is there to run it)."""
     if predictor is None:
         if isinstance(rule, OnPredicted):
             raise SpecificationError(
@@ -178,7 +179,7 @@ def _check_predictor(predictor: Any, rule: Any, history: Any, delay: Any) -> Pre
             "delay: the predictor runs with the constant delay tau only (its correction needs the age of each "
             "measurement; a DelayModel, jitter included, is not supported with a predictor): drop delay="
         )
-    if find_compiler() is None:
+    if compiled and find_compiler() is None:
         raise CodegenError("predictor: the predictor loop needs the compiled engine (a C compiler); none was found")
     return predictor
 
