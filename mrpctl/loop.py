@@ -756,7 +756,9 @@ def closed_loop_functions(
     rate = float(rate)
     substeps = check_substeps(substeps)
     period = 1.0 / rate
-    if predictor is not None or type(rule).__name__ == "OnPredicted":
+    from mrpctl.predictor import OnPredicted  # mrpctl.predictor imports this module
+
+    if predictor is not None or isinstance(rule, OnPredicted):
         return _predictor_loop(
             spacecraft, gain, rule, d, float(tau), rate, substeps, actuator, disturbance, sensor, delay, predictor
         )
