@@ -52,6 +52,7 @@ __all__ = [
     "HEADER_NAME",
     "LIBRARY_NAME",
     "MANIFEST_NAME",
+    "PREDICTOR_EXPORTED_FUNCTIONS",
     "SOURCE_NAME",
     "ExportResult",
     "content_hash",
@@ -73,6 +74,17 @@ MANIFEST_NAME = "manifest.json"
 EXPORTED_FUNCTIONS = ("dynamics", "controller", "rule", "step", "sample", "chunk")
 #: Exported Functions of the loop as flown (rule ``Hysteretic``), in the same sense.
 FLIGHT_EXPORTED_FUNCTIONS = ("dynamics", "flight_controller", "sensor", "step", "sample", "chunk")
+#: Exported Functions of the predictor loop (``predictor=Predictor(...)``, rule ``OnPredicted``).
+PREDICTOR_EXPORTED_FUNCTIONS = (
+    "dynamics",
+    "predictor_controller",
+    "prediction",
+    "model_step",
+    "sensor",
+    "step",
+    "sample",
+    "chunk",
+)
 #: Version of the manifest layout.
 MANIFEST_FORMAT_VERSION = 1
 
@@ -110,6 +122,27 @@ _FLIGHT_DESCRIPTIONS = {
     "(bookkept) state, u the applied torque, switched = 1 when h flipped; memory as in flight.memory_layout",
     "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's measurements "
     "m_{k-d}, ..., m_{k-1} (oldest first), noise one column (theta_k; eta_k) per sample",
+}
+
+# The Functions of the predictor loop (predictor=Predictor(...), rule OnPredicted).
+_PREDICTOR_DESCRIPTIONS = {
+    "dynamics": _DESCRIPTIONS["dynamics"],
+    "predictor_controller": "the flight software, once per sample: from the delayed measurement y = [sigma~; "
+    "omega~/4] (m_{k-d}), the model copy at the same time z_delayed = z_{k-d}, the copy now z = z_k and the "
+    "previous sigma_hat: prediction, u_command = K x_hat, u = the actuator-limited torque (N m), and "
+    "z_next = model_step(z, u); the caller keeps z_k and m_k over the last d samples",
+    "prediction": "x_hat = the prediction: C_hat = C(tau dw) C(z) C(z_delayed)^T C(y), dw = omega_y - omega_z_delayed, "
+    "omega_hat = omega_z + dw (quaternion products), sigma_hat its short MRP, the shadow when nearer sigma_prev "
+    "(|sigma_hat|^2 > 1e-8), then the shadow when |sigma_hat| >= alpha (switched = 1)",
+    "model_step": "the controller's model copy: one RK4 step of the model inertia J_m over h with the applied "
+    "torque u (no disturbance), sigma kept in the short set",
+    "sensor": _FLIGHT_DESCRIPTIONS["sensor"],
+    "step": _DESCRIPTIONS["step"],
+    "sample": "one measurement period of the predictor loop: sensor, predictor_controller on x_delayed = "
+    "(m_{k-d}; z_{k-d}) (12; unused when d = 0), step with u + w; x_meas is the true (bookkept) state, u the "
+    "applied torque, ring = (m_k; z_k) the next delay-line entry; memory as in predictor.memory_layout",
+    "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's ring entries "
+    "(m_{k-d}; z_{k-d}), ..., oldest first (12 x d), noise one column (theta_k; eta_k) per sample",
 }
 
 
@@ -185,6 +218,7 @@ def export(
     disturbance: Any = None,
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
+    predictor: Any = None,
     overwrite: bool = False,
     compile: bool = True,
 ) -> ExportResult:
@@ -219,6 +253,11 @@ def export(
         gyro bias (a constant of the Functions; its noise is the ``noise`` input of ``sample``
         and ``chunk``) and a time-varying delay (recorded in the manifest). Each is listed in
         the manifest's ``flight`` section.
+    predictor : mrpctl.Predictor, keyword-only
+        Export the predictor loop (with ``rule=OnPredicted(alpha)``; actuator, disturbance and sensor
+        allowed): :data:`PREDICTOR_EXPORTED_FUNCTIONS`, with ``predictor_controller`` (and its pieces
+        ``prediction`` and ``model_step``) for flight software, and a ``predictor`` section in the
+        manifest (model inertia, τ, α, the memory and delay-line layouts).
     overwrite : bool, keyword-only
         Allow a non-empty ``out_dir``: the previous export in it (the names listed in the
         module docstring) is replaced as a whole, a library that is not rebuilt disappears,
@@ -260,6 +299,7 @@ def export(
         disturbance=disturbance,
         sensor=sensor,
         delay=delay,
+        predictor=predictor,
     )
     folder = _path(out_dir)
     target = Path(os.path.realpath(folder))  # a symbolic link stays, its target is replaced
@@ -320,7 +360,8 @@ def _flag(name: str, value: Any) -> bool:
 
 
 def _export_names() -> tuple[str, ...]:
-    names = [f"{name}.casadi" for name in dict.fromkeys(EXPORTED_FUNCTIONS + FLIGHT_EXPORTED_FUNCTIONS)]
+    every = EXPORTED_FUNCTIONS + FLIGHT_EXPORTED_FUNCTIONS + PREDICTOR_EXPORTED_FUNCTIONS
+    names = [f"{name}.casadi" for name in dict.fromkeys(every)]
     return (*names, SOURCE_NAME, HEADER_NAME, LIBRARY_NAME, MANIFEST_NAME)
 
 
@@ -537,6 +578,8 @@ def _manifest(
 
     rule = closed.rule
     descriptions = _DESCRIPTIONS if closed.flight is None else _FLIGHT_DESCRIPTIONS
+    if closed.predictor is not None:
+        descriptions = _PREDICTOR_DESCRIPTIONS
     manifest: dict[str, Any] = {
         "format": "mrpctl-export",
         "format_version": MANIFEST_FORMAT_VERSION,
@@ -588,9 +631,60 @@ def _manifest(
             "value": content_hash(folder, names),
         },
     }
-    if closed.flight is not None:
+    if closed.predictor is not None:
+        manifest["predictor"] = _predictor_manifest(closed)
+    elif closed.flight is not None:
         manifest["flight"] = _flight_manifest(closed, closed.flight)
     return manifest
+
+
+def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:
+    """The manifest's ``predictor`` section: the model, τ, α, the flight models and the layouts."""
+    from mrpctl.loop import PREDICTOR_MEMORY_LAYOUT
+
+    predictor = closed.predictor
+    flight = closed.flight
+    assert flight is not None
+    actuator, disturbance, sensor = flight.actuator, flight.disturbance, flight.sensor
+    constants = [float(value) for value in flight.constants]
+    alpha = float(closed.rule.parameters()[0])
+    return {
+        "form": "model copy with the error composed on the rotation group (design/predictor.md, form (b))",
+        "model_inertia": predictor.model.inertia.tolist(),
+        "tau": closed.tau,
+        "alpha": None if math.isinf(alpha) else alpha,
+        "rule": "sigma_hat in the set nearest the previous sigma_hat, then its shadow when |sigma_hat| >= alpha "
+        "(null: never)",
+        "actuator": None
+        if actuator is None
+        else {
+            "u_max": [float(value) for value in actuator.u_max],
+            "norm_max": actuator.norm_max,
+            "saturation": actuator.mode.value,
+        },
+        "disturbance": None if disturbance is None else {"torque": [float(w) for w in disturbance.torque]},
+        "sensor": None
+        if sensor is None
+        else {
+            "attitude_noise": sensor.attitude_noise,
+            "rate_noise": sensor.rate_noise,
+            "gyro_bias": [float(b) for b in sensor.gyro_bias],
+            "seed": sensor.seed,
+        },
+        "constants": {
+            "u_max": [_limit(value) for value in constants[0:3]],
+            "u_norm": _limit(constants[3]),
+            "disturbance": constants[4:7],
+            "gyro_bias": constants[7:10],
+            "note": "bound into the Functions (null: no limit)",
+        },
+        "memory_layout": {"sample": list(PREDICTOR_MEMORY_LAYOUT)},
+        "delay_line": "entries (m_k; z_k) of 12: the sensor's measurement and the model copy at sample k; "
+        "x_delayed of sample k is entry k - d",
+        "initial_memory": "unused = 1, sigma_hat_prev = z_0 = x0 with sigma in the short set, accumulators 0 "
+        "(mrpctl.simulation._engine.predictor_memory)",
+        "history": "entries for k < d: (x0; x0) (the constant history, the only one with a predictor): x_hat = z_k",
+    }
 
 
 def _limit(value: float) -> float | None:

@@ -12,6 +12,7 @@ import numpy as np
 from mrpctl._validation import readonly, sealed
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE
+from mrpctl.loop import PREDICTOR_MEMORY_SIZE
 from mrpctl.simulation._engine import RunOutput
 from mrpctl.simulation._stats import DIVERGENCE_BOUND, Metrics
 from mrpctl.spacecraft import Spacecraft
@@ -87,6 +88,9 @@ class SimulationResult(_Conversions):
     peak_command : numpy.ndarray or None
         Flight loop: (4,) max over the run of the *commanded* |u_c,i| per axis and of |u_c|
         (N m), before the actuator limits; None otherwise.
+    predictor : mrpctl.Predictor or None
+        The predictor controller of the run (the flight-loop fields above are then reported too);
+        None for the plain delayed law.
     spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
         The inputs of the run.
     """
@@ -119,6 +123,7 @@ class SimulationResult(_Conversions):
     keep_every: int | None = 1
     saturated_fraction: float | None = None
     peak_command: np.ndarray | None = field(default=None, repr=False)
+    predictor: Any = None
 
     @property
     def converged(self) -> bool:
@@ -157,6 +162,9 @@ class SimulationResult(_Conversions):
                 f"Simulation {self.t_final:g} s, tau = {self.tau:g} s ({self.delay_samples} samples at "
                 f"{self.rate:g} Hz), history {history}, RK4 x{self.substeps}, {kept} kept",
                 f"  rule         {self.rule}",
+            )
+            + (() if self.predictor is None else (f"  predictor    {self.predictor}",))
+            + (
                 f"  switches     {self.switch_count}{first}{last}",
                 f"  sign flips   u1 {self.sign_flips[0]}, u2 {self.sign_flips[1]}, u3 {self.sign_flips[2]}",
                 f"  max |sigma|  {self.max_sigma:.6f}",
@@ -197,7 +205,7 @@ def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: d
         settling = settle_index / rate if settle_index < n else None
     first, last = metrics.first_switch_index, metrics.last_switch_index
     flight: dict[str, Any] = {}
-    if output.memory is not None and output.memory.size == FLIGHT_MEMORY_SIZE:
+    if output.memory is not None and output.memory.size in (FLIGHT_MEMORY_SIZE, PREDICTOR_MEMORY_SIZE):
         flight = dict(saturated_fraction=float(output.memory[5]) / valid, peak_command=readonly(output.memory[6:10]))
     return SimulationResult(
         t=sealed(t),
