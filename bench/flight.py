@@ -16,7 +16,12 @@ process's CPU time (``time.process_time``: the least disturbed by other jobs on 
 machine); each entry is the minimum and the median over the rounds, and the ratio is to the
 plain run's minimum of the same process.
 
-Run: ``.venv/bin/python bench/flight.py [rounds]`` (default 9 rounds; about half a minute).
+A second table: ``simulate_batch`` of 32 perturbations of the paper case with every option, metrics
+only, on the lane engine (the default: W runs per C call, the noise and the jitter schedule
+generated once per slice for the W lanes) and on the scalar engine (``_simulate._LANES =
+False``: one run per C call, the noise per run), runs/s in CPU time on one thread.
+
+Run: ``.venv/bin/python bench/flight.py [rounds]`` (default 9 rounds; about a minute).
 """
 
 from __future__ import annotations
@@ -27,8 +32,11 @@ import sys
 import time
 from collections.abc import Callable
 
-from mrpctl import OnCurrent, paper, simulate
+import numpy as np
+
+from mrpctl import OnCurrent, paper, simulate, simulate_batch
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel, newest_arrived_slice
+from mrpctl.simulation import _simulate
 
 T_FINAL = 60.0
 TAU = 0.5
@@ -94,6 +102,54 @@ def main() -> None:
     for label, values in times.items():
         best = min(values)
         print(f"{label:34s} {1e3 * best:8.2f} {1e3 * statistics.median(values):10.2f} {best / plain:8.2f}")
+    batch_table(max(3, rounds // 3))
+
+
+def batch_table(rounds: int, runs: int = 32) -> None:
+    """simulate_batch with every option: the lane engine against the scalar engine, CPU time, one thread."""
+    rng = np.random.default_rng(3)
+    x0 = np.array(paper.INITIAL_STATE) + np.hstack((rng.normal(0, 0.01, (runs, 3)), rng.normal(0, 0.005, (runs, 3))))
+
+    def batch(lanes: bool) -> object:
+        _simulate._LANES = lanes
+        try:
+            return simulate_batch(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                x0,
+                tau=TAU,
+                rule=RULE,
+                t_final=T_FINAL,
+                rate=RATE,
+                threads=1,
+                actuator=ACTUATOR,
+                disturbance=DISTURBANCE,
+                sensor=SENSOR,
+                delay=JITTER,
+            )
+        finally:
+            _simulate._LANES = True
+
+    best = {"lane engine": np.inf, "scalar engine": np.inf}
+    results = {}
+    for _ in range(rounds):
+        for label, lanes in (("lane engine", True), ("scalar engine", False)):
+            start = time.process_time()
+            results[label] = batch(lanes)
+            best[label] = min(best[label], time.process_time() - start)
+    same = all(
+        np.array_equal(
+            np.asarray(getattr(results["lane engine"], name)),
+            np.asarray(getattr(results["scalar engine"], name)),
+            equal_nan=True,
+        )
+        for name in ("switch_count", "max_sigma", "peak_torque", "saturated_fraction", "peak_command")
+    )
+    print()
+    print(f"simulate_batch, {runs} paper-case perturbations, every option, metrics only, 1 thread, best of {rounds}")
+    for label, seconds in best.items():
+        print(f"{label:34s} {runs / seconds:8.1f} runs/s {seconds / best['lane engine']:8.2f} x the lane engine's time")
+    print(f"lane engine = scalar engine on every metric: {same}")
 
 
 if __name__ == "__main__":

@@ -120,3 +120,25 @@ def test_the_virtual_machine_refuses_noise_bias_and_jitter_clearly_and_runs_an_i
         _engine.clear_engines()
     np.testing.assert_allclose(machine.sigma, compiled.sigma, rtol=0, atol=1e-12)
     assert machine.switch_indices.tolist() == compiled.switch_indices.tolist()
+
+
+# ============================================================================ -march=native, keyed by the CPU
+def test_native_flags_are_this_cpu_s_fingerprint_and_key_the_cache_per_cpu(tmp_path):
+    if _compile.find_compiler() is None:
+        pytest.skip("no C compiler")
+    flags = _vectorize.native_isa_flags()
+    if not flags:
+        pytest.skip("this compiler does not resolve -march=native")
+    assert "-march=native" not in flags and any(flag.startswith("-march=") for flag in flags)
+    cpu = _vectorize._cpu_flags()  # /proc/cpuinfo, independent of the compiler
+    for feature in ("avx2", "avx512f", "sse4_2", "fma"):
+        if cpu:  # the compiler enables exactly what the CPU reports
+            flag = "-m" + feature.replace("_", ".")
+            assert (flag in flags) == (feature in cpu), feature
+    # a library built for another CPU (another fingerprint) is another file of the cache
+    code = "int probe_cpu(void) { return 7; }\n"
+    other = tuple("-march=x86-64-v2" if flag.startswith("-march=") else flag for flag in flags)
+    here = _compile.compile_source(code, "probe_cpu", flags=(*_compile.DEFAULT_FLAGS, *flags), directory=tmp_path)
+    there = _compile.compile_source(code, "probe_cpu", flags=(*_compile.DEFAULT_FLAGS, *other), directory=tmp_path)
+    assert here != there and here.exists() and there.exists()
+    assert _vectorize.host_isa_flags() == flags or "MRPCTL_LANES_ISA" in __import__("os").environ
