@@ -9,11 +9,9 @@ import scipy.linalg
 
 from mrpctl import paper
 from mrpctl.design import interval as iv
+from mrpctl.design.interval import _difference_coordinates, _DifferenceLayout, solve_interval_preconditioned
 from mrpctl.design.sampled import (
     MAX_LIFTED_SIZE,
-    _difference_coordinates,
-    _DifferenceLayout,
-    _solve_preconditioned,
     _stable_by_winding,
     certify_sampled,
     lifted_matrices,
@@ -95,7 +93,10 @@ def test_soundness_on_random_sampled_loops(rng: np.random.Generator) -> None:
         for d in (0, 1):
             if not sampled_stability(a, b, k, h, delay_samples=d).stable:
                 scale = bool((checked + d) % 2)
-                assert not _solve_preconditioned(a, b @ k, h, d, checked % 3, 1e-9, scale_variables=scale).certified
+                cert = solve_interval_preconditioned(
+                    [(a, b @ k)], d * h, (d + 1) * h, iv.DelayRate.sawtooth(), checked % 3, 1e-9, scale_variables=scale
+                )
+                assert not cert.certified
         checked += 1
 
 

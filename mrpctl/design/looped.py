@@ -35,7 +35,7 @@ import numpy as np
 from mrpctl._validation import integer, positive_scalar, readonly
 from mrpctl.design.interval import UnknownRate, interval_margins, solve_lmi
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus
-from mrpctl.design.sampled import SampledCertification, SampledCriterion, _bisect_period, _system
+from mrpctl.design.sampled import SampledCertification, SampledCriterion, bisect_period, sampled_system
 from mrpctl.errors import SpecificationError
 
 __all__ = [
@@ -215,7 +215,7 @@ def certify_looped(
     >>> certify_looped([[0, 1], [0, -0.1]], [[0], [0.1]], [[-3.75, -11.5]], 1.6).certified
     True
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     return solve_looped(a, b @ k, h, positive_scalar("margin_tol", margin_tol))
 
@@ -236,7 +236,7 @@ def max_looped_period(
     ``SampledCriterion.LOOPED``. Only ``delay_samples = 0`` is supported (for d > 0 use
     :func:`~mrpctl.design.sampled.max_certified_period`).
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     if integer("delay_samples", delay_samples, minimum=0) != 0:
         raise SpecificationError(
             "delay_samples: the looped-functional criterion covers d = 0 only; "
@@ -244,7 +244,7 @@ def max_looped_period(
         )
     rtol = positive_scalar("rtol", rtol)
     margin_tol = positive_scalar("margin_tol", margin_tol)
-    return _bisect_period(
+    return bisect_period(
         a,
         b,
         k,

@@ -24,24 +24,9 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from mrpctl._validation import finite_array, integer, positive_scalar, readonly
+from mrpctl._validation import finite_array, integer, positive_scalar
 from mrpctl.design._common import order_value
-from mrpctl.design.interval import (
-    DelayRate,
-    IntervalCertificate,
-    UnknownRate,
-    _assemble_rcc,
-    _fridman,
-    _Layout,
-    _layout,
-    _phi,
-    _sym,
-    _vertex_points,
-    _xi_size,
-    interval_margins,
-    solve_interval,
-    solve_lmi,
-)
+from mrpctl.design.interval import DelayRate, IntervalCertificate, solve_interval, solve_interval_preconditioned
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, CertificateStatus, SearchStatus, criterion_name
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.spacecraft import Spacecraft
@@ -65,7 +50,8 @@ __all__ = [
 MAX_LIFTED_SIZE = 4000
 
 
-def _system(A: Any, B: Any, K: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sampled_system(A: Any, B: Any, K: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Check (A, B, K) of ẋ = A x + B u, u = K x(t_k): finite, (n, n), (n, m), (m, n); float64 copies."""
     a = finite_array("A", A)
     if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] == 0:
         raise DimensionError(f"A: expected a square (n, n) matrix but found shape {a.shape}")
@@ -205,7 +191,7 @@ def sampled_stability(A: Any, B: Any, K: Any, period: float, *, delay_samples: i
     SpecificationError
         If n(d+1) > MAX_LIFTED_SIZE (the estimate and the way out are in the message).
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     d = integer("delay_samples", delay_samples, minimum=0)
     rho, size = _radius(a, b, k, h, d)
@@ -226,7 +212,7 @@ def max_stable_delay_samples(A: Any, B: Any, K: Any, period: float, *, d_limit: 
     is verified (stable at d, unstable at d + 1). Returns -1 when d = 0 is already unstable and
     ``d_limit`` when every d up to the limit is stable (checked at the limit only).
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     d_limit = integer("d_limit", d_limit, minimum=1)
 
@@ -259,7 +245,7 @@ def max_stable_period(
     unstable period, then bisection to ``rtol``. Returns nan when no grid period is stable, and
     ``period_limit`` when every grid period is.
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     d = integer("delay_samples", delay_samples, minimum=0)
     limit = positive_scalar("period_limit", period_limit)
     rtol = positive_scalar("rtol", rtol)
@@ -288,165 +274,6 @@ def max_stable_period(
     return good
 
 
-# --------------------------------------------------------------------------------------------
-# Preconditioning of the sawtooth problem. In time normalised by τ_max the points and moments of
-# ζ (x(t), x(t − h1), x(t − τ), x(t − h2), Legendre moments) are nearly equal when the dynamics are
-# slow over a segment (‖A‖·h ≪ 1 at 1 kHz, or the 1/(d+1)-wide varying segment for d > 0): Φ ≺ 0
-# must then hold in directions of size ε = ‖A‖·(segment length) next to directions of size 1, and
-# Clarabel returns "optimal_inaccurate" for the Wirtinger/Bessel-Legendre problems. The retry
-# writes ζ in difference coordinates ζ = T ζ' (x1 = x0 + ε0 x1', xτ = x1 + εab xτ', moments of
-# order 0 about the segment's recent end, every difference scaled by the power of two nearest ε)
-# and scales every block by a diagonal power-of-two congruence D (from the diagonal magnitudes of
-# its coefficient matrices). T and D are invertible, so T'ΦT ≺ 0 ⇔ Φ ≺ 0, and with power-of-two
-# entries the selectors and the scaling are exact in floating point: the float64 re-check of the
-# transformed blocks is as strict as the plain one.
-# --------------------------------------------------------------------------------------------
-
-
-def _pow2(x: float) -> float:
-    return float(2.0 ** round(math.log2(x)))
-
-
-class _DifferenceLayout(_Layout):
-    """The interval layout with every selector composed with T (ζ = T ζ')."""
-
-    def __init__(self, base: _Layout, t: np.ndarray) -> None:
-        self.n, self.order, self.has0 = base.n, base.order, base.has0
-        self.index, self.m = base.index, base.m
-        self._sel = {}
-        for name, sel in base._sel.items():
-            out = sel @ t
-            out.setflags(write=False)
-            self._sel[name] = out
-
-
-def _difference_coordinates(lay: _Layout, eps0: float, eps_ab: float) -> np.ndarray:
-    n = lay.n
-    t = np.zeros((lay.m, lay.m))
-
-    def col(name: str) -> slice:
-        i = lay.index[name]
-        return slice(i * n, (i + 1) * n)
-
-    eye = np.eye(n)
-    t[col("x0"), col("x0")] = eye
-    ref_ab = "x1" if lay.has0 else "x0"
-    if lay.has0:
-        t[col("x1"), col("x0")] = eye
-        t[col("x1"), col("x1")] = eps0 * eye
-    for name in ("xt", "x2"):
-        t[col(name), :] += t[col(ref_ab), :]
-        t[col(name), col(name)] += eps_ab * eye
-    for seg in (["0"] if lay.has0 else []) + ["a", "b"]:
-        eps, ref = (eps0, "x0") if seg == "0" else (eps_ab, ref_ab)
-        for k in range(lay.order):
-            name = f"O{seg}{k}"
-            if k == 0:
-                t[col(name), :] += t[col(ref), :]
-            t[col(name), col(name)] += eps * eye
-    return t
-
-
-def _solve_preconditioned(
-    a: np.ndarray, a_d: np.ndarray, h: float, d: int, order: int, margin_tol: float, *, scale_variables: bool
-) -> IntervalCertificate:
-    """The sawtooth criterion of :func:`~mrpctl.design.interval.solve_interval` in difference coordinates."""
-    import time
-
-    rate = DelayRate.sawtooth()
-    n = a.shape[0]
-    tau_min, tau_max = d * h, (d + 1) * h
-    h1 = tau_min / tau_max
-    has0 = h1 > 0.0
-    sa, sad = tau_max * a, tau_max * a_d
-    c = max(float(np.linalg.norm(sa, 2)), float(np.linalg.norm(sad, 2)), 1e-300)
-    eps0 = _pow2(min(1.0, c * h1)) if has0 else 1.0
-    eps_ab = _pow2(min(1.0, c * (1.0 - h1)))
-    lay = _DifferenceLayout(_layout(n, order, has0), _difference_coordinates(_layout(n, order, has0), eps0, eps_ab))
-    nx = _xi_size(n, order, has0, rate)
-    unknowns = [UnknownRate("P", nx, nx, True), UnknownRate("S2", n, n, True), UnknownRate("R2", n, n, True)]
-    if has0:
-        unknowns += [UnknownRate("S1", n, n, True), UnknownRate("R1", n, n, True)]
-    if _fridman(rate, has0):
-        unknowns += [UnknownRate("U", n, n, True), UnknownRate("Z", n, n, True)]
-    unknowns.append(UnknownRate("X", (order + 1) * n, (order + 1) * n, False))
-    fixed = {k: np.zeros((n, n)) for k in ("S1", "R1", "Q", "U", "Z")}
-    # Optionally the integral weights in units of 1/ε (their natural size when the dynamics are slow).
-    var_scale = (
-        {"R1": 1.0 / eps0, "R2": 1.0 / eps_ab, "X": 1.0 / eps_ab, "U": 1.0 / eps_ab, "Z": 1.0 / eps_ab}
-        if scale_variables
-        else {}
-    )
-
-    def raw(matrices: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        mats = {k: var_scale.get(k, 1.0) * v for k, v in matrices.items()}
-        mats["RCC"] = _assemble_rcc(mats["R2"], mats["X"], order, n, numeric=True)
-        out = {"P": _sym(mats["P"]), "S2": _sym(mats["S2"]), "R2": _sym(mats["R2"])}
-        if has0:
-            out["S1"], out["R1"] = _sym(mats["S1"]), _sym(mats["R1"])
-        if _fridman(rate, has0):
-            out["U"], out["Z"] = _sym(mats["U"]), _sym(mats["Z"])
-        out["RCC"] = _sym(mats["RCC"])
-        for tau, rate_d in _vertex_points(h1, rate):
-            phi = _phi(lay, sa, sad, h1, tau, rate, rate_d, mats, np.matmul)
-            out[f"derivative[difference coordinates, tau {tau:.3g}]"] = _sym(-phi)
-        return out
-
-    zero = {u.name: np.zeros((u.rows, u.cols)) for u in unknowns}
-    magnitude: dict[str, np.ndarray] = {}
-    for u in unknowns:
-        for basis in u.basis():
-            for key, block in raw({**fixed, **zero, u.name: basis}).items():
-                magnitude[key] = magnitude.get(key, 0.0) + np.abs(np.diag(block))
-    scale = {
-        key: np.array([_pow2(1.0 / math.sqrt(v)) if v > 0 else 1.0 for v in mag]) for key, mag in magnitude.items()
-    }
-
-    def blocks(matrices: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return {key: scale[key][:, None] * b * scale[key][None, :] for key, b in raw(matrices).items()}
-
-    start = time.perf_counter()
-    outcome, values, t_opt = solve_lmi(unknowns, blocks, fixed, [u.name for u in unknowns if u.symmetric])
-    elapsed = time.perf_counter() - start
-    base: dict[str, Any] = {
-        "order": order,
-        "tau_min": tau_min,
-        "tau_max": tau_max,
-        "rate": rate,
-        "plants": 1,
-        "solver_status": outcome.status,
-        "solve_time": elapsed,
-    }
-    if values is None:
-        reason = outcome.error or f"solver status {outcome.status!r} is not 'optimal' (preconditioned): no certificate"
-        return IntervalCertificate(
-            status=CertificateStatus.SOLVER_FAILED,
-            matrices={},
-            margins=(),
-            solver_margin=math.nan,
-            reason=reason,
-            **base,
-        )
-    margins = interval_margins(blocks({**fixed, **values}))
-    mats = {k: var_scale.get(k, 1.0) * v for k, v in {**fixed, **values}.items()}
-    worst = min(margins, key=lambda m: m.relative)
-    ok = worst.relative >= margin_tol
-    reason = (
-        f"every block positive definite (difference coordinates, power-of-two scaling); smallest relative "
-        f"margin {worst.relative:.3g} ({worst.name})"
-        if ok
-        else f"block {worst.name!r} has relative margin {worst.relative:.3g} < {margin_tol:g} (preconditioned)"
-    )
-    return IntervalCertificate(
-        status=CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED,
-        matrices={k: readonly(v) for k, v in mats.items()},
-        margins=margins,
-        solver_margin=t_opt,
-        reason=reason,
-        **base,
-    )
-
-
 def _solve_sawtooth(
     a: np.ndarray, a_d: np.ndarray, h: float, d: int, order: int, margin_tol: float, *, precondition: bool = True
 ) -> IntervalCertificate:
@@ -459,7 +286,9 @@ def _solve_sawtooth(
     if plain.certified or not precondition:
         return plain
     for scale_variables in (False, True):
-        retry = _solve_preconditioned(a, a_d, h, d, order, margin_tol, scale_variables=scale_variables)
+        retry = solve_interval_preconditioned(
+            [(a, a_d)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol, scale_variables=scale_variables
+        )
         if retry.certified:
             return retry
     return plain
@@ -484,7 +313,7 @@ def certify_sampled(
     coordinates with power-of-two block scaling (an equivalent LMI, design/lmi.md 7.3); the returned
     certificate says which one certified. ``precondition=False`` (keyword-only) skips the retry.
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     d = integer("delay_samples", delay_samples, minimum=0)
     return _solve_sawtooth(
@@ -542,7 +371,7 @@ class SampledCertification:
         return f"{head}: certified for h <= {self.period:.6g} s ({self.solves} solves; {self.reason})"
 
 
-def _bisect_period(
+def bisect_period(
     a: np.ndarray,
     b: np.ndarray,
     k: np.ndarray,
@@ -610,7 +439,7 @@ def max_certified_period(
     The exact period (:func:`max_stable_period`) bounds the search from above: a sound certificate
     cannot exceed it. The bound itself is tested too.
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     d = integer("delay_samples", delay_samples, minimum=0)
     order = order_value(order)
     rtol = positive_scalar("rtol", rtol)
@@ -619,7 +448,7 @@ def max_certified_period(
     def test(h: float) -> IntervalCertificate:
         return _solve_sawtooth(a, b @ k, h, d, order, margin_tol)
 
-    return _bisect_period(
+    return bisect_period(
         a, b, k, d, test, rtol=rtol, period_limit=period_limit, criterion=SampledCriterion.INPUT_DELAY, order=order
     )
 
@@ -666,7 +495,7 @@ def max_certified_delay_samples(
     failure (``optimal_inaccurate``) rather than a negative margin is retried at d ± 1, d + 2 before
     it counts as failed. Returns (d, certificate, solves); d = -1 when d = 0 is not certified.
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     order = order_value(order)
     d_max = integer("d_max", d_max, minimum=0)
