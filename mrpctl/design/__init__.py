@@ -32,9 +32,11 @@ from mrpctl.design.lmi import (
 from mrpctl.design.loop import LinearizedLoop, linearized_loop
 from mrpctl.design.margin import Crossing, DelayMargin, delay_margin
 from mrpctl.design.polytope import (
+    Functional,
     InertiaPolytope,
     PolytopeCertificate,
     certify_polytope,
+    certify_vertices,
     exact_polytope_margin,
     inertia_polytope,
     max_certified_tolerance,
@@ -67,6 +69,7 @@ __all__ = [
     "DelayMargin",
     "DelayModel",
     "DelayRate",
+    "Functional",
     "GainAnalysis",
     "InertiaPolytope",
     "IntervalCertificate",
@@ -89,6 +92,7 @@ __all__ = [
     "certify_interval",
     "certify_polytope",
     "certify_sampled",
+    "certify_vertices",
     "criterion_name",
     "delay_margin",
     "exact_polytope_margin",
