@@ -39,3 +39,24 @@ def test_refusals() -> None:
     with pytest.raises(SpecificationError, match="either period"):
         synthesize_robust_pd(paper.SPACECRAFT, 0.5, period=0.01, tau_min=0.1)
     assert np.isfinite(paper.TAU)
+
+
+def test_solver_failure_during_the_search_is_counted_not_raised(monkeypatch: pytest.MonkeyPatch) -> None:
+    import mrpctl.design.robust as robust
+    from mrpctl.design.lmi import CertificateStatus
+    from mrpctl.design.polytope import PolytopeCertificate
+
+    real = robust.certify_polytope
+    calls: list[int] = []
+
+    def flaky(*args: object, **kwargs: object) -> PolytopeCertificate:
+        calls.append(1)
+        if len(calls) == 2:  # the first doubling step
+            return PolytopeCertificate(CertificateStatus.SOLVER_FAILED, 1, 0.5, 0, (), 0.0, "simulated failure")
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(robust, "certify_polytope", flaky)
+    res = synthesize_robust_pd(paper.SPACECRAFT, 0.5, tolerance=0.2, order=1, rtol=0.1)
+    assert res.status is RobustStatus.SYNTHESIZED and res.certificate is not None and res.certificate.certified
+    assert "1 certificate test(s) SOLVER_FAILED" in res.reason
+    assert exact_polytope_margin(inertia_polytope(paper.SPACECRAFT, 0.2), res.gains.K, points=11) > 0.5  # type: ignore[union-attr]

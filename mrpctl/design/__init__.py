@@ -33,9 +33,11 @@ from mrpctl.design.loop import LinearizedLoop, linearized_loop
 from mrpctl.design.looped import LoopedCertificate, certify_looped, max_looped_period
 from mrpctl.design.margin import Crossing, DelayMargin, delay_margin
 from mrpctl.design.polytope import (
+    Functional,
     InertiaPolytope,
     PolytopeCertificate,
     certify_polytope,
+    certify_vertices,
     exact_polytope_margin,
     inertia_polytope,
     max_certified_tolerance,
@@ -69,6 +71,7 @@ __all__ = [
     "DelayMargin",
     "DelayModel",
     "DelayRate",
+    "Functional",
     "GainAnalysis",
     "InertiaPolytope",
     "IntervalCertificate",
@@ -94,6 +97,7 @@ __all__ = [
     "certify_looped",
     "certify_polytope",
     "certify_sampled",
+    "certify_vertices",
     "criterion_name",
     "delay_margin",
     "exact_polytope_margin",

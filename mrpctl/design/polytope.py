@@ -508,6 +508,22 @@ def _vertex_constant(
     )
 
 
+def _interval_with_retry(
+    plants: list[tuple[np.ndarray, np.ndarray]], lo: float, tau: float, rate: DelayRate, order: int, margin_tol: float
+) -> tuple[IntervalCertificate, str]:
+    """solve_interval; after SOLVER_FAILED once more in balanced coordinates (exact power-of-two similarity)."""
+    cert = solve_interval(plants, lo, tau, rate, order, margin_tol)
+    if cert.status is not CertificateStatus.SOLVER_FAILED:
+        return cert, ""
+    mag = sum((np.abs(a) + np.abs(a_d) for a, a_d in plants), np.zeros_like(plants[0][0]))
+    scale = balancing(mag, np.zeros_like(mag))
+    if np.all(scale == 1.0):
+        return cert, ""
+    balanced = [(similarity(a, scale), similarity(a_d, scale)) for a, a_d in plants]
+    second = solve_interval(balanced, lo, tau, rate, order, margin_tol)
+    return second, f"balanced retry after solver failure ({cert.reason}): "
+
+
 def _check_functional(functional: Any) -> None:
     if functional is not None and not isinstance(functional, Functional):
         raise SpecificationError(f"functional must be a Functional or None, got {functional!r}")
@@ -582,9 +598,9 @@ def certify_polytope(
             lo = nonnegative_scalar("tau_min", tau_min)
             if not tau > lo:
                 raise SpecificationError(f"tau must exceed tau_min, got [{lo}, {tau}]")
-            cert = solve_interval(plants, lo, tau, rate_value(rate), order, margin_tol)
+            cert, retried = _interval_with_retry(plants, lo, tau, rate_value(rate), order, margin_tol)
             intervals.append(cert)
-            st, mg, tm, why = cert.status, cert.margins, cert.solve_time, cert.reason
+            st, mg, tm, why = cert.status, cert.margins, cert.solve_time, retried + cert.reason
         total += tm
         margins += list(mg)
         reasons.append(f"{'axis ' + str(gi + 1) if axes is not None else '6x6'}: {st.value}, {why}")
