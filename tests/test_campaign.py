@@ -261,3 +261,20 @@ def test_store_that_would_not_fit_is_refused_up_front(spec, tmp_path, monkeypatc
         run_campaign(spec, tmp_path, chunk=4)
     assert not (tmp_path / STORE_NAME).exists()
     assert bytes_per_run() == 8 * (3 + 3 + 9 + 4) + 8 * 6 + 2 + 8
+
+
+def test_worker_task_imports_no_storage_or_plotting_and_names_stay_bound():
+    """A Dask worker unpickling the chunk task imports neither xarray, zarr nor matplotlib (bench/campaign_dask.py),
+    and the package's lazily bound names are the functions (``report`` is not shadowed by its submodule)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, mrpctl.campaign._task as t; "
+        "print(sorted(m for m in ('xarray', 'zarr', 'matplotlib') if m in sys.modules)); "
+        "import mrpctl.campaign.report; from mrpctl.campaign import report, simulate_chunk; "
+        "print(callable(report) and report.__module__, simulate_chunk is t.simulate_chunk)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "[]"
+    assert out[1] == "mrpctl.campaign.report True"

@@ -42,6 +42,20 @@ def _batch(
     return {name: np.asarray(getattr(batch, name)) for name in METRICS}
 
 
+def _spacecraft(inertia: np.ndarray) -> list[Spacecraft]:
+    """One Spacecraft per run, built once per distinct inertia (the same values give the same object,
+    so an undispersed inertia costs one eigen-decomposition per chunk, not one per run)."""
+    built: dict[bytes, Spacecraft] = {}
+    crafts = []
+    for J in np.asarray(inertia, dtype=float):
+        key = J.tobytes()
+        craft = built.get(key)
+        if craft is None:
+            craft = built[key] = Spacecraft(J)
+        crafts.append(craft)
+    return crafts
+
+
 def simulate_runs(
     inertia: np.ndarray,
     K: np.ndarray,
@@ -85,7 +99,7 @@ def simulate_runs(
     if n == 0:
         return {name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()}
     # One call: simulate_batch takes a spacecraft per run and compiles one engine per inertia layout.
-    out = _batch([Spacecraft(J) for J in inertia], K, x0, tau, rule, options)
+    out = _batch(_spacecraft(inertia), K, x0, tau, rule, options)
     if not peak_torque:
         out["peak_torque"] = np.full(n, np.nan)
     return out

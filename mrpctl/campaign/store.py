@@ -166,7 +166,12 @@ class CampaignStore:
         dataset["chunk_complete"] = (("chunk",), np.zeros(chunks, dtype=bool), {"runs_per_chunk": self.chunk})
         encoding = {name: {"chunks": (self.chunk, *dataset[name].shape[1:])} for name in dataset.data_vars}
         encoding["chunk_complete"] = {"chunks": (1,)}
-        dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
+        import dask
+
+        # The template's lazy arrays are filled here, in this process: never on a Dask Client that happens
+        # to be the default (the campaign's own, or a user's), which would ship every chunk as a task.
+        with dask.config.set(scheduler="synchronous"):
+            dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
         os.replace(temporary, self.path)
 
     def complete(self) -> np.ndarray:
