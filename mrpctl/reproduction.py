@@ -59,7 +59,7 @@ FIGURE_FILES = (
     "flight_paper.png",
 )
 #: The figures of the flight studies (noise × δ, distributions over initial states and rates).
-STUDY_FIGURE_FILES = ("noise_delta_study.png", "distributions.png")
+STUDY_FIGURE_FILES = ("noise_delta_study.png", "distributions.png", "predictor_study.png")
 #: Every file :func:`write_reproduction` writes into its folder (nothing else is touched there).
 OUTPUT_FILES = (*FIGURE_FILES, *STUDY_FIGURE_FILES, "claims.md", "summary.json")
 
@@ -103,6 +103,10 @@ class Reproduction:
     studies : dict
         The flight studies (``summary.json`` key ``flight``): ``noise_delta``, one row per
         (attitude noise, α), and ``distributions``, one row per (rule, sample rate).
+    predictor : mrpctl._predictor_study.PredictorStudy or None
+        The predictor study (``summary.json`` key ``predictor``, figure ``predictor_study.png``):
+        settling time of the best certified PD and of the predictor with fast gains against the
+        inertia error, and the inertia error each tolerates.
     """
 
     results: dict[str, SimulationResult] = field(repr=False)
@@ -110,6 +114,7 @@ class Reproduction:
     files: tuple[Path, ...]
     design: dict[str, Any] = field(default_factory=dict, repr=False)
     studies: dict[str, Any] = field(default_factory=dict, repr=False)
+    predictor: Any = field(default=None, repr=False)
 
     @property
     def agreeing(self) -> int:
@@ -793,9 +798,14 @@ def run_reproduction(*, t_final: float = 60.0) -> Reproduction:
         results[f"eps_{eps:g}"] = fig7.with_rule(BoundaryLayer(eps=eps)).simulate()
     results.update(_flight_runs(t_final))
     studies = {"noise_delta": _noise_study(t_final), "distributions": _distribution_study(t_final)}
+    from mrpctl._predictor_study import predictor_study
+
+    study = predictor_study(t_final=t_final)
     design_claims, design_summary = _design_claims()
-    claims = (*design_claims, *_simulation_claims(results), *_flight_claims(results, studies))
-    return Reproduction(results=results, claims=claims, files=(), design=design_summary, studies=studies)
+    claims = (*design_claims, *_simulation_claims(results), *_flight_claims(results, studies), *study.claims())
+    return Reproduction(
+        results=results, claims=claims, files=(), design=design_summary, studies=studies, predictor=study
+    )
 
 
 def _check_out(out: Path, overwrite: bool) -> None:
@@ -844,8 +854,15 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
     try:
         _figures(reproduction.results, staging)
         _study_figures(reproduction.studies, staging)
+        if reproduction.predictor is not None:
+            from mrpctl import plots
+
+            plots.save_figure(reproduction.predictor.figure(), staging / "predictor_study.png")
         runs = {name: _run_summary(result) for name, result in reproduction.results.items()}
         text = _claims_markdown(reproduction.claims, runs) + _studies_markdown(reproduction.studies)
+        if reproduction.predictor is not None:
+            text += "\n## Delay compensation by prediction (paper case, tau = 0.5 s)\n\n"
+            text += reproduction.predictor.table() + "\n\n" + str(reproduction.predictor) + "\n"
         (staging / "claims.md").write_text(text, encoding="utf-8")
         summary = {
             "design": reproduction.design,
@@ -860,6 +877,7 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
             ],
             "runs": runs,
             "flight": reproduction.studies,
+            "predictor": None if reproduction.predictor is None else reproduction.predictor.summary(),
         }
         (staging / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
         if not out.exists():
@@ -867,7 +885,8 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
         else:
             _check_out(out, overwrite)  # again: something may have appeared while computing
             for name in OUTPUT_FILES:
-                os.replace(staging / name, out / name)
+                if (staging / name).exists():  # predictor_study.png only when the study was run
+                    os.replace(staging / name, out / name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return replace(reproduction, files=tuple(out / name for name in OUTPUT_FILES))

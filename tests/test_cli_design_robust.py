@@ -108,4 +108,7 @@ def test_no_robust_gain_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pyt
 
 
 class _NotCertified:
+    from mrpctl.design.lmi import CertificateStatus
+
     certified = False
+    status = CertificateStatus.NOT_CERTIFIED

@@ -123,7 +123,16 @@ def test_headline_findings(reproduction) -> None:
     assert aware.switch_count <= 2 and aware.converged
     verdicts = {c.claim: c.verdict for c in result.claims}
     # mrpctl's own rows: the delay-aware rule, 3 of the flight loop, one distribution per rule
-    assert sum(v is Verdict.EXTENDS for v in verdicts.values()) == 1 + 3 + 4
+    # ... and the predictor study: 8 runs and the two exact inertia margins
+    assert sum(v is Verdict.EXTENDS for v in verdicts.values()) == 1 + 3 + 4 + 8 + 2
+    study = result.predictor
+    by = {(row.controller.split(",")[0], row.e): row for row in study.rows}
+    fast, slow = by[("predictor", 0.0)], by[("certified PD", 0.0)]
+    assert fast.settling_time is not None and slow.settling_time is not None
+    assert fast.settling_time < slow.settling_time / 5  # prediction removes the delay's limit on the gains
+    # 5 % and 10 % inertia errors are inside the exact (linearised) margin, and those runs settle
+    assert study.predictor_margin.lower < 0.0 < 0.10 < study.predictor_margin.upper
+    assert by[("predictor", 0.05)].settling_time is not None and by[("predictor", 0.10)].settling_time is not None
     assert fig4.switch_count == 30198  # the reproduced Fig. 4 number (README) is unchanged by the flight rows
 
 

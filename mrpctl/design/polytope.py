@@ -44,7 +44,7 @@ from mrpctl.design.interval import (
     solve_interval,
     solve_lmi,
 )
-from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, _structure, lmi_blocks
+from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, lmi_blocks, lmi_structure
 from mrpctl.errors import SpecificationError
 from mrpctl.model import gain_matrix
 from mrpctl.spacecraft import Spacecraft
@@ -342,7 +342,7 @@ def vertex_blocks(A: Any, A_d: Any, P: Any, S: Any, R: Any, M: Any, *, order: in
     s = np.asarray(S, dtype=float)
     r = np.asarray(R, dtype=float)
     mm = np.asarray(M, dtype=float)
-    e_mats, g0, g1 = _structure(n, order)
+    e_mats, g0, g1 = lmi_structure(n, order)
     m = (order + 2) * n
     k = m + n
     pad = np.zeros((n, n))
