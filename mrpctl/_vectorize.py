@@ -34,7 +34,11 @@ The closed loop comes from :mod:`mrpctl.simulation._engine` (``engine_sample`` o
 ``mrpctl.loop.core_function`` with the run-time inertia: J and J⁻¹ are per-lane constants, so
 one library serves every spacecraft of an inertia layout); :func:`simulate_lanes` gives the
 statistics rows of :mod:`mrpctl.simulation._stats`, bit for bit those of the scalar ``Engine.run``,
-and ``simulate_batch`` uses it for metrics-only batches.
+and ``simulate_batch`` uses it for metrics-only batches. The flight loop
+(``mrpctl.loop.flight_core_function``) runs the same way: its delayed input is fed from its
+``measurement`` output, its per-sample ``noise`` is a stream shared by the lanes (one
+:meth:`~mrpctl.flight.SensorModel.noise_rows` per slice and batch) and a time-varying delay's
+newest-arrived schedule is shared per slice (:func:`closed_loop_batches`).
 """
 
 from __future__ import annotations
