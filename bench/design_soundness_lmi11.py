@@ -1,8 +1,9 @@
 """Soundness of every interval and sampled-data criterion on 200 seeded random systems (issue 11).
 
 Run: python bench/design_soundness_lmi11.py [count [part parts]]. With part/parts, only the systems whose
-index is part mod parts are checked (run the parts in parallel and add the tables). For each random 2x2 system it tries each criterion
-where a sound one must fail, and counts a violation whenever it certifies there:
+index is part mod parts are checked (run the parts in parallel and add the tables). For each random 2x2
+system it tries each criterion where a sound one must fail, and counts a violation whenever it certifies
+there:
 
 - interval (orders 0, 1, 2; rate 0, |rate| <= 0.3 or unknown, cycling): tau(t) in [0, 1.01 x the exact
   constant-delay margin] (every constant delay in the interval must be stable);
