@@ -453,3 +453,21 @@ def test_shipped_campaign_files_parse_and_sample(name):
     inputs = run_inputs(spec, 0, min(4, spec.count))
     assert len(inputs) == min(4, spec.count) and np.isfinite(inputs.x0).all()
     assert inputs.rule.tolist() == [i % len(spec.rule_list) for i in range(len(inputs))]
+
+
+def test_flight_runs_sharing_their_models_run_in_one_call_with_the_same_results(tmp_path):
+    """Without per-run noise or jitter the flight runs share one simulate_batch call (on 2 threads); each run
+    equals the same run simulated alone."""
+    from mrpctl.campaign._task import simulate_chunk
+
+    data = copy.deepcopy(FLIGHT_SPEC)
+    data["flight"] = {"u_max": 40.0, "disturbance": [0.2, 0.0, -0.1]}
+    data["dispersions"] = {k: data["dispersions"][k] for k in ("attitude", "rate", "hysteresis")}
+    data["count"] = 4
+    spec = parse_campaign(data)
+    together = simulate_chunk(spec, 0, 4, threads=2)
+    for i in range(4):
+        alone = simulate_chunk(spec, i, i + 1, threads=1)
+        for name, values in alone.items():
+            assert values[0].tobytes() == together[name][i].tobytes(), (i, name)
+    assert (together["u_max"] == 40.0).all() and (together["disturbance"] == [0.2, 0.0, -0.1]).all()

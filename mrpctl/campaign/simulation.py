@@ -147,7 +147,9 @@ def simulate_runs(
     if plain is not None:  # one call: simulate_batch takes a spacecraft and a rule per run
         call(plain)
     flown = list(groups.values())
-    if flown:
+    if len(flown) == 1:  # one set of models: one call, on every thread
+        call(flown[0])
+    elif flown:
         call(flown[0], threads=1)  # loads the flight engine once before the pool shares it
     if len(flown) > 1:
         from concurrent.futures import ThreadPoolExecutor

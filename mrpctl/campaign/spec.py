@@ -71,7 +71,7 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar
+from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
 from mrpctl.scenario import RULE_NAMES, Scenario, parse_scenario, rule_from_name, rule_name
@@ -544,10 +544,10 @@ def _flight_options(table: Any, base: Scenario) -> FlightOptions:
         jitter = (low, base.tau)
     return FlightOptions(
         actuator=actuator,
-        disturbance=finite_array("flight.disturbance", table.get("disturbance", [0.0, 0.0, 0.0]), (3,)),
+        disturbance=readonly(finite_array("flight.disturbance", table.get("disturbance", [0.0, 0.0, 0.0]), (3,))),
         attitude_noise=nonnegative_scalar("flight.attitude_noise", table.get("attitude_noise", 0.0)),
         rate_noise=nonnegative_scalar("flight.rate_noise", table.get("rate_noise", 0.0)),
-        gyro_bias=finite_array("flight.gyro_bias", table.get("gyro_bias", [0.0, 0.0, 0.0]), (3,)),
+        gyro_bias=readonly(finite_array("flight.gyro_bias", table.get("gyro_bias", [0.0, 0.0, 0.0]), (3,))),
         jitter=jitter,
     )
 
