@@ -432,13 +432,14 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
     if "rule" not in data:
         raise SpecificationError(f"[rule] needs type, one of {sorted([*RULE_NAMES, 'hysteretic'])}")
-    scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
-    base = parse_scenario(scenario_part, name=name)
-    if base.flight_options:  # scenario-style flight tables would be dropped by the runner: refuse, never drop
+    tables = sorted(set(scenario_part) & {"actuator", "sensor", "disturbance", "delay"})
+    if tables:  # scenario-style flight tables would be dropped by the runner: refuse, never drop them
         raise SpecificationError(
-            f"[{sorted(base.flight_options)[0]}]: a campaign gives the loop-as-flown models in its [flight] table "
+            f"[{tables[0]}]: a campaign gives the loop-as-flown models in its [flight] table "
             "(see design/campaigns.md), not as scenario tables"
         )
+    scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
+    base = parse_scenario(scenario_part, name=name)
     base = base.with_rule(parse_rule("[rule]", data["rule"]))
     for key in ("count", "seed"):
         if key not in data:
