@@ -11,7 +11,7 @@ there:
   the first exactly unstable one (lifted spectral radius > 1, checked at that period).
 
 It also counts, on every 4th system, how often each certifies well inside the exact bound (0.3 x margin,
-0.5 x / 0.9 x the period), so that "no violation" is not vacuous. Prints a markdown table (design/lmi.md section 7.7).
+0.5 x / 0.9 x the period), so that "no violation" is not vacuous. Prints a markdown table.
 """
 
 from __future__ import annotations

@@ -119,7 +119,7 @@ def test_max_looped_period_on_the_benchmark() -> None:
     result = max_looped_period(SD_A, SD_B, SD_K, rtol=1e-3)
     assert result.criterion is SampledCriterion.LOOPED
     assert 1.72 <= result.period < max_stable_period(SD_A, SD_B, SD_K)
-    assert "looped" in str(result)
+    assert "looped" in str(result) and "periodic h = " in str(result)  # not "h <=": one periodic h only
 
 
 def test_soundness_on_random_sampled_loops(rng: np.random.Generator) -> None:

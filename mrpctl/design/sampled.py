@@ -341,7 +341,11 @@ class SampledCertification:
         Bessel-Legendre order of the integral inequality (1 for the looped criterion).
     delay_samples : int
     period : float
-        Largest certified sampling period h (s); nan when none.
+        Largest certified sampling period h (s); nan when none. The input-delay criterion
+        certifies every sampling sequence with intervals in (0, h]; the looped criterion
+        certifies the *periodic* loop at this one h only (not smaller or mixed intervals: a
+        system certified at 0.8259 s periodic is unstable when 0.5893 s and 0.8259 s alternate,
+        design/lmi.md section 7.2).
     certificate : IntervalCertificate, LoopedCertificate or None
     solves : int
     reason : str
@@ -368,6 +372,8 @@ class SampledCertification:
             head = f"{criterion_name(self.order)} + RCC, sampled (d = {self.delay_samples})"
         if not self.certified:
             return f"{head}: {self.status.value} ({self.reason})"
+        if self.criterion is SampledCriterion.LOOPED:
+            return f"{head}: periodic h = {self.period:.6g} s certified ({self.solves} solves; {self.reason})"
         return f"{head}: certified for h <= {self.period:.6g} s ({self.solves} solves; {self.reason})"
 
 
