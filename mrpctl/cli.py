@@ -437,7 +437,7 @@ def _design(args: argparse.Namespace) -> int:
     if toml_path is not None:
         _refuse_existing(toml_path, args.overwrite, "--toml")
         _check_delay(args.tau, rate)
-    order = 3 if args.order is None else args.order
+    order = int(args.order)
     design = synthesize_pd(spacecraft, args.tau, zeta=args.zeta, order=order, allow_underdamped=args.allow_underdamped)
     if not design.synthesized or design.gains is None:
         raise SpecificationError(
@@ -1083,7 +1083,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         _check_delay(args.tau, rate)
     # Wirtinger and higher orders are numerically inaccurate for the 0.2 % wide sampled interval at 1 kHz
     # (design/lmi.md section 7.3): the sampled loop defaults to Jensen; the constant delay to N = 2.
-    order = (0 if period is not None else 2) if args.order is None else args.order
+    order = (0 if period is not None else 2) if isinstance(args.order, _Default) else int(args.order)
     rtol = 1e-3 if args.rtol is None else positive_scalar("--rtol", args.rtol)
     result = synthesize_robust_pd(
         spacecraft,
@@ -1160,6 +1160,13 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     return 0
 
 
+class _Default(int):
+    """An int default that `design` can tell from the same value given on the command line."""
+
+
+_DEFAULT_ORDER = _Default(3)
+
+
 def _add_design(commands: Any) -> None:
     parser = commands.add_parser(
         "design",
@@ -1177,7 +1184,8 @@ def _add_design(commands: Any) -> None:
     parser.add_argument(
         "--order",
         type=int,
-        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); default 3, with --inertia-tolerance 2, with --sampled 0",
+        default=_DEFAULT_ORDER,
+        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); with --inertia-tolerance 2, with --sampled 0",
     )
     robust = parser.add_argument_group("robust design (synthesize_robust_pd; see design/lmi.md section 7.5)")
     robust.add_argument(
