@@ -24,6 +24,7 @@ from mrpctl.errors import (
 )
 from mrpctl.loop import ClosedLoopFunctions, closed_loop_functions
 from mrpctl.model import PlantModel, plant_model
+from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.scenario import Scenario, load_scenario
 from mrpctl.simulation import BatchResult, SimulationResult, simulate, simulate_batch
 from mrpctl.spacecraft import Spacecraft
@@ -48,7 +49,9 @@ __all__ = [
     "NoSwitching",
     "OnCurrent",
     "OnDelayed",
+    "OnPredicted",
     "PlantModel",
+    "Predictor",
     "Scenario",
     "SimulationResult",
     "Spacecraft",

@@ -24,6 +24,7 @@ import contextlib
 import hashlib
 import json
 import logging
+import math
 import os
 import re
 import secrets
@@ -39,16 +40,19 @@ import casadi as ca
 
 from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_library, compiler_version, find_compiler
 from mrpctl.errors import CodegenError, SpecificationError
-from mrpctl.loop import ClosedLoopFunctions, closed_loop_functions
+from mrpctl.flight import NOISE_BLOCK, ActuatorModel, DelayModel, SensorModel
+from mrpctl.loop import FLIGHT_MEMORY_LAYOUT, ClosedLoopFunctions, FlightOptions, closed_loop_functions
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 
 __all__ = [
     "C_PREFIX",
     "EXPORTED_FUNCTIONS",
+    "FLIGHT_EXPORTED_FUNCTIONS",
     "HEADER_NAME",
     "LIBRARY_NAME",
     "MANIFEST_NAME",
+    "PREDICTOR_EXPORTED_FUNCTIONS",
     "SOURCE_NAME",
     "ExportResult",
     "content_hash",
@@ -68,6 +72,19 @@ LIBRARY_NAME = "libmrpctl_model.so"
 MANIFEST_NAME = "manifest.json"
 #: Exported Functions, in the order they appear in the C code and the manifest.
 EXPORTED_FUNCTIONS = ("dynamics", "controller", "rule", "step", "sample", "chunk")
+#: Exported Functions of the loop as flown (rule ``Hysteretic``), in the same sense.
+FLIGHT_EXPORTED_FUNCTIONS = ("dynamics", "flight_controller", "sensor", "step", "sample", "chunk")
+#: Exported Functions of the predictor loop (``predictor=Predictor(...)``, rule ``OnPredicted``).
+PREDICTOR_EXPORTED_FUNCTIONS = (
+    "dynamics",
+    "predictor_controller",
+    "prediction",
+    "model_step",
+    "sensor",
+    "step",
+    "sample",
+    "chunk",
+)
 #: Version of the manifest layout.
 MANIFEST_FORMAT_VERSION = 1
 
@@ -89,6 +106,43 @@ _DESCRIPTIONS = {
     "x_delayed is m_{k-d} (unused when d = 0)",
     "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's "
     "measurements m_{k-d}, ..., m_{k-1} (oldest first)",
+}
+# The Functions of the loop as flown (rule Hysteretic): the controller is what flight software runs.
+_FLIGHT_DESCRIPTIONS = {
+    "dynamics": _DESCRIPTIONS["dynamics"],
+    "flight_controller": "the flight software: from the delayed measurement x_meas = [sigma~; omega~/4] and the "
+    "controller memory (h, c, sigma~_prev), MRP set selection with hysteresis delta (h flips when h q0 < -delta), "
+    "u_command = K [sigma_c; omega~/4] and u = the actuator-limited torque (N m)",
+    "sensor": "x_true = x with sigma kept in the short set (bookkeeping, no physical effect); measurement = "
+    "[sigma~; omega~/4] of x_true with the attitude error rotation theta = noise[0:3] (rad), rate noise "
+    "eta = noise[3:6] (rad/s) and the gyro bias",
+    "step": _DESCRIPTIONS["step"],
+    "sample": "one measurement period of the flown loop: sensor, flight_controller on x_delayed = the delayed "
+    "measurement (m_{k-d}; the sample's own measurement when d = 0), step with u + w; x_meas is the true "
+    "(bookkept) state, u the applied torque, switched = 1 when h flipped; memory as in flight.memory_layout",
+    "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's measurements "
+    "m_{k-d}, ..., m_{k-1} (oldest first), noise one column (theta_k; eta_k) per sample",
+}
+
+# The Functions of the predictor loop (predictor=Predictor(...), rule OnPredicted).
+_PREDICTOR_DESCRIPTIONS = {
+    "dynamics": _DESCRIPTIONS["dynamics"],
+    "predictor_controller": "the flight software, once per sample: from the delayed measurement y = [sigma~; "
+    "omega~/4] (m_{k-d}), the model copy at the same time z_delayed = z_{k-d}, the copy now z = z_k and the "
+    "previous sigma_hat: prediction, u_command = K x_hat, u = the actuator-limited torque (N m), and "
+    "z_next = model_step(z, u); the caller keeps z_k and m_k over the last d samples",
+    "prediction": "x_hat = the prediction: C_hat = C(tau dw) C(z) C(z_delayed)^T C(y), dw = omega_y - omega_z_delayed, "
+    "omega_hat = omega_z + dw (quaternion products), sigma_hat its short MRP, the shadow when nearer sigma_prev "
+    "(|sigma_hat|^2 > 1e-8), then the shadow when |sigma_hat| >= alpha (switched = 1)",
+    "model_step": "the controller's model copy: one RK4 step of the model inertia J_m over h with the applied "
+    "torque u (no disturbance), sigma kept in the short set",
+    "sensor": _FLIGHT_DESCRIPTIONS["sensor"],
+    "step": _DESCRIPTIONS["step"],
+    "sample": "one measurement period of the predictor loop: sensor, predictor_controller on x_delayed = "
+    "(m_{k-d}; z_{k-d}) (12; unused when d = 0), step with u + w; x_meas is the true (bookkept) state, u the "
+    "applied torque, ring = (m_k; z_k) the next delay-line entry; memory as in predictor.memory_layout",
+    "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's ring entries "
+    "(m_{k-d}; z_{k-d}), ..., oldest first (12 x d), noise one column (theta_k; eta_k) per sample",
 }
 
 
@@ -131,11 +185,17 @@ class ExportResult:
         parameters = self.manifest["parameters"]
         names = ", ".join(self.manifest["functions"])
         library = LIBRARY_NAME if self.library is not None else f"not built: {self.skipped_reason}"
+        flight = self.manifest.get("flight")
+        models = []
+        if flight is not None:
+            models = [key for key in ("actuator", "disturbance", "sensor", "delay") if flight[key] is not None]
+        flown = [] if flight is None else [f"  flight     the loop as flown; models: {', '.join(models) or 'none'}"]
         return "\n".join(
             (
                 f"CasADi export in {self.folder}",
                 f"  loop       tau = {parameters['tau']:g} s = {parameters['delay_samples']} samples at "
                 f"{parameters['rate']:g} Hz, rule {parameters['rule']['str']}",
+                *flown,
                 f"  Functions  {names} (.casadi; C symbols {C_PREFIX}<name>)",
                 f"  C code     {SOURCE_NAME}, {HEADER_NAME}",
                 f"  library    {library}",
@@ -154,6 +214,11 @@ def export(
     rule: SwitchingRule,
     rate: float = 1000.0,
     substeps: int = 1,
+    actuator: ActuatorModel | None = None,
+    disturbance: Any = None,
+    sensor: SensorModel | None = None,
+    delay: DelayModel | None = None,
+    predictor: Any = None,
     overwrite: bool = False,
     compile: bool = True,
 ) -> ExportResult:
@@ -175,11 +240,24 @@ def export(
     tau : float, keyword-only
         Delay τ (s), a whole number d of measurement periods 1/rate.
     rule : SwitchingRule, keyword-only
-        The shadow-set switching rule, e.g. ``OnDelayed()``.
+        The shadow-set switching rule, e.g. ``OnDelayed()``, or the controller-side
+        :class:`~mrpctl.flight.Hysteretic`: then the loop as flown is exported
+        (:data:`FLIGHT_EXPORTED_FUNCTIONS`, with ``flight_controller`` for flight software).
     rate : float, keyword-only
         Measurement rate (Hz), default 1000; ``step`` integrates over h = 1/rate.
     substeps : int, keyword-only
         RK4 substeps per measurement period in ``step``, default 1.
+    actuator, disturbance, sensor, delay : keyword-only
+        The flight loop's models (``rule=Hysteretic(...)`` only), as in :func:`mrpctl.simulate`:
+        torque limits and saturation mode, a constant disturbance torque (N m), the sensor's
+        gyro bias (a constant of the Functions; its noise is the ``noise`` input of ``sample``
+        and ``chunk``) and a time-varying delay (recorded in the manifest). Each is listed in
+        the manifest's ``flight`` section.
+    predictor : mrpctl.Predictor, keyword-only
+        Export the predictor loop (with ``rule=OnPredicted(alpha)``; actuator, disturbance and sensor
+        allowed): :data:`PREDICTOR_EXPORTED_FUNCTIONS`, with ``predictor_controller`` (and its pieces
+        ``prediction`` and ``model_step``) for flight software, and a ``predictor`` section in the
+        manifest (model inertia, τ, α, the memory and delay-line layouts).
     overwrite : bool, keyword-only
         Allow a non-empty ``out_dir``: the previous export in it (the names listed in the
         module docstring) is replaced as a whole, a library that is not rebuilt disappears,
@@ -210,12 +288,24 @@ def export(
     """
     overwrite = _flag("overwrite", overwrite)
     compile = _flag("compile", compile)
-    closed = closed_loop_functions(spacecraft, K, tau=tau, rule=rule, rate=rate, substeps=substeps)
+    closed = closed_loop_functions(
+        spacecraft,
+        K,
+        tau=tau,
+        rule=rule,
+        rate=rate,
+        substeps=substeps,
+        actuator=actuator,
+        disturbance=disturbance,
+        sensor=sensor,
+        delay=delay,
+        predictor=predictor,
+    )
     folder = _path(out_dir)
     target = Path(os.path.realpath(folder))  # a symbolic link stays, its target is replaced
     _clean_leftovers(target)  # first: it may put back a folder that a killed export had moved aside
     _check_folder(folder, overwrite)
-    functions = {name: closed.functions()[name] for name in EXPORTED_FUNCTIONS}
+    functions = closed.functions()
     in_place = _in_place(target)
     staging = _staging_folder(target, in_place)
     try:
@@ -270,7 +360,8 @@ def _flag(name: str, value: Any) -> bool:
 
 
 def _export_names() -> tuple[str, ...]:
-    names = [f"{name}.casadi" for name in EXPORTED_FUNCTIONS]
+    every = EXPORTED_FUNCTIONS + FLIGHT_EXPORTED_FUNCTIONS + PREDICTOR_EXPORTED_FUNCTIONS
+    names = [f"{name}.casadi" for name in dict.fromkeys(every)]
     return (*names, SOURCE_NAME, HEADER_NAME, LIBRARY_NAME, MANIFEST_NAME)
 
 
@@ -486,7 +577,10 @@ def _manifest(
     import mrpctl  # the package version; imported here because mrpctl may import this module
 
     rule = closed.rule
-    return {
+    descriptions = _DESCRIPTIONS if closed.flight is None else _FLIGHT_DESCRIPTIONS
+    if closed.predictor is not None:
+        descriptions = _PREDICTOR_DESCRIPTIONS
+    manifest: dict[str, Any] = {
         "format": "mrpctl-export",
         "format_version": MANIFEST_FORMAT_VERSION,
         "mrpctl_version": mrpctl.__version__,
@@ -507,13 +601,13 @@ def _manifest(
                 "str": str(rule),
                 "parameters": list(rule.parameters()),
             },
-            "initial_memory": closed.initial_memory,
+            "initial_memory": closed.initial_memory if closed.flight is None else None,
         },
         "functions": {
             name: {
                 "file": f"{name}.casadi",
                 "c_symbol": C_PREFIX + name,
-                "description": _DESCRIPTIONS[name],
+                "description": descriptions[name],
                 "inputs": _ports(function, True),
                 "outputs": _ports(function, False),
             }
@@ -536,6 +630,126 @@ def _manifest(
             "covers": "every file listed in 'files' (all written files except manifest.json)",
             "value": content_hash(folder, names),
         },
+    }
+    if closed.predictor is not None:
+        manifest["predictor"] = _predictor_manifest(closed)
+    elif closed.flight is not None:
+        manifest["flight"] = _flight_manifest(closed, closed.flight)
+    return manifest
+
+
+def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:
+    """The manifest's ``predictor`` section: the model, τ, α, the flight models and the layouts."""
+    from mrpctl.loop import PREDICTOR_MEMORY_LAYOUT
+
+    predictor = closed.predictor
+    flight = closed.flight
+    assert flight is not None
+    actuator, disturbance, sensor = flight.actuator, flight.disturbance, flight.sensor
+    constants = [float(value) for value in flight.constants]
+    alpha = float(closed.rule.parameters()[0])
+    return {
+        "form": "model copy with the error composed on the rotation group (design/predictor.md, form (b))",
+        "model_inertia": predictor.model.inertia.tolist(),
+        "tau": closed.tau,
+        "alpha": None if math.isinf(alpha) else alpha,
+        "rule": "sigma_hat in the set nearest the previous sigma_hat, then its shadow when |sigma_hat| >= alpha "
+        "(null: never)",
+        "actuator": None
+        if actuator is None
+        else {
+            "u_max": [float(value) for value in actuator.u_max],
+            "norm_max": actuator.norm_max,
+            "saturation": actuator.mode.value,
+        },
+        "disturbance": None if disturbance is None else {"torque": [float(w) for w in disturbance.torque]},
+        "sensor": None
+        if sensor is None
+        else {
+            "attitude_noise": sensor.attitude_noise,
+            "rate_noise": sensor.rate_noise,
+            "gyro_bias": [float(b) for b in sensor.gyro_bias],
+            "seed": sensor.seed,
+        },
+        "constants": {
+            "u_max": [_limit(value) for value in constants[0:3]],
+            "u_norm": _limit(constants[3]),
+            "disturbance": constants[4:7],
+            "gyro_bias": constants[7:10],
+            "note": "bound into the Functions (null: no limit)",
+        },
+        "memory_layout": {"sample": list(PREDICTOR_MEMORY_LAYOUT)},
+        "delay_line": "entries (m_k; z_k) of 12: the sensor's measurement and the model copy at sample k; "
+        "x_delayed of sample k is entry k - d",
+        "initial_memory": "unused = 1, sigma_hat_prev = z_0 = x0 with sigma in the short set, accumulators 0 "
+        "(mrpctl.simulation._engine.predictor_memory)",
+        "history": "entries for k < d: (x0; x0) (the constant history, the only one with a predictor): x_hat = z_k",
+    }
+
+
+def _limit(value: float) -> float | None:
+    """A limit for JSON: None for no limit (inf), which JSON cannot hold."""
+    return None if math.isinf(value) else float(value)
+
+
+def _flight_manifest(closed: ClosedLoopFunctions, flight: FlightOptions) -> dict[str, Any]:
+    """The manifest's ``flight`` section: the models, the bound constants and the memory layouts."""
+    rule = closed.rule
+    actuator, disturbance, sensor, delay = flight.actuator, flight.disturbance, flight.sensor, flight.delay
+    constants = [float(value) for value in flight.constants]
+    return {
+        "rule": {
+            "delta": float(rule.parameters()[0]),
+            "alpha": float(getattr(rule, "alpha", 1.0)),
+            "law": "h <- -h when h q0 < -delta on the delayed measured quaternion (sign kept continuous by c); "
+            "sigma_c = sigma~ when h c = +1, else its shadow; |sigma_c| <= alpha",
+        },
+        "actuator": None
+        if actuator is None
+        else {
+            "u_max": [float(value) for value in actuator.u_max],
+            "norm_max": actuator.norm_max,
+            "saturation": actuator.mode.value,
+        },
+        "saturation": flight.saturation.value,
+        "disturbance": None if disturbance is None else {"torque": [float(w) for w in disturbance.torque]},
+        "sensor": None
+        if sensor is None
+        else {
+            "attitude_noise": sensor.attitude_noise,
+            "rate_noise": sensor.rate_noise,
+            "gyro_bias": [float(b) for b in sensor.gyro_bias],
+            "seed": sensor.seed,
+            "noise": "the noise input of sample/chunk: (theta_k; eta_k) = mrpctl.flight.SensorModel(...).noise(k0, k1) "
+            f"(counter-based Philox streams, blocks of {NOISE_BLOCK} samples keyed by (seed, stream, block))",
+        },
+        "delay": None
+        if delay is None
+        else {
+            "kind": delay.kind.value,
+            "tau_min": delay.tau_min,
+            "tau_max": delay.tau_max,
+            "samples": list(delay.bounds(closed.rate)),
+            "seed": delay.seed,
+            "sequence_length": None if delay.delays is None else len(delay.delays),
+            "schedule": "x_delayed of sample k is the newest measurement that has arrived, m_j* with "
+            "j*(k) = max{j : j + d_j <= k} (mrpctl.flight.newest_arrived)",
+        },
+        "constants": {
+            "u_max": [_limit(value) for value in constants[0:3]],
+            "u_norm": _limit(constants[3]),
+            "disturbance": constants[4:7],
+            "gyro_bias": constants[7:10],
+            "note": "bound into the Functions (null: no limit)",
+        },
+        "memory_layout": {
+            "sample": list(FLIGHT_MEMORY_LAYOUT),
+            "flight_controller": list(FLIGHT_MEMORY_LAYOUT[0:5]),
+        },
+        "initial_memory": "h = c = 1; sigma_prev = short set of the sigma the controller sees at k = 0 (the first "
+        "history row, m_{-d} = x0 for the constant history; for d = 0 the short set of sigma0); the accumulators "
+        "0 (mrpctl.loop.FlightOptions.initial_memory)",
+        "history": "m_{-d}, ..., m_{-1}: noise-free states (the constant history x0 by default)",
     }
 
 

@@ -34,7 +34,11 @@ The closed loop comes from :mod:`mrpctl.simulation._engine` (``engine_sample`` o
 ``mrpctl.loop.core_function`` with the run-time inertia: J and J⁻¹ are per-lane constants, so
 one library serves every spacecraft of an inertia layout); :func:`simulate_lanes` gives the
 statistics rows of :mod:`mrpctl.simulation._stats`, bit for bit those of the scalar ``Engine.run``,
-and ``simulate_batch`` uses it for metrics-only batches.
+and ``simulate_batch`` uses it for metrics-only batches. The flight loop
+(``mrpctl.loop.flight_core_function``) runs the same way: its delayed input is fed from its
+``measurement`` output, its per-sample ``noise`` is a stream shared by the lanes (one
+:meth:`~mrpctl.flight.SensorModel.noise_rows` per slice and batch) and a time-varying delay's
+newest-arrived schedule is shared per slice (:func:`closed_loop_batches`).
 """
 
 from __future__ import annotations
@@ -45,6 +49,8 @@ import functools
 import importlib.resources
 import math
 import os
+import shlex
+import subprocess
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -58,8 +64,9 @@ import numpy as np
 from mrpctl import _compile
 from mrpctl._validation import integer
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
-from mrpctl.loop import InertiaInput, core_function, inertia_input, inertia_values
-from mrpctl.simulation._engine import engine_sample, rule_key
+from mrpctl.flight import DelayModel, Hysteretic, Saturation, SensorModel, newest_arrived_slice
+from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
+from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, rule_key
 from mrpctl.simulation._stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
@@ -90,7 +97,7 @@ SLICE_SAMPLES = 2**16
 
 
 _DRIVER_FILE = "_lanes_driver.c"
-_ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT = 0, 1, 2
+_ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT, _ROLE_STREAMED = 0, 1, 2, 3
 _ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
 
 # ------------------------------------------------------------------ the operations
@@ -174,29 +181,67 @@ _OP_NAMES = {getattr(ca, name): name for name in dir(ca) if name.startswith("OP_
 
 
 @functools.lru_cache(maxsize=1)
-def _min_max_forms() -> dict[int, str]:
-    """Lane forms of fmin/fmax that reproduce this host's libm on ties (+0, -0) and NaNs.
+def _libm_ties() -> dict[str, str]:
+    """How this host's libm fmax/fmin break a (+0, -0) tie: {"fmax": "first" or "second", ...}.
 
     C99 leaves fmax(+0, -0) to the library: glibc's generic code returns the first argument
-    on ties, its old x86-64 assembly (maxsd) the second. Both forms return the non-NaN
-    argument when one is NaN and the first when both are. The choice is probed from the
-    libm that the scalar code links; a libm matching neither refuses fmin/fmax.
+    on ties, its old x86-64 assembly (maxsd) the second. Both return the non-NaN argument
+    when one is NaN and the first when both are. Probed from the libm that the scalar code
+    links; a function matching neither rule is left out.
     """
     name = ctypes.util.find_library("m")
     libm = ctypes.CDLL(name) if name else ctypes.CDLL(None)
-    forms: dict[int, str] = {}
-    for op, c_name, compare in ((ca.OP_FMAX, "fmax", ">"), (ca.OP_FMIN, "fmin", "<")):
+    ties: dict[str, str] = {}
+    for c_name in ("fmax", "fmin"):
         function = getattr(libm, c_name)
         function.restype = ctypes.c_double
         function.argtypes = [ctypes.c_double, ctypes.c_double]
         first_on_tie = math.copysign(1.0, function(0.0, -0.0)) > 0 and math.copysign(1.0, function(-0.0, 0.0)) < 0
         second_on_tie = math.copysign(1.0, function(0.0, -0.0)) < 0 and math.copysign(1.0, function(-0.0, 0.0)) > 0
         nan_ok = function(math.nan, 1.0) == 1.0 and function(1.0, math.nan) == 1.0
-        if nan_ok and first_on_tie:
-            forms[op] = f"L_SELECT(L_MASK(({{0}}{compare}={{1}})|({{1}}!={{1}})), {{0}}, {{1}})"
-        elif nan_ok and second_on_tie:
-            forms[op] = f"L_SELECT(L_MASK(({{0}}{compare}{{1}})|({{1}}!={{1}})), {{0}}, {{1}})"
+        if nan_ok and (first_on_tie or second_on_tie):
+            ties[c_name] = "first" if first_on_tie else "second"
+    return ties
+
+
+@functools.lru_cache(maxsize=1)
+def _min_max_forms() -> dict[int, str]:
+    """Lane forms of fmin/fmax that reproduce this host's libm on ties (+0, -0) and NaNs
+    (:func:`_libm_ties`); a libm matching neither rule refuses fmin/fmax."""
+    forms: dict[int, str] = {}
+    for op, c_name, compare in ((ca.OP_FMAX, "fmax", ">"), (ca.OP_FMIN, "fmin", "<")):
+        tie = _libm_ties().get(c_name)
+        if tie is not None:
+            test = compare + "=" if tie == "first" else compare
+            forms[op] = f"L_SELECT(L_MASK(({{0}}{test}{{1}})|({{1}}!={{1}})), {{0}}, {{1}})"
     return forms
+
+
+@functools.lru_cache(maxsize=1)
+def inline_min_max() -> tuple[tuple[str, ...], str]:
+    """Compiler flags and C source that replace the libm calls fmax/fmin by inline code, same results.
+
+    gcc calls fmax/fmin through the PLT under IEEE flags (no ``-ffinite-math-only``); CasADi's
+    ``casadi_fmax``/``casadi_fmin`` call them (the flight sample: 22 calls per sample). The flags
+    ``-Dfmax(x,y)=mrpctl_fmax_(x,y)`` (and fmin) rename them, <math.h>'s declarations included,
+    and the source (to append to the translation unit) defines ``mrpctl_fmax_``/``mrpctl_fmin_``
+    to return what this host's libm returns (:func:`_libm_ties`: the non-NaN argument, the
+    library's tie rule), which gcc then inlines. Both are part of the compile cache key (flags
+    and code). ``((), "")`` when the libm matches neither tie rule (the calls stay).
+    """
+    flags: list[str] = []
+    source = "/* fmax/fmin as this host's libm computes them, inlined (mrpctl._vectorize.inline_min_max) */\n"
+    for c_name, compare in (("fmax", ">"), ("fmin", "<")):
+        tie = _libm_ties().get(c_name)
+        if tie is None:
+            return (), ""
+        test = compare + "=" if tie == "first" else compare
+        flags.append(f"-D{c_name}(x,y)=mrpctl_{c_name}_(x,y)")
+        source += (
+            f'__attribute__((visibility("hidden"))) double mrpctl_{c_name}_(double x, double y) {{\n'
+            f"  return (x {test} y || y != y) ? x : y;\n}}\n"
+        )
+    return tuple(flags), source
 
 
 def _constant(value: float) -> str:
@@ -252,6 +297,7 @@ def emit_lanes(
     drop: Sequence[str] = (),
     ivdep: bool = False,
     standalone: bool = False,
+    shared: Sequence[str] = (),
 ) -> LaneProgram:
     """Emit C evaluating a pure SX Function on ``width`` lanes at once.
 
@@ -269,6 +315,9 @@ def emit_lanes(
         Output names not to compute.
     ivdep : bool, keyword-only
         Put ``#pragma GCC ivdep`` before every lane loop.
+    shared : sequence of str, keyword-only
+        Input names whose values are the same in every lane: read from a (nnz,) buffer, not
+        (nnz, W) (e.g. a per-sample noise stream shared by the runs of a batch).
     standalone : bool, keyword-only
         Also export ``<name>_eval(const double** arg, double** res)`` (for tests).
 
@@ -293,6 +342,10 @@ def emit_lanes(
     if unknown:
         raise SpecificationError(f"drop: {unknown} are not outputs of {function.name()} ({[p.name for p in outputs]})")
     dropped_index = {i for i, port in enumerate(outputs) if port.name in dropped}
+    unknown_shared = sorted(set(shared) - {port.name for port in inputs})
+    if unknown_shared:
+        raise SpecificationError(f"shared: {unknown_shared} are not inputs of {function.name()}")
+    shared_index = {i for i, port in enumerate(inputs) if port.name in shared}
     vector_ops = dict(_VECTOR_OPS)
     vector_ops.update(_min_max_forms())
     vector_ops.update(_MASK_OPS)
@@ -382,7 +435,7 @@ def emit_lanes(
             op = ops[j]
             if op == ca.OP_INPUT:
                 port, nz = function.instruction_input(j)
-                text = f"i{port}[{nz * width}+l]"
+                text = f"i{port}[{nz}]" if port in shared_index else f"i{port}[{nz * width}+l]"
             elif op == ca.OP_CONST:
                 text = _constant(float(function.instruction_constant(j)))
             elif op == ca.OP_OUTPUT:
@@ -449,17 +502,63 @@ def _cpu_flags() -> set[str]:
 
 @functools.lru_cache(maxsize=1)
 def host_isa_flags() -> tuple[str, ...]:
-    """Vector-ISA flags for this host: ``-mavx2`` where the CPU has AVX2, else none (SSE2).
+    """Vector-ISA flags for this host: ``-march=native`` as the compiler resolves it.
 
-    Explicit flags rather than ``-march=native``, so that the cache key (which hashes the
-    flags) tells libraries for different machines apart. AVX-512 is not chosen (not
-    measured: the development host has none); ``$MRPCTL_LANES_ISA`` overrides (space-separated
-    flags, empty for SSE2). No FMA: ``-ffp-contract=off`` keeps the IEEE sequence either way.
+    :func:`native_isa_flags` (explicit flags, so that the cache key, which hashes the flags,
+    tells libraries for different CPUs apart); measured 1.2x the explicit ``-mavx2`` on the
+    AVX2 development host (``bench/lanes_rate.py``, bit for bit the same results). Where the
+    compiler does not resolve it: ``-mavx2`` where the CPU has AVX2, else none (SSE2).
+    ``$MRPCTL_LANES_ISA`` overrides (space-separated flags, empty for SSE2). The FMA the CPU may
+    have is never used: ``-ffp-contract=off`` keeps the IEEE sequence of the scalar code.
     """
     configured = os.environ.get("MRPCTL_LANES_ISA")
     if configured is not None:
         return tuple(configured.split())
+    native = native_isa_flags()
+    if native:
+        return native
     return ("-mavx2",) if "avx2" in _cpu_flags() else ()
+
+
+@functools.lru_cache(maxsize=4)
+def native_isa_flags(compiler: str | None = None) -> tuple[str, ...]:
+    """``-march=native`` resolved by the compiler into explicit flags: this CPU's fingerprint.
+
+    ``gcc -### -march=native`` prints the options its compiler proper gets: the CPU model
+    (``-march=znver3``), every ISA extension on or off (``-mavx2 -mno-avx512f ...``) and the cache
+    ``--param``s. Compiling with those rather than with the string ``-march=native`` puts them
+    in the compile cache key (which hashes the flags), so a cache shared by several machines
+    (a Dask cluster's home directory) never serves one CPU a library built for another: each
+    worker compiles for its own machine, and machines whose compiler resolves ``native`` the
+    same share one library. Empty when the compiler does not say (then the caller falls back
+    to explicit flags).
+    """
+    compiler = compiler or _compile.find_compiler()
+    if compiler is None:
+        return ()
+    try:
+        done = subprocess.run(
+            [compiler, "-###", "-march=native", "-x", "c", "-c", os.devnull, "-o", os.devnull],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return ()
+    for line in done.stderr.splitlines():
+        if "cc1" not in line or "-march=" not in line:
+            continue
+        words = shlex.split(line)
+        flags: list[str] = []
+        for i, word in enumerate(words):
+            cpu = word.startswith(("-march=", "-mtune=")) and not word.endswith("=native")
+            if cpu or (word.startswith("-m") and word[2:3].isalpha() and "=" not in word):  # -mavx2, -mno-avx512f
+                flags.append(word)
+            elif word == "--param" and i + 1 < len(words) and "cache" in words[i + 1]:
+                flags += [word, words[i + 1]]
+        return tuple(flags) if any(flag.startswith("-march=") for flag in flags) else ()
+    return ()
 
 
 #: IEEE-exact flags of the lane engine: the simulator's, plus -fno-math-errno (sqrt then
@@ -501,6 +600,10 @@ class LaneEngine:
         The other compiler flags (default :data:`LANE_FLAGS`); they must keep IEEE arithmetic.
     delayed : (str, str), keyword-only
         The delayed input and the output that feeds it.
+    streamed : sequence of str, keyword-only
+        Inputs given per sample and shared by the W lanes (e.g. the flight sample's ``noise``):
+        their values of sample k are row k − k0 of the ``stream`` of :meth:`LaneBatches.run`
+        (the inputs side by side, :attr:`stream_size` values a row).
     """
 
     def __init__(
@@ -514,6 +617,7 @@ class LaneEngine:
         isa: tuple[str, ...] | None = None,
         flags: tuple[str, ...] = LANE_FLAGS,
         delayed: tuple[str, str] = ("x_delayed", "x_meas"),
+        streamed: Sequence[str] = (),
     ) -> None:
         self.d = integer("delay_samples", delay_samples, minimum=0)
         self.width = integer("width", width, minimum=1)
@@ -529,12 +633,23 @@ class LaneEngine:
         if sample.nnz_in(names_in.index(delayed_in)) != self.measured:
             raise DimensionError(f"{delayed_in} and {measured_out} of {sample.name()} differ in size")
         carried = [name for name in names_in if name + "_next" in names_out]
+        unknown = sorted(set(streamed) - set(names_in))
+        if unknown or delayed_in in streamed or set(streamed) & set(carried):
+            raise SpecificationError(
+                f"streamed: {list(streamed)} must name inputs of {sample.name()} that are constants"
+            )
         self.carried: dict[str, slice] = {}
         self.constants: dict[str, slice] = {}
-        in_role, in_offset, offset_carried, offset_constant = [], [], 0, 0
+        self.streamed: dict[str, slice] = {}
+        in_role, in_offset, offset_carried, offset_constant, offset_stream = [], [], 0, 0, 0
         for i, name in enumerate(names_in):
             size = sample.nnz_in(i)
-            if name in carried:
+            if name in streamed:
+                in_role.append(_ROLE_STREAMED)
+                in_offset.append(offset_stream)
+                self.streamed[name] = slice(offset_stream, offset_stream + size)
+                offset_stream += size
+            elif name in carried:
                 if sample.nnz_out(names_out.index(name + "_next")) != size:
                     raise DimensionError(f"{name} and {name}_next of {sample.name()} differ in size")
                 in_role.append(_ROLE_CARRIED)
@@ -561,15 +676,23 @@ class LaneEngine:
                 out_role.append(_ROLE_DROPPED)
                 out_offset.append(0)
                 drop.append(name)
-        self.carried_size, self.constant_size = offset_carried, offset_constant
-        program = emit_lanes(sample, self.width, name="mrpctl_lanes_sample_body", fuse=fuse, drop=drop, ivdep=ivdep)
+        self.carried_size, self.constant_size, self.stream_size = offset_carried, offset_constant, offset_stream
+        program = emit_lanes(
+            sample,
+            self.width,
+            name="mrpctl_lanes_sample_body",
+            fuse=fuse,
+            drop=drop,
+            ivdep=ivdep,
+            shared=tuple(streamed),
+        )
         header = (
             f"#define MRPCTL_W {self.width}\n#define MRPCTL_N_IN {len(names_in)}\n"
             f"#define MRPCTL_N_OUT {len(names_out)}\n#define MRPCTL_CARRIED {max(offset_carried, 1)}\n"
             f"#define MRPCTL_MEASURED {self.measured}\n"
             f"#define MRPCTL_ROLE_CARRIED {_ROLE_CARRIED}\n#define MRPCTL_ROLE_DELAYED {_ROLE_DELAYED}\n"
             f"#define MRPCTL_ROLE_CONSTANT {_ROLE_CONSTANT}\n#define MRPCTL_ROLE_MEASUREMENT {_ROLE_MEASUREMENT}\n"
-            f"#define MRPCTL_ROLE_DROPPED {_ROLE_DROPPED}\n"
+            f"#define MRPCTL_ROLE_DROPPED {_ROLE_DROPPED}\n#define MRPCTL_ROLE_STREAMED {_ROLE_STREAMED}\n"
             f"static const int mrpctl_in_role[] = {{{', '.join(map(str, in_role))}}};\n"
             f"static const long long mrpctl_in_offset[] = {{{', '.join(map(str, in_offset))}}};\n"
             f"static const int mrpctl_out_role[] = {{{', '.join(map(str, out_role))}}};\n"
@@ -589,7 +712,12 @@ class LaneEngine:
             raise CodegenError(f"{self.library} was built for {self._dll.mrpctl_lanes_width()} lanes, not {self.width}")
         self._run = self._dll.mrpctl_lanes_run
         self._run.restype = ctypes.c_int
-        self._run.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_longlong] * 3 + [ctypes.c_void_p]
+        self._run.argtypes = (
+            [ctypes.c_void_p] * 3
+            + [ctypes.c_longlong] * 3
+            + [ctypes.c_void_p] * 2
+            + [ctypes.c_longlong, ctypes.c_void_p]
+        )
 
     @property
     def history_columns(self) -> int:
@@ -611,13 +739,24 @@ class LaneEngine:
         threads: int = 1,
         slice_samples: int = SLICE_SAMPLES,
         finished: str | None = None,
+        stream: Callable[[int, int], np.ndarray] | np.ndarray | None = None,
+        schedule: Callable[[int, int, int], np.ndarray] | None = None,
     ) -> LaneBatches:
         """The N runs packed into batches of W lanes, checked and ready to run (see :meth:`run`).
 
         ``finished`` names a carried nonzero (``"stats[13]"``-style: port and index) that a
         lane sets >= 0 when nothing more of it changes but the sample counter; a batch whose
         lanes all have it stops early (the caller completes the counter).
+
+        ``stream`` gives the streamed inputs (shared by every run): ``stream(k0, k1)`` the
+        (k1 − k0, :attr:`stream_size`) rows of a slice, or one (:attr:`stream_size`,) row for
+        every sample. ``schedule(k0, k1, newest_before)`` gives the newest arrived measurement
+        j*(k) (int64, in [k − d, k − 1]) of the samples of a slice under a time-varying delay
+        (``newest_before`` is j*(k0 − 1), −1 − d at k0 = 0), shared by every run; None: the
+        constant delay d.
         """
+        if self.streamed and stream is None:
+            raise SpecificationError(f"stream: the inputs {sorted(self.streamed)} are streamed; give their values")
         n = integer("n", n, minimum=0)
         slice_samples = integer("slice_samples", slice_samples, minimum=1)
         missing = sorted((set(self.carried) - set(carried)) | (set(self.constants) - set(constants)))
@@ -659,7 +798,9 @@ class LaneEngine:
         if finished is not None:
             port, _, index = finished.partition("[")
             row = self.carried[port].start + int(index.rstrip("]"))
-        return LaneBatches(self, full_carried, full_constants, history_array, n, slice_samples, row)
+        return LaneBatches(
+            self, full_carried, full_constants, history_array, n, slice_samples, row, stream=stream, schedule=schedule
+        )
 
     def run(
         self,
@@ -715,8 +856,13 @@ class LaneBatches:
         n: int,
         slice_samples: int,
         finished_row: int | None,
+        *,
+        stream: Callable[[int, int], np.ndarray] | np.ndarray | None = None,
+        schedule: Callable[[int, int, int], np.ndarray] | None = None,
     ) -> None:
         self.engine = engine
+        self._stream = stream
+        self._schedule = schedule
         self.runs = len(carried)
         self.count = -(-self.runs // engine.width)
         self.n = n
@@ -742,10 +888,43 @@ class LaneBatches:
         ring = np.empty((engine.d + 1, engine.measured, width))
         pointers = (_compile.address(block), _compile.address(values), _compile.address(columns))
         real = self.lanes(b)
+        constant_row = None
+        if self._stream is not None and not callable(self._stream):
+            constant_row = np.ascontiguousarray(self._stream, dtype=float)
+            if constant_row.shape != (engine.stream_size,):
+                raise DimensionError(f"stream: expected shape ({engine.stream_size},) but found {constant_row.shape}")
+        newest = -1 - engine.d
         k = 0
         while k < self.n:
             k1 = min(k + self._slice, self.n)
-            if engine._run(*pointers, k, k1, engine.d, _compile.address(ring)) != 0:
+            rows, stride = constant_row, 0
+            if callable(self._stream):
+                rows, stride = np.ascontiguousarray(self._stream(k, k1), dtype=float), engine.stream_size
+                if rows.shape != (k1 - k, engine.stream_size):
+                    raise DimensionError(
+                        f"stream: expected shape ({k1 - k}, {engine.stream_size}) but found {rows.shape}"
+                    )
+            used = None
+            if self._schedule is not None:
+                used = np.ascontiguousarray(self._schedule(k, k1, newest), dtype=np.int64)
+                if (
+                    used.shape != (k1 - k,)
+                    or np.any(used >= np.arange(k, k1))
+                    or np.any(used < np.arange(k, k1) - engine.d)
+                ):
+                    raise SpecificationError(f"schedule: j*(k) must lie in [k - d, k - 1] with d = {engine.d}")
+                newest = int(used[-1])
+            status = engine._run(
+                *pointers,
+                k,
+                k1,
+                engine.d,
+                _compile.address(ring),
+                None if rows is None else _compile.address(rows),
+                stride,
+                None if used is None else _compile.address(used),
+            )
+            if status != 0:
                 raise CodegenError(f"the lane engine {engine.library} failed")
             k = k1
             if stop is not None and stop(k * real):
@@ -793,13 +972,18 @@ def lane_engine(
     substeps: int,
     *,
     width: int = DEFAULT_WIDTH,
+    saturation: Saturation = Saturation.SCALE,
     **options: Any,
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
 
     The structure is the scalar engine's (:func:`mrpctl.simulation._engine.engine`): the
     inertia layout of ``spacecraft`` (J and J⁻¹ are run-time inputs, one per lane), the
-    rule's expressions, d, h, substeps; plus W and the emitter options.
+    rule's expressions, d, h, substeps (and, for the flight rule
+    :class:`~mrpctl.flight.Hysteretic`, the actuator's ``saturation`` mode); plus W and the
+    emitter options. The flight sample (:func:`mrpctl.loop.flight_core_function`) feeds its
+    delayed input from its ``measurement`` output (the sensor's, as the scalar driver's ring
+    does) and takes its ``noise`` as a stream shared by the lanes.
 
     Raises
     ------
@@ -807,12 +991,30 @@ def lane_engine(
         If the sample has an operation without a bit-identical lane form, or the compiler fails.
     """
     layout = inertia_input(spacecraft)
-    key = (layout, type(rule), rule_key(rule, d), d, period, substeps, width, tuple(sorted(options.items())))
+    flight = isinstance(rule, Hysteretic)
+    if not flight:
+        saturation = Saturation.SCALE
+    key = (
+        layout,
+        type(rule),
+        rule_key(rule, d),
+        d,
+        period,
+        substeps,
+        width,
+        saturation,
+        tuple(sorted(options.items())),
+    )
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
-            core = core_function(spacecraft, rule, d, period, substeps, inertia=layout)
             label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{layout.value}"
+            if flight:
+                core = flight_core_function(spacecraft, d, period, substeps, inertia=layout, saturation=saturation)
+                label += f"_{saturation.value}"
+                options = {"delayed": ("x_delayed", "measurement"), "streamed": ("noise",), **options}
+            else:
+                core = core_function(spacecraft, rule, d, period, substeps, inertia=layout)
             sample = engine_sample(core, d, f"mrpctl_lanes_{label}")
             found = LaneEngine(sample, d, width=width, **options)
             _ENGINES[key] = found
@@ -831,9 +1033,22 @@ def closed_loop_batches(
     spacecraft: Spacecraft | Sequence[Spacecraft],
     threads: int = 1,
     slice_samples: int = SLICE_SAMPLES,
+    flight_options: np.ndarray | None = None,
+    sensor: SensorModel | None = None,
+    delay: DelayModel | None = None,
+    rate: float = 1.0,
 ) -> LaneBatches:
     """The closed-loop runs packed for :meth:`LaneBatches.run` (arguments as :func:`simulate_lanes`);
-    read the statistics with :func:`lane_stats` once every batch has run."""
+    read the statistics with :func:`lane_stats` once every batch has run.
+
+    For the flight sample (an engine of :func:`lane_engine` with a ``noise`` stream):
+    ``memory0`` is (N, FLIGHT_MEMORY_SIZE) (:func:`mrpctl.simulation._engine.flight_memory`
+    of each run), ``flight_options`` the shared run-time constants (u_max (3), u_norm, w (3),
+    gyro bias (3); default none), ``sensor`` the shared noise (:meth:`SensorModel.noise_rows`
+    of each slice, the numbers the scalar engine gets) and ``delay`` a shared time-varying
+    delay at ``rate`` (Hz), whose newest-arrived schedule is computed per slice
+    (:func:`~mrpctl.flight.newest_arrived_slice`), as in ``Engine.run``.
+    """
     runs = len(x0)
     crafts = (spacecraft,) * runs if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
     if len(crafts) != runs:
@@ -857,6 +1072,18 @@ def closed_loop_batches(
                 values = cache[id(craft)] = inertia_values(craft, layout)
             inertia[i, 0], inertia[i, 1] = values[0].ravel(), values[1].ravel()  # column-major, as Engine.run
         constants["J"], constants["J_inv"] = inertia[:, 0], inertia[:, 1]
+    stream: Callable[[int, int], np.ndarray] | np.ndarray | None = None
+    schedule: Callable[[int, int, int], np.ndarray] | None = None
+    if "noise" in engine.streamed:
+        options = NO_FLIGHT_OPTIONS if flight_options is None else np.asarray(flight_options, dtype=float)
+        constants["flight"] = np.broadcast_to(options, (runs, options.size))
+        stream = np.zeros(engine.stream_size)  # no noise: the zero row at every sample, as Engine.run
+        if sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0):
+            stream = functools.partial(_noise_rows, sensor)
+        if delay is not None:
+            schedule = functools.partial(newest_arrived_slice, delay, rate, engine.d)
+    elif flight_options is not None or sensor is not None or delay is not None:
+        raise SpecificationError("flight_options, sensor, delay: this lane engine does not run the flight sample")
     return engine.batches(
         {"x": x0, "memory": np.reshape(memory0, (runs, -1)), "stats": np.tile(initial_stats(n), (runs, 1))},
         constants,
@@ -865,7 +1092,13 @@ def closed_loop_batches(
         threads=threads,
         slice_samples=slice_samples,
         finished=f"stats[{S_DIVERGED}]",
+        stream=stream,
+        schedule=schedule,
     )
+
+
+def _noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
+    return sensor.noise_rows(k0, k1)
 
 
 def lane_stats(batches: LaneBatches) -> np.ndarray:
@@ -879,6 +1112,12 @@ def lane_stats(batches: LaneBatches) -> np.ndarray:
     diverged = stats[:, S_DIVERGED] >= 0
     stats[diverged, S_K] = stats[diverged, S_DIVERGED] + 1.0
     return stats
+
+
+def lane_memory(batches: LaneBatches) -> np.ndarray:
+    """The (N, memory size) rule memories after every batch ran, as the scalar ``Engine.run``'s
+    ``RunOutput.memory`` (frozen from the diverging sample on, as the scalar driver stops there)."""
+    return batches.out[:, batches.engine.carried["memory"]].copy()
 
 
 def simulate_lanes(

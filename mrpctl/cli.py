@@ -322,6 +322,107 @@ def _apply_overrides(scenario: Scenario, args: argparse.Namespace) -> Scenario:
     return replace(scenario, **changes) if changes else scenario
 
 
+def _option_value(option: str, build: Callable[[], Any]) -> Any:
+    """``build()``, with a refusal re-raised naming the command-line ``option``."""
+    try:
+        return build()
+    except (SpecificationError, DimensionError) as exc:
+        raise type(exc)(f"{option}: {exc}") from exc
+
+
+def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scenario:
+    """The loop-as-flown options of ``simulate`` and ``export`` applied to ``scenario``.
+
+    ``--hysteresis DELTA`` selects the controller-side rule; the model options change the
+    scenario's own models field by field (or add them); every model needs that rule.
+    """
+    from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
+
+    changes: dict[str, Any] = {}
+    if args.hysteresis is not None:
+        if args.rule not in (None, "hysteretic"):
+            raise SpecificationError(
+                f"--hysteresis selects the rule 'hysteretic'; it does not apply with --rule {args.rule}"
+            )
+        if args.alpha is not None:
+            raise SpecificationError("--hysteresis (delta) and --alpha give the same bound; give one of them")
+        changes["rule"] = _option_value("--hysteresis", lambda: Hysteretic(args.hysteresis))
+    actuator_given = [
+        o
+        for o, v in (
+            ("--torque-limit", args.torque_limit),
+            ("--torque-norm", args.torque_norm),
+            ("--saturation", args.saturation),
+        )
+        if v is not None
+    ]
+    if actuator_given:
+        old = scenario.actuator
+        if old is None and args.torque_limit is None:
+            raise SpecificationError(f"{actuator_given[0]} needs --torque-limit (the per-axis limit, N m)")
+        limit = args.torque_limit if args.torque_limit is not None else old.u_max  # type: ignore[union-attr]
+        if len(limit) not in (1, 3):
+            raise DimensionError(f"--torque-limit: expected 1 or 3 values (N m) but found {len(limit)}")
+        norm = args.torque_norm if args.torque_norm is not None else (None if old is None else old.norm_max)
+        mode = (
+            Saturation(args.saturation)
+            if args.saturation is not None
+            else (Saturation.SCALE if old is None else old.mode)
+        )
+        changes["actuator"] = _option_value(
+            actuator_given[0],
+            lambda: ActuatorModel(u_max=limit[0] if len(limit) == 1 else limit, norm_max=norm, mode=mode),
+        )
+    sensor_options = (
+        ("--attitude-noise", "attitude_noise", args.attitude_noise),
+        ("--rate-noise", "rate_noise", args.rate_noise),
+        ("--gyro-bias", "gyro_bias", args.gyro_bias),
+        ("--noise-seed", "seed", args.noise_seed),
+    )
+    sensor_given = {key: value for _, key, value in sensor_options if value is not None}
+    if sensor_given:
+        base = scenario.sensor if scenario.sensor is not None else SensorModel()
+        first = next(option for option, _, value in sensor_options if value is not None)
+        fields = {"attitude_noise": base.attitude_noise, "rate_noise": base.rate_noise, "gyro_bias": base.gyro_bias}
+        fields["seed"] = base.seed
+        fields.update(sensor_given)
+        changes["sensor"] = _option_value(first, lambda: SensorModel(**fields))
+    if args.disturbance is not None:
+        from mrpctl.flight import Disturbance
+
+        changes["disturbance"] = _option_value("--disturbance", lambda: Disturbance(args.disturbance))
+    if args.jitter is not None:
+        low, high = args.jitter
+        if args.tau is not None and args.tau != high:
+            raise SpecificationError(
+                f"--jitter TMIN TMAX sets tau = TMAX = {high:g} s; it contradicts --tau {args.tau:g}"
+            )
+        model = _option_value(
+            "--jitter", lambda: DelayModel.jitter(low, high, seed=0 if args.jitter_seed is None else args.jitter_seed)
+        )
+        changes["delay"] = model
+        changes["tau"] = model.tau_max
+    elif args.jitter_seed is not None:
+        raise SpecificationError("--jitter-seed needs --jitter TMIN TMAX")
+    updated = replace(scenario, **changes) if changes else scenario
+    if updated.flight_options and not isinstance(updated.rule, Hysteretic):
+        given = [name for name in ("actuator", "sensor", "disturbance", "delay") if name in updated.flight_options]
+        raise SpecificationError(
+            f"the {', '.join(given)} model(s) apply only to the loop as flown: add --hysteresis DELTA "
+            f"(the controller-side rule), got the rule {rule_name(updated.rule)!r}"
+        )
+    if updated.delay is not None:
+        if updated.delay.tau_max != updated.tau:
+            raise SpecificationError(
+                f"the jittering delay's tau_max = {updated.delay.tau_max:g} s must equal tau = {updated.tau:g} s; "
+                "give --jitter TMIN TMAX instead of --tau"
+            )
+        low_samples, _ = _option_value("--jitter", lambda: updated.delay.bounds(updated.rate))  # type: ignore[union-attr]
+        if low_samples < 1:
+            raise SpecificationError(f"--jitter: TMIN must be >= 1/rate = {1.0 / updated.rate:g} s")
+    return updated
+
+
 def _progress(total: int, label: str) -> Any:
     """A tqdm bar on stderr, silent when stderr is not a terminal (no ``\\r`` frames into a pipe or file)."""
     from tqdm import tqdm  # type: ignore[import-untyped]
@@ -347,6 +448,8 @@ def _result_summary(result: SimulationResult) -> dict[str, Any]:
         "diverged": result.diverged,
         "final_sigma": result.sigma[-1],
         "final_omega": result.omega[-1],
+        "saturated_fraction": result.saturated_fraction,
+        "peak_command": result.peak_command,
     }
 
 
@@ -364,6 +467,7 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "rule_repr": str(scenario.rule),
         "history": scenario.history,
         "substeps": scenario.substeps,
+        "flight_models": {name: str(model) for name, model in scenario.flight_options.items()},
     }
 
 
@@ -437,7 +541,7 @@ def _design(args: argparse.Namespace) -> int:
     if toml_path is not None:
         _refuse_existing(toml_path, args.overwrite, "--toml")
         _check_delay(args.tau, rate)
-    order = int(args.order)
+    order = 3 if args.order is None else args.order
     design = synthesize_pd(spacecraft, args.tau, zeta=args.zeta, order=order, allow_underdamped=args.allow_underdamped)
     if not design.synthesized or design.gains is None:
         raise SpecificationError(
@@ -686,7 +790,7 @@ _CSV_HEADER = (
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    scenario = _apply_overrides(_scenario_from_args(args, file=args.scenario), args)
+    scenario = _apply_flight_options(_apply_overrides(_scenario_from_args(args, file=args.scenario), args), args)
     _check_plot_path(args.plot)
     _check_run_fits(scenario)
     result = scenario.simulate()
@@ -805,6 +909,7 @@ def _sweep(args: argparse.Namespace) -> int:
                 rate=base.rate,
                 history=base.history,
                 substeps=base.substeps,
+                **base.flight_options,  # a flight scenario's models, shared by the runs
             )
             batches.append(batch)
             for i in range(len(part)):
@@ -894,7 +999,7 @@ def _sweep(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace) -> int:
     from mrpctl._export import export
 
-    scenario = _apply_overrides(load_scenario(args.scenario), args)
+    scenario = _apply_flight_options(_apply_overrides(load_scenario(args.scenario), args), args)
     _check_history_fits(scenario)
     if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
         raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")
@@ -908,6 +1013,7 @@ def _export(args: argparse.Namespace) -> int:
         substeps=scenario.substeps,
         overwrite=args.overwrite,
         compile=not args.no_compile,
+        **scenario.flight_options,
     )
     if args.json:
         _print_json(
@@ -964,7 +1070,9 @@ def _add_json(parser: argparse.ArgumentParser) -> None:
 def _add_rule_options(parser: argparse.ArgumentParser, what: str = "override the scenario's switching rule") -> None:
     parser.add_argument("--rule", choices=sorted(RULE_NAMES), help=what)
     parser.add_argument("--eps", type=float, help="boundary layer thickness (with --rule boundary-layer)")
-    parser.add_argument("--alpha", type=float, help="switching threshold >= 1 (with --rule delay-aware; default 1)")
+    parser.add_argument(
+        "--alpha", type=float, help="switching threshold >= 1 (with --rule delay-aware or hysteretic; default 1)"
+    )
 
 
 def _add_run_options(parser: argparse.ArgumentParser, *, plot: str, csv: str) -> None:
@@ -981,6 +1089,36 @@ def _add_run_options(parser: argparse.ArgumentParser, *, plot: str, csv: str) ->
         "--fail-on-divergence", action="store_true", help=f"exit with code {EXIT_DIVERGED} when a run diverged"
     )
     _add_json(parser)
+
+
+def _add_flight_options(parser: argparse.ArgumentParser) -> None:
+    """The loop as flown (design/flight.md): controller-side rule, actuator, sensor, disturbance, jitter."""
+    flown = parser.add_argument_group(
+        "the loop as flown (controller-side set selection; the models need --hysteresis or a hysteretic scenario)"
+    )
+    flown.add_argument(
+        "--hysteresis", type=float, metavar="DELTA", help="controller-side rule with hysteresis delta in [0, 1) on q0"
+    )
+    flown.add_argument(
+        "--torque-limit", type=float, nargs="+", metavar="U", help="per-axis torque limit: 1 or 3 values (N m)"
+    )
+    flown.add_argument("--torque-norm", type=float, metavar="U", help="limit on |u| (N m), with --torque-limit")
+    flown.add_argument(
+        "--saturation", choices=("scale", "clip"), help="saturation mode (default scale: direction kept)"
+    )
+    flown.add_argument("--attitude-noise", type=float, metavar="RAD", help="attitude noise, 1 sigma per axis (rad)")
+    flown.add_argument("--rate-noise", type=float, metavar="RAD_S", help="white rate noise, 1 sigma per axis (rad/s)")
+    flown.add_argument("--gyro-bias", type=float, nargs=3, metavar="B", help="constant gyro bias (rad/s)")
+    flown.add_argument("--noise-seed", type=int, help="seed (>= 0) of the sensor noise")
+    flown.add_argument("--disturbance", type=float, nargs=3, metavar="W", help="constant body-frame torque (N m)")
+    flown.add_argument(
+        "--jitter",
+        type=float,
+        nargs=2,
+        metavar=("TMIN", "TMAX"),
+        help="seeded random delay uniform over the whole periods in [TMIN, TMAX] (s); sets tau = TMAX",
+    )
+    flown.add_argument("--jitter-seed", type=int, help="seed (>= 0) of the delay jitter (default 0)")
 
 
 def _add_plant_options(parser: argparse.ArgumentParser, default: str) -> None:
@@ -1083,7 +1221,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         _check_delay(args.tau, rate)
     # Wirtinger and higher orders are numerically inaccurate for the 0.2 % wide sampled interval at 1 kHz
     # (design/lmi.md section 7.3): the sampled loop defaults to Jensen; the constant delay to N = 2.
-    order = (0 if period is not None else 2) if isinstance(args.order, _Default) else int(args.order)
+    order = (0 if period is not None else 2) if args.order is None else args.order
     rtol = 1e-3 if args.rtol is None else positive_scalar("--rtol", args.rtol)
     result = synthesize_robust_pd(
         spacecraft,
@@ -1160,13 +1298,6 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     return 0
 
 
-class _Default(int):
-    """An int default that `design` can tell from the same value given on the command line."""
-
-
-_DEFAULT_ORDER = _Default(3)
-
-
 def _add_design(commands: Any) -> None:
     parser = commands.add_parser(
         "design",
@@ -1184,8 +1315,7 @@ def _add_design(commands: Any) -> None:
     parser.add_argument(
         "--order",
         type=int,
-        default=_DEFAULT_ORDER,
-        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); with --inertia-tolerance 2, with --sampled 0",
+        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); default 3, with --inertia-tolerance 2, with --sampled 0",
     )
     robust = parser.add_argument_group("robust design (synthesize_robust_pd; see design/lmi.md section 7.5)")
     robust.add_argument(
@@ -1277,6 +1407,7 @@ def _add_simulate(commands: Any) -> None:
     _add_run_options(
         parser, plot="write sigma, omega, u against t to this image", csv="write the trajectory to this CSV"
     )
+    _add_flight_options(parser)
     parser.set_defaults(handler=_simulate)
 
 
@@ -1327,6 +1458,7 @@ def _add_export(commands: Any) -> None:
     parser.add_argument("--no-compile", action="store_true", help="write sources only, no shared library")
     _add_rule_options(parser)
     parser.add_argument("--tau", type=float, help="override the delay (s)")
+    _add_flight_options(parser)
     _add_json(parser)
     parser.set_defaults(handler=_export)
 

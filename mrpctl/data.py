@@ -57,6 +57,8 @@ def _rule(fields: dict[str, Any]) -> Any:
         return rule_from_name(name, eps=value)
     if name == "delay-aware":
         return rule_from_name(name, alpha=value)
+    if name == "hysteretic":
+        return rule_from_name(name, delta=value)
     return rule_from_name(name)
 
 

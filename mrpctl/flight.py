@@ -80,25 +80,39 @@ def _block_generator(seed: int, stream: int, block: int) -> np.random.Generator:
     return np.random.Generator(np.random.Philox(np.random.SeedSequence(seed, spawn_key=(stream, block))))
 
 
-def _stream_normals(seed: int, stream: int, k0: int, k1: int) -> np.ndarray:
-    """(k1 − k0, 3) standard normals of samples k0 … k1 − 1 of one stream."""
-    out = np.empty((k1 - k0, 3))
-    for block in range(k0 // NOISE_BLOCK, (k1 - 1) // NOISE_BLOCK + 1 if k1 > k0 else k0 // NOISE_BLOCK):
+def _blocks(k0: int, k1: int) -> range:
+    """The blocks of :data:`NOISE_BLOCK` samples that samples k0 … k1 − 1 touch."""
+    return range(k0 // NOISE_BLOCK, -(-k1 // NOISE_BLOCK)) if k1 > k0 else range(0)
+
+
+def _stream_normals(
+    seed: int, stream: int, k0: int, k1: int, *, scale: float = 1.0, out: np.ndarray | None = None
+) -> np.ndarray:
+    """(k1 − k0, 3) standard normals of samples k0 … k1 − 1 of one stream, times ``scale``.
+
+    Block b's normals are the first values of ``standard_normal((NOISE_BLOCK, 3))`` of its
+    generator; a block is generated only up to the last sample asked for (the generator fills
+    sequentially, so a prefix is the same numbers: tested), straight into ``out`` (any (k1 − k0, 3)
+    float64 view, e.g. three columns of a wider array) when the slice covers it from its start,
+    and ``scale * value`` is the same IEEE product whichever way it is formed.
+    """
+    out = np.empty((k1 - k0, 3)) if out is None else out
+    for block in _blocks(k0, k1):
         start = block * NOISE_BLOCK
-        values = _block_generator(seed, stream, block).standard_normal((NOISE_BLOCK, 3))
         lo, hi = max(k0, start), min(k1, start + NOISE_BLOCK)
-        out[lo - k0 : hi - k0] = values[lo - start : hi - start]
+        values = _block_generator(seed, stream, block).standard_normal((hi - start, 3))
+        np.multiply(values[lo - start :], scale, out=out[lo - k0 : hi - k0])
     return out
 
 
 def _stream_integers(seed: int, stream: int, k0: int, k1: int, low: int, high: int) -> np.ndarray:
-    """(k1 − k0,) integers uniform in [low, high] of samples k0 … k1 − 1 of one stream."""
+    """(k1 − k0,) integers uniform in [low, high] of samples k0 … k1 − 1 of one stream (prefix of each block)."""
     out = np.empty(k1 - k0, dtype=np.int64)
-    for block in range(k0 // NOISE_BLOCK, (k1 - 1) // NOISE_BLOCK + 1 if k1 > k0 else k0 // NOISE_BLOCK):
+    for block in _blocks(k0, k1):
         start = block * NOISE_BLOCK
-        values = _block_generator(seed, stream, block).integers(low, high, size=NOISE_BLOCK, endpoint=True)
         lo, hi = max(k0, start), min(k1, start + NOISE_BLOCK)
-        out[lo - k0 : hi - k0] = values[lo - start : hi - start]
+        values = _block_generator(seed, stream, block).integers(low, high, size=hi - start, endpoint=True)
+        out[lo - k0 : hi - k0] = values[lo - start :]
     return out
 
 
@@ -162,14 +176,37 @@ class SensorModel:
             horizon (counter-based: block b of :data:`NOISE_BLOCK` samples is keyed by
             (seed, stream, b)).
         """
+        rows = self.noise_rows(k0, k1)
+        return rows[:, 0:3], rows[:, 3:6]
+
+    def noise_rows(self, k0: int, k1: int, *, out: np.ndarray | None = None) -> np.ndarray:
+        """The noise of samples k0 … k1 − 1 as one (k1 − k0, 6) array of rows (θ_k, η_k).
+
+        The flight sample's per-sample ``noise`` input, the numbers of :meth:`noise` bit for bit,
+        generated in place: into ``out`` when given (a C-contiguous float64 array of at least
+        k1 − k0 rows and 6 columns, e.g. a buffer reused slice after slice; its first k1 − k0 rows
+        are written and returned), else into a new array.
+        """
         start, stop = _slice(k0, k1)
-        rotation = np.zeros((stop - start, 3))
-        rate = np.zeros((stop - start, 3))
-        if self.attitude_noise > 0.0:
-            rotation = self.attitude_noise * _stream_normals(self.seed, _STREAM_ATTITUDE, start, stop)
-        if self.rate_noise > 0.0:
-            rate = self.rate_noise * _stream_normals(self.seed, _STREAM_RATE, start, stop)
-        return rotation, rate
+        count = stop - start
+        if out is None:
+            rows = np.empty((count, NOISE_SIZE))
+        else:
+            if out.dtype != np.float64 or out.ndim != 2 or out.shape[1] != NOISE_SIZE or len(out) < count:
+                raise DimensionError(
+                    f"out: expected a float64 array of shape (>= {count}, {NOISE_SIZE}) "
+                    f"but found {out.dtype} {out.shape}"
+                )
+            if not out.flags.c_contiguous:
+                raise SpecificationError("out must be C-contiguous (the engine reads its rows as one block)")
+            rows = out[:count]
+        for column, sigma, stream in ((0, self.attitude_noise, _STREAM_ATTITUDE), (3, self.rate_noise, _STREAM_RATE)):
+            target = rows[:, column : column + 3]
+            if sigma > 0.0:
+                _stream_normals(self.seed, stream, start, stop, scale=sigma, out=target)
+            else:
+                target[...] = 0.0
+        return rows
 
     def __str__(self) -> str:
         if self.ideal:

@@ -38,7 +38,9 @@ __all__ = [
     "SETTLING_CAPTION",
     "plot_attitude",
     "plot_batch",
+    "plot_distributions",
     "plot_monte_carlo",
+    "plot_noise_study",
     "plot_response",
     "plot_sweep",
     "render_rgba",
@@ -563,6 +565,110 @@ def plot_batch(
 
 
 # ------------------------------------------------------------------------------ output
+def _grid(name: str, values: Any, shape: tuple[int, int]) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if array.shape != shape:
+        raise DimensionError(f"{name}: expected shape {shape} but found {array.shape}")
+    return array
+
+
+def plot_noise_study(
+    noise: Sequence[float] | np.ndarray,
+    alpha: Sequence[float] | np.ndarray,
+    *,
+    switch_count: Any,
+    settling_time: Any,
+    title: str | None = None,
+) -> Figure:
+    """Heat maps of the controller-side rule over attitude noise × hysteresis: switches and settling.
+
+    Parameters
+    ----------
+    noise : array_like
+        (m,) attitude noise levels σ_n (rad, 1σ per axis): the rows.
+    alpha : array_like
+        (p,) bounds α on |σ_c| (δ = (α² − 1)/(α² + 1)): the columns.
+    switch_count, settling_time : array_like
+        (m, p) logic switches and settling times (s; NaN: did not settle, drawn as "x").
+    title : str, optional
+    """
+    rows, columns = np.asarray(noise, dtype=float), np.asarray(alpha, dtype=float)
+    shape = (rows.size, columns.size)
+    counts = _grid("switch_count", switch_count, shape)
+    settling = _grid("settling_time", settling_time, shape)
+    fig = Figure(figsize=(9.0, 3.6), layout="constrained")
+    axes = fig.subplots(1, 2)
+    panels = (
+        (axes[0], np.log10(1.0 + counts), counts, "logic switches", "{:.0f}"),
+        (axes[1], settling, settling, "settling time (s)", "{:.1f}"),
+    )
+    for ax, shade, shown, label, fmt in panels:
+        finite = shade[np.isfinite(shade)]
+        norm = Normalize(
+            vmin=float(finite.min()) if finite.size else 0.0, vmax=float(finite.max()) if finite.size else 1.0
+        )
+        ax.imshow(np.where(np.isfinite(shade), shade, np.nan), cmap="viridis", norm=norm, aspect="auto", origin="lower")
+        for i in range(shape[0]):
+            for j in range(shape[1]):
+                value = shown[i, j]
+                text = "x" if not np.isfinite(value) else fmt.format(value)
+                light = np.isfinite(shade[i, j]) and norm(shade[i, j]) < 0.5
+                ax.text(j, i, text, ha="center", va="center", fontsize=9, color="white" if light else "black")
+        ax.set_xticks(range(shape[1]), [f"{a:g}\n(δ = {(a * a - 1) / (a * a + 1):.3f})" for a in columns], fontsize=8)
+        ax.set_yticks(range(shape[0]), [f"{n:g}" for n in rows])
+        ax.set_xlabel("hysteresis bound α on |σ_c|")
+        ax.set_ylabel("attitude noise σ_n (rad, 1σ per axis)")
+        ax.set_title(label, fontsize=10)
+    if title:
+        fig.suptitle(_typeset(title), fontsize=10)
+    return fig
+
+
+def plot_distributions(
+    rates: Sequence[float] | np.ndarray,
+    labels: Sequence[str],
+    *,
+    settled_fraction: Any,
+    switching_fraction: Any,
+    title: str | None = None,
+) -> Figure:
+    """Grouped bars: the fraction of perturbed runs that settle, and that still switch at the end, per rule and rate.
+
+    Parameters
+    ----------
+    rates : array_like
+        (r,) sample rates (Hz).
+    labels : sequence of str
+        (q,) rule labels.
+    settled_fraction, switching_fraction : array_like
+        (q, r) fractions in [0, 1].
+    title : str, optional
+    """
+    rate_values = np.asarray(rates, dtype=float)
+    shape = (len(labels), rate_values.size)
+    settled = _grid("settled_fraction", settled_fraction, shape)
+    switching = _grid("switching_fraction", switching_fraction, shape)
+    fig = Figure(figsize=(9.0, 3.6), layout="constrained")
+    axes = fig.subplots(1, 2, sharey=True)
+    width = 0.8 / max(rate_values.size, 1)
+    positions = np.arange(len(labels))
+    for ax, values, name in (
+        (axes[0], settled, "settled by the end"),
+        (axes[1], switching, "switching in the last 10 s"),
+    ):
+        for j, rate in enumerate(rate_values):
+            ax.bar(positions + (j - (rate_values.size - 1) / 2) * width, values[:, j], width, label=f"{rate:g} Hz")
+        ax.set_xticks(positions, [_typeset(label) for label in labels], fontsize=8, rotation=15)
+        ax.set_ylim(0.0, 1.05)
+        ax.set_title(name, fontsize=10)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_ylabel("fraction of runs")
+    _legend_outside(axes[1])
+    if title:
+        fig.suptitle(_typeset(title), fontsize=10)
+    return fig
+
+
 def render_rgba(fig: Figure, *, dpi: int = 80) -> np.ndarray:
     """The figure rendered by Agg as an (h, w, 4) uint8 array (for image regression tests)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg

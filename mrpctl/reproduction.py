@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl import paper
-from mrpctl._validation import positive_scalar
+from mrpctl._validation import integer, nonnegative_scalar, positive_scalar
 from mrpctl.errors import SpecificationError
 from mrpctl.scenario import Scenario
 from mrpctl.simulation import SimulationResult
@@ -24,10 +24,13 @@ from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, 
 
 __all__ = [
     "OUTPUT_FILES",
+    "STUDY_FIGURE_FILES",
     "Claim",
     "Reproduction",
     "Verdict",
+    "flight_scenarios",
     "paper_scenarios",
+    "perturbed_states",
     "reproduce",
     "run_reproduction",
     "write_reproduction",
@@ -53,9 +56,12 @@ FIGURE_FILES = (
     "fig7_boundary_layer.png",
     "delay_aware.png",
     "eps_study.png",
+    "flight_paper.png",
 )
+#: The figures of the flight studies (noise × δ, distributions over initial states and rates).
+STUDY_FIGURE_FILES = ("noise_delta_study.png", "distributions.png", "predictor_study.png")
 #: Every file :func:`write_reproduction` writes into its folder (nothing else is touched there).
-OUTPUT_FILES = (*FIGURE_FILES, "claims.md", "summary.json")
+OUTPUT_FILES = (*FIGURE_FILES, *STUDY_FIGURE_FILES, "claims.md", "summary.json")
 
 
 class Verdict(enum.Enum):
@@ -94,12 +100,21 @@ class Reproduction:
     design : dict
         The design measurements of the claims (damping ratios, exact margin, certificate),
         as written to ``summary.json``.
+    studies : dict
+        The flight studies (``summary.json`` key ``flight``): ``noise_delta``, one row per
+        (attitude noise, α), and ``distributions``, one row per (rule, sample rate).
+    predictor : mrpctl._predictor_study.PredictorStudy or None
+        The predictor study (``summary.json`` key ``predictor``, figure ``predictor_study.png``):
+        settling time of the best certified PD and of the predictor with fast gains against the
+        inertia error, and the inertia error each tolerates.
     """
 
     results: dict[str, SimulationResult] = field(repr=False)
     claims: tuple[Claim, ...]
     files: tuple[Path, ...]
     design: dict[str, Any] = field(default_factory=dict, repr=False)
+    studies: dict[str, Any] = field(default_factory=dict, repr=False)
+    predictor: Any = field(default=None, repr=False)
 
     @property
     def agreeing(self) -> int:
@@ -189,6 +204,35 @@ def paper_scenarios(*, t_final: float = 60.0) -> dict[str, Scenario]:
             ),
         )
     }
+
+
+def flight_scenarios(*, t_final: float = 60.0) -> dict[str, Scenario]:
+    """The shipped scenarios of the loop as flown (``mrpctl/scenarios/flight-*.toml``), by name.
+
+    ``flight-paper``: the paper's case with the controller-side rule
+    :class:`~mrpctl.flight.Hysteretic` (α = 1.2), 0.01 rad / 1e-4 rad/s sensor noise (seed 1),
+    a 20 N m per-axis torque limit, a 1e-3 N m disturbance about x and a delay jittering in
+    [0.45, 0.5] s (seed 2).
+    """
+    from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
+
+    t_final = positive_scalar("t_final", t_final)
+    base = _paper_scenario(
+        "flight-paper",
+        "The paper's case as flown: hysteretic set selection (alpha = 1.2), noisy sensor, 20 N m torque limit, "
+        "disturbance, jittering delay",
+        paper.TAU,
+        Hysteretic.from_alpha(1.2),
+        t_final,
+    )
+    flown = replace(
+        base,
+        actuator=ActuatorModel(u_max=20.0),
+        sensor=SensorModel(attitude_noise=0.01, rate_noise=1e-4, seed=1),
+        disturbance=Disturbance([1e-3, 0.0, 0.0]),
+        delay=DelayModel.jitter(0.45, paper.TAU, seed=2),
+    )
+    return {flown.name: flown}
 
 
 # ------------------------------------------------------------------------------ measures
@@ -361,6 +405,205 @@ def _simulation_claims(results: dict[str, SimulationResult]) -> list[Claim]:
     return claims
 
 
+# ------------------------------------------------------------------------------ the loop as flown
+#: Attitude noise levels σ_n (rad, 1σ per axis) and bounds α = √((1 + δ)/(1 − δ)) of the noise × δ study.
+NOISE_STUDY = (0.0, 0.001, 0.01)
+ALPHA_STUDY = (1.0, 1.05, 1.2, 1.5)
+#: Seed of the sensor noise of the noise × δ study.
+NOISE_SEED = 1
+#: Sample rates (Hz) of the distribution study, and its perturbed initial states: the paper's
+#: state rotated by a rotation vector with components uniform in ±0.5° and ω0 + uniform ±0.02 rad/s per axis.
+RATE_STUDY = (500.0, 1000.0, 2000.0)
+PERTURBATION_COUNT = 30
+PERTURBATION_SEED = 2026
+PERTURBATION_ANGLE_DEG = 0.5
+PERTURBATION_RATE = 0.02
+
+
+def perturbed_states(
+    count: int = PERTURBATION_COUNT,
+    *,
+    seed: int = PERTURBATION_SEED,
+    angle_deg: float = PERTURBATION_ANGLE_DEG,
+    rate: float = PERTURBATION_RATE,
+) -> np.ndarray:
+    """(count, 6) seeded perturbations x0 = [σ; ω/4] of the paper's initial state.
+
+    The attitude is σ0 followed by a small rotation θ (rotation vector, components uniform in
+    ±``angle_deg``), σ = σ0 ⊕ σ(θ) in the set of σ0 (|σ| near 0.93, the long set is never
+    taken); ω = ω0 + δω with δω uniform in ±``rate`` rad/s per axis.
+    """
+    from mrpctl import mrp
+
+    count = integer("count", count, minimum=1)
+    generator = np.random.default_rng(integer("seed", seed, minimum=0))
+    theta = np.radians(nonnegative_scalar("angle_deg", angle_deg)) * generator.uniform(-1.0, 1.0, (count, 3))
+    delta_omega = nonnegative_scalar("rate", rate) * generator.uniform(-1.0, 1.0, (count, 3))
+    sigma0 = paper.INITIAL_STATE[:3]
+    sigma = mrp.add(np.broadcast_to(sigma0, (count, 3)), mrp.from_rotation_vector(theta))
+    omega = 4.0 * paper.INITIAL_STATE[3:] + delta_omega
+    return np.hstack((sigma, omega / 4.0))
+
+
+def _flight_runs(t_final: float) -> dict[str, SimulationResult]:
+    """The controller-side rule on the paper case: δ = 0, α = 1.2 (ideal loop) and the shipped flight-paper."""
+    from mrpctl.flight import Hysteretic
+
+    base = _paper_scenario("flight_hysteretic_alpha_1", "", paper.TAU, Hysteretic(0.0), t_final)
+    return {
+        "flight_hysteretic_alpha_1": base.simulate(),
+        "flight_hysteretic_alpha_1.2": base.with_rule(Hysteretic.from_alpha(1.2)).simulate(),
+        "flight-paper": flight_scenarios(t_final=t_final)["flight-paper"].simulate(),
+    }
+
+
+def _noise_study(t_final: float) -> list[dict[str, Any]]:
+    """Logic switches and settling of the controller-side rule for every (σ_n, α): one batch per noise level."""
+    from mrpctl.flight import Hysteretic, SensorModel
+    from mrpctl.simulation import simulate_batch
+
+    rows = []
+    rules = [Hysteretic.from_alpha(alpha) for alpha in ALPHA_STUDY]
+    for noise in NOISE_STUDY:
+        batch = simulate_batch(
+            paper.SPACECRAFT,
+            paper.GAIN,
+            paper.INITIAL_STATE,
+            tau=paper.TAU,
+            rule=rules,
+            t_final=t_final,
+            rate=paper.MEASUREMENT_RATE,
+            sensor=SensorModel(attitude_noise=noise, seed=NOISE_SEED) if noise > 0 else None,
+            trajectories=False,
+        )
+        for i, (alpha, rule) in enumerate(zip(ALPHA_STUDY, rules, strict=True)):
+            rows.append(
+                {
+                    "attitude_noise": noise,
+                    "alpha": alpha,
+                    "delta": rule.delta,
+                    "switch_count": int(batch.switch_count[i]),
+                    "first_switch_time": _or_none(batch.first_switch_time[i]),
+                    "settling_time": _or_none(batch.settling_time[i]),
+                    "converged": bool(batch.converged[i]),
+                    "max_sigma": float(batch.max_sigma[i]),
+                }
+            )
+    return rows
+
+
+def _or_none(value: float) -> float | None:
+    return None if math.isnan(value) else float(value)
+
+
+def _distribution_rules() -> dict[str, SwitchingRule]:
+    from mrpctl.flight import Hysteretic
+
+    return {
+        "on-delayed": OnDelayed(),
+        f"boundary-layer eps = {paper.BOUNDARY_LAYER_EPS:g}": BoundaryLayer(eps=paper.BOUNDARY_LAYER_EPS),
+        "delay-aware": DelayAware(),
+        "hysteretic alpha = 1.2": Hysteretic.from_alpha(1.2),
+    }
+
+
+def _distribution_study(t_final: float) -> list[dict[str, Any]]:
+    """Each switching claim over :func:`perturbed_states` at the rates of :data:`RATE_STUDY` (metrics only)."""
+    from mrpctl.simulation import simulate_batch
+
+    states = perturbed_states()
+    rows = []
+    for label, rule in _distribution_rules().items():
+        for rate in RATE_STUDY:
+            batch = simulate_batch(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                states,
+                tau=paper.TAU,
+                rule=rule,
+                t_final=t_final,
+                rate=rate,
+                trajectories=False,
+            )
+            late = batch.last_switch_time > t_final - LATE_WINDOW
+            settling = batch.settling_time[batch.converged]
+            rows.append(
+                {
+                    "rule": label,
+                    "rate": rate,
+                    "runs": len(states),
+                    "converged": int(np.count_nonzero(batch.converged)),
+                    "diverged": int(np.count_nonzero(batch.diverged)),
+                    "switching_in_last_10s": int(np.count_nonzero(late)),
+                    "median_switches": float(np.median(batch.switch_count)),
+                    "max_switches": int(np.max(batch.switch_count)),
+                    "median_settling_time": float(np.median(settling)) if settling.size else None,
+                    "max_settling_time": float(np.max(settling)) if settling.size else None,
+                }
+            )
+    return rows
+
+
+def _flight_claims(results: dict[str, SimulationResult], studies: dict[str, Any]) -> list[Claim]:
+    plain, wide, flown = (
+        results[name] for name in ("flight_hysteretic_alpha_1", "flight_hysteretic_alpha_1.2", "flight-paper")
+    )
+    first = "" if plain.first_switch_time is None else f" at {plain.first_switch_time:.3f} s"
+    peak = float("nan") if flown.peak_command is None else float(flown.peak_command[3])
+    claims = [
+        Claim(
+            "mrpctl (flight)",
+            "controller-side MRP set selection with hysteresis on the delayed measurement (Mayhew-Sanfelice-Teel), "
+            "paper case, ideal sensor",
+            f"alpha = 1 (delta = 0): {plain.switch_count} logic switch(es){first}, {_settling(plain)} (= OnCurrent); "
+            f"alpha = 1.2: {wide.switch_count} switch(es), {_settling(wide)} (= NoSwitching: the paper's case only "
+            "just passes Phi = 180 deg)",
+            Verdict.EXTENDS,
+        ),
+        Claim(
+            "mrpctl (flight)",
+            "the loop as flown (flight-paper): alpha = 1.2, 0.01 rad + 1e-4 rad/s noise, 20 N m limit, "
+            "1e-3 N m disturbance, delay jitter in [0.45, 0.5] s",
+            f"{flown.switch_count} logic switch(es), saturated {100 * (flown.saturated_fraction or 0.0):.1f} % of "
+            f"the samples, peak command {peak:.1f} N m, {_settling(flown)}",
+            Verdict.EXTENDS,
+        ),
+    ]
+    noise_rows = studies["noise_delta"]
+    cells = []
+    for noise in NOISE_STUDY:
+        counts = ", ".join(f"{row['switch_count']}" for row in noise_rows if row["attitude_noise"] == noise)
+        cells.append(f"noise {noise:g} rad: {counts}")
+    claims.append(
+        Claim(
+            "mrpctl (flight)",
+            f"noise x delta: logic switches in {plain.t_final:g} s of the paper case at alpha = "
+            + ", ".join(f"{a:g}" for a in ALPHA_STUDY),
+            "; ".join(cells),
+            Verdict.EXTENDS,
+        )
+    )
+    by_rule: dict[str, list[dict[str, Any]]] = {}
+    for row in studies["distributions"]:
+        by_rule.setdefault(row["rule"], []).append(row)
+    for label, rows in by_rule.items():
+        parts = [
+            f"{row['rate']:g} Hz: {row['converged']}/{row['runs']} settle, {row['switching_in_last_10s']} still "
+            f"switching, median {row['median_switches']:g} switches"
+            for row in rows
+        ]
+        claims.append(
+            Claim(
+                "mrpctl (distribution)",
+                f"{label} over {rows[0]['runs']} perturbed initial states (+-{PERTURBATION_ANGLE_DEG:g} deg, "
+                f"+-{PERTURBATION_RATE:g} rad/s) at {len(rows)} sample rates",
+                "; ".join(parts),
+                Verdict.EXTENDS,
+            )
+        )
+    return claims
+
+
 # ------------------------------------------------------------------------------ output
 def _cell(text: str) -> str:
     """Escape the pipes of |sigma| so that a Markdown table cell stays one cell."""
@@ -421,6 +664,7 @@ def _figures(results: dict[str, SimulationResult], out: Path) -> list[Path]:
         ("fig6_no_switching.png", lambda: plots.plot_response(results["paper_fig6_no_switching"])),
         ("fig7_boundary_layer.png", lambda: plots.plot_response(results["paper_fig7_boundary_layer"])),
         ("delay_aware.png", lambda: plots.plot_response(results["delay_aware"])),
+        ("flight_paper.png", lambda: plots.plot_response(results["flight-paper"])),
     ]
     eps_runs = [results[f"eps_{eps:g}"] for eps in paper.EPS_STUDY]
     makers.append(
@@ -439,6 +683,96 @@ def _figures(results: dict[str, SimulationResult], out: Path) -> list[Path]:
         )
     )
     return [plots.save_figure(make(), out / name) for name, make in makers]
+
+
+def _study_figures(studies: dict[str, Any], out: Path) -> list[Path]:
+    """The noise × δ heat maps and the distributions over initial states and rates."""
+    from mrpctl import plots
+
+    written = []
+    rows = studies.get("noise_delta", [])
+    if rows:
+        shape = (len(NOISE_STUDY), len(ALPHA_STUDY))
+        switches = np.array([row["switch_count"] for row in rows], dtype=float).reshape(shape)
+        settling = np.array([np.nan if row["settling_time"] is None else row["settling_time"] for row in rows])
+        figure = plots.plot_noise_study(
+            NOISE_STUDY,
+            ALPHA_STUDY,
+            switch_count=switches,
+            settling_time=settling.reshape(shape),
+            title=f"Controller-side rule, paper case, tau = {paper.TAU:g} s: logic switches vs noise and alpha",
+        )
+        written.append(plots.save_figure(figure, out / "noise_delta_study.png"))
+    rows = studies.get("distributions", [])
+    if rows:
+        labels = list(dict.fromkeys(row["rule"] for row in rows))
+        settled = np.array(
+            [[row["converged"] / row["runs"] for row in rows if row["rule"] == label] for label in labels]
+        )
+        switching = np.array(
+            [[row["switching_in_last_10s"] / row["runs"] for row in rows if row["rule"] == label] for label in labels]
+        )
+        figure = plots.plot_distributions(
+            RATE_STUDY,
+            labels,
+            settled_fraction=settled,
+            switching_fraction=switching,
+            title=f"{rows[0]['runs']} perturbed initial states (+-{PERTURBATION_ANGLE_DEG:g} deg, "
+            f"+-{PERTURBATION_RATE:g} rad/s), tau = {paper.TAU:g} s",
+        )
+        written.append(plots.save_figure(figure, out / "distributions.png"))
+    return written
+
+
+def _studies_markdown(studies: dict[str, Any]) -> str:
+    """The flight studies as Markdown tables (appended to claims.md)."""
+    if not studies:
+        return ""
+    lines = [
+        "",
+        "## Noise x delta: the controller-side rule on the paper case",
+        "",
+        f"Logic switches (first switch, settling) over the run; attitude noise 1 sigma per axis, seed {NOISE_SEED}.",
+        "",
+        "| attitude noise (rad) | "
+        + " | ".join(f"alpha = {a:g} (delta = {(a * a - 1) / (a * a + 1):.4f})" for a in ALPHA_STUDY)
+        + " |",
+        "|---|" + "---|" * len(ALPHA_STUDY),
+    ]
+
+    def time(value: float | None) -> str:
+        return "-" if value is None else f"{value:.3f}"
+
+    for noise in NOISE_STUDY:
+        cells = [
+            f"{row['switch_count']} ({time(row['first_switch_time'])}, {time(row['settling_time'])})"
+            for row in studies["noise_delta"]
+            if row["attitude_noise"] == noise
+        ]
+        lines.append(f"| {noise:g} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "## Switching claims as distributions",
+        "",
+        f"{PERTURBATION_COUNT} seeded perturbations (seed {PERTURBATION_SEED}) of the paper's initial state: "
+        f"a rotation vector uniform in +-{PERTURBATION_ANGLE_DEG:g} deg per axis after sigma0, omega0 + uniform "
+        f"+-{PERTURBATION_RATE:g} rad/s per axis; tau = {paper.TAU:g} s.",
+        "",
+        "| rule | rate (Hz) | settled | diverged | still switching in the last 10 s | switches (median, max) "
+        "| settling (median, max, s) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+
+    def number(value: float | None) -> str:
+        return "-" if value is None else f"{value:.2f}"
+
+    for row in studies["distributions"]:
+        lines.append(
+            f"| {row['rule']} | {row['rate']:g} | {row['converged']}/{row['runs']} | {row['diverged']} | "
+            f"{row['switching_in_last_10s']} | {row['median_switches']:g}, {row['max_switches']} | "
+            f"{number(row['median_settling_time'])}, {number(row['max_settling_time'])} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def run_reproduction(*, t_final: float = 60.0) -> Reproduction:
@@ -462,9 +796,16 @@ def run_reproduction(*, t_final: float = 60.0) -> Reproduction:
     fig7 = scenarios["paper_fig7_boundary_layer"]
     for eps in paper.EPS_STUDY:
         results[f"eps_{eps:g}"] = fig7.with_rule(BoundaryLayer(eps=eps)).simulate()
+    results.update(_flight_runs(t_final))
+    studies = {"noise_delta": _noise_study(t_final), "distributions": _distribution_study(t_final)}
+    from mrpctl._predictor_study import predictor_study
+
+    study = predictor_study(t_final=t_final)
     design_claims, design_summary = _design_claims()
-    claims = (*design_claims, *_simulation_claims(results))
-    return Reproduction(results=results, claims=claims, files=(), design=design_summary)
+    claims = (*design_claims, *_simulation_claims(results), *_flight_claims(results, studies), *study.claims())
+    return Reproduction(
+        results=results, claims=claims, files=(), design=design_summary, studies=studies, predictor=study
+    )
 
 
 def _check_out(out: Path, overwrite: bool) -> None:
@@ -512,8 +853,17 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     try:
         _figures(reproduction.results, staging)
+        _study_figures(reproduction.studies, staging)
+        if reproduction.predictor is not None:
+            from mrpctl import plots
+
+            plots.save_figure(reproduction.predictor.figure(), staging / "predictor_study.png")
         runs = {name: _run_summary(result) for name, result in reproduction.results.items()}
-        (staging / "claims.md").write_text(_claims_markdown(reproduction.claims, runs), encoding="utf-8")
+        text = _claims_markdown(reproduction.claims, runs) + _studies_markdown(reproduction.studies)
+        if reproduction.predictor is not None:
+            text += "\n## Delay compensation by prediction (paper case, tau = 0.5 s)\n\n"
+            text += reproduction.predictor.table() + "\n\n" + str(reproduction.predictor) + "\n"
+        (staging / "claims.md").write_text(text, encoding="utf-8")
         summary = {
             "design": reproduction.design,
             "claims": [
@@ -526,6 +876,8 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
                 for c in reproduction.claims
             ],
             "runs": runs,
+            "flight": reproduction.studies,
+            "predictor": None if reproduction.predictor is None else reproduction.predictor.summary(),
         }
         (staging / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
         if not out.exists():
@@ -533,7 +885,8 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
         else:
             _check_out(out, overwrite)  # again: something may have appeared while computing
             for name in OUTPUT_FILES:
-                os.replace(staging / name, out / name)
+                if (staging / name).exists():  # predictor_study.png only when the study was run
+                    os.replace(staging / name, out / name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return replace(reproduction, files=tuple(out / name for name in OUTPUT_FILES))

@@ -13,6 +13,7 @@ import numpy as np
 
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
@@ -41,15 +42,22 @@ RULE_NAMES = {
     "on-delayed": OnDelayed,
     "boundary-layer": BoundaryLayer,
     "delay-aware": DelayAware,
+    "hysteretic": Hysteretic,
 }
 
 _TOP_KEYS = {"name", "description", "t_final", "tau", "rate", "history", "substeps"}
 _TABLES = {"spacecraft", "gains", "initial", "rule"}
+#: Tables of the loop as flown (``[rule] type = "hysteretic"`` only), all optional.
+_FLIGHT_TABLES = {"actuator", "sensor", "disturbance", "delay"}
 _KEYS = {
     "spacecraft": {"inertia"},
     "gains": {"K", "k_sigma", "k_omega", "K1", "K2"},
     "initial": {"sigma", "principal_angle_deg", "axis", "omega"},
-    "rule": {"type", "eps", "alpha"},
+    "rule": {"type", "eps", "alpha", "delta"},
+    "actuator": {"u_max", "u_norm", "saturation"},
+    "sensor": {"attitude_noise", "rate_noise", "gyro_bias", "seed"},
+    "disturbance": {"torque"},
+    "delay": {"tau_min", "tau_max", "seed"},
 }
 
 
@@ -81,6 +89,11 @@ class Scenario:
         RK4 substeps per measurement period.
     description : str
         Free text (the paper figure it reproduces, for instance).
+    actuator, sensor, disturbance, delay : optional
+        The loop as flown (``rule`` a :class:`~mrpctl.flight.Hysteretic` only):
+        :class:`~mrpctl.flight.ActuatorModel`, :class:`~mrpctl.flight.SensorModel`,
+        :class:`~mrpctl.flight.Disturbance` (constant), :class:`~mrpctl.flight.DelayModel`
+        (seeded jitter with ``tau_max`` = ``tau``). None: not modelled.
     """
 
     name: str
@@ -94,6 +107,17 @@ class Scenario:
     history: str = "constant"
     substeps: int = 1
     description: str = ""
+    actuator: ActuatorModel | None = None
+    sensor: SensorModel | None = None
+    disturbance: Disturbance | None = None
+    delay: DelayModel | None = None
+
+    @property
+    def flight_options(self) -> dict[str, Any]:
+        """The flight models that are set, as keywords of :func:`mrpctl.simulate` and :func:`mrpctl.export`."""
+        options: dict[str, Any] = {"actuator": self.actuator, "sensor": self.sensor, "disturbance": self.disturbance}
+        options["delay"] = self.delay
+        return {key: value for key, value in options.items() if value is not None}
 
     def with_rule(self, rule: SwitchingRule) -> Scenario:
         """The same scenario with another switching rule."""
@@ -113,6 +137,7 @@ class Scenario:
             rate=self.rate,
             history=self.history,
             substeps=self.substeps,
+            **self.flight_options,
         )
 
     def __str__(self) -> str:
@@ -124,22 +149,37 @@ class Scenario:
                 f"  sigma0 = {np.round(sigma0, 6).tolist()}, omega0 = {np.round(omega0, 6).tolist()} rad/s",
                 f"  tau = {self.tau:g} s at {self.rate:g} Hz, rule {self.rule}, history {self.history}",
                 f"  t_final = {self.t_final:g} s, {self.substeps} RK4 substep(s) per sample",
+                *(f"  {value}" for value in self.flight_options.values()),
             )
         )
 
 
-def rule_from_name(name: str, *, eps: float | None = None, alpha: float | None = None) -> SwitchingRule:
+def rule_from_name(
+    name: str, *, eps: float | None = None, alpha: float | None = None, delta: float | None = None
+) -> SwitchingRule:
     """The switching rule called ``name`` (one of :data:`RULE_NAMES`).
 
     ``eps`` is required by (and only allowed for) ``boundary-layer``; ``alpha`` is
-    optional for ``delay-aware`` (default 1).
+    optional for ``delay-aware`` (default 1) and ``hysteretic``; ``delta`` (the hysteresis
+    δ ∈ [0, 1) on q₀) only for ``hysteretic``, which takes δ or α = √((1 + δ)/(1 − δ)), not
+    both (default δ = 0).
     """
     if name not in RULE_NAMES:
         raise SpecificationError(f"rule type must be one of {sorted(RULE_NAMES)}, got {name!r}")
     if eps is not None and name != "boundary-layer":
         raise SpecificationError(f"rule: eps applies only to 'boundary-layer', not to {name!r}")
-    if alpha is not None and name != "delay-aware":
-        raise SpecificationError(f"rule: alpha applies only to 'delay-aware', not to {name!r}")
+    if alpha is not None and name not in ("delay-aware", "hysteretic"):
+        raise SpecificationError(f"rule: alpha applies only to 'delay-aware' and 'hysteretic', not to {name!r}")
+    if delta is not None and name != "hysteretic":
+        raise SpecificationError(f"rule: delta applies only to 'hysteretic', not to {name!r}")
+    if name == "hysteretic":
+        if delta is not None and alpha is not None:
+            raise SpecificationError(
+                "rule: 'hysteretic' takes delta or alpha (alpha = sqrt((1 + delta)/(1 - delta))), not both"
+            )
+        if alpha is not None:
+            return Hysteretic.from_alpha(alpha)
+        return Hysteretic(0.0 if delta is None else delta)
     if name == "boundary-layer":
         if eps is None:
             raise SpecificationError("rule: 'boundary-layer' needs eps (the layer thickness, > 0)")
@@ -155,6 +195,79 @@ def rule_name(rule: SwitchingRule) -> str:
         if type(rule) is cls:
             return name
     raise SpecificationError(f"rule {rule!r} has no scenario-file name; use one of {sorted(RULE_NAMES)}")
+
+
+def _flight_tables(data: dict[str, Any], rule: SwitchingRule, tau: float, rate: float) -> dict[str, Any]:
+    """The optional [actuator], [sensor], [disturbance] and [delay] tables as flight models.
+
+    Each table is refused with a paper rule, and every error names the table and its key.
+    """
+    models: dict[str, Any] = {}
+    for name in sorted(_FLIGHT_TABLES):
+        if name not in data:
+            continue
+        table = data[name]
+        if not isinstance(table, dict):
+            raise SpecificationError(f"[{name}] must be a table of the scenario, got {table!r}")
+        _check_keys(name, table, _KEYS[name])
+        if not isinstance(rule, Hysteretic):
+            raise SpecificationError(
+                f"[{name}] applies only to the loop as flown: set [rule] type = 'hysteretic' "
+                f"(the controller-side rule), got {rule_name(rule)!r}"
+            )
+        try:
+            models[name] = _FLIGHT_BUILDERS[name](table, tau, rate)
+        except (SpecificationError, DimensionError) as exc:
+            raise type(exc)(f"[{name}] {exc}") from exc
+    return models
+
+
+def _actuator(table: dict[str, Any], tau: float, rate: float) -> ActuatorModel:
+    if "u_max" not in table:
+        raise SpecificationError("needs u_max (per-axis torque limit, N m; a scalar or 3 values)")
+    modes = {mode.value: mode for mode in Saturation}
+    mode = table.get("saturation", Saturation.SCALE.value)
+    if mode not in modes:
+        raise SpecificationError(f"saturation must be one of {sorted(modes)}, got {mode!r}")
+    norm = table.get("u_norm")
+    return ActuatorModel(
+        u_max=table["u_max"], norm_max=None if norm is None else positive_scalar("u_norm", norm), mode=modes[mode]
+    )
+
+
+def _sensor(table: dict[str, Any], tau: float, rate: float) -> SensorModel:
+    return SensorModel(
+        attitude_noise=table.get("attitude_noise", 0.0),
+        rate_noise=table.get("rate_noise", 0.0),
+        gyro_bias=table.get("gyro_bias", (0.0, 0.0, 0.0)),
+        seed=table.get("seed", 0),
+    )
+
+
+def _disturbance(table: dict[str, Any], tau: float, rate: float) -> Disturbance:
+    if "torque" not in table:
+        raise SpecificationError("needs torque (constant body-frame torque, 3 values, N m)")
+    return Disturbance(finite_array("torque", table["torque"], (3,)))
+
+
+def _delay(table: dict[str, Any], tau: float, rate: float) -> DelayModel:
+    if "tau_min" not in table:
+        raise SpecificationError(
+            "needs tau_min (s): the delay jitters uniformly over the whole periods in [tau_min, tau]"
+        )
+    tau_max = nonnegative_scalar("tau_max", table.get("tau_max", tau))
+    if tau_max != tau:
+        raise SpecificationError(
+            f"tau_max must equal the scenario's tau = {tau!r} s (the history depth), got {tau_max!r}"
+        )
+    model = DelayModel.jitter(table["tau_min"], tau_max, seed=table.get("seed", 0))
+    low, _ = model.bounds(rate)
+    if low < 1:
+        raise SpecificationError(f"tau_min must be >= 1/rate = {1.0 / rate:g} s, got {model.tau_min!r} s")
+    return model
+
+
+_FLIGHT_BUILDERS = {"actuator": _actuator, "sensor": _sensor, "disturbance": _disturbance, "delay": _delay}
 
 
 def _check_keys(table: str, data: dict[str, Any], allowed: set[str]) -> None:
@@ -229,7 +342,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
 
     Unknown keys raise a :class:`~mrpctl.errors.SpecificationError` naming the key.
     """
-    _check_keys("", data, _TOP_KEYS | _TABLES)
+    _check_keys("", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES)
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")
@@ -237,7 +350,15 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
     rule_table = _table(data, "rule")
     if "type" not in rule_table:
         raise SpecificationError(f"[rule] needs type, one of {sorted(RULE_NAMES)}")
-    rule = rule_from_name(str(rule_table["type"]), eps=rule_table.get("eps"), alpha=rule_table.get("alpha"))
+    try:
+        rule = rule_from_name(
+            str(rule_table["type"]),
+            eps=rule_table.get("eps"),
+            alpha=rule_table.get("alpha"),
+            delta=rule_table.get("delta"),
+        )
+    except (SpecificationError, DimensionError) as exc:
+        raise type(exc)(f"[rule] {exc}") from exc
     for key in ("t_final", "tau"):
         if key not in data:
             raise SpecificationError(f"scenario needs {key} (s)")
@@ -248,6 +369,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
     if history not in ("constant", "zero-input"):
         raise SpecificationError(f"history must be 'constant' or 'zero-input', got {history!r}")
     substeps = integer("substeps", data.get("substeps", 1), minimum=1)
+    flight = _flight_tables(data, rule, tau, rate)
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
@@ -260,6 +382,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
         history=history,
         substeps=substeps,
         description=str(data.get("description", "")),
+        **flight,
     )
 
 
@@ -375,7 +498,50 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
         lines.append(f"eps = {_toml_value(scenario.rule.eps)}")
     if isinstance(scenario.rule, DelayAware):
         lines.append(f"alpha = {_toml_value(scenario.rule.alpha)}")
+    if isinstance(scenario.rule, Hysteretic):
+        lines.append(
+            f"delta = {_toml_value(scenario.rule.delta)}  # hysteresis on q0; alpha = {scenario.rule.alpha:.6g}"
+        )
+    lines += _flight_toml(scenario)
     return "\n".join(lines) + "\n"
+
+
+def _flight_toml(scenario: Scenario) -> list[str]:
+    """The [actuator], [sensor], [disturbance] and [delay] tables of ``scenario`` (those that are set)."""
+    lines: list[str] = []
+    if scenario.actuator is not None:
+        lines += ["", "[actuator]", f"u_max = {_toml_value(scenario.actuator.u_max)}  # N m per axis"]
+        if scenario.actuator.norm_max is not None:
+            lines.append(f"u_norm = {_toml_value(scenario.actuator.norm_max)}  # N m")
+        lines.append(f"saturation = {_toml_value(scenario.actuator.mode.value)}")
+    if scenario.sensor is not None:
+        sensor = scenario.sensor
+        lines += [
+            "",
+            "[sensor]",
+            f"attitude_noise = {_toml_value(sensor.attitude_noise)}  # rad, 1 sigma per axis",
+            f"rate_noise = {_toml_value(sensor.rate_noise)}  # rad/s, 1 sigma per axis",
+            f"gyro_bias = {_toml_value(sensor.gyro_bias)}  # rad/s",
+            f"seed = {sensor.seed}",
+        ]
+    if scenario.disturbance is not None:
+        if not scenario.disturbance.constant:
+            raise SpecificationError("disturbance: a per-sample torque array cannot be written to a scenario file")
+        lines += ["", "[disturbance]", f"torque = {_toml_value(scenario.disturbance.torque)}  # N m, body frame"]
+    if scenario.delay is not None:
+        delay = scenario.delay
+        if delay.kind is not DelayKind.JITTER:
+            raise SpecificationError(
+                f"delay: only seeded jitter can be written to a scenario file, got {delay.kind.value}"
+            )
+        lines += [
+            "",
+            "[delay]",
+            f"tau_min = {_toml_value(delay.tau_min)}  # s; jitter uniform over the whole periods in [tau_min, tau]",
+            f"tau_max = {_toml_value(delay.tau_max)}",
+            f"seed = {delay.seed}",
+        ]
+    return lines
 
 
 #: The commented starter scenario written by ``mrpctl init``.
@@ -414,8 +580,15 @@ omega = [0.3, 0.0, 0.0]  # body rates (rad/s)
 
 [rule]
 # Shadow-set switching: "none", "on-current" (|sigma(t)| >= 1), "on-delayed" (|sigma(t - tau)| >= 1),
-# "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1).
+# "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1), or the
+# controller-side set selection of the loop as flown, "hysteretic" (delta in [0, 1) or alpha >= 1).
 type = "delay-aware"
+
+# The loop as flown (only with type = "hysteretic"; see `mrpctl simulate flight-paper`), all optional:
+# [actuator]     u_max = 20.0 (N m, scalar or 3 values), u_norm = 30.0 (N m), saturation = "scale" or "clip"
+# [sensor]       attitude_noise = 0.01 (rad, 1 sigma per axis), rate_noise = 1e-4 (rad/s), gyro_bias, seed = 1
+# [disturbance]  torque = [1e-3, 0.0, 0.0] (N m, body frame)
+# [delay]        tau_min = 0.15 (s; the delay jitters over the whole periods in [tau_min, tau]), seed = 2
 """
 
 

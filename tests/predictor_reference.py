@@ -17,6 +17,11 @@ Predictor forms (see design/predictor.md):
   δω = ω_y − ω_z(k−d) (body frame), Ĉ_k = C(τ δω) C_z(k) C_E, ω̂_k = ω_z(k) + δω.
 * ``"smith"``: the same without the τ δω rotation (the textbook Smith correction x̂ = z_k + (y − z_{k−d})).
 
+Flight-loop options (for the compiled engine's predictor sample): ``u_max`` clips each torque axis (the
+torque actually applied drives both the plant and the model copy), ``disturbance`` is a constant torque
+added on the plant only, and ``noise`` = (θ (n, 3), η (n, 3), b (3,)) makes the measurement
+[B̃N] = exp(−[θ_k×]) [BN] (short set), ω̃ = ω + b + η_k; the delayed measurement is then y_k = m̃_{k−d}.
+
 Switching on the predicted attitude: σ̂_k is taken in the set nearest σ̂_{k−1} (continuity); with
 ``alpha`` given, σ̂_k is replaced by its shadow when |σ̂_k| >= α (α >= 1: hysteresis) and the sample
 is recorded as a switch. The plant's own MRPs are kept in the short set (a change of coordinates only).
@@ -141,6 +146,9 @@ def run(
     form: str = "model-copy",
     alpha: float | None = 1.0,
     plant_substeps: int = 1,
+    u_max: float | None = None,
+    disturbance: np.ndarray | None = None,
+    noise: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> Run:
     assert form in FORMS
     inertia = np.diag(j_plant) if np.ndim(j_plant) == 1 else np.asarray(j_plant, float)
@@ -152,6 +160,7 @@ def run(
     n = math.floor(t_final * rate + 1e-9) + 1
     x = to_short(np.asarray(x0, float).copy())
     xs = np.empty((n, 6))
+    ms = np.empty((n, 6))  # the measurements (the true state without noise)
     us = np.zeros((n, 3))
     zs = np.empty((n, 6))
     sigma_hats = np.empty((n, 3))
@@ -164,7 +173,13 @@ def run(
     for k in range(n):
         xs[k] = x
         zs[k] = z
-        y = xs[k - d] if k >= d else xs[0]
+        if noise is None:
+            ms[k] = x
+        else:
+            theta, eta, bias = noise
+            sigma_meas = mrp_from_dcm(rotation_dcm(theta[k]) @ dcm(x[:3]))
+            ms[k] = np.concatenate((sigma_meas, (4.0 * x[3:] + bias + eta[k]) / 4.0))
+        y = ms[k - d] if k >= d else xs[0]
         if form == "none":
             c_hat, omega_hat = dcm(y[:3]), 4.0 * y[3:]
         elif form == "reintegrate":
@@ -194,8 +209,11 @@ def run(
         rate_err[k] = float(np.linalg.norm(omega_hat - 4.0 * x[3:]))
         x_hats[k] = np.concatenate((sigma_hat, omega_hat / 4.0))
         u = gain @ x_hats[k]
+        if u_max is not None:
+            u = np.clip(u, -u_max, u_max)
         us[k] = u
-        x = to_short(rk4(inertia, inverse, x, u, h, plant_substeps))
+        w = np.zeros(3) if disturbance is None else disturbance
+        x = to_short(rk4(inertia, inverse, x, u + w, h, plant_substeps))
         z = to_short(rk4(model, model_inverse, z, u, h, 1))
         if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > 1e6:
             n = k + 1

@@ -260,4 +260,214 @@ def test_store_that_would_not_fit_is_refused_up_front(spec, tmp_path, monkeypatc
     with pytest.raises(SpecificationError, match="smaller count"):
         run_campaign(spec, tmp_path, chunk=4)
     assert not (tmp_path / STORE_NAME).exists()
-    assert bytes_per_run() == 8 * (3 + 3 + 9 + 4) + 8 * 6 + 2 + 8
+    # inputs: 19 floats (sigma0, omega0, inertia, tau, gain_scale, angle, rate) + 12 flight floats + 4 integers
+    assert bytes_per_run() == 8 * (3 + 3 + 9 + 4) + 8 * (1 + 3 + 3 + 1 + 1 + 3) + 8 * 4 + 8 * 6 + 2 + 8
+
+
+def test_worker_task_imports_no_storage_or_plotting_and_names_stay_bound():
+    """A Dask worker unpickling the chunk task imports neither xarray, zarr nor matplotlib (bench/campaign_dask.py),
+    and the package's lazily bound names are the functions (``report`` is not shadowed by its submodule)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, mrpctl.campaign._task as t; "
+        "print(sorted(m for m in ('xarray', 'zarr', 'matplotlib') if m in sys.modules)); "
+        "import mrpctl.campaign.report; from mrpctl.campaign import report, simulate_chunk; "
+        "print(callable(report) and report.__module__, simulate_chunk is t.simulate_chunk)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "[]"
+    assert out[1] == "mrpctl.campaign.report True"
+
+
+RULES_SPEC = {
+    **copy.deepcopy(SPEC),
+    "name": "rules",
+    "count": 9,
+    "t_final": 2.0,
+    "dispersions": {
+        **copy.deepcopy(SPEC["dispersions"]),
+        "rule": {"rules": ["on-delayed", "delay-aware", "hysteretic:0.1"]},
+    },
+}
+
+
+def test_rule_dispersion_is_crossed_with_the_cases_and_reported_by_rule(tmp_path):
+    """Run i is case i // 3 under rule i % 3: the cases are those of the campaign without the rule list, each
+    run's metrics are simulate_batch's of that rule alone, and the report's per-rule rows count the dataset."""
+    from mrpctl.flight import Hysteretic
+    from mrpctl.switching import DelayAware, OnDelayed
+
+    spec = parse_campaign(copy.deepcopy(RULES_SPEC))
+    assert spec.rule_labels == ("on-delayed", "delay-aware", "hysteretic:0.1") and spec.cases == 3
+    run_campaign(spec, tmp_path, chunk=4, threads=2)
+    dataset = open_campaign(tmp_path)
+    assert json.loads(dataset.attrs["rules"]) == list(spec.rule_labels)
+    assert dataset["rule"].values.tolist() == [i % 3 for i in range(9)]
+    assert dataset["case"].values.tolist() == [i // 3 for i in range(9)]
+    plain = parse_campaign({**copy.deepcopy(RULES_SPEC), "dispersions": copy.deepcopy(SPEC["dispersions"])})
+    cases = run_inputs(plain, 0, 3)
+    for i in range(9):
+        assert np.array_equal(dataset["sigma0"].values[i], cases.sigma0[i // 3])
+        assert np.array_equal(dataset["omega0"].values[i], cases.omega0[i // 3])
+    assert np.isnan(dataset["delta"].values[[0, 1, 3, 4]]).all() and (dataset["delta"].values[[2, 5, 8]] == 0.1).all()
+    expected_rules = (OnDelayed(), DelayAware(), Hysteretic(0.1))
+    for i in (0, 4, 8):
+        batch = simulate_batch(
+            Spacecraft(cases.inertia[i // 3]),
+            cases.gain_scale[i // 3] * spec.base.K,
+            cases.x0[i // 3],
+            tau=float(cases.tau[i // 3]),
+            rule=expected_rules[i % 3],
+            t_final=spec.base.t_final,
+            rate=spec.base.rate,
+            threads=1,
+        )
+        for name in METRICS:
+            assert np.asarray(getattr(batch, name))[0].tobytes() == dataset[name].values[i].tobytes(), (i, name)
+    summary = report(dataset)
+    assert [r.rule for r in summary.by_rule] == list(spec.rule_labels)
+    for r, entry in enumerate(summary.by_rule):
+        mine = dataset["rule"].values == r
+        assert entry.runs == 3 and entry.converged == int(dataset["converged"].values[mine].sum())
+        assert entry.switch_quantiles["max"] == float(dataset["switch_count"].values[mine].max())
+        assert entry.wilson == wilson_interval(entry.converged, 3)
+    assert "by rule" in str(summary) and "hysteretic:0.1" in str(summary)
+    assert json.loads(json.dumps(summary.summary()))["by_rule"][2]["rule"] == "hysteretic:0.1"
+    assert replay(tmp_path, 5).matches
+
+
+FLIGHT_SPEC = {
+    **copy.deepcopy(SPEC),
+    "name": "flight",
+    "count": 6,
+    "t_final": 2.0,
+    "tau": 0.05,
+    "rule": {"type": "hysteretic", "delta": 0.05},
+    "flight": {"u_max": 40.0, "saturation": "clip", "attitude_noise": 2e-3, "jitter": [0.02, 0.05]},
+    "dispersions": {
+        "attitude": {"angle_deg": [150.0, 180.0]},
+        "rate": {"magnitude": [0.0, 0.5]},
+        "hysteresis": {"delta": [0.0, 0.2]},
+        "actuator": {"u_max": [20.0, 60.0]},
+        "disturbance": {"magnitude": [0.5, 1.0]},
+        "sensor": {"rate_noise": [1e-4, 1e-3], "gyro_bias": [1e-3, 2e-3]},
+    },
+}
+
+
+def test_flight_dispersions_are_stored_and_a_replay_reproduces_each_run(tmp_path):
+    """Each run's flight options are drawn from (seed, run), stored, simulated as given (an independent
+    simulate_batch call with the models built by hand), and replayed bit for bit."""
+    from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
+
+    spec = parse_campaign(copy.deepcopy(FLIGHT_SPEC))
+    run_campaign(spec, tmp_path, chunk=4, threads=2)
+    ds = open_campaign(tmp_path)
+    delta, u_max = ds["delta"].values, ds["u_max"].values
+    assert ((delta >= 0.0) & (delta <= 0.2)).all() and len(set(delta.tolist())) == 6
+    assert ((u_max >= 20.0) & (u_max <= 60.0)).all() and (u_max == u_max[:, :1]).all()
+    w = np.linalg.norm(ds["disturbance"].values, axis=1)
+    assert ((w >= 0.5 * (1 - 1e-12)) & (w <= 1.0 * (1 + 1e-12))).all()
+    bias = np.linalg.norm(ds["gyro_bias"].values, axis=1)
+    assert ((bias >= 1e-3 * (1 - 1e-12)) & (bias <= 2e-3 * (1 + 1e-12))).all()
+    assert (ds["attitude_noise"].values == 2e-3).all()
+    assert len(set(ds["noise_seed"].values.tolist())) == 6 and len(set(ds["jitter_seed"].values.tolist())) == 6
+    assert np.isfinite(ds["peak_torque"].values).all()
+    inputs = run_inputs(spec, 0, 6)
+    for i in (1, 4):
+        batch = simulate_batch(
+            Spacecraft(inputs.inertia[i]),
+            inputs.gain_scale[i] * spec.base.K,
+            inputs.x0[i],
+            tau=0.05,
+            rule=Hysteretic(float(delta[i])),
+            t_final=2.0,
+            rate=100.0,
+            threads=1,
+            actuator=ActuatorModel(u_max[i], mode=Saturation.CLIP),
+            disturbance=Disturbance(ds["disturbance"].values[i]),
+            sensor=SensorModel(
+                2e-3, float(ds["rate_noise"].values[i]), ds["gyro_bias"].values[i], seed=int(ds["noise_seed"].values[i])
+            ),
+            delay=DelayModel.jitter(0.02, 0.05, seed=int(ds["jitter_seed"].values[i])),
+        )
+        for name in METRICS:
+            assert np.asarray(getattr(batch, name))[0].tobytes() == ds[name].values[i].tobytes(), (i, name)
+        result = replay(tmp_path, i, trajectory=True)
+        assert result.matches, result.mismatches
+        assert result.trajectory is not None and result.trajectory.switch_count == int(ds["switch_count"].values[i])
+    # the stored noise seed is the one used: the replayed trajectory is the seed's, another seed's differs
+    from mrpctl import simulate
+
+    def trajectory(seed: int) -> np.ndarray:
+        return simulate(
+            Spacecraft(inputs.inertia[4]),
+            inputs.gain_scale[4] * spec.base.K,
+            inputs.x0[4],
+            tau=0.05,
+            rule=Hysteretic(float(delta[4])),
+            t_final=2.0,
+            rate=100.0,
+            actuator=ActuatorModel(u_max[4], mode=Saturation.CLIP),
+            disturbance=Disturbance(ds["disturbance"].values[4]),
+            sensor=SensorModel(2e-3, float(ds["rate_noise"].values[4]), ds["gyro_bias"].values[4], seed=seed),
+            delay=DelayModel.jitter(0.02, 0.05, seed=int(ds["jitter_seed"].values[4])),
+        ).sigma
+
+    assert np.array_equal(trajectory(int(ds["noise_seed"].values[4])), result.trajectory.sigma)
+    assert not np.array_equal(trajectory(12345), result.trajectory.sigma)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"dispersions": {"rule": {"rules": ["hysteretic", "on-delayed"]}}}, "every rule must be 'hysteretic'"),
+        ({"rule": {"type": "delay-aware"}}, "no rule of the campaign is 'hysteretic'"),
+        ({"flight": {"jitter": [0.02, 0.04]}}, "tau_max must equal tau"),
+        ({"flight": {"u_max": 1.0, "colour": 1}}, "unknown key 'colour'"),
+        ({"flight": {"norm_max": 1.0}}, "need flight.u_max"),
+        ({"dispersions": {"rule": {"rules": ["on-delayed", "on-delayed"]}}}, "listed twice"),
+        ({"dispersions": {"rule": {"rules": ["on-delayed:3"]}}}, "takes no parameter"),
+        ({"dispersions": {"hysteresis": {"delta": [0.0, 1.0]}}}, r"\[0, 1\)"),
+        ({"dispersions": {"actuator": {"u_max": [0.0, 1.0]}}}, "must be > 0"),
+        ({"rule": {"type": "hysteretic", "eps": 0.1}}, "takes delta only"),
+    ],
+)
+def test_rule_and_flight_keys_are_checked(change, message):
+    data = copy.deepcopy(FLIGHT_SPEC)
+    for key, value in change.items():
+        data[key] = value if key != "dispersions" else {**data["dispersions"], **value}
+    with pytest.raises(SpecificationError, match=message):
+        parse_campaign(data)
+
+
+@pytest.mark.parametrize("name", ["tumble", "tumble_fixed_inertia", "rules", "flight"])
+def test_shipped_campaign_files_parse_and_sample(name):
+    from pathlib import Path
+
+    from mrpctl.campaign import load_campaign
+
+    spec = load_campaign(Path(__file__).resolve().parent.parent / "examples" / "campaigns" / f"{name}.toml")
+    inputs = run_inputs(spec, 0, min(4, spec.count))
+    assert len(inputs) == min(4, spec.count) and np.isfinite(inputs.x0).all()
+    assert inputs.rule.tolist() == [i % len(spec.rule_list) for i in range(len(inputs))]
+
+
+def test_flight_runs_sharing_their_models_run_in_one_call_with_the_same_results(tmp_path):
+    """Without per-run noise or jitter the flight runs share one simulate_batch call (on 2 threads); each run
+    equals the same run simulated alone."""
+    from mrpctl.campaign._task import simulate_chunk
+
+    data = copy.deepcopy(FLIGHT_SPEC)
+    data["flight"] = {"u_max": 40.0, "disturbance": [0.2, 0.0, -0.1]}
+    data["dispersions"] = {k: data["dispersions"][k] for k in ("attitude", "rate", "hysteresis")}
+    data["count"] = 4
+    spec = parse_campaign(data)
+    together = simulate_chunk(spec, 0, 4, threads=2)
+    for i in range(4):
+        alone = simulate_chunk(spec, i, i + 1, threads=1)
+        for name, values in alone.items():
+            assert values[0].tobytes() == together[name][i].tobytes(), (i, name)
+    assert (together["u_max"] == 40.0).all() and (together["disturbance"] == [0.2, 0.0, -0.1]).all()

@@ -10,7 +10,6 @@ import pytest
 
 from mrpctl.cli import USER_ERROR, main
 from mrpctl.design import delay_margin
-from mrpctl.design.lmi import CertificateStatus
 from mrpctl.design.sampled import sampled_stability
 from mrpctl.scenario import load_scenario
 
@@ -114,5 +113,7 @@ def test_no_robust_gain_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pyt
 
 
 class _NotCertified:
+    from mrpctl.design.lmi import CertificateStatus
+
     certified = False
     status = CertificateStatus.NOT_CERTIFIED

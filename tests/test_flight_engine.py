@@ -133,9 +133,12 @@ def test_slices_of_the_c_driver_give_the_same_run(monkeypatch):
     assert np.array_equal(again.switch_times[: len(again.switch_times)], whole.switch_times)
 
 
-def test_the_flight_rule_is_not_exported_yet():
-    with pytest.raises(SpecificationError, match="rule"):
-        closed_loop_functions(paper.SPACECRAFT, paper.GAIN, tau=0.5, rule=Hysteretic(0.1))
+def test_closed_loop_functions_of_the_flight_rule_and_the_refused_options():
+    # the flight loop's Functions (their numbers against simulate: tests/test_export_flight.py)
+    closed = closed_loop_functions(paper.SPACECRAFT, paper.GAIN, tau=0.5, rule=Hysteretic(0.1))
+    assert set(closed.functions()) == {"dynamics", "flight_controller", "sensor", "step", "sample", "chunk"}
+    with pytest.raises(SpecificationError, match="Hysteretic"):
+        closed_loop_functions(paper.SPACECRAFT, paper.GAIN, tau=0.5, rule=OnCurrent(), actuator=ActuatorModel(1.0))
 
 
 def test_the_virtual_machine_fallback_equals_the_compiled_engine():

@@ -10,7 +10,7 @@ import pytest
 
 from mrpctl import mrp, paper
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.reproduction import paper_scenarios
+from mrpctl.reproduction import flight_scenarios, paper_scenarios
 from mrpctl.scenario import (
     STARTER_SCENARIO,
     load_scenario,
@@ -58,7 +58,7 @@ def test_examples_are_the_package_data_files() -> None:
     """One copy: examples/scenarios is the package-data folder mrpctl/scenarios (shipped in the wheel)."""
     assert EXAMPLES.resolve() == PACKAGE.resolve()
     shipped = shipped_scenarios()
-    assert set(shipped) == set(paper_scenarios()) == {p.stem for p in PACKAGE.glob("*.toml")}
+    assert set(shipped) == set(paper_scenarios()) | set(flight_scenarios()) == {p.stem for p in PACKAGE.glob("*.toml")}
     assert all(path.resolve().parent == PACKAGE.resolve() for path in shipped.values())
 
 

@@ -10,11 +10,63 @@ See ``design/campaigns.md`` for the sampling, the store layout, resuming and clu
 
 from __future__ import annotations
 
-from mrpctl.campaign.report import CampaignReport, ReplayResult, replay, report, write_report
-from mrpctl.campaign.run import CampaignRun, run_campaign, simulate_chunk
-from mrpctl.campaign.sampling import RunInputs, run_inputs
-from mrpctl.campaign.spec import CampaignSpec, load_campaign, parse_campaign
-from mrpctl.campaign.store import open_campaign
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from mrpctl.campaign.report import CampaignReport, ReplayResult, replay, report, write_report
+    from mrpctl.campaign.run import CampaignRun, run_campaign, simulate_chunk
+    from mrpctl.campaign.sampling import RunInputs, run_inputs
+    from mrpctl.campaign.spec import CampaignSpec, load_campaign, parse_campaign
+    from mrpctl.campaign.store import open_campaign
+
+# Imported on first use (PEP 562), so that a Dask worker unpickling the chunk task
+# (mrpctl.campaign._task) does not import xarray, zarr and matplotlib it never uses.
+_WHERE = {
+    "CampaignReport": "report",
+    "ReplayResult": "report",
+    "replay": "report",
+    "report": "report",
+    "write_report": "report",
+    "CampaignRun": "run",
+    "run_campaign": "run",
+    "simulate_chunk": "_task",
+    "RunInputs": "sampling",
+    "run_inputs": "sampling",
+    "CampaignSpec": "spec",
+    "load_campaign": "spec",
+    "parse_campaign": "spec",
+    "open_campaign": "store",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'mrpctl.campaign' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"mrpctl.campaign.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_WHERE])
+
+
+class _Package(types.ModuleType):
+    """Keeps ``mrpctl.campaign.report`` the function (as an eager ``from ... import report`` did):
+    importing the submodule ``report`` must not replace the lazily bound function by the module."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "report" and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
+
 
 __all__ = [
     "CampaignReport",

@@ -18,7 +18,7 @@ import numpy as np
 import xarray as xr
 
 from mrpctl._validation import integer
-from mrpctl.campaign.run import simulate_chunk
+from mrpctl.campaign._task import run_models, simulate_chunk
 from mrpctl.campaign.simulation import METRICS
 from mrpctl.campaign.store import INPUTS, open_campaign, spec_of
 from mrpctl.errors import SpecificationError
@@ -31,6 +31,7 @@ if TYPE_CHECKING:
 __all__ = [
     "CampaignReport",
     "ReplayResult",
+    "RuleSummary",
     "WorstCase",
     "clopper_pearson_interval",
     "figures",
@@ -74,6 +75,34 @@ def clopper_pearson_interval(successes: int, trials: int, *, confidence: float =
 
 
 @dataclass(frozen=True)
+class RuleSummary:
+    """The outcome of the runs of one rule (the rules are crossed with the same cases).
+
+    Attributes
+    ----------
+    rule : str
+        The rule's campaign-file string.
+    runs, converged, diverged : int
+        Runs of this rule stored so far; of them, settled; diverged.
+    convergence_rate : float
+        converged / runs (NaN without runs).
+    wilson : tuple of float
+        95 % Wilson interval of the rate.
+    settling_quantiles, switch_quantiles : dict
+        Median, p95 and max settling time of the converged runs (s) and of the switch count.
+    """
+
+    rule: str
+    runs: int
+    converged: int
+    diverged: int
+    convergence_rate: float
+    wilson: tuple[float, float]
+    settling_quantiles: dict[str, float]
+    switch_quantiles: dict[str, float]
+
+
+@dataclass(frozen=True)
 class WorstCase:
     """One of the worst runs, with the command that replays it."""
 
@@ -85,6 +114,7 @@ class WorstCase:
     initial_angle: float
     initial_rate: float
     command: str
+    rule: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,6 +155,7 @@ class CampaignReport:
     switch_quantiles: dict[str, float]
     peak_torque_max: float
     worst: tuple[WorstCase, ...] = field(repr=False)
+    by_rule: tuple[RuleSummary, ...] = field(default=(), repr=False)
 
     def summary(self) -> dict[str, Any]:
         """The report as JSON-ready values."""
@@ -141,6 +172,7 @@ class CampaignReport:
             "switch_count": self.switch_quantiles,
             "peak_torque_max_Nm": None if math.isnan(self.peak_torque_max) else self.peak_torque_max,
             "worst": [case.__dict__ for case in self.worst],
+            "by_rule": [{**entry.__dict__, "wilson": list(entry.wilson)} for entry in self.by_rule],
         }
 
     def __str__(self) -> str:
@@ -154,14 +186,29 @@ class CampaignReport:
             f"  settling (s)  median {s['median']:.4g}, p95 {s['p95']:.4g}, max {s['max']:.4g} (converged runs)",
             f"  switches      median {w['median']:.4g}, p95 {w['p95']:.4g}, max {w['max']:.4g}",
             f"  peak torque   max {self.peak_torque_max:.4g} N m",
+        ]
+        if len(self.by_rule) > 1:
+            lines.append("  by rule (the same cases under each rule):")
+            lines.append(
+                f"    {'rule':<24} {'runs':>7} {'converged':>10} {'rate':>8} {'95 % Wilson':>20} {'diverged':>8} "
+                f"{'settle_med_s':>12} {'settle_p95_s':>12} {'switch_med':>10} {'switch_max':>10}"
+            )
+            for r in self.by_rule:
+                lines.append(
+                    f"    {r.rule:<24} {r.runs:>7} {r.converged:>10} {r.convergence_rate:>8.2%} "
+                    f"{f'[{r.wilson[0]:.2%}, {r.wilson[1]:.2%}]':>20} {r.diverged:>8} "
+                    f"{r.settling_quantiles['median']:>12.4g} {r.settling_quantiles['p95']:>12.4g} "
+                    f"{r.switch_quantiles['median']:>10.4g} {r.switch_quantiles['max']:>10.4g}"
+                )
+        lines += [
             "  worst cases:",
-            f"    {'run':>8} {'reason':<12} {'settling_s':>10} {'switches':>8} {'max|sigma|':>10} "
+            f"    {'run':>8} {'rule':<20} {'reason':<12} {'settling_s':>10} {'switches':>8} {'max|sigma|':>10} "
             f"{'angle_deg':>9} {'rate_rad/s':>10}  replay",
         ]
         for c in self.worst:
             lines.append(
-                f"    {c.run:>8} {c.reason:<12} {c.settling_time:>10.4g} {c.switch_count:>8} {c.max_sigma:>10.4g} "
-                f"{math.degrees(c.initial_angle):>9.2f} {c.initial_rate:>10.4g}  {c.command}"
+                f"    {c.run:>8} {c.rule:<20} {c.reason:<12} {c.settling_time:>10.4g} {c.switch_count:>8} "
+                f"{c.max_sigma:>10.4g} {math.degrees(c.initial_angle):>9.2f} {c.initial_rate:>10.4g}  {c.command}"
             )
         return "\n".join(lines)
 
@@ -198,6 +245,8 @@ def report(source: str | Path | xr.Dataset, *, worst: int = 10, out: str | Path 
     severity = np.where(diverged, 0, np.where(~converged, 1, 2))
     order = np.lexsort((-switches, -np.nan_to_num(settling, nan=np.inf), severity))[:worst]
     runs = np.asarray(dataset["run"])
+    labels = _rule_labels(dataset)
+    rule_index = np.asarray(dataset["rule"], dtype=np.int64) if "rule" in dataset else np.zeros(n, dtype=np.int64)
     cases = []
     for i in order:
         reason = "diverged" if diverged[i] else ("not settled" if not converged[i] else "slow")
@@ -211,6 +260,23 @@ def report(source: str | Path | xr.Dataset, *, worst: int = 10, out: str | Path 
                 initial_angle=float(dataset["initial_angle"][i]),
                 initial_rate=float(dataset["initial_rate"][i]),
                 command=f"mrpctl campaign replay {shlex.quote(folder)} --run {int(runs[i])}",
+                rule=labels[int(rule_index[i])] if 0 <= int(rule_index[i]) < len(labels) else "?",
+            )
+        )
+    by_rule = []
+    for r, label in enumerate(labels):
+        mine = rule_index == r
+        runs_r, k_r = int(mine.sum()), int((converged & mine).sum())
+        by_rule.append(
+            RuleSummary(
+                rule=label,
+                runs=runs_r,
+                converged=k_r,
+                diverged=int((diverged & mine).sum()),
+                convergence_rate=k_r / runs_r if runs_r else math.nan,
+                wilson=wilson_interval(k_r, runs_r),
+                settling_quantiles=_quantiles(settling[converged & mine]),
+                switch_quantiles=_quantiles(switches[mine].astype(float)),
             )
         )
     peak = np.asarray(dataset["peak_torque"], dtype=float)
@@ -227,7 +293,15 @@ def report(source: str | Path | xr.Dataset, *, worst: int = 10, out: str | Path 
         switch_quantiles=_quantiles(switches.astype(float)),
         peak_torque_max=float(np.nanmax(peak)) if np.any(np.isfinite(peak)) else math.nan,
         worst=tuple(cases),
+        by_rule=tuple(by_rule),
     )
+
+
+def _rule_labels(dataset: xr.Dataset) -> list[str]:
+    """The rules crossed with the cases (attrs["rules"]), or the one rule of an older store."""
+    if "rules" in dataset.attrs:
+        return [str(label) for label in json.loads(str(dataset.attrs["rules"]))]
+    return [str(dataset.attrs.get("rule", "rule"))]
 
 
 def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
@@ -395,16 +469,18 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
 
     inputs = run_inputs(spec, run)
     base = spec.base
+    rule, models = run_models(spec, inputs, 0)
     return simulate(
         Spacecraft(inputs.inertia[0]),
         inputs.gain_scale[0] * base.K,
         inputs.x0[0],
         tau=float(inputs.tau[0]),
-        rule=base.rule,
+        rule=rule,
         t_final=base.t_final,
         rate=base.rate,
         history=base.history,
         substeps=base.substeps,
+        **(models or {}),
     )
 
 

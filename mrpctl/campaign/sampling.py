@@ -13,18 +13,28 @@ same order and always the same variates, whether or not a dispersion is enabled:
 
 So run i can be replayed on its own, and enabling one dispersion never changes the
 values of another.
+
+With R rules crossed (``[dispersions.rule]``), run i is case c = ⌊i / R⌋ under rule i mod R,
+and the draws above are those of case c (spawn key (c,)): every rule sees the same cases.
+The flight options draw from a second generator of the case, spawn key (c, 1), only when
+the campaign uses the flight loop, always in this order: 1 uniform (δ), 1 uniform (u_max),
+3 normals and 1 uniform (disturbance direction and magnitude), 1 uniform (attitude noise),
+1 uniform (rate noise), 3 normals and 1 uniform (gyro bias direction and magnitude), then two
+integers in [0, 2⁶³): the seeds of the run's sensor-noise and delay-jitter streams.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from mrpctl._validation import integer, sealed
-from mrpctl.campaign.spec import AttitudeDispersion, CampaignSpec
+from mrpctl.campaign.spec import AttitudeDispersion, CampaignSpec, FlightOptions
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import Hysteretic
 from mrpctl.model import state
 
 __all__ = [
@@ -59,6 +69,20 @@ class RunInputs:
         (N,) scale s of the base gain, K = s K_base.
     inertia_attempts : numpy.ndarray
         (N,) draws the inertia rejection sampler needed (1 when it is not dispersed).
+    rule, case : numpy.ndarray
+        (N,) index of the run's rule in ``spec.rule_list`` (i mod R) and its case ⌊i / R⌋.
+    delta : numpy.ndarray
+        (N,) δ of a hysteretic rule (NaN for the other rules).
+    u_max : numpy.ndarray
+        (N, 3) per-axis torque limits (N m; inf: none).
+    disturbance : numpy.ndarray
+        (N, 3) constant disturbance torques (N m).
+    attitude_noise, rate_noise : numpy.ndarray
+        (N,) 1σ of the attitude error rotation (rad) and of the rate noise (rad/s).
+    gyro_bias : numpy.ndarray
+        (N, 3) gyro biases (rad/s).
+    noise_seed, jitter_seed : numpy.ndarray
+        (N,) seeds of the run's sensor-noise and delay-jitter streams (0 without the flight loop).
     """
 
     index: np.ndarray
@@ -68,6 +92,16 @@ class RunInputs:
     tau: np.ndarray
     gain_scale: np.ndarray
     inertia_attempts: np.ndarray = field(repr=False)
+    rule: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
+    case: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
+    delta: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    u_max: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    disturbance: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    attitude_noise: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    rate_noise: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    noise_seed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
+    jitter_seed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
 
     @property
     def x0(self) -> np.ndarray:
@@ -193,7 +227,11 @@ def run_inputs(spec: CampaignSpec, start: int, stop: int | None = None) -> RunIn
     gain_quantile = np.empty(n)
     inertia = np.empty((n, 3, 3))
     attempts = np.empty(n, dtype=np.int64)
-    for j, index in enumerate(range(start, stop)):
+    rules = len(spec.rule_list)
+    index_all = np.arange(start, stop, dtype=np.int64)
+    case_all = index_all // rules
+    flight = _flight_draws(spec, case_all)
+    for j, index in enumerate(case_all.tolist()):
         generator = np.random.default_rng(np.random.SeedSequence(spec.seed, spawn_key=(index,)))
         quaternion_normals[j] = generator.standard_normal(4)
         axis_normals[j] = generator.standard_normal(3)
@@ -220,12 +258,77 @@ def run_inputs(spec: CampaignSpec, start: int, stop: int | None = None) -> RunIn
     else:
         low, high = spec.gains.scale
         gain_scale = low + (high - low) * gain_quantile
+    rule_all = index_all % rules
     return RunInputs(
-        index=sealed(np.arange(start, stop, dtype=np.int64)),
+        index=sealed(index_all),
         sigma0=sealed(sigma0),
         omega0=sealed(omega0),
         inertia=sealed(inertia),
         tau=sealed(np.array(tau)),
         gain_scale=sealed(gain_scale),
         inertia_attempts=sealed(attempts),
+        rule=sealed(rule_all),
+        case=sealed(case_all),
+        **_flight_values(spec, rule_all, flight),
     )
+
+
+def _flight_draws(spec: CampaignSpec, cases: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 12) variates of the flight stream (spawn key (case, 1)) and (N, 2) stream seeds; zeros without it."""
+    n = len(cases)
+    draws = np.zeros((n, 12))
+    seeds = np.zeros((n, 2), dtype=np.int64)
+    if not spec.uses_flight and spec.flight_dispersion.delta is None:
+        return draws, seeds
+    for j, case in enumerate(cases.tolist()):
+        generator = np.random.default_rng(np.random.SeedSequence(spec.seed, spawn_key=(case, 1)))
+        draws[j, 0] = generator.random()  # delta
+        draws[j, 1] = generator.random()  # u_max
+        draws[j, 2:5] = generator.standard_normal(3)  # disturbance direction
+        draws[j, 5] = generator.random()  # disturbance magnitude
+        draws[j, 6] = generator.random()  # attitude noise
+        draws[j, 7] = generator.random()  # rate noise
+        draws[j, 8:11] = generator.standard_normal(3)  # gyro bias direction
+        draws[j, 11] = generator.random()  # gyro bias magnitude
+        seeds[j] = generator.integers(0, 2**63 - 1, size=2, dtype=np.int64, endpoint=True)
+    return draws, seeds
+
+
+def _uniform(interval: tuple[float, float] | None, quantile: np.ndarray, base: float) -> np.ndarray:
+    if interval is None:
+        return np.full(len(quantile), base)
+    low, high = interval
+    return low + (high - low) * quantile
+
+
+def _flight_values(spec: CampaignSpec, rule: np.ndarray, flight: tuple[np.ndarray, np.ndarray]) -> dict[str, Any]:
+    """The per-run flight options from the flight stream's variates (see the module docstring)."""
+    draws, seeds = flight
+    n = len(rule)
+    options = spec.flight if spec.flight is not None else FlightOptions()
+    dispersion = spec.flight_dispersion
+    delta = np.array([r.delta if isinstance(r, Hysteretic) else np.nan for r in spec.rule_list])[rule]
+    if dispersion.delta is not None:
+        delta = np.where(np.isnan(delta), np.nan, _uniform(dispersion.delta, draws[:, 0], 0.0))
+    if dispersion.u_max is not None:
+        u_max = np.repeat(_uniform(dispersion.u_max, draws[:, 1], 0.0)[:, None], 3, axis=1)
+    elif options.actuator is not None:
+        u_max = np.tile(options.actuator.u_max, (n, 1))
+    else:
+        u_max = np.full((n, 3), np.inf)
+    disturbance = np.tile(options.disturbance, (n, 1))
+    if dispersion.disturbance is not None:
+        disturbance = disturbance + _uniform(dispersion.disturbance, draws[:, 5], 0.0)[:, None] * _unit(draws[:, 2:5])
+    gyro_bias = np.tile(options.gyro_bias, (n, 1))
+    if dispersion.gyro_bias is not None:
+        gyro_bias = gyro_bias + _uniform(dispersion.gyro_bias, draws[:, 11], 0.0)[:, None] * _unit(draws[:, 8:11])
+    return {
+        "delta": sealed(delta),
+        "u_max": sealed(u_max),
+        "disturbance": sealed(disturbance),
+        "attitude_noise": sealed(_uniform(dispersion.attitude_noise, draws[:, 6], options.attitude_noise)),
+        "rate_noise": sealed(_uniform(dispersion.rate_noise, draws[:, 7], options.rate_noise)),
+        "gyro_bias": sealed(gyro_bias),
+        "noise_seed": sealed(np.array(seeds[:, 0])),
+        "jitter_seed": sealed(np.array(seeds[:, 1])),
+    }

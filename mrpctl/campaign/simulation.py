@@ -6,6 +6,8 @@ engine), so a campaign with dispersed inertia compiles one engine per delay, not
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -34,7 +36,7 @@ def _batch(
     K: np.ndarray,
     x0: np.ndarray,
     tau: np.ndarray,
-    rule: SwitchingRule,
+    rule: Sequence[SwitchingRule],
     options: dict[str, Any],
 ) -> dict[str, np.ndarray]:
     """The runs' metrics from one metrics-only batch (the peak torque is accumulated by the engine)."""
@@ -42,12 +44,43 @@ def _batch(
     return {name: np.asarray(getattr(batch, name)) for name in METRICS}
 
 
+def _cpus() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _spacecraft(inertia: np.ndarray) -> list[Spacecraft]:
+    """One Spacecraft per run, built once per distinct inertia (the same values give the same object,
+    so an undispersed inertia costs one eigen-decomposition per chunk, not one per run)."""
+    built: dict[bytes, Spacecraft] = {}
+    crafts = []
+    for J in np.asarray(inertia, dtype=float):
+        key = J.tobytes()
+        craft = built.get(key)
+        if craft is None:
+            craft = built[key] = Spacecraft(J)
+        crafts.append(craft)
+    return crafts
+
+
+def _flight_key(models: dict[str, Any] | None) -> Any:
+    """Runs with equal flight models share one simulate_batch call (the models are per call)."""
+    if models is None:
+        return None
+    actuator, sensor, delay = models["actuator"], models["sensor"], models["delay"]
+    return (
+        None if actuator is None else (actuator.u_max.tobytes(), actuator.norm_limit, actuator.mode),
+        np.asarray(models["disturbance"]).tobytes(),
+        (sensor.attitude_noise, sensor.rate_noise, sensor.gyro_bias.tobytes(), 0 if sensor.ideal else sensor.seed),
+        None if delay is None else (delay.tau_min, delay.tau_max, delay.seed),
+    )
+
+
 def simulate_runs(
     inertia: np.ndarray,
     K: np.ndarray,
     x0: np.ndarray,
     tau: np.ndarray,
-    rule: SwitchingRule,
+    rule: SwitchingRule | Sequence[SwitchingRule],
     *,
     t_final: float,
     rate: float,
@@ -55,8 +88,9 @@ def simulate_runs(
     substeps: int,
     threads: int | None = None,
     peak_torque: bool = True,
+    flight: Sequence[dict[str, Any] | None] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Simulate N runs, each with its own inertia, gain, initial state and delay.
+    """Simulate N runs, each with its own inertia, gain, initial state, delay, rule and flight models.
 
     Parameters
     ----------
@@ -68,12 +102,16 @@ def simulate_runs(
         (N, 6) initial states.
     tau : numpy.ndarray
         (N,) delays (s).
-    rule : SwitchingRule
-        The rule of every run.
+    rule : SwitchingRule or sequence of SwitchingRule
+        The rule of every run, or one per run.
     t_final, rate, history, substeps, threads
         As in :func:`mrpctl.simulate_batch`.
     peak_torque : bool
         Also return the peak torque max_k |u_k|_∞ (N m) per run (NaN when False).
+    flight : sequence of dict or None, optional
+        Per run, None or the flight models (``actuator``, ``disturbance``, ``sensor``, ``delay``
+        of :func:`mrpctl.simulate_batch`). Runs with equal models share one call; the calls
+        run on ``threads`` threads (one each), and every run's result is the same either way.
 
     Returns
     -------
@@ -84,8 +122,42 @@ def simulate_runs(
     options: dict[str, Any] = dict(t_final=t_final, rate=rate, history=history, substeps=substeps, threads=threads)
     if n == 0:
         return {name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()}
-    # One call: simulate_batch takes a spacecraft per run and compiles one engine per inertia layout.
-    out = _batch([Spacecraft(J) for J in inertia], K, x0, tau, rule, options)
+    rules = [rule] * n if isinstance(rule, SwitchingRule) else list(rule)
+    models = [None] * n if flight is None else list(flight)
+    crafts = _spacecraft(inertia)
+    groups: dict[Any, list[int]] = {}
+    for i in range(n):
+        groups.setdefault(_flight_key(models[i]), []).append(i)
+    out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()}
+
+    def call(members: list[int], **extra: Any) -> None:
+        found = models[members[0]] or {}
+        batch = _batch(
+            [crafts[i] for i in members],
+            K[members],
+            x0[members],
+            tau[members],
+            [rules[i] for i in members],
+            {**options, **extra, **found},
+        )
+        for name in METRICS:
+            out[name][members] = batch[name]
+
+    plain = groups.pop(None, None)
+    if plain is not None:  # one call: simulate_batch takes a spacecraft and a rule per run
+        call(plain)
+    flown = list(groups.values())
+    if len(flown) == 1:  # one set of models: one call, on every thread
+        call(flown[0])
+    elif flown:
+        call(flown[0], threads=1)  # loads the flight engine once before the pool shares it
+    if len(flown) > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        workers = max(1, min(len(flown) - 1, threads or _cpus()))
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for future in [pool.submit(call, members, threads=1) for members in flown[1:]]:
+                future.result()
     if not peak_torque:
         out["peak_torque"] = np.full(n, np.nan)
     return out

@@ -19,6 +19,43 @@ the origin) read by :func:`mrpctl.scenario.parse_scenario`, plus ``count``, ``se
     step = 0.1                      # s, a multiple of 1/rate (each distinct delay is one engine)
     [dispersions.gains]
     scale = [0.9, 1.1]              # K = s K_base
+    [dispersions.rule]
+    rules = ["on-delayed", "delay-aware", "hysteretic:0.1"]   # crossed with the cases (see below)
+
+The rule of ``[rule]`` (or of each entry of ``dispersions.rule.rules``) is a name of
+:data:`mrpctl.scenario.RULE_NAMES` or ``"hysteretic"`` (the controller-side rule
+:class:`mrpctl.flight.Hysteretic`), as a table ``{type = "boundary-layer", eps = 0.05}`` or a
+string ``"name"`` / ``"name:parameter"`` (eps of boundary-layer, alpha of delay-aware, delta of
+hysteretic). A rule list is a factor **crossed** with the cases: with R rules, run i is case
+⌊i / R⌋ (its dispersed inputs drawn from (seed, ⌊i / R⌋)) under rule i mod R, so every case is
+run under every rule and the rules are compared on the same cases.
+
+The flight loop's options (``[flight]``; every rule must then be hysteretic)::
+
+    [flight]
+    u_max = 2.0                     # N m, per-axis torque limit (scalar or 3 values)
+    norm_max = 3.0                  # N m, limit on |u| (optional)
+    saturation = "scale"            # or "clip"
+    disturbance = [0.01, 0.0, 0.0]  # N m, constant body torque
+    attitude_noise = 1e-4           # rad, 1 sigma per axis of the star-tracker error rotation
+    rate_noise = 1e-5               # rad/s, 1 sigma per axis of the gyro noise
+    gyro_bias = [0.0, 0.0, 0.0]     # rad/s
+    jitter = [0.4, 0.5]             # s, delay uniform over the periods in [tau_min, tau_max = tau]
+
+and their dispersions::
+
+    [dispersions.hysteresis]
+    delta = [0.0, 0.2]              # delta of the hysteretic rule, uniform
+    [dispersions.actuator]
+    u_max = [1.0, 3.0]              # N m, the per-axis limit (the same on the 3 axes), uniform
+    [dispersions.disturbance]
+    magnitude = [0.0, 0.05]         # N m, direction uniform on the sphere, added to [flight] disturbance
+    [dispersions.sensor]
+    attitude_noise = [0.0, 1e-3]    # rad, uniform
+    rate_noise = [0.0, 1e-4]        # rad/s, uniform
+    gyro_bias = [0.0, 1e-3]         # rad/s, magnitude uniform, direction uniform, added to [flight] gyro_bias
+
+Each run's noise and jitter streams are seeded from (seed, case) (:mod:`mrpctl.campaign.sampling`).
 
 Unknown keys anywhere are errors naming the key.
 """
@@ -32,30 +69,58 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mrpctl._validation import finite_scalar, integer, nonnegative_scalar
+import numpy as np
+
+from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
-from mrpctl.scenario import Scenario, parse_scenario
+from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
+from mrpctl.scenario import RULE_NAMES, Scenario, parse_scenario, rule_from_name, rule_name
+from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
 
 __all__ = [
     "AttitudeDispersion",
     "CampaignSpec",
+    "FlightDispersion",
+    "FlightOptions",
     "GainDispersion",
     "InertiaDispersion",
     "RateDispersion",
+    "RuleDispersion",
     "TauDispersion",
     "load_campaign",
     "parse_campaign",
+    "parse_rule",
+    "rule_label",
 ]
 
-_CAMPAIGN_KEYS = {"count", "seed", "dispersions", "peak_torque"}
-_DISPERSION_KEYS = {"attitude", "rate", "inertia", "tau", "gains"}
+_CAMPAIGN_KEYS = {"count", "seed", "dispersions", "peak_torque", "flight", "rule"}
+_DISPERSION_KEYS = {
+    "attitude",
+    "rate",
+    "inertia",
+    "tau",
+    "gains",
+    "rule",
+    "hysteresis",
+    "actuator",
+    "disturbance",
+    "sensor",
+}
 _KEYS = {
     "attitude": {"angle_deg"},
     "rate": {"magnitude"},
     "inertia": {"axis_tolerance", "product_tolerance"},
     "tau": {"range", "step"},
     "gains": {"scale"},
+    "rule": {"rules"},
+    "hysteresis": {"delta"},
+    "actuator": {"u_max"},
+    "disturbance": {"magnitude"},
+    "sensor": {"attitude_noise", "rate_noise", "gyro_bias"},
 }
+_FLIGHT_KEYS = {"u_max", "norm_max", "saturation", "disturbance", "attitude_noise", "rate_noise", "gyro_bias", "jitter"}
+#: The one parameter a rule string "name:value" sets, by rule name.
+_RULE_PARAMETER = {"boundary-layer": "eps", "delay-aware": "alpha", "hysteretic": "delta"}
 #: Largest count a specification accepts (the run index is a 64-bit spawn key; this is a sanity bound).
 MAX_COUNT = 10**9
 
@@ -143,6 +208,146 @@ class GainDispersion:
     scale: tuple[float, float]
 
 
+def rule_label(rule: SwitchingRule) -> str:
+    """The campaign-file string of ``rule``: ``"name"`` or ``"name:parameter"`` (the inverse of :func:`parse_rule`)."""
+    if isinstance(rule, Hysteretic):
+        return f"hysteretic:{rule.delta!r}"
+    name = rule_name(rule)
+    if isinstance(rule, BoundaryLayer):
+        return f"{name}:{float(rule.eps)!r}"
+    if isinstance(rule, DelayAware) and float(rule.alpha) != 1.0:
+        return f"{name}:{float(rule.alpha)!r}"
+    return name
+
+
+def parse_rule(where: str, value: Any) -> SwitchingRule:
+    """A rule from ``"name"``, ``"name:parameter"`` or a table ``{type = ..., eps/alpha/delta = ...}``.
+
+    The names are those of :data:`mrpctl.scenario.RULE_NAMES` and ``"hysteretic"``
+    (:class:`mrpctl.flight.Hysteretic`, parameter delta, default 0).
+    """
+    names = sorted([*RULE_NAMES, "hysteretic"])
+    if isinstance(value, str):
+        name, colon, parameter = value.partition(":")
+        table: dict[str, Any] = {"type": name.strip()}
+        if colon:
+            key = _RULE_PARAMETER.get(name.strip())
+            if key is None:
+                raise SpecificationError(f"{where}: rule {name!r} takes no parameter, got {value!r}")
+            try:
+                table[key] = float(parameter)
+            except ValueError:
+                raise SpecificationError(f"{where}: the parameter of {value!r} is not a number") from None
+    elif isinstance(value, dict):
+        table = _check_keys(where, value, {"type", "eps", "alpha", "delta"})
+    else:
+        raise SpecificationError(f"{where}: a rule is a string such as 'delay-aware' or a table, got {value!r}")
+    if "type" not in table:
+        raise SpecificationError(f"{where} needs type, one of {names}")
+    name = str(table["type"])
+    if name == "hysteretic":
+        if "eps" in table or "alpha" in table:
+            raise SpecificationError(f"{where}: 'hysteretic' takes delta only")
+        return Hysteretic(finite_scalar(f"{where}.delta", table.get("delta", 0.0)))
+    if "delta" in table:
+        raise SpecificationError(f"{where}: delta applies only to 'hysteretic', not to {name!r}")
+    if name not in RULE_NAMES:
+        raise SpecificationError(f"{where}: rule type must be one of {names}, got {name!r}")
+    return rule_from_name(name, eps=table.get("eps"), alpha=table.get("alpha"))
+
+
+@dataclass(frozen=True, eq=False)
+class RuleDispersion:
+    """Several rules, crossed with the cases: run i is case ⌊i / R⌋ under rule i mod R.
+
+    Attributes
+    ----------
+    rules : tuple of SwitchingRule
+        The R >= 1 rules, in the order of the file.
+    """
+
+    rules: tuple[SwitchingRule, ...]
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """The rules' campaign-file strings (:func:`rule_label`), stored with the results."""
+        return tuple(rule_label(rule) for rule in self.rules)
+
+    def __str__(self) -> str:
+        return f"crossed with the cases: {', '.join(self.labels)}"
+
+
+@dataclass(frozen=True, eq=False)
+class FlightOptions:
+    """The flight loop's options shared by the runs (base values of the flight dispersions).
+
+    Attributes
+    ----------
+    actuator : ActuatorModel or None
+        Torque limits (N m).
+    disturbance : numpy.ndarray
+        (3,) constant body torque w (N m).
+    attitude_noise, rate_noise : float
+        1σ of the attitude error rotation (rad) and of the rate noise (rad/s).
+    gyro_bias : numpy.ndarray
+        (3,) gyro bias (rad/s).
+    jitter : tuple of float or None
+        (tau_min, tau_max) of a jittered delay (s), tau_max = the scenario's tau.
+    """
+
+    actuator: ActuatorModel | None = None
+    disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    attitude_noise: float = 0.0
+    rate_noise: float = 0.0
+    gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    jitter: tuple[float, float] | None = None
+
+    def __str__(self) -> str:
+        parts = [str(self.actuator) if self.actuator is not None else "no torque limit"]
+        parts.append("w = [" + ", ".join(f"{w:g}" for w in self.disturbance) + "] N m")
+        parts.append(f"noise {self.attitude_noise:g} rad, {self.rate_noise:g} rad/s")
+        parts.append("bias [" + ", ".join(f"{b:g}" for b in self.gyro_bias) + "] rad/s")
+        if self.jitter is not None:
+            parts.append(f"jitter [{self.jitter[0]:g}, {self.jitter[1]:g}] s")
+        return "; ".join(parts)
+
+
+@dataclass(frozen=True)
+class FlightDispersion:
+    """Dispersions of the flight options; None keeps the base value.
+
+    Attributes
+    ----------
+    delta : tuple of float or None
+        δ of the hysteretic rule, uniform in [low, high] ⊂ [0, 1).
+    u_max : tuple of float or None
+        Per-axis torque limit (the same on the three axes), uniform in [low, high] (N m), low > 0.
+    disturbance : tuple of float or None
+        Magnitude of a torque added to the base w, uniform (N m); direction uniform on the sphere.
+    attitude_noise, rate_noise : tuple of float or None
+        1σ of the sensor noises, uniform (rad; rad/s).
+    gyro_bias : tuple of float or None
+        Magnitude of a bias added to the base bias, uniform (rad/s); direction uniform on the sphere.
+    """
+
+    delta: tuple[float, float] | None = None
+    u_max: tuple[float, float] | None = None
+    disturbance: tuple[float, float] | None = None
+    attitude_noise: tuple[float, float] | None = None
+    rate_noise: tuple[float, float] | None = None
+    gyro_bias: tuple[float, float] | None = None
+
+    @property
+    def any(self) -> bool:
+        """True when some flight option is dispersed."""
+        return any(getattr(self, name) is not None for name in self.__dataclass_fields__)
+
+    @property
+    def models(self) -> bool:
+        """True when a model of the flight loop (actuator, disturbance, sensor) is dispersed (δ is the rule's)."""
+        return any(getattr(self, name) is not None for name in self.__dataclass_fields__ if name != "delta")
+
+
 @dataclass(frozen=True, eq=False)
 class CampaignSpec:
     """A Monte Carlo campaign: ``count`` runs of ``base`` dispersed by ``seed``.
@@ -176,13 +381,39 @@ class CampaignSpec:
     gains: GainDispersion | None = None
     peak_torque: bool = True
     source: dict[str, Any] = field(default_factory=dict, repr=False)
+    rules: RuleDispersion | None = None
+    flight: FlightOptions | None = None
+    flight_dispersion: FlightDispersion = field(default_factory=FlightDispersion)
+
+    @property
+    def rule_list(self) -> tuple[SwitchingRule, ...]:
+        """The rules crossed with the cases (the base rule alone when the rule is not dispersed)."""
+        return (self.base.rule,) if self.rules is None else self.rules.rules
+
+    @property
+    def rule_labels(self) -> tuple[str, ...]:
+        """:func:`rule_label` of each rule of :attr:`rule_list` (what the results store per rule index)."""
+        return tuple(rule_label(rule) for rule in self.rule_list)
+
+    @property
+    def cases(self) -> int:
+        """Distinct dispersed cases: ⌈count / R⌉ with R rules crossed."""
+        return -(-self.count // len(self.rule_list))
+
+    @property
+    def uses_flight(self) -> bool:
+        """True when the runs go through the flight loop's models (sensor, actuator, disturbance, jitter)."""
+        return self.flight is not None or self.flight_dispersion.models
 
     def __str__(self) -> str:
         parts = [f"campaign {self.base.name}: {self.count} runs, seed {self.seed}, rule {self.base.rule}"]
         parts.append(f"  t_final = {self.base.t_final:g} s at {self.base.rate:g} Hz, base tau = {self.base.tau:g} s")
-        for name in ("attitude", "rate", "inertia", "tau", "gains"):
+        for name in ("attitude", "rate", "inertia", "tau", "gains", "rules"):
             value = getattr(self, name)
             parts.append(f"  {name:<9} {'base value' if value is None else value}")
+        if self.uses_flight:
+            parts.append(f"  flight    {self.flight if self.flight is not None else 'base models'}")
+            parts.append(f"  flight dispersions {self.flight_dispersion}")
         return "\n".join(parts)
 
 
@@ -199,7 +430,16 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
     source = copy.deepcopy(data)
     scenario_part = {k: v for k, v in data.items() if k not in _CAMPAIGN_KEYS}
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
+    if "rule" not in data:
+        raise SpecificationError(f"[rule] needs type, one of {sorted([*RULE_NAMES, 'hysteretic'])}")
+    scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
     base = parse_scenario(scenario_part, name=name)
+    if base.flight_options:  # scenario-style flight tables would be dropped by the runner: refuse, never drop
+        raise SpecificationError(
+            f"[{sorted(base.flight_options)[0]}]: a campaign gives the loop-as-flown models in its [flight] table "
+            "(see design/campaigns.md), not as scenario tables"
+        )
+    base = base.with_rule(parse_rule("[rule]", data["rule"]))
     for key in ("count", "seed"):
         if key not in data:
             raise SpecificationError(f"campaign needs {key} (an integer)")
@@ -250,7 +490,19 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
         if "scale" not in tables["gains"]:
             raise SpecificationError("[dispersions.gains] needs scale = [low, high]")
         gains = GainDispersion(_interval("gains.scale", tables["gains"]["scale"]))
-    return CampaignSpec(
+    rules = None
+    if "rule" in tables:
+        listed = tables["rule"].get("rules")
+        if not isinstance(listed, list) or not listed:
+            raise SpecificationError("[dispersions.rule] needs rules = a non-empty list of rules")
+        rules = RuleDispersion(tuple(parse_rule(f"dispersions.rule.rules[{i}]", v) for i, v in enumerate(listed)))
+        labels = rules.labels
+        repeated = sorted({label for label in labels if labels.count(label) > 1})
+        if repeated:
+            raise SpecificationError(f"dispersions.rule.rules: {repeated[0]!r} is listed twice")
+    flight = _flight_options(data["flight"], base) if "flight" in data else None
+    flight_dispersion = _flight_dispersion(tables)
+    spec = CampaignSpec(
         base=base,
         count=count,
         seed=seed,
@@ -261,7 +513,90 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
         gains=gains,
         peak_torque=peak,
         source=source,
+        rules=rules,
+        flight=flight,
+        flight_dispersion=flight_dispersion,
     )
+    _check_flight(spec)
+    return spec
+
+
+def _flight_options(table: Any, base: Scenario) -> FlightOptions:
+    table = _check_keys("[flight]", table, _FLIGHT_KEYS)
+    actuator = None
+    if "u_max" in table:
+        mode_name = table.get("saturation", "scale")
+        modes = {mode.value: mode for mode in Saturation}
+        if mode_name not in modes:
+            raise SpecificationError(f"flight.saturation must be one of {sorted(modes)}, got {mode_name!r}")
+        norm = table.get("norm_max")
+        actuator = ActuatorModel(
+            table["u_max"], None if norm is None else positive_scalar("flight.norm_max", norm), modes[mode_name]
+        )
+    elif "norm_max" in table or "saturation" in table:
+        raise SpecificationError("flight.norm_max and flight.saturation need flight.u_max (the per-axis limit, N m)")
+    jitter = None
+    if "jitter" in table:
+        low, high = _interval("flight.jitter", table["jitter"], low=0.0)
+        if abs(high - base.tau) > 1e-12 * max(1.0, base.tau):
+            raise SpecificationError(
+                f"flight.jitter: tau_max must equal tau = {base.tau:g} s (the history depth), got {high:g} s"
+            )
+        model = DelayModel.jitter(low, base.tau)
+        model.bounds(base.rate)  # whole numbers of periods, or a SpecificationError naming them
+        if round(low * base.rate) < 1:
+            raise SpecificationError(f"flight.jitter: tau_min must be >= 1/rate = {1.0 / base.rate:g} s, got {low:g} s")
+        jitter = (low, base.tau)
+    return FlightOptions(
+        actuator=actuator,
+        disturbance=readonly(finite_array("flight.disturbance", table.get("disturbance", [0.0, 0.0, 0.0]), (3,))),
+        attitude_noise=nonnegative_scalar("flight.attitude_noise", table.get("attitude_noise", 0.0)),
+        rate_noise=nonnegative_scalar("flight.rate_noise", table.get("rate_noise", 0.0)),
+        gyro_bias=readonly(finite_array("flight.gyro_bias", table.get("gyro_bias", [0.0, 0.0, 0.0]), (3,))),
+        jitter=jitter,
+    )
+
+
+def _flight_dispersion(tables: dict[str, dict[str, Any]]) -> FlightDispersion:
+    values: dict[str, tuple[float, float]] = {}
+    if "hysteresis" in tables:
+        if "delta" not in tables["hysteresis"]:
+            raise SpecificationError("[dispersions.hysteresis] needs delta = [low, high]")
+        low, high = _interval("hysteresis.delta", tables["hysteresis"]["delta"], low=0.0)
+        if high >= 1.0:
+            raise SpecificationError(f"hysteresis.delta must lie in [0, 1), got [{low:g}, {high:g}]")
+        values["delta"] = (low, high)
+    if "actuator" in tables:
+        if "u_max" not in tables["actuator"]:
+            raise SpecificationError("[dispersions.actuator] needs u_max = [low, high] (N m)")
+        low, high = _interval("actuator.u_max", tables["actuator"]["u_max"], low=0.0)
+        if low <= 0.0:
+            raise SpecificationError(f"actuator.u_max: the torque limit must be > 0, got low = {low:g} N m")
+        values["u_max"] = (low, high)
+    if "disturbance" in tables:
+        if "magnitude" not in tables["disturbance"]:
+            raise SpecificationError("[dispersions.disturbance] needs magnitude = [low, high] (N m)")
+        values["disturbance"] = _interval("disturbance.magnitude", tables["disturbance"]["magnitude"], low=0.0)
+    for key in ("attitude_noise", "rate_noise", "gyro_bias"):
+        if key in tables.get("sensor", {}):
+            values[key] = _interval(f"sensor.{key}", tables["sensor"][key], low=0.0)
+    return FlightDispersion(**values)
+
+
+def _check_flight(spec: CampaignSpec) -> None:
+    """The flight models run in the flight loop only: every rule must be hysteretic, and jitter fixes tau."""
+    labels = dict(zip(spec.rule_labels, spec.rule_list, strict=True))
+    if spec.flight_dispersion.delta is not None and not any(isinstance(r, Hysteretic) for r in labels.values()):
+        raise SpecificationError("dispersions.hysteresis.delta: no rule of the campaign is 'hysteretic'")
+    if spec.uses_flight:
+        other = [label for label, rule in labels.items() if not isinstance(rule, Hysteretic)]
+        if other:
+            raise SpecificationError(
+                f"[flight] and the flight dispersions run in the flight loop only: every rule must be 'hysteretic' "
+                f"(hysteretic:0 is on-current's control), got {other[0]!r}"
+            )
+    if spec.flight is not None and spec.flight.jitter is not None and spec.tau is not None:
+        raise SpecificationError("flight.jitter fixes tau (= tau_max); remove [dispersions.tau]")
 
 
 def load_campaign(path: str | Path) -> CampaignSpec:

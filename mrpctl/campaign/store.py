@@ -6,6 +6,10 @@ Layout of ``<out>/campaign.zarr`` (a Zarr group written by xarray):
   ``omega0`` (run, axis), ``inertia`` (run, row, col), ``tau``, ``gain_scale``,
   ``initial_angle``, ``initial_rate`` and the metrics of :data:`METRICS`; every array is
   chunked along ``run`` by the campaign chunk, so a chunk's write touches only its own files;
+* per run also ``rule`` (index into the JSON list ``attrs["rules"]``, the rules crossed with the
+  cases), ``case``, and the flight loop's ``delta``, ``u_max`` (run, axis; inf: none),
+  ``disturbance`` (run, axis), ``attitude_noise``, ``rate_noise``, ``gyro_bias`` (run, axis),
+  ``noise_seed``, ``jitter_seed``;
 * ``chunk_complete`` (chunk,), one Zarr chunk per campaign chunk, set to True only after
   all of that chunk's arrays are written. A chunk whose flag is False (never started, or
   half-written when the campaign was interrupted) is simulated again on resume.
@@ -44,6 +48,16 @@ INPUTS: dict[str, tuple[tuple[str, ...], Any]] = {
     "gain_scale": ((), np.float64),
     "initial_angle": ((), np.float64),
     "initial_rate": ((), np.float64),
+    "rule": ((), np.int64),
+    "case": ((), np.int64),
+    "delta": ((), np.float64),
+    "u_max": (("axis",), np.float64),
+    "disturbance": (("axis",), np.float64),
+    "attitude_noise": ((), np.float64),
+    "rate_noise": ((), np.float64),
+    "gyro_bias": (("axis",), np.float64),
+    "noise_seed": ((), np.int64),
+    "jitter_seed": ((), np.int64),
 }
 _SIZES = {"axis": 3, "row": 3, "col": 3}
 _UNITS = {
@@ -54,6 +68,11 @@ _UNITS = {
     "gain_scale": "1",
     "initial_angle": "rad",
     "initial_rate": "rad/s",
+    "u_max": "N m",
+    "disturbance": "N m",
+    "attitude_noise": "rad",
+    "rate_noise": "rad/s",
+    "gyro_bias": "rad/s",
     "first_switch_time": "s",
     "last_switch_time": "s",
     "settling_time": "s",
@@ -82,6 +101,7 @@ def _attrs(spec: CampaignSpec) -> dict[str, Any]:
         "count": spec.count,
         "seed": spec.seed,
         "rule": str(spec.base.rule),
+        "rules": json.dumps(list(spec.rule_labels)),
         "versions": json.dumps(versions(), sort_keys=True),
     }
 
@@ -94,7 +114,8 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
     data: dict[str, Any] = {}
     for name, (dims, dtype) in INPUTS.items():
         shape = (n, *(_SIZES[d] for d in dims))
-        data[name] = (("run", *dims), da.full(shape, np.nan, dtype=dtype, chunks=(chunk, *shape[1:])))
+        missing = np.nan if np.dtype(dtype).kind == "f" else -1
+        data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=(chunk, *shape[1:])))
     for name, (dtype, missing) in METRICS.items():
         data[name] = (("run",), da.full((n,), missing, dtype=dtype, chunks=(chunk,)))
     dataset = xr.Dataset(data, coords={"run": np.arange(n, dtype=np.int64)}, attrs=_attrs(spec))
@@ -166,7 +187,12 @@ class CampaignStore:
         dataset["chunk_complete"] = (("chunk",), np.zeros(chunks, dtype=bool), {"runs_per_chunk": self.chunk})
         encoding = {name: {"chunks": (self.chunk, *dataset[name].shape[1:])} for name in dataset.data_vars}
         encoding["chunk_complete"] = {"chunks": (1,)}
-        dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
+        import dask
+
+        # The template's lazy arrays are filled here, in this process: never on a Dask Client that happens
+        # to be the default (the campaign's own, or a user's), which would ship every chunk as a task.
+        with dask.config.set(scheduler="synchronous"):
+            dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
         os.replace(temporary, self.path)
 
     def complete(self) -> np.ndarray:

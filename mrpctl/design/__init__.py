@@ -30,6 +30,7 @@ from mrpctl.design.lmi import (
     max_certified_delay,
 )
 from mrpctl.design.loop import LinearizedLoop, linearized_loop
+from mrpctl.design.looped import LoopedCertificate, certify_looped, max_looped_period
 from mrpctl.design.margin import Crossing, DelayMargin, delay_margin
 from mrpctl.design.polytope import (
     Functional,
@@ -45,6 +46,7 @@ from mrpctl.design.polytope import (
 from mrpctl.design.robust import DelayModel, RobustPDSynthesis, RobustStatus, synthesize_robust_pd
 from mrpctl.design.sampled import (
     SampledCertification,
+    SampledCriterion,
     SampledStability,
     certify_sampled,
     lifted_matrices,
@@ -76,6 +78,7 @@ __all__ = [
     "IntervalDelayCertification",
     "LMISynthesis",
     "LinearizedLoop",
+    "LoopedCertificate",
     "PDGains",
     "PDSynthesis",
     "PolytopeCertificate",
@@ -84,12 +87,14 @@ __all__ = [
     "RobustPDSynthesis",
     "RobustStatus",
     "SampledCertification",
+    "SampledCriterion",
     "SampledStability",
     "SearchStatus",
     "SynthesisStatus",
     "analyze_gains",
     "certify",
     "certify_interval",
+    "certify_looped",
     "certify_polytope",
     "certify_sampled",
     "certify_vertices",
@@ -105,6 +110,7 @@ __all__ = [
     "max_certified_interval_delay",
     "max_certified_period",
     "max_certified_tolerance",
+    "max_looped_period",
     "max_stable_delay_samples",
     "max_stable_period",
     "max_stable_tolerance",

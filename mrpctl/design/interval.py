@@ -730,3 +730,176 @@ def max_certified_interval_delay(
             bad = mid
     reason = f"exact constant-delay bound {top:.6g} s" if math.isfinite(top) else "stable for every constant delay"
     return result(SearchStatus.CERTIFIED, good, good_cert, reason)
+
+
+# --------------------------------------------------------------------------------------------
+# Preconditioning (issue 11: the sampled loop at 1 kHz). In time normalised by τ_max the points and moments of
+# ζ (x(t), x(t − h1), x(t − τ), x(t − h2), Legendre moments) are nearly equal when the dynamics are
+# slow over a segment (‖A‖·h ≪ 1 at 1 kHz, or the 1/(d+1)-wide varying segment for d > 0): Φ ≺ 0
+# must then hold in directions of size ε = ‖A‖·(segment length) next to directions of size 1, and
+# Clarabel returns "optimal_inaccurate" for the Wirtinger/Bessel-Legendre problems. The retry
+# writes ζ in difference coordinates ζ = T ζ' (x1 = x0 + ε0 x1', xτ = x1 + εab xτ', moments of
+# order 0 about the segment's recent end, every difference scaled by the power of two nearest ε)
+# and scales every block by a diagonal power-of-two congruence D (from the diagonal magnitudes of
+# its coefficient matrices). T and D are invertible, so T'ΦT ≺ 0 ⇔ Φ ≺ 0, and with power-of-two
+# entries the selectors and the scaling are exact in floating point: the float64 re-check of the
+# transformed blocks is as strict as the plain one.
+# --------------------------------------------------------------------------------------------
+
+
+def _pow2(x: float) -> float:
+    return float(2.0 ** round(math.log2(x)))
+
+
+class _DifferenceLayout(_Layout):
+    """The interval layout with every selector composed with T (ζ = T ζ')."""
+
+    def __init__(self, base: _Layout, t: np.ndarray) -> None:
+        self.n, self.order, self.has0 = base.n, base.order, base.has0
+        self.index, self.m = base.index, base.m
+        self._sel = {}
+        for name, sel in base._sel.items():
+            out = sel @ t
+            out.setflags(write=False)
+            self._sel[name] = out
+
+
+def _difference_coordinates(lay: _Layout, eps0: float, eps_ab: float) -> np.ndarray:
+    n = lay.n
+    t = np.zeros((lay.m, lay.m))
+
+    def col(name: str) -> slice:
+        i = lay.index[name]
+        return slice(i * n, (i + 1) * n)
+
+    eye = np.eye(n)
+    t[col("x0"), col("x0")] = eye
+    ref_ab = "x1" if lay.has0 else "x0"
+    if lay.has0:
+        t[col("x1"), col("x0")] = eye
+        t[col("x1"), col("x1")] = eps0 * eye
+    for name in ("xt", "x2"):
+        t[col(name), :] += t[col(ref_ab), :]
+        t[col(name), col(name)] += eps_ab * eye
+    for seg in (["0"] if lay.has0 else []) + ["a", "b"]:
+        eps, ref = (eps0, "x0") if seg == "0" else (eps_ab, ref_ab)
+        for k in range(lay.order):
+            name = f"O{seg}{k}"
+            if k == 0:
+                t[col(name), :] += t[col(ref), :]
+            t[col(name), col(name)] += eps * eye
+    return t
+
+
+def solve_interval_preconditioned(
+    plants: Sequence[tuple[np.ndarray, np.ndarray]],
+    tau_min: float,
+    tau_max: float,
+    rate: DelayRate,
+    order: int,
+    margin_tol: float,
+    *,
+    scale_variables: bool = False,
+) -> IntervalCertificate:
+    """:func:`solve_interval` in difference coordinates with power-of-two block scaling (an equivalent LMI).
+
+    For problems that come back ``optimal_inaccurate`` because the dynamics are slow over a segment
+    (see the comment above). ``scale_variables`` also measures R1, R2, X, U, Z in units of 1/ε.
+    The float64 re-check is made on the transformed blocks (exact congruences of the plain ones).
+    """
+    n = plants[0][0].shape[0]
+    h1 = tau_min / tau_max
+    has0 = h1 > 0.0
+    scaled = [(tau_max * a, tau_max * a_d) for a, a_d in plants]
+    c = max(max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(a_d, 2))) for a, a_d in scaled)
+    c = max(c, 1e-300)
+    eps0 = _pow2(min(1.0, c * h1)) if has0 else 1.0
+    eps_ab = _pow2(min(1.0, c * (1.0 - h1)))
+    lay = _DifferenceLayout(_layout(n, order, has0), _difference_coordinates(_layout(n, order, has0), eps0, eps_ab))
+    nx = _xi_size(n, order, has0, rate)
+    unknowns = [UnknownRate("P", nx, nx, True), UnknownRate("S2", n, n, True), UnknownRate("R2", n, n, True)]
+    if has0:
+        unknowns += [UnknownRate("S1", n, n, True), UnknownRate("R1", n, n, True)]
+    if rate.kind is RateKind.BOUNDED:
+        unknowns.append(UnknownRate("Q", n, n, True))
+    if _fridman(rate, has0):
+        unknowns += [UnknownRate("U", n, n, True), UnknownRate("Z", n, n, True)]
+    unknowns.append(UnknownRate("X", (order + 1) * n, (order + 1) * n, False))
+    fixed = {k: np.zeros((n, n)) for k in ("S1", "R1", "Q", "U", "Z")}
+    # Optionally the integral weights in units of 1/ε (their natural size when the dynamics are slow).
+    var_scale = (
+        {"R1": 1.0 / eps0, "R2": 1.0 / eps_ab, "X": 1.0 / eps_ab, "U": 1.0 / eps_ab, "Z": 1.0 / eps_ab}
+        if scale_variables
+        else {}
+    )
+
+    def raw(matrices: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        mats = {k: var_scale.get(k, 1.0) * v for k, v in matrices.items()}
+        mats["RCC"] = _assemble_rcc(mats["R2"], mats["X"], order, n, numeric=True)
+        out = {"P": _sym(mats["P"]), "S2": _sym(mats["S2"]), "R2": _sym(mats["R2"])}
+        if has0:
+            out["S1"], out["R1"] = _sym(mats["S1"]), _sym(mats["R1"])
+        if rate.kind is RateKind.BOUNDED:
+            out["Q"] = _sym(mats["Q"])
+        if _fridman(rate, has0):
+            out["U"], out["Z"] = _sym(mats["U"]), _sym(mats["Z"])
+        out["RCC"] = _sym(mats["RCC"])
+        for p, (a, a_d) in enumerate(scaled):
+            for tau, rate_d in _vertex_points(h1, rate):
+                phi = _phi(lay, a, a_d, h1, tau, rate, rate_d, mats, np.matmul)
+                out[f"derivative[difference coordinates, plant {p}, tau {tau:.3g}, rate {rate_d:g}]"] = _sym(-phi)
+        return out
+
+    zero = {u.name: np.zeros((u.rows, u.cols)) for u in unknowns}
+    magnitude: dict[str, np.ndarray] = {}
+    for u in unknowns:
+        for basis in u.basis():
+            for key, block in raw({**fixed, **zero, u.name: basis}).items():
+                magnitude[key] = magnitude.get(key, 0.0) + np.abs(np.diag(block))
+    scale = {
+        key: np.array([_pow2(1.0 / math.sqrt(v)) if v > 0 else 1.0 for v in mag]) for key, mag in magnitude.items()
+    }
+
+    def blocks(matrices: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {key: scale[key][:, None] * b * scale[key][None, :] for key, b in raw(matrices).items()}
+
+    start = time.perf_counter()
+    outcome, values, t_opt = solve_lmi(unknowns, blocks, fixed, [u.name for u in unknowns if u.symmetric])
+    elapsed = time.perf_counter() - start
+    base: dict[str, Any] = {
+        "order": order,
+        "tau_min": tau_min,
+        "tau_max": tau_max,
+        "rate": rate,
+        "plants": len(plants),
+        "solver_status": outcome.status,
+        "solve_time": elapsed,
+    }
+    if values is None:
+        reason = outcome.error or f"solver status {outcome.status!r} is not 'optimal' (preconditioned): no certificate"
+        return IntervalCertificate(
+            status=CertificateStatus.SOLVER_FAILED,
+            matrices={},
+            margins=(),
+            solver_margin=math.nan,
+            reason=reason,
+            **base,
+        )
+    margins = interval_margins(blocks({**fixed, **values}))
+    mats = {k: var_scale.get(k, 1.0) * v for k, v in {**fixed, **values}.items()}
+    worst = min(margins, key=lambda m: m.relative)
+    ok = worst.relative >= margin_tol
+    reason = (
+        f"every block positive definite (difference coordinates, power-of-two scaling); smallest relative "
+        f"margin {worst.relative:.3g} ({worst.name})"
+        if ok
+        else f"block {worst.name!r} has relative margin {worst.relative:.3g} < {margin_tol:g} (preconditioned)"
+    )
+    return IntervalCertificate(
+        status=CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED,
+        matrices={k: readonly(v) for k, v in mats.items()},
+        margins=margins,
+        solver_margin=t_opt,
+        reason=reason,
+        **base,
+    )

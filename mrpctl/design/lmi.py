@@ -238,7 +238,7 @@ def legendre_rows(order: int) -> np.ndarray:
     return rows
 
 
-def _structure(n: int, order: int) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+def lmi_structure(n: int, order: int) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
     """(E_0..E_N as (n, m) arrays, G0 = [I 0 0], G1 = [0 0 I_{Nn}]) for ζ of size m = (N+2)n."""
     rows = legendre_rows(order)
     eye = np.eye(n)
@@ -290,7 +290,7 @@ def lmi_blocks(
     p = np.asarray(P, dtype=float)
     s = np.asarray(S, dtype=float)
     r = np.asarray(R, dtype=float)
-    e_mats, g0, g1 = _structure(n, order)
+    e_mats, g0, g1 = lmi_structure(n, order)
     m = (order + 2) * n
     f0 = np.zeros((n, m))
     f0[:, :n] = a
@@ -360,7 +360,7 @@ class _AnalysisProblem:
         self.R = cp.Variable((n, n), symmetric=True, name="R")
         self.t = cp.Variable(name="t")
         P, S, R, t = self.P, self.S, self.R, self.t
-        e_mats, g0, g1 = _structure(n, order)
+        e_mats, g0, g1 = lmi_structure(n, order)
         zeros_n = np.zeros((n, n))
         z_rest = np.zeros((n, order * n))
         # G(τ)ᵀ P H = G0ᵀ (P[0,:] H) + G1ᵀ (τ P[1:,:] H); H = [F₀; E_0..E_{N−1}].

@@ -44,7 +44,7 @@ from mrpctl.design.interval import (
     solve_interval,
     solve_lmi,
 )
-from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, legendre_rows, lmi_blocks
+from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, lmi_blocks, lmi_structure
 from mrpctl.errors import SpecificationError
 from mrpctl.model import gain_matrix
 from mrpctl.spacecraft import Spacecraft
@@ -342,14 +342,9 @@ def vertex_blocks(A: Any, A_d: Any, P: Any, S: Any, R: Any, M: Any, *, order: in
     s = np.asarray(S, dtype=float)
     r = np.asarray(R, dtype=float)
     mm = np.asarray(M, dtype=float)
-    rows = legendre_rows(order)  # Δ_k = Σ_i rows[k, i] ζ_i, as in lmi_blocks
-    e_mats = [np.kron(rows[j], np.eye(n)) for j in range(order + 1)]
+    e_mats, g0, g1 = lmi_structure(n, order)
     m = (order + 2) * n
     k = m + n
-    g0 = np.zeros((n, m))
-    g0[:, :n] = np.eye(n)
-    g1 = np.zeros((order * n, m))
-    g1[:, 2 * n :] = np.eye(order * n)
     pad = np.zeros((n, n))
     ext = [np.hstack((e, pad)) for e in e_mats]
     e_dx = np.zeros((n, k))

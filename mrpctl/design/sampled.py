@@ -15,7 +15,9 @@ For a spacecraft with a gain that splits per axis, :func:`spacecraft_axes` retur
 
 from __future__ import annotations
 
+import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,14 +26,15 @@ import scipy.linalg
 
 from mrpctl._validation import finite_array, integer, positive_scalar
 from mrpctl.design._common import order_value
-from mrpctl.design.interval import DelayRate, IntervalCertificate, solve_interval
-from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, SearchStatus, criterion_name
+from mrpctl.design.interval import DelayRate, IntervalCertificate, solve_interval, solve_interval_preconditioned
+from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, CertificateStatus, SearchStatus, criterion_name
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = [
     "MAX_LIFTED_SIZE",
     "SampledCertification",
+    "SampledCriterion",
     "SampledStability",
     "certify_sampled",
     "lifted_matrices",
@@ -47,7 +50,8 @@ __all__ = [
 MAX_LIFTED_SIZE = 4000
 
 
-def _system(A: Any, B: Any, K: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sampled_system(A: Any, B: Any, K: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Check (A, B, K) of ẋ = A x + B u, u = K x(t_k): finite, (n, n), (n, m), (m, n); float64 copies."""
     a = finite_array("A", A)
     if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] == 0:
         raise DimensionError(f"A: expected a square (n, n) matrix but found shape {a.shape}")
@@ -187,7 +191,7 @@ def sampled_stability(A: Any, B: Any, K: Any, period: float, *, delay_samples: i
     SpecificationError
         If n(d+1) > MAX_LIFTED_SIZE (the estimate and the way out are in the message).
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     d = integer("delay_samples", delay_samples, minimum=0)
     rho, size = _radius(a, b, k, h, d)
@@ -208,7 +212,7 @@ def max_stable_delay_samples(A: Any, B: Any, K: Any, period: float, *, d_limit: 
     is verified (stable at d, unstable at d + 1). Returns -1 when d = 0 is already unstable and
     ``d_limit`` when every d up to the limit is stable (checked at the limit only).
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     d_limit = integer("d_limit", d_limit, minimum=1)
 
@@ -241,7 +245,7 @@ def max_stable_period(
     unstable period, then bisection to ``rtol``. Returns nan when no grid period is stable, and
     ``period_limit`` when every grid period is.
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     d = integer("delay_samples", delay_samples, minimum=0)
     limit = positive_scalar("period_limit", period_limit)
     rtol = positive_scalar("rtol", rtol)
@@ -270,6 +274,26 @@ def max_stable_period(
     return good
 
 
+def _solve_sawtooth(
+    a: np.ndarray, a_d: np.ndarray, h: float, d: int, order: int, margin_tol: float, *, precondition: bool = True
+) -> IntervalCertificate:
+    """The plain sawtooth problem; when it does not certify, the preconditioned ones (each certificate is sound).
+
+    The retries are (1) difference coordinates + block scaling, (2) the same with the integral weights
+    R1, R2, X, U, Z in units of 1/ε; at most three solves, the first certificate wins.
+    """
+    plain = solve_interval([(a, a_d)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+    if plain.certified or not precondition:
+        return plain
+    for scale_variables in (False, True):
+        retry = solve_interval_preconditioned(
+            [(a, a_d)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol, scale_variables=scale_variables
+        )
+        if retry.certified:
+            return retry
+    return plain
+
+
 def certify_sampled(
     A: Any,
     B: Any,
@@ -279,58 +303,124 @@ def certify_sampled(
     delay_samples: int = 0,
     order: int = 1,
     margin_tol: float = DEFAULT_MARGIN_TOL,
+    precondition: bool = True,
 ) -> IntervalCertificate:
     """Certify the sampled loop by the input-delay approach (interval delay with τ̇ = 1).
 
     ẋ = A x + B K x(t − τ(t)), τ(t) = d h + t − t_k ∈ [d h, (d+1) h], τ̇ = 1; see
-    :func:`~mrpctl.design.interval.certify_interval`.
+    :func:`~mrpctl.design.interval.certify_interval`. When the problem as written does not certify
+    (typically Clarabel ``optimal_inaccurate`` for N >= 1 at 1 kHz), it is solved again in difference
+    coordinates with power-of-two block scaling (an equivalent LMI, design/lmi.md 7.3); the returned
+    certificate says which one certified. ``precondition=False`` (keyword-only) skips the retry.
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     d = integer("delay_samples", delay_samples, minimum=0)
-    return solve_interval(
-        [(a, b @ k)],
-        d * h,
-        (d + 1) * h,
-        DelayRate.sawtooth(),
-        order_value(order),
-        positive_scalar("margin_tol", margin_tol),
+    return _solve_sawtooth(
+        a, b @ k, h, d, order_value(order), positive_scalar("margin_tol", margin_tol), precondition=precondition
     )
+
+
+class SampledCriterion(enum.Enum):
+    """Which sampled-data certificate a :class:`SampledCertification` comes from."""
+
+    #: Input-delay approach: the interval criterion with the sawtooth τ(t) ∈ [d h, (d+1) h] (any d).
+    INPUT_DELAY = "input-delay"
+    #: Looped functional with Wirtinger's inequality (:mod:`mrpctl.design.looped`; d = 0, periodic).
+    LOOPED = "looped"
 
 
 @dataclass(frozen=True, eq=False)
 class SampledCertification:
-    """Result of :func:`max_certified_period`.
+    """Result of :func:`max_certified_period` and :func:`~mrpctl.design.looped.max_looped_period`.
 
     Attributes
     ----------
     status : SearchStatus
     order : int
+        Bessel-Legendre order of the integral inequality (1 for the looped criterion).
     delay_samples : int
     period : float
         Largest certified sampling period h (s); nan when none.
-    certificate : IntervalCertificate or None
+    certificate : IntervalCertificate, LoopedCertificate or None
     solves : int
     reason : str
+    criterion : SampledCriterion
     """
 
     status: SearchStatus
     order: int
     delay_samples: int
     period: float
-    certificate: IntervalCertificate | None = field(repr=False)
+    certificate: Any = field(repr=False)
     solves: int
     reason: str
+    criterion: SampledCriterion = SampledCriterion.INPUT_DELAY
 
     @property
     def certified(self) -> bool:
         return self.status is not SearchStatus.NOT_CERTIFIED
 
     def __str__(self) -> str:
-        head = f"{criterion_name(self.order)} + RCC, sampled (d = {self.delay_samples})"
+        if self.criterion is SampledCriterion.LOOPED:
+            head = "looped functional + Wirtinger, sampled (d = 0)"
+        else:
+            head = f"{criterion_name(self.order)} + RCC, sampled (d = {self.delay_samples})"
         if not self.certified:
             return f"{head}: {self.status.value} ({self.reason})"
         return f"{head}: certified for h <= {self.period:.6g} s ({self.solves} solves; {self.reason})"
+
+
+def bisect_period(
+    a: np.ndarray,
+    b: np.ndarray,
+    k: np.ndarray,
+    d: int,
+    test: Callable[[float], Any],
+    *,
+    rtol: float,
+    period_limit: float | None,
+    criterion: SampledCriterion,
+    order: int,
+) -> SampledCertification:
+    """Bisection of the certified period below the exact one (which is tested too); <= 206 solves."""
+    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(b @ k, 2)), 1e-12)
+    limit = 1e3 / scale if period_limit is None else positive_scalar("period_limit", period_limit)
+    exact = max_stable_period(a, b, k, delay_samples=d, period_limit=limit)
+    solves = 0
+
+    def run(h: float) -> Any:
+        nonlocal solves
+        solves += 1
+        return test(h)
+
+    def result(status: SearchStatus, period: float, cert: Any, reason: str) -> SampledCertification:
+        return SampledCertification(status, order, d, period, cert, solves, reason, criterion)
+
+    if math.isnan(exact):
+        return result(SearchStatus.NOT_CERTIFIED, math.nan, None, "no stable period")
+    bad = exact
+    good, cert = math.nan, None
+    for f in (1.0, 0.5, 0.2, 0.05, 0.01, 1e-3):
+        trial = run(f * exact)
+        if trial.certified:
+            good, cert = f * exact, trial
+            break
+        bad = f * exact
+    if cert is None:
+        return result(SearchStatus.NOT_CERTIFIED, math.nan, None, "nothing certified")
+    if good >= exact:
+        return result(SearchStatus.CERTIFIED, good, cert, f"certified at the exact bound {exact:.6g} s")
+    for _ in range(200):
+        if bad - good <= rtol * good:
+            break
+        mid = 0.5 * (good + bad)
+        trial = run(mid)
+        if trial.certified:
+            good, cert = mid, trial
+        else:
+            bad = mid
+    return result(SearchStatus.CERTIFIED, good, cert, f"exact period {exact:.6g} s")
 
 
 def max_certified_period(
@@ -344,52 +434,23 @@ def max_certified_period(
     period_limit: float | None = None,
     margin_tol: float = DEFAULT_MARGIN_TOL,
 ) -> SampledCertification:
-    """The largest sampling period h certified by :func:`certify_sampled` (bisection, ≤ 200 solves).
+    """The largest sampling period h certified by :func:`certify_sampled` (bisection, ≤ 206 solves).
 
     The exact period (:func:`max_stable_period`) bounds the search from above: a sound certificate
     cannot exceed it. The bound itself is tested too.
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     d = integer("delay_samples", delay_samples, minimum=0)
     order = order_value(order)
     rtol = positive_scalar("rtol", rtol)
     margin_tol = positive_scalar("margin_tol", margin_tol)
-    scale = max(float(np.linalg.norm(a, 2)), float(np.linalg.norm(b @ k, 2)), 1e-12)
-    limit = 1e3 / scale if period_limit is None else positive_scalar("period_limit", period_limit)
-    exact = max_stable_period(a, b, k, delay_samples=d, period_limit=limit)
-    solves = 0
 
     def test(h: float) -> IntervalCertificate:
-        nonlocal solves
-        solves += 1
-        return solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+        return _solve_sawtooth(a, b @ k, h, d, order, margin_tol)
 
-    if math.isnan(exact):
-        return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, 0, "no stable period")
-    bad = exact
-    good, cert = math.nan, None
-    for f in (1.0, 0.5, 0.2, 0.05, 0.01, 1e-3):
-        trial = test(f * exact)
-        if trial.certified:
-            good, cert = f * exact, trial
-            break
-        bad = f * exact
-    if cert is None:
-        return SampledCertification(SearchStatus.NOT_CERTIFIED, order, d, math.nan, None, solves, "nothing certified")
-    if good >= exact:
-        return SampledCertification(
-            SearchStatus.CERTIFIED, order, d, good, cert, solves, f"certified at the exact bound {exact:.6g} s"
-        )
-    for _ in range(200):
-        if bad - good <= rtol * good:
-            break
-        mid = 0.5 * (good + bad)
-        trial = test(mid)
-        if trial.certified:
-            good, cert = mid, trial
-        else:
-            bad = mid
-    return SampledCertification(SearchStatus.CERTIFIED, order, d, good, cert, solves, f"exact period {exact:.6g} s")
+    return bisect_period(
+        a, b, k, d, test, rtol=rtol, period_limit=period_limit, criterion=SampledCriterion.INPUT_DELAY, order=order
+    )
 
 
 def spacecraft_axes(spacecraft: Spacecraft, K: Any) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
@@ -430,10 +491,11 @@ def max_certified_delay_samples(
 
     Certified d means the sawtooth τ(t) ∈ [d h, (d+1) h] is certified; the search assumes the
     certified set in d is an interval starting at 0 (the certificate at the answer is returned and
-    the answer + 1 was tested and failed, unless it is ``d_max``). Returns (d, certificate, solves);
-    d = -1 when d = 0 is not certified.
+    the answer + 1 was tested and failed, unless it is ``d_max``). A test that ends in a solver
+    failure (``optimal_inaccurate``) rather than a negative margin is retried at d ± 1, d + 2 before
+    it counts as failed. Returns (d, certificate, solves); d = -1 when d = 0 is not certified.
     """
-    a, b, k = _system(A, B, K)
+    a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     order = order_value(order)
     d_max = integer("d_max", d_max, minimum=0)
@@ -443,7 +505,7 @@ def max_certified_delay_samples(
     def test(d: int) -> IntervalCertificate:
         nonlocal solves
         solves += 1
-        return solve_interval([(a, b @ k)], d * h, (d + 1) * h, DelayRate.sawtooth(), order, margin_tol)
+        return _solve_sawtooth(a, b @ k, h, d, order, margin_tol)
 
     top = test(d_max)
     if top.certified:
@@ -455,6 +517,14 @@ def max_certified_delay_samples(
     while bad - good > 1:
         mid = (good + bad) // 2
         trial = test(mid)
+        if not trial.certified and trial.status is CertificateStatus.SOLVER_FAILED:
+            # A solver failure is no evidence of infeasibility: probe the neighbours before giving mid up.
+            for probe in (mid + 1, mid - 1, mid + 2):
+                if good < probe < bad:
+                    again = test(probe)
+                    if again.certified:
+                        mid, trial = probe, again
+                        break
         if trial.certified:
             good, cert = mid, trial
         else:

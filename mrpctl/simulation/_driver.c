@@ -6,6 +6,11 @@
  * and MRPCTL_RUN the exported driver; both, and the sizes below, are #defined by
  * mrpctl/simulation/_engine.py in front of this file.
  *
+ * MRPCTL_RING_WIDTH is the width of one ring entry (6: m_k; 12 for the predictor sample: m_k and the
+ * controller's model state z_k); with MRPCTL_RING_OUTPUT the sample has a seventh output, the ring
+ * entry, apart from x_meas (the flight and predictor samples), and with MRPCTL_SENSOR a per-sample
+ * noise input.
+ *
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
  * stats alternate between two buffers; the sample writes m_k into a ring of ring_size
  * columns (slot k mod ring_size) from which m_{k-d} is read (from the history for k < d);
@@ -30,6 +35,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   casadi_real w[MRPCTL_SZ_W];
   casadi_real buffers[2][MRPCTL_STATE];
   casadi_real u_scratch[3], switched_scratch[1], x_scratch[6];
+  const long long width = MRPCTL_RING_WIDTH;
   long long k, slot, delayed_slot = 0, phase = 1, kept_column = 0;
   int i, now_index = 0;
   for (i = 0; i < MRPCTL_STATE; ++i) buffers[0][i] = state[i];
@@ -56,6 +62,8 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #if !MRPCTL_SENSOR
   (void)noise;
   (void)noise_stride;
+#endif
+#if !MRPCTL_RING_OUTPUT
   (void)x_scratch;
 #endif
   for (k = k0; k < k1; ++k) {
@@ -68,21 +76,24 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     if (d == 0) {
       arg[3] = history;
     } else {
-      arg[3] = k < d ? history + history_stride * k : ring + 6 * delayed_slot;
+      arg[3] = k < d ? history + history_stride * k : ring + width * delayed_slot;
     }
     if (used) {
       /* a time-varying delay: the newest arrived measurement j*(k) in [k - d, k - 1] (d = d_max) */
       long long j = used[k - k0];
-      arg[3] = j < 0 ? history + history_stride * (j + d) : ring + 6 * (j % ring_size);
+      arg[3] = j < 0 ? history + history_stride * (j + d) : ring + width * (j % ring_size);
     }
     res[0] = next;
     res[1] = next + MRPCTL_X;
     res[2] = next + MRPCTL_X_MEMORY;
 #if MRPCTL_SENSOR
-    /* the flight sample: the sensor's measurement goes to the ring, the true state to the kept array */
     arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise + noise_stride * (k - k0);
+#endif
+#if MRPCTL_RING_OUTPUT
+    /* the flight and predictor samples: the sensor's measurement (and the model state) go to the ring,
+       the true state to the kept array */
     res[3] = kept ? kept_measurements + 6 * kept_column : x_scratch;
-    res[6] = ring + 6 * slot;
+    res[6] = ring + width * slot;
 #else
     res[3] = ring + 6 * slot;
 #endif
@@ -90,7 +101,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     res[5] = switched ? switched + (k - k0) : switched_scratch;
     if (MRPCTL_SAMPLE(arg, res, iw, w, 0)) return -1;
     if (kept) {
-      if (!MRPCTL_SENSOR && kept_measurements != ring)
+      if (!MRPCTL_RING_OUTPUT && kept_measurements != ring)
         for (i = 0; i < 6; ++i) kept_measurements[6 * kept_column + i] = ring[6 * slot + i];
       ++kept_column;
     }

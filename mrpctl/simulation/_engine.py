@@ -40,7 +40,15 @@ from mrpctl.flight import (
     SensorModel,
     newest_arrived_slice,
 )
-from mrpctl.loop import core_function, flight_core_function, inertia_input, inertia_values
+from mrpctl.loop import (
+    PREDICTOR_MEMORY_SIZE,
+    InertiaInput,
+    core_function,
+    flight_core_function,
+    inertia_input,
+    inertia_values,
+    predictor_core_function,
+)
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.simulation._stats import (
     DIVERGENCE_BOUND,
@@ -94,6 +102,30 @@ def flight_memory(x0: np.ndarray, history: np.ndarray, d: int) -> np.ndarray:
     return memory
 
 
+def predictor_memory(x0: np.ndarray) -> np.ndarray:
+    """The predictor sample's memory at k = 0: σ̂_prev = z_0 = short(x0) (|σ|² > 1: shadow), accumulators 0.
+
+    The model copy starts at the initial state, the latest value of the constant history: for
+    k < d the measurement and the model state at t_{k−d} are both that state, so x̂_k = z_k.
+    """
+    z = np.array(x0, dtype=float)
+    squared = float(z[0:3] @ z[0:3])
+    if squared > 1.0:
+        z[0:3] = -z[0:3] / squared
+    memory = np.zeros(PREDICTOR_MEMORY_SIZE)
+    memory[0:2] = 1.0
+    memory[2:5] = z[0:3]
+    memory[FLIGHT_MEMORY_SIZE:] = z
+    return memory
+
+
+def predictor_constants(options: np.ndarray | None, tau: float, model: Spacecraft) -> np.ndarray:
+    """The predictor sample's ``flight`` input: the flight constants (default none), τ (s), J_m, J_m⁻¹."""
+    flight = NO_FLIGHT_OPTIONS if options is None else options
+    inertia, inertia_inverse = inertia_values(model, inertia_input(model))
+    return np.ascontiguousarray(np.concatenate((flight, [tau], inertia.ravel(), inertia_inverse.ravel())))
+
+
 #: The flight sample's constants without actuator limits or disturbance: u_max = u_norm = inf, w = 0.
 NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 _NO_NOISE = np.zeros(NOISE_SIZE)
@@ -113,7 +145,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", core.size1_in(1))  # MEMORY_SIZE; FLIGHT_MEMORY_SIZE for the flight sample
     stats = ca.SX.sym("stats", STATS_SIZE)
-    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", core.size1_in(2))  # STATE_SIZE; PREDICTOR_RING_WIDTH for the predictor
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
     extra = [ca.SX.sym(core.name_in(i), core.sparsity_in(i)) for i in range(5, core.n_in())]
@@ -180,6 +212,8 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_INERTIA_INPUT": int("J" in sample.name_in()),
         "MRPCTL_FLIGHT_INPUT": int("flight" in sample.name_in()),
         "MRPCTL_SENSOR": int("noise" in sample.name_in()),
+        "MRPCTL_RING_OUTPUT": int(sample.n_out() > 6),
+        "MRPCTL_RING_WIDTH": sample.size1_in(3),
     }
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
     body = resources.files("mrpctl.simulation").joinpath("_driver.c").read_text(encoding="utf-8")
@@ -222,23 +256,47 @@ class Engine:
         period: float,
         substeps: int,
         saturation: Saturation = Saturation.SCALE,
+        predictor: InertiaInput | None = None,
+        sensor: bool = False,
+        limited: bool = True,
     ) -> None:
         self.d = d
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
-        self.flight = isinstance(rule, Hysteretic)
+        self.predictor = predictor is not None
+        self.flight = isinstance(rule, Hysteretic) or self.predictor
         self._structure = (spacecraft, d, period, substeps, saturation)
-        if self.flight:
+        if predictor is not None:
+            core = predictor_core_function(
+                spacecraft,
+                d,
+                period,
+                substeps,
+                inertia=self.inertia,
+                model_inertia=predictor,
+                saturation=saturation,
+                sensor=sensor,
+                limited=limited,
+            )
+        elif self.flight:
             core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation)
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
         self.memory_size = core.size1_in(1)
+        self.ring_width = core.size1_in(2)
         label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
         if self.flight:
             label += f"_{saturation.value}"
+        if predictor is not None:
+            label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
+        from mrpctl._vectorize import inline_min_max  # (it imports this module)
+
+        min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
         self.compiled: CompiledFunction = compile_function(
-            self.sample, flags=SIMULATION_FLAGS, appendix=_driver_source(self.sample)
+            self.sample,
+            flags=(*SIMULATION_FLAGS, *min_max_flags),
+            appendix=_driver_source(self.sample) + min_max_source,
         )
         self._run_c: Any = None
         if self.compiled.compiled:
@@ -258,6 +316,8 @@ class Engine:
         """The sample for the virtual machine: the flight sample without its per-sample sensor ports."""
         if not self.flight:
             return self.sample
+        if self.predictor:
+            raise CodegenError("the predictor loop needs the compiled engine (a C compiler); see mrpctl._compile")
         spacecraft, d, period, substeps, saturation = self._structure
         core = flight_core_function(
             spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation, sensor=False
@@ -277,7 +337,7 @@ class Engine:
         """Buffers for runs of n samples (``switches``: collect switch instants)."""
         return Workspace(
             state=np.empty(STATE_SIZE + self.memory_size + STATS_SIZE),
-            ring=np.empty((self.ring_size(n), STATE_SIZE)),
+            ring=np.empty((self.ring_size(n), self.ring_width)),
             switched=np.empty(min(slice_samples(self.substeps), n)) if switches else None,
         )
 
@@ -333,9 +393,13 @@ class Engine:
         history = np.ascontiguousarray(history, dtype=float)
         memory_end = STATE_SIZE + self.memory_size
         state[:STATE_SIZE] = x0
-        state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
+        if self.predictor:
+            state[STATE_SIZE:memory_end] = predictor_memory(x0)
+            history = np.ascontiguousarray(np.hstack((history, history)))  # (m, z) with z = m before t = 0
+        else:
+            state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
         state[memory_end:] = initial_stats(n)
-        history_stride = STATE_SIZE if history.shape[0] > 1 else 0
+        history_stride = self.ring_width if history.shape[0] > 1 else 0
         gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
         parameters = np.ascontiguousarray(parameters, dtype=float)
         if inertia_input(spacecraft) is not self.inertia:
@@ -354,12 +418,19 @@ class Engine:
         indices: list[np.ndarray] = []
         stored = 0
         ring = workspace.ring
-        noisy = self.flight and sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
-        if keep == 1 and measurements is not None and not self.flight:
+        noisy = (
+            "noise" in self.sample.name_in()
+            and sensor is not None
+            and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
+        )
+        if self.predictor and flight_options is None:
+            raise ValueError("the predictor engine needs its constants (predictor_constants)")
+        if keep == 1 and measurements is not None and self.ring_width == STATE_SIZE and not self.flight:
             ring = measurements  # every sample kept: m_{k-d} is read back from the result (no copy)
         step = slice_samples(self.substeps)
         newest = -1 - self.d
         schedule: np.ndarray | None = None
+        noise_rows: np.ndarray | None = None
         k = 0
         diverged = memory_end + S_DIVERGED
         while k < n:
@@ -367,7 +438,9 @@ class Engine:
             noise, noise_stride = _NO_NOISE, 0
             if noisy:
                 assert sensor is not None
-                noise = np.ascontiguousarray(np.hstack(sensor.noise(k, k1)))
+                if noise_rows is None:
+                    noise_rows = np.empty((min(step, n), NOISE_SIZE))  # one buffer for the run's slices
+                noise = sensor.noise_rows(k, k1, out=noise_rows)
                 noise_stride = NOISE_SIZE
             if delay is not None:
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
@@ -462,18 +535,40 @@ def engine(
     period: float,
     substeps: int,
     saturation: Saturation = Saturation.SCALE,
+    *,
+    predictor: Spacecraft | None = None,
+    sensor: bool = False,
+    limited: bool = True,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
-    ``saturation`` (the actuator's mode) is part of the structure of the flight sample only.
+    ``saturation`` (the actuator's mode) is part of the structure of the flight and predictor
+    samples only. ``predictor``: the controller's model (its inertia layout is part of the
+    structure, its values are run-time inputs) for the predictor sample, with a sensor port when
+    ``sensor`` and the actuator when ``limited``; the predictor needs a C compiler.
     """
-    if not isinstance(rule, Hysteretic):
+    model = None if predictor is None else inertia_input(predictor)
+    if not isinstance(rule, Hysteretic) and model is None:
         saturation = Saturation.SCALE
-    key = (inertia_input(spacecraft), type(rule), rule_key(rule, d), d, period, substeps, saturation)
+    if model is None:
+        sensor, limited = False, True
+        key: tuple[Any, ...] = (
+            inertia_input(spacecraft),
+            type(rule),
+            rule_key(rule, d),
+            d,
+            period,
+            substeps,
+            saturation,
+        )
+    else:
+        key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
-            found = Engine(spacecraft, rule, d, period, substeps, saturation)
+            found = Engine(
+                spacecraft, rule, d, period, substeps, saturation, predictor=model, sensor=sensor, limited=limited
+            )
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
 

@@ -17,10 +17,28 @@ import numpy as np
 from mrpctl._compile import find_compiler
 from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
-from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
+from mrpctl.flight import (
+    FLIGHT_MEMORY_SIZE,
+    ActuatorModel,
+    DelayKind,
+    DelayModel,
+    Disturbance,
+    Hysteretic,
+    Saturation,
+    SensorModel,
+)
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
-from mrpctl.simulation._engine import STATE_BLOCK, RunOutput, engine, rule_key, slice_samples
+from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.simulation._engine import (
+    STATE_BLOCK,
+    RunOutput,
+    engine,
+    flight_memory,
+    predictor_constants,
+    rule_key,
+    slice_samples,
+)
 from mrpctl.simulation._stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft
@@ -93,9 +111,10 @@ def run_bytes(n: int, keep_every: int | None, *, switches: bool = True) -> int:
     return kept * _BYTES_PER_KEPT + switch_cap * _BYTES_PER_SWITCH
 
 
-def workspace_bytes(n: int, d: int, substeps: int) -> int:
-    """Bytes of one worker's buffers: the d-sample ring and the slice's switch flags."""
-    return (min(d, n) + 1) * STATE_SIZE * 8 + min(slice_samples(substeps), n) * 8
+def workspace_bytes(n: int, d: int, substeps: int, width: int = 1) -> int:
+    """Bytes of one worker's buffers: the d-sample ring (``width`` states per entry: 2 for the
+    predictor's measurement and model copy) and the slice's switch flags."""
+    return (min(d, n) + 1) * width * STATE_SIZE * 8 + min(slice_samples(substeps), n) * 8
 
 
 def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: int | None, runs: int = 1) -> None:
@@ -122,6 +141,13 @@ def _flight_options(
             "actuator, disturbance, sensor: the actuator, disturbance and sensor models run in the flight loop only; "
             f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
         )
+    return _flight_constants(actuator, disturbance, sensor)
+
+
+def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.ndarray | None, Saturation]:
+    """The checked actuator, disturbance and sensor models as the flight constants and the saturation mode."""
+    if actuator is None and disturbance is None and sensor is None:
+        return None, Saturation.SCALE
     if actuator is not None and not isinstance(actuator, ActuatorModel):
         raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel or None, got {actuator!r}")
     if disturbance is not None and not isinstance(disturbance, Disturbance):
@@ -142,6 +168,37 @@ def _flight_options(
     if disturbance is not None:
         options[4:7] = disturbance.torque
     return options, Saturation.SCALE if actuator is None else actuator.mode
+
+
+def _check_predictor(predictor: Any, rule: Any, history: Any, delay: Any, *, compiled: bool = True) -> Predictor | None:
+    """The predictor option, checked against the rule, the history and the delay model (and, with
+    ``compiled``, that a C compiler is there to run it)."""
+    if predictor is None:
+        if isinstance(rule, OnPredicted):
+            raise SpecificationError(
+                "rule: OnPredicted switches on the predicted attitude; give predictor=mrpctl.Predictor(model=...)"
+            )
+        return None
+    if not isinstance(predictor, Predictor):
+        raise SpecificationError(f"predictor must be a mrpctl.Predictor or None, got {predictor!r}")
+    if not isinstance(rule, OnPredicted):
+        raise SpecificationError(
+            "rule: with a predictor the controller chooses its MRP set on the predicted attitude; use "
+            f"rule=mrpctl.OnPredicted(alpha) (alpha=1: short set, > 1: hysteresis, None: never switch), got {rule}"
+        )
+    if not (isinstance(history, str) and history == "constant"):
+        raise SpecificationError(
+            "history: the predictor's model copy starts at x0, the constant history; only history='constant' is "
+            f"supported with a predictor, got {history if isinstance(history, str) else 'an array'}"
+        )
+    if delay is not None:
+        raise SpecificationError(
+            "delay: the predictor runs with the constant delay tau only (its correction needs the age of each "
+            "measurement; a DelayModel, jitter included, is not supported with a predictor): drop delay="
+        )
+    if compiled and find_compiler() is None:
+        raise CodegenError("predictor: the predictor loop needs the compiled engine (a C compiler); none was found")
+    return predictor
 
 
 def _varying_delay(rule: Any, delay: Any, d: int, rate: float, n: int) -> DelayModel | None:
@@ -189,6 +246,7 @@ def simulate(
     disturbance: Any = None,
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
+    predictor: Predictor | None = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -243,6 +301,12 @@ def simulate(
         A time-varying delay (``rule=Hysteretic(...)`` only): a sequence of n delays or seeded
         jitter in [tau_min, tau_max], with ``tau`` = tau_max (the history depth) and
         tau_min >= 1/rate; the controller uses the newest measurement that has arrived.
+    predictor : mrpctl.Predictor, keyword-only
+        The predictor controller (``design/predictor.md``): u = K x̂ with x̂ the model copy's state
+        corrected by the delayed measurement on the rotation group, with ``rule=OnPredicted(alpha)``
+        (the switch is decided on the prediction). Runs with ``actuator`` (the copy is driven by
+        the applied torque), ``disturbance`` and ``sensor``; needs ``history="constant"``, no
+        ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
 
     Returns
     -------
@@ -266,11 +330,27 @@ def simulate(
     keep = _keep_every(keep_every)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
-    options, saturation = _flight_options(rule, actuator, disturbance, sensor)
-    varying = _varying_delay(rule, delay, d, rate, n)
-    _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps), limit, t_final=t_final, keep_every=keep)
+    checked = _check_predictor(predictor, rule, history, delay)
+    if checked is None:
+        options, saturation = _flight_options(rule, actuator, disturbance, sensor)
+        varying = _varying_delay(rule, delay, d, rate, n)
+    else:
+        options, saturation = _flight_constants(actuator, disturbance, sensor)
+        options, varying = predictor_constants(options, float(tau), checked.model), None
+    width = 1 if checked is None else 2
+    _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps, width), limit, t_final=t_final, keep_every=keep)
 
-    found = engine(spacecraft, rule, d, 1.0 / rate, substeps, saturation)
+    found = engine(
+        spacecraft,
+        rule,
+        d,
+        1.0 / rate,
+        substeps,
+        saturation,
+        predictor=None if checked is None else checked.model,
+        sensor=sensor is not None,
+        limited=actuator is not None,
+    )
     stop = None
     if progress is not None:
 
@@ -306,6 +386,7 @@ def simulate(
         substeps=substeps,
         t_final=t_final,
         x0=readonly(x0),
+        predictor=checked,
     )
     return assemble_run(output, n=n, keep_every=keep, common=common)
 
@@ -342,6 +423,7 @@ def simulate_batch(
     disturbance: Any = None,
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
+    predictor: Predictor | None = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -388,7 +470,14 @@ def simulate_batch(
 
     actuator, disturbance, sensor, delay : keyword-only
         The flight loop's models (as in :func:`simulate`), shared by every run; each rule
-        must then be a :class:`mrpctl.flight.Hysteretic`. Flight runs take the scalar engine.
+        must then be a :class:`mrpctl.flight.Hysteretic`. Without trajectories flight runs take
+        the lane engine too (noise and jitter streamed per slice, shared by the lanes), bit
+        for bit the scalar engine's; the result then has ``saturated_fraction`` and
+        ``peak_command``.
+    predictor : mrpctl.Predictor, keyword-only
+        The predictor controller (as in :func:`simulate`), shared by every run; each rule must
+        then be a :class:`mrpctl.OnPredicted`. Predictor runs take the scalar engine (on the thread
+        pool), also when ``trajectories`` is False.
 
     Returns
     -------
@@ -438,7 +527,8 @@ def simulate_batch(
     histories = [_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
     limit = _memory_limit(memory_limit)
     workers = min(threads, n_runs)
-    estimate = workers * workspace_bytes(n, max(samples_by_run), substeps) + n_runs * STATS_SIZE * 8 * 4
+    width = 1 if predictor is None else 2
+    estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width) + n_runs * STATS_SIZE * 8 * 4
     if trajectories:
         estimate += n_runs * run_bytes(n, keep)
     elif _LANES:
@@ -446,15 +536,28 @@ def simulate_batch(
     _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
 
     options, saturation = None, Saturation.SCALE
-    for one in rules:  # the flight options are shared by the runs; every rule must be the flight rule
-        options, saturation = _flight_options(one, actuator, disturbance, sensor)
-    varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
+    checked = None
+    for one in rules:
+        checked = _check_predictor(predictor, one, history, delay)
+    by_delay: dict[float, np.ndarray] = {}
+    if checked is None:
+        for one in rules:  # the flight options are shared by the runs; every rule must be the flight rule
+            options, saturation = _flight_options(one, actuator, disturbance, sensor)
+        varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
+    else:
+        options, saturation = _flight_constants(actuator, disturbance, sensor)
+        varying = [None] * n_runs
+        for value in set(float(v) for v in delays):
+            by_delay[value] = predictor_constants(options, value, checked.model)
 
     stats = np.full((n_runs, STATS_SIZE), np.nan)
+    any_flight = any(isinstance(one, Hysteretic) for one in rules)
+    flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
-    if not trajectories and _LANES and find_compiler() is not None:
+    if not trajectories and _LANES and checked is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
+            flight_rows,
             crafts=crafts,
             rules=rules,
             samples_by_run=samples_by_run,
@@ -467,6 +570,7 @@ def simulate_batch(
             substeps=substeps,
             threads=threads,
             progress=progress,
+            flight=(options, saturation, sensor, varying),
         )
 
     by_structure: dict[tuple[int, int, int], Any] = {}  # objects alive during the call: id() is safe
@@ -474,7 +578,17 @@ def simulate_batch(
     for i in scalar_runs:
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i])
         if key not in by_structure:
-            by_structure[key] = engine(crafts[i], rules[i], samples_by_run[i], 1.0 / rate, substeps, saturation)
+            by_structure[key] = engine(
+                crafts[i],
+                rules[i],
+                samples_by_run[i],
+                1.0 / rate,
+                substeps,
+                saturation,
+                predictor=None if checked is None else checked.model,
+                sensor=sensor is not None,
+                limited=actuator is not None,
+            )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
     stop_flag = threading.Event()
@@ -513,7 +627,7 @@ def simulate_batch(
                 workspace=space,
                 switch_limit=n if keep == 1 else SWITCH_LIMIT,
                 stop=stop,
-                flight_options=options,
+                flight_options=options if checked is None else by_delay[float(delays[i])],
                 sensor=sensor,
                 delay=varying[i],
                 rate=rate,
@@ -530,6 +644,8 @@ def simulate_batch(
             output = outputs[i]
             assert output is not None
             stats[i] = output.stats
+            if flight_rows is not None and output.memory is not None and output.memory.size == FLIGHT_MEMORY_SIZE:
+                flight_rows[i] = output.memory
 
     runs: list[SimulationResult] | None = None
     if trajectories:
@@ -552,6 +668,7 @@ def simulate_batch(
                         substeps=substeps,
                         t_final=t_final,
                         x0=readonly(states[i]),
+                        predictor=checked,
                     ),
                 )
             )
@@ -560,6 +677,7 @@ def simulate_batch(
         n=n,
         rate=rate,
         runs=runs,
+        flight_memory=flight_rows,
         common=dict(
             x0=readonly(states),
             K=readonly(gains),
@@ -586,6 +704,7 @@ def lane_bytes(runs: int, d: int, workers: int) -> int:
 
 def _run_lanes(
     stats: np.ndarray,
+    flight_rows: np.ndarray | None,
     *,
     crafts: Sequence[Spacecraft],
     rules: Sequence[SwitchingRule],
@@ -599,10 +718,14 @@ def _run_lanes(
     substeps: int,
     threads: int,
     progress: Callable[[int, int], Any] | None,
+    flight: tuple[np.ndarray | None, Saturation, SensorModel | None, list[DelayModel | None]],
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d), W runs per C call, the batches on the thread pool; write the
-    rows of ``stats``. Returns the runs left to the scalar engine (a rule without lane form)."""
+    rows of ``stats`` (and of ``flight_rows``: the flight sample's memory). ``flight`` is the
+    flight loop's (constants, saturation, sensor, per-run varying delay). Returns the runs left
+    to the scalar engine (a rule without lane form)."""
+    flight_options, saturation, sensor, varying = flight
     from mrpctl import _vectorize
 
     groups: dict[Any, list[int]] = {}
@@ -620,11 +743,9 @@ def _run_lanes(
     for members in groups.values():
         first = members[0]
         d = samples_by_run[first]
-        if isinstance(rules[first], Hysteretic):  # the flight sample has no lane form yet
-            left.extend(members)
-            continue
+        is_flight = isinstance(rules[first], Hysteretic)
         try:
-            lanes = _vectorize.lane_engine(crafts[first], rules[first], d, 1.0 / rate, substeps)
+            lanes = _vectorize.lane_engine(crafts[first], rules[first], d, 1.0 / rate, substeps, saturation=saturation)
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
             left.extend(members)
@@ -633,13 +754,17 @@ def _run_lanes(
             rows = np.stack([histories[i][0][0] for i in members])[:, :, None]
         else:  # the array history is shared: a view, copied W runs at a time
             rows = np.broadcast_to(histories[first][0].T, (len(members), STATE_SIZE, d))
+        if is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
+            memory0 = np.array([flight_memory(states[i], histories[i][0], d) for i in members])
+        else:
+            memory0 = np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float)
         packs.append(
             (
                 members,
                 _vectorize.closed_loop_batches(
                     lanes,
                     states[members],
-                    np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float),
+                    memory0,
                     rows,
                     gains[members],
                     np.array([rules[i].parameters() for i in members], dtype=float),
@@ -647,6 +772,10 @@ def _run_lanes(
                     spacecraft=[crafts[i] for i in members],
                     threads=threads,
                     slice_samples=step,
+                    flight_options=flight_options if is_flight else None,
+                    sensor=sensor if is_flight else None,
+                    delay=varying[first] if is_flight else None,
+                    rate=rate,
                 ),
             )
         )
@@ -684,6 +813,8 @@ def _run_lanes(
     _run_polled(jobs, progress, done_samples, total, stop_flag, workers)
     for members, packed in packs:
         stats[members] = _vectorize.lane_stats(packed)
+        if flight_rows is not None and packed.engine.streamed:
+            flight_rows[members] = _vectorize.lane_memory(packed)
     return left
 
 

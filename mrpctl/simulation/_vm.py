@@ -136,9 +136,16 @@ class VirtualMachineEngine:
         inertia = inertia_values(spacecraft, self.inertia)
         constants = list(inertia)
         if delay is not None:
-            raise CodegenError("a time-varying delay needs the compiled engine (a C compiler)")
-        if self.flight and sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0):
-            raise CodegenError("sensor noise in the flight loop needs the compiled engine (a C compiler)")
+            raise CodegenError(
+                "delay: a time-varying delay needs the compiled engine (install a C compiler: gcc or cc, or set CC); "
+                "the virtual machine runs the constant delay only"
+            )
+        if self.flight and sensor is not None and not sensor.ideal:
+            # the virtual machine's flight sample has no sensor ports: noise and bias would be dropped
+            raise CodegenError(
+                "sensor: attitude/rate noise and a gyro bias need the compiled engine (install a C compiler: gcc or "
+                f"cc, or set CC); the virtual machine runs an ideal sensor only, got {sensor}"
+            )
         if self.flight:
             memory0 = flight_memory(x0, np.ascontiguousarray(history, dtype=float), self.d)  # type: ignore[assignment]
             constants.append(NO_FLIGHT_OPTIONS if flight_options is None else flight_options)

@@ -12,6 +12,7 @@ import numpy as np
 from mrpctl._validation import readonly, sealed
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE
+from mrpctl.loop import PREDICTOR_MEMORY_SIZE
 from mrpctl.simulation._engine import RunOutput
 from mrpctl.simulation._stats import DIVERGENCE_BOUND, Metrics
 from mrpctl.spacecraft import Spacecraft
@@ -87,6 +88,9 @@ class SimulationResult(_Conversions):
     peak_command : numpy.ndarray or None
         Flight loop: (4,) max over the run of the *commanded* |u_c,i| per axis and of |u_c|
         (N m), before the actuator limits; None otherwise.
+    predictor : mrpctl.Predictor or None
+        The predictor controller of the run (the flight-loop fields above are then reported too);
+        None for the plain delayed law.
     spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
         The inputs of the run.
     """
@@ -119,6 +123,7 @@ class SimulationResult(_Conversions):
     keep_every: int | None = 1
     saturated_fraction: float | None = None
     peak_command: np.ndarray | None = field(default=None, repr=False)
+    predictor: Any = None
 
     @property
     def converged(self) -> bool:
@@ -157,6 +162,9 @@ class SimulationResult(_Conversions):
                 f"Simulation {self.t_final:g} s, tau = {self.tau:g} s ({self.delay_samples} samples at "
                 f"{self.rate:g} Hz), history {history}, RK4 x{self.substeps}, {kept} kept",
                 f"  rule         {self.rule}",
+            )
+            + (() if self.predictor is None else (f"  predictor    {self.predictor}",))
+            + (
                 f"  switches     {self.switch_count}{first}{last}",
                 f"  sign flips   u1 {self.sign_flips[0]}, u2 {self.sign_flips[1]}, u3 {self.sign_flips[2]}",
                 f"  max |sigma|  {self.max_sigma:.6f}",
@@ -197,7 +205,7 @@ def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: d
         settling = settle_index / rate if settle_index < n else None
     first, last = metrics.first_switch_index, metrics.last_switch_index
     flight: dict[str, Any] = {}
-    if output.memory is not None and output.memory.size == FLIGHT_MEMORY_SIZE:
+    if output.memory is not None and output.memory.size in (FLIGHT_MEMORY_SIZE, PREDICTOR_MEMORY_SIZE):
         flight = dict(saturated_fraction=float(output.memory[5]) / valid, peak_command=readonly(output.memory[6:10]))
     return SimulationResult(
         t=sealed(t),
@@ -274,6 +282,12 @@ class BatchResult(_Conversions):
         (N,) max |σ| over the run.
     peak_torque : numpy.ndarray
         (N,) max over the run of |u|_∞ (N m).
+    saturated_fraction : numpy.ndarray or None
+        Flight loop (``rule=Hysteretic(...)``): (N,) fraction of each run's samples at which a
+        torque limit acted (NaN for a run of another rule); None when no run is a flight run.
+    peak_command : numpy.ndarray or None
+        Flight loop: (N, 4) max over each run of the *commanded* |u_c,i| per axis and of |u_c|
+        (N m), before the actuator limits (NaN rows for runs of another rule); None otherwise.
     runs : tuple of SimulationResult or None
         The full runs when ``trajectories=True`` was asked for.
     rate, t_final, substeps, history
@@ -299,6 +313,8 @@ class BatchResult(_Conversions):
     history: Any = field(repr=False)
     spacecraft: tuple[Spacecraft, ...] = field(default=(), repr=False)
     runs: tuple[SimulationResult, ...] | None = field(default=None, repr=False)
+    saturated_fraction: np.ndarray | None = field(default=None, repr=False)
+    peak_command: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.switch_count)
@@ -328,7 +344,14 @@ class BatchResult(_Conversions):
         runs = None
         if all(b.runs is not None for b in batches):
             runs = tuple(run for b in batches for run in (b.runs or ()))
+        flight: dict[str, Any] = {}
+        if any(b.saturated_fraction is not None for b in batches):  # NaN rows for batches without flight runs
+            flight["saturated_fraction"] = readonly(
+                np.concatenate([_or_nan(b.saturated_fraction, (len(b),)) for b in batches])
+            )
+            flight["peak_command"] = readonly(np.concatenate([_or_nan(b.peak_command, (len(b), 4)) for b in batches]))
         return cls(
+            **flight,
             **arrays,
             rules=tuple(rule for b in batches for rule in b.rules),
             rate=first.rate,
@@ -364,10 +387,22 @@ class BatchResult(_Conversions):
         )
 
 
+def _or_nan(values: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    return np.full(shape, np.nan) if values is None else values
+
+
 def assemble_batch(
-    stats: np.ndarray, *, n: int, rate: float, common: dict[str, Any], runs: list[SimulationResult] | None
+    stats: np.ndarray,
+    *,
+    n: int,
+    rate: float,
+    common: dict[str, Any],
+    runs: list[SimulationResult] | None,
+    flight_memory: np.ndarray | None = None,
 ) -> BatchResult:
-    """The :class:`BatchResult` from the (N, stats) rows of the runs."""
+    """The :class:`BatchResult` from the (N, stats) rows of the runs (and the (N, 10) flight
+    memories after the runs: n_sat at 5, peak |u_c,i| at 6:9, peak |u_c| at 9; NaN rows for
+    runs of other rules)."""
     metrics = [Metrics.from_stats(row) for row in stats]
     n_runs = len(metrics)
     diverged = np.array([m.diverged for m in metrics], dtype=bool)
@@ -375,7 +410,13 @@ def assemble_batch(
     settled = ~diverged & (settle < n)
     first = np.array([m.first_switch_index for m in metrics], dtype=float)
     last = np.array([m.last_switch_index for m in metrics], dtype=float)
+    flight: dict[str, Any] = {}
+    if flight_memory is not None:
+        valid = np.array([m.valid_samples(n) for m in metrics], dtype=float)  # as assemble_run divides
+        flight["saturated_fraction"] = readonly(flight_memory[:, 5] / valid)
+        flight["peak_command"] = readonly(flight_memory[:, 6:10])
     return BatchResult(
+        **flight,
         switch_count=readonly([m.switch_count for m in metrics], np.int64),
         first_switch_time=readonly(np.where(first >= 0, first / rate, np.nan)),
         last_switch_time=readonly(np.where(last >= 0, last / rate, np.nan)),

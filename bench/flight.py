@@ -1,0 +1,156 @@
+"""Benchmark of the flight loop's options on the paper case (issue 10's bench goal); prints one table.
+
+The 60 s paper case (the paper's spacecraft, gain and initial state, tau = 0.5 s, 1 kHz,
+60 001 samples, ``keep_every=None``) through :func:`mrpctl.simulate`:
+
+* ``plain``: the paper's loop with ``OnCurrent`` (the reference of the ratios),
+* ``Hysteretic(0)``: the flight sample with no option,
+* each option alone with the rule ``Hysteretic.from_alpha(1.2)``: torque limits, a constant
+  disturbance, sensor noise (0.01 rad, 1e-4 rad/s, a gyro bias), a 0.4–0.5 s jitter,
+* ``all``: every option at once;
+
+plus, for the noise, the cost of generating it alone (``SensorModel.noise(0, n)``) and, for the
+jitter, of the newest-arrived schedule (``newest_arrived_slice``), so that the table says where
+the time goes. All in this process, the variants interleaved round by round, each timed by the
+process's CPU time (``time.process_time``: the least disturbed by other jobs on a shared
+machine); each entry is the minimum and the median over the rounds, and the ratio is to the
+plain run's minimum of the same process.
+
+A second table: ``simulate_batch`` of 32 perturbations of the paper case with every option, metrics
+only, on the lane engine (the default: W runs per C call, the noise and the jitter schedule
+generated once per slice for the W lanes) and on the scalar engine (``_simulate._LANES =
+False``: one run per C call, the noise per run), runs/s in CPU time on one thread.
+
+Run: ``.venv/bin/python bench/flight.py [rounds]`` (default 9 rounds; about a minute).
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from mrpctl import OnCurrent, paper, simulate, simulate_batch
+from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel, newest_arrived_slice
+from mrpctl.simulation import _simulate
+
+T_FINAL = 60.0
+TAU = 0.5
+RATE = 1000.0
+N = 60_001
+SENSOR = SensorModel(attitude_noise=0.01, rate_noise=1e-4, gyro_bias=[1e-4, -2e-4, 5e-5], seed=1)
+ACTUATOR = ActuatorModel([60.0, 60.0, 60.0], norm_max=80.0)
+DISTURBANCE = Disturbance([1e-3, -2e-3, 5e-4])
+JITTER = DelayModel.jitter(0.4, 0.5, seed=2)
+RULE = Hysteretic.from_alpha(1.2)
+
+
+def _run(rule: object = RULE, **options: object) -> Callable[[], object]:
+    def call() -> object:
+        return simulate(
+            paper.SPACECRAFT,
+            paper.GAIN,
+            paper.INITIAL_STATE,
+            tau=TAU,
+            rule=rule,  # type: ignore[arg-type]
+            t_final=T_FINAL,
+            rate=RATE,
+            keep_every=None,
+            **options,  # type: ignore[arg-type]
+        )
+
+    return call
+
+
+def variants() -> dict[str, Callable[[], object]]:
+    """The measured calls, in table order."""
+    return {
+        "plain (OnCurrent)": _run(OnCurrent()),
+        "Hysteretic(0), no option": _run(Hysteretic(0.0)),
+        "alpha 1.2, no option": _run(),
+        "alpha 1.2 + actuator limits": _run(actuator=ACTUATOR),
+        "alpha 1.2 + disturbance": _run(disturbance=DISTURBANCE),
+        "alpha 1.2 + sensor noise": _run(sensor=SENSOR),
+        "alpha 1.2 + jitter 0.4-0.5 s": _run(delay=JITTER),
+        "all options": _run(actuator=ACTUATOR, disturbance=DISTURBANCE, sensor=SENSOR, delay=JITTER),
+        "  (noise generation alone)": lambda: SENSOR.noise(0, N),
+        "  (jitter schedule alone)": lambda: newest_arrived_slice(JITTER, RATE, 500, 0, N, -501),
+    }
+
+
+def main() -> None:
+    rounds = int(sys.argv[1]) if len(sys.argv) > 1 else 9
+    measures = variants()
+    for call in measures.values():  # compile (or load) every engine first
+        call()
+    times: dict[str, list[float]] = {label: [] for label in measures}
+    for _ in range(rounds):
+        for label, call in measures.items():
+            start = time.process_time()
+            call()
+            times[label].append(time.process_time() - start)
+    plain = min(times["plain (OnCurrent)"])
+    print(
+        f"paper case, {T_FINAL:g} s at {RATE:g} Hz ({N} samples), keep_every=None; process CPU time, "
+        f"{rounds} interleaved rounds; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+    )
+    print(f"{'variant':34s} {'min ms':>8s} {'median ms':>10s} {'x plain':>8s}")
+    for label, values in times.items():
+        best = min(values)
+        print(f"{label:34s} {1e3 * best:8.2f} {1e3 * statistics.median(values):10.2f} {best / plain:8.2f}")
+    batch_table(max(3, rounds // 3))
+
+
+def batch_table(rounds: int, runs: int = 32) -> None:
+    """simulate_batch with every option: the lane engine against the scalar engine, CPU time, one thread."""
+    rng = np.random.default_rng(3)
+    x0 = np.array(paper.INITIAL_STATE) + np.hstack((rng.normal(0, 0.01, (runs, 3)), rng.normal(0, 0.005, (runs, 3))))
+
+    def batch(lanes: bool) -> object:
+        _simulate._LANES = lanes
+        try:
+            return simulate_batch(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                x0,
+                tau=TAU,
+                rule=RULE,
+                t_final=T_FINAL,
+                rate=RATE,
+                threads=1,
+                actuator=ACTUATOR,
+                disturbance=DISTURBANCE,
+                sensor=SENSOR,
+                delay=JITTER,
+            )
+        finally:
+            _simulate._LANES = True
+
+    best = {"lane engine": np.inf, "scalar engine": np.inf}
+    results = {}
+    for _ in range(rounds):
+        for label, lanes in (("lane engine", True), ("scalar engine", False)):
+            start = time.process_time()
+            results[label] = batch(lanes)
+            best[label] = min(best[label], time.process_time() - start)
+    same = all(
+        np.array_equal(
+            np.asarray(getattr(results["lane engine"], name)),
+            np.asarray(getattr(results["scalar engine"], name)),
+            equal_nan=True,
+        )
+        for name in ("switch_count", "max_sigma", "peak_torque", "saturated_fraction", "peak_command")
+    )
+    print()
+    print(f"simulate_batch, {runs} paper-case perturbations, every option, metrics only, 1 thread, best of {rounds}")
+    for label, seconds in best.items():
+        print(f"{label:34s} {runs / seconds:8.1f} runs/s {seconds / best['lane engine']:8.2f} x the lane engine's time")
+    print(f"lane engine = scalar engine on every metric: {same}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,113 @@
+"""The work of one chunk, in its own light module: what a Dask worker imports to run a task.
+
+Importing this module (and the package ``mrpctl.campaign``, whose names are bound lazily) does
+not import xarray, zarr or matplotlib: a worker imports what it computes with and nothing else.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mrpctl.campaign.sampling import RunInputs, run_inputs
+from mrpctl.campaign.simulation import simulate_runs
+from mrpctl.campaign.spec import CampaignSpec, FlightOptions, parse_campaign
+from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
+from mrpctl.switching import SwitchingRule
+
+__all__ = ["FLIGHT_INPUTS", "chunk_on_worker", "run_models", "simulate_chunk"]
+
+
+#: The per-run inputs of the flight loop stored with each run (besides the rule index and case).
+FLIGHT_INPUTS = (
+    "delta",
+    "u_max",
+    "disturbance",
+    "attitude_noise",
+    "rate_noise",
+    "gyro_bias",
+    "noise_seed",
+    "jitter_seed",
+)
+
+
+def run_models(spec: CampaignSpec, inputs: RunInputs, j: int) -> tuple[SwitchingRule, dict[str, Any] | None]:
+    """Row j's rule object and flight models (``actuator``, ``disturbance``, ``sensor``, ``delay`` of
+    :func:`mrpctl.simulate_batch`; None without the flight loop), rebuilt from its stored inputs."""
+    rule = spec.rule_list[int(inputs.rule[j])]
+    if isinstance(rule, Hysteretic) and spec.flight_dispersion.delta is not None:
+        rule = Hysteretic(float(inputs.delta[j]))
+    if not spec.uses_flight:
+        return rule, None
+    options = spec.flight if spec.flight is not None else FlightOptions()
+    u_max = inputs.u_max[j]
+    actuator = None
+    if np.all(np.isfinite(u_max)):
+        norm = options.actuator.norm_max if options.actuator is not None else None
+        mode = options.actuator.mode if options.actuator is not None else Saturation.SCALE
+        actuator = ActuatorModel(np.array(u_max), norm, mode)
+    sensor = SensorModel(
+        float(inputs.attitude_noise[j]),
+        float(inputs.rate_noise[j]),
+        np.array(inputs.gyro_bias[j]),
+        seed=int(inputs.noise_seed[j]),
+    )
+    delay = None
+    if options.jitter is not None:
+        delay = DelayModel.jitter(options.jitter[0], options.jitter[1], seed=int(inputs.jitter_seed[j]))
+    models = {
+        "actuator": actuator,
+        "disturbance": np.array(inputs.disturbance[j]),
+        "sensor": sensor,
+        "delay": delay,
+    }
+    return rule, models
+
+
+def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | None = None) -> dict[str, np.ndarray]:
+    """Inputs and metrics of runs [start, stop) of ``spec`` (what one chunk stores).
+
+    Returns
+    -------
+    dict of numpy.ndarray
+        The arrays of :data:`mrpctl.campaign.store.INPUTS` and
+        :data:`mrpctl.campaign.simulation.METRICS`, one row per run.
+    """
+    inputs = run_inputs(spec, start, stop)
+    base = spec.base
+    K = inputs.gain_scale[:, None, None] * base.K[None]
+    per_run = [run_models(spec, inputs, j) for j in range(len(inputs))]
+    metrics = simulate_runs(
+        inputs.inertia,
+        K,
+        inputs.x0,
+        inputs.tau,
+        [rule for rule, _ in per_run],
+        t_final=base.t_final,
+        rate=base.rate,
+        history=base.history,
+        substeps=base.substeps,
+        threads=threads,
+        peak_torque=spec.peak_torque,
+        flight=[models for _, models in per_run],
+    )
+    sigma_norm = np.linalg.norm(inputs.sigma0, axis=1)
+    return {
+        "sigma0": np.array(inputs.sigma0),
+        "omega0": np.array(inputs.omega0),
+        "inertia": np.array(inputs.inertia),
+        "tau": np.array(inputs.tau),
+        "gain_scale": np.array(inputs.gain_scale),
+        "initial_angle": 4.0 * np.arctan(sigma_norm),
+        "initial_rate": np.linalg.norm(inputs.omega0, axis=1),
+        "rule": np.array(inputs.rule),
+        "case": np.array(inputs.case),
+        **{name: np.array(getattr(inputs, name)) for name in FLIGHT_INPUTS},
+        **metrics,
+    }
+
+
+def chunk_on_worker(source: dict[str, Any], name: str, start: int, stop: int) -> dict[str, np.ndarray]:
+    """The Dask task: rebuild the spec from plain data (cheap to ship) and run the chunk on one thread."""
+    return simulate_chunk(parse_campaign(source, name=name), start, stop, threads=1)

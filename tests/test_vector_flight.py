@@ -1,0 +1,144 @@
+"""Speed work on the flight loop (issue 10's bench goal, issue 12's lane engine): same numbers, less time."""
+
+from __future__ import annotations
+
+import ctypes
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from mrpctl import _compile, _vectorize
+from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.flight import NOISE_BLOCK, DelayModel, SensorModel
+
+
+def _whole_blocks(seed: int, stream: int, blocks: int) -> np.ndarray:
+    """The documented stream, written out independently: block b is Philox(SeedSequence(seed, (stream, b)))."""
+    out = []
+    for b in range(blocks):
+        generator = np.random.Generator(np.random.Philox(np.random.SeedSequence(seed, spawn_key=(stream, b))))
+        out.append(generator.standard_normal((NOISE_BLOCK, 3)))
+    return np.vstack(out)
+
+
+# ============================================================================ noise in place
+def test_noise_rows_are_the_documented_streams_bit_for_bit_in_any_slicing():
+    sensor = SensorModel(attitude_noise=0.01, rate_noise=2e-4, seed=5)
+    n = 2 * NOISE_BLOCK + 77
+    attitude = 0.01 * _whole_blocks(5, 0, 3)[:n]
+    rate = 2e-4 * _whole_blocks(5, 1, 3)[:n]
+    buffer = np.full((NOISE_BLOCK + 10, 6), np.nan)  # reused slice after slice, larger than a slice
+    cuts = [0, 1, 300, NOISE_BLOCK - 1, NOISE_BLOCK + 2, 2 * NOISE_BLOCK, n]
+    for a, b in itertools.pairwise(cuts):
+        rows = sensor.noise_rows(a, b, out=buffer)
+        assert rows.shape == (b - a, 6) and np.shares_memory(rows, buffer)
+        assert np.array_equal(rows[:, 0:3], attitude[a:b]) and np.array_equal(rows[:, 3:6], rate[a:b])
+        theta, eta = sensor.noise(a, b)
+        assert np.array_equal(theta, attitude[a:b]) and np.array_equal(eta, rate[a:b])
+
+
+def test_noise_rows_of_a_zero_sigma_are_zero_and_a_bad_buffer_is_refused():
+    rows = SensorModel(rate_noise=1e-3, seed=2).noise_rows(10, 20, out=np.full((10, 6), np.nan))
+    assert not np.any(rows[:, 0:3]) and np.all(rows[:, 3:6] != 0)
+    with pytest.raises(DimensionError, match="out"):
+        SensorModel(rate_noise=1e-3).noise_rows(0, 20, out=np.empty((10, 6)))
+    with pytest.raises(SpecificationError, match="C-contiguous"):
+        SensorModel(rate_noise=1e-3).noise_rows(0, 5, out=np.empty((6, 10)).T)
+
+
+def test_jitter_prefixes_of_a_block_are_the_whole_block_s_integers():
+    model = DelayModel.jitter(0.01, 0.05, seed=4)
+    generator = np.random.Generator(np.random.Philox(np.random.SeedSequence(4, spawn_key=(2, 0))))
+    whole = generator.integers(10, 50, size=NOISE_BLOCK, endpoint=True)
+    assert np.array_equal(model.samples(1000.0, 0, 123), whole[:123])
+    assert np.array_equal(model.samples(1000.0, 100, 2000), whole[100:2000])
+
+
+# ============================================================================ fmax/fmin inlined
+def test_inlined_fmax_fmin_return_what_the_libm_returns_on_ties_nans_and_infinities(tmp_path):
+    flags, source = _vectorize.inline_min_max()
+    if not flags:
+        pytest.skip("this libm's fmax/fmin match no known tie rule: the calls stay")
+    if _compile.find_compiler() is None:
+        pytest.skip("no C compiler")
+    code = (
+        "#include <math.h>\n"
+        + source
+        + (
+            "double probe_fmax(double x, double y) { return fmax(x, y); }\n"
+            "double probe_fmin(double x, double y) { return fmin(x, y); }\n"
+        )
+    )
+    built = _compile.compile_source(
+        code, "probe_min_max", flags=(*_compile.SIMULATION_FLAGS, *flags), directory=tmp_path
+    )
+    library = ctypes.CDLL(str(built))
+    libm = ctypes.CDLL(None)
+    values = [0.0, -0.0, 1.0, -1.0, 1e-300, math.inf, -math.inf, math.nan, 2.5]
+    for name in ("fmax", "fmin"):
+        inline, reference = getattr(library, "probe_" + name), getattr(libm, name)
+        for function in (inline, reference):
+            function.restype = ctypes.c_double
+            function.argtypes = [ctypes.c_double, ctypes.c_double]
+        for x, y in itertools.product(values, repeat=2):
+            got, want = inline(x, y), reference(x, y)
+            if math.isnan(want):
+                assert math.isnan(got)
+            else:
+                assert np.float64(got).view(np.int64) == np.float64(want).view(np.int64), (name, x, y)
+
+
+# ============================================================================ no C compiler
+def test_the_virtual_machine_refuses_noise_bias_and_jitter_clearly_and_runs_an_ideal_sensor(monkeypatch):
+    """Without a compiler the flight sample has no sensor ports: it must refuse, never drop the noise."""
+    import warnings
+
+    from mrpctl import paper, simulate
+    from mrpctl.errors import CodegenError
+    from mrpctl.flight import Hysteretic
+    from mrpctl.simulation import _engine, _simulate
+
+    compiled = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.05, rule=Hysteretic(0.1), t_final=0.3)
+    monkeypatch.setattr(_compile, "find_compiler", lambda: None)
+    monkeypatch.setattr(_simulate, "find_compiler", lambda: None)
+    _engine.clear_engines()
+    try:
+        common = dict(tau=0.05, rule=Hysteretic(0.1), t_final=0.3)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", _compile.CompilerWarning)
+            for option, message in (
+                (dict(sensor=SensorModel(attitude_noise=1e-3)), "sensor: .*compiled engine"),
+                (dict(sensor=SensorModel(gyro_bias=[1e-4, 0.0, 0.0])), "sensor: .*compiled engine"),
+                (dict(tau=0.05, delay=DelayModel.jitter(0.02, 0.05)), "delay: .*compiled engine"),
+            ):
+                with pytest.raises(CodegenError, match=message):
+                    simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **{**common, **option})
+            machine = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, sensor=SensorModel(), **common)
+    finally:
+        _engine.clear_engines()
+    np.testing.assert_allclose(machine.sigma, compiled.sigma, rtol=0, atol=1e-12)
+    assert machine.switch_indices.tolist() == compiled.switch_indices.tolist()
+
+
+# ============================================================================ -march=native, keyed by the CPU
+def test_native_flags_are_this_cpu_s_fingerprint_and_key_the_cache_per_cpu(tmp_path):
+    if _compile.find_compiler() is None:
+        pytest.skip("no C compiler")
+    flags = _vectorize.native_isa_flags()
+    if not flags:
+        pytest.skip("this compiler does not resolve -march=native")
+    assert "-march=native" not in flags and any(flag.startswith("-march=") for flag in flags)
+    cpu = _vectorize._cpu_flags()  # /proc/cpuinfo, independent of the compiler
+    for feature in ("avx2", "avx512f", "sse4_2", "fma"):
+        if cpu:  # the compiler enables exactly what the CPU reports
+            flag = "-m" + feature.replace("_", ".")
+            assert (flag in flags) == (feature in cpu), feature
+    # a library built for another CPU (another fingerprint) is another file of the cache
+    code = "int probe_cpu(void) { return 7; }\n"
+    other = tuple("-march=x86-64-v2" if flag.startswith("-march=") else flag for flag in flags)
+    here = _compile.compile_source(code, "probe_cpu", flags=(*_compile.DEFAULT_FLAGS, *flags), directory=tmp_path)
+    there = _compile.compile_source(code, "probe_cpu", flags=(*_compile.DEFAULT_FLAGS, *other), directory=tmp_path)
+    assert here != there and here.exists() and there.exists()
+    assert _vectorize.host_isa_flags() == flags or "MRPCTL_LANES_ISA" in __import__("os").environ
