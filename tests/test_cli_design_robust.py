@@ -97,7 +97,10 @@ def test_no_robust_gain_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pyt
 
     real = robust.synthesize_robust_pd
 
+    orders: list[object] = []
+
     def infeasible(*args: object, **kwargs: object) -> object:
+        orders.append(kwargs["order"])
         # The real function, made to find nothing: every certificate test reports "not certified".
         monkeypatch.setattr(robust, "certify_polytope", lambda *a, **k: _NotCertified())
         return real(*args, **kwargs)  # type: ignore[arg-type]
@@ -105,6 +108,8 @@ def test_no_robust_gain_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pyt
     monkeypatch.setattr(robust, "synthesize_robust_pd", infeasible)
     assert main([*BASE, "--tau", "0.5", "--inertia-tolerance", "0.2"]) == USER_ERROR
     _one_line_error(capsys, "no robustly certified gains", "inertia +-20 %", "no omega_n down to 1 %")
+    assert main([*BASE, "--tau", "0.5", "--inertia-tolerance", "0.2", "--order", "3"]) == USER_ERROR
+    assert orders == [2, 3]  # the robust default order is 2; an explicit --order 3 is kept
 
 
 class _NotCertified:
