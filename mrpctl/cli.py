@@ -1378,7 +1378,8 @@ def _add_verify(commands: Any) -> None:
         "--inertia-tolerance",
         type=float,
         metavar="TOL",
-        help="every inertia with J_ii within +-TOL (relative): a vertex-dependent LK functional (common one above 8 vertices)",
+        help="every inertia with J_ii within +-TOL (relative): a vertex-dependent LK functional "
+        "(a common one above 8 vertices)",
     )
     flown.add_argument(
         "--product-bound", type=float, default=0.0, metavar="P", help="with --inertia-tolerance: |J_ij| <= P kg m^2"
