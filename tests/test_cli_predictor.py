@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -154,3 +155,17 @@ def test_export_manifest_of_a_predictor_scenario(capsys: pytest.CaptureFixture[s
     plain = json.loads((tmp_path / "plain" / "manifest.json").read_text(encoding="utf-8"))["predictor"]
     np.testing.assert_array_equal(plain["model_inertia"], J)
     assert plain["alpha"] == 1.0 and plain["actuator"] is None
+
+
+@needs_compiler
+def test_readme_delay_compensation_example(capsys: pytest.CaptureFixture[str]) -> None:
+    """The README's "Delay compensation" block runs as written and prints what its comments say."""
+    section = README.split("## Delay compensation", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    scope: dict[str, object] = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    out = capsys.readouterr().out
+    assert "+/-19.9020%" in out
+    run = scope["run"]
+    assert run.converged and run.switch_count == 0  # type: ignore[attr-defined]
+    assert f"settling time {run.settling_time:.3f} s" in out and round(run.settling_time, 3) == 3.003  # type: ignore[attr-defined]
