@@ -577,6 +577,11 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
     bit for bit; the gain is written as the full 3×6 K, with the per-axis loop gains
     K₁, K₂ as a comment when they are diagonal.
     """
+    if isinstance(scenario.rule, OnPredicted) and scenario.predictor is None:
+        raise SpecificationError(
+            "rule: 'on-predicted' needs the scenario's predictor (the controller's model) to be written as a "
+            "[predictor] table; set Scenario.predictor = mrpctl.Predictor(model=...)"
+        )
     k1, k2 = pd_from_gain(scenario.spacecraft, scenario.K)
     inertia = scenario.spacecraft.inertia
     inertia_value = np.diag(inertia) if scenario.spacecraft.is_diagonal else inertia
@@ -705,7 +710,9 @@ omega = [0.3, 0.0, 0.0]  # body rates (rad/s)
 [rule]
 # Shadow-set switching: "none", "on-current" (|sigma(t)| >= 1), "on-delayed" (|sigma(t - tau)| >= 1),
 # "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1), or the
-# controller-side set selection of the loop as flown, "hysteretic" (delta in [0, 1) or alpha >= 1).
+# controller-side set selection of the loop as flown, "hysteretic" (delta in [0, 1) or alpha >= 1),
+# or "on-predicted" (the predictor controller; alpha >= 1, inf: never switch; needs a [predictor]
+# table: empty for the exact model, inertia = [...] or inertia_error = e; see predictor-paper).
 type = "delay-aware"
 
 # The loop as flown (only with type = "hysteretic"; see `mrpctl simulate flight-paper`), all optional:

@@ -157,11 +157,14 @@ def test_export_manifest_of_a_predictor_scenario(capsys: pytest.CaptureFixture[s
     assert plain["alpha"] == 1.0 and plain["actuator"] is None
 
 
+@pytest.mark.slow  # about 8 s: the exact 1 kHz margin search of the example
 @needs_compiler
 def test_readme_delay_compensation_example(capsys: pytest.CaptureFixture[str]) -> None:
     """The README's "Delay compensation" block runs as written and prints what its comments say."""
     section = README.split("## Delay compensation", 1)[1]
-    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    block = re.search(r"```python\n(.*?)```", section, re.S)
+    assert block is not None
+    code = block.group(1)
     scope: dict[str, object] = {}
     exec(compile(code, "README.md", "exec"), scope)
     out = capsys.readouterr().out

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import math
 import tomllib
+from typing import Any
 
 import numpy as np
 import pytest
@@ -29,7 +30,7 @@ from mrpctl.scenario import (
 needs_compiler = pytest.mark.skipif(find_compiler() is None, reason="no C compiler on this machine")
 
 J = np.diag([140.0, 100.0, 80.0])
-BASE = {
+BASE: dict[str, Any] = {
     "tau": 0.5,
     "rate": 100.0,
     "t_final": 2.0,
@@ -155,7 +156,8 @@ def test_shipped_predictor_paper_is_the_study_case() -> None:
     np.testing.assert_allclose(scenario.K, fast, rtol=1e-14, atol=0.0)
     np.testing.assert_allclose(scenario.x0, X0, rtol=0.0, atol=1e-6)  # x0 from Phi = 171.6913 deg
     assert (scenario.tau, scenario.rate, scenario.t_final) == (TAU, RATE, 60.0)
-    assert scenario.spacecraft == paper.SPACECRAFT and scenario.predictor.model == paper.SPACECRAFT
+    assert scenario.predictor is not None and scenario.predictor.model == paper.SPACECRAFT
+    assert scenario.spacecraft == paper.SPACECRAFT
     assert scenario.rule == OnPredicted(1.0) and scenario.history == "constant"
     assert "predictor" in str(scenario).lower()
 
@@ -190,3 +192,12 @@ def test_shipped_predictor_paper_runs_and_settles() -> None:
     assert not result.diverged and result.converged
     assert result.switch_count == 0 and result.max_sigma < 1.0
     assert result.settling_time == pytest.approx(0.995, abs=1.5e-3)
+
+
+def test_scenario_toml_refuses_on_predicted_without_a_model() -> None:
+    """A file it could not read back is never written (mrpctl design --rule on-predicted --toml goes through here)."""
+    from dataclasses import replace
+
+    scenario = replace(parse_scenario(BASE), predictor=None)
+    with pytest.raises(SpecificationError, match=r"on-predicted.*\[predictor\]"):
+        scenario_toml(scenario)
