@@ -31,6 +31,7 @@ from mrpctl.scenario import (
     STARTER_SCENARIO,
     Scenario,
     load_scenario,
+    predictor_model,
     resolve_scenario,
     rule_from_name,
     rule_name,
@@ -306,12 +307,34 @@ def _scenario_from_args(args: argparse.Namespace, *, file: Path | str | None) ->
     return replace(base, **changes)
 
 
+def _predictor_given(args: argparse.Namespace) -> list[str]:
+    """The predictor options given on the command line (``simulate`` and ``export`` have them)."""
+    options = (
+        ("--predictor", getattr(args, "predictor", False) or None),
+        ("--predictor-inertia", getattr(args, "predictor_inertia", None)),
+        ("--predictor-error", getattr(args, "predictor_error", None)),
+    )
+    return [option for option, value in options if value is not None]
+
+
 def _apply_overrides(scenario: Scenario, args: argparse.Namespace) -> Scenario:
+    from mrpctl.predictor import OnPredicted
+
     changes: dict[str, Any] = {}
+    predictor_options = _predictor_given(args)
     if getattr(args, "rule", None) is not None:
         changes["rule"] = rule_from_name(args.rule, eps=args.eps, alpha=args.alpha)
+    elif (
+        predictor_options
+        and getattr(args, "hysteresis", None) is None
+        and (args.alpha is not None or not isinstance(scenario.rule, OnPredicted))
+    ):
+        # A predictor option selects the rule 'on-predicted' (alpha from --alpha, default 1), as --hysteresis does
+        if args.eps is not None:
+            raise SpecificationError(f"--eps does not apply with {predictor_options[0]} (the rule 'on-predicted')")
+        changes["rule"] = _option_value("--alpha", lambda: rule_from_name("on-predicted", alpha=args.alpha))
     elif getattr(args, "eps", None) is not None or getattr(args, "alpha", None) is not None:
-        raise SpecificationError("--eps and --alpha need --rule")
+        raise SpecificationError("--eps and --alpha need --rule (or, for the predictor's rule, --predictor)")
     for key in ("tau", "t_final", "history", "rate"):
         value = getattr(args, key, None)
         if value is not None:
@@ -337,9 +360,16 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
     scenario's own models field by field (or add them); every model needs that rule.
     """
     from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
+    from mrpctl.predictor import OnPredicted
 
     changes: dict[str, Any] = {}
     if args.hysteresis is not None:
+        predictor_options = _predictor_given(args)
+        if predictor_options:
+            raise SpecificationError(
+                f"--hysteresis (the hysteretic rule on the delayed measurement) and {predictor_options[0]} "
+                "(the rule on the predicted attitude) are two controllers; give one of them"
+            )
         if args.rule not in (None, "hysteretic"):
             raise SpecificationError(
                 f"--hysteresis selects the rule 'hysteretic'; it does not apply with --rule {args.rule}"
@@ -404,12 +434,12 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
         changes["tau"] = model.tau_max
     elif args.jitter_seed is not None:
         raise SpecificationError("--jitter-seed needs --jitter TMIN TMAX")
-    updated = replace(scenario, **changes) if changes else scenario
-    if updated.flight_options and not isinstance(updated.rule, Hysteretic):
+    updated = _apply_predictor_options(replace(scenario, **changes) if changes else scenario, args)
+    if updated.flight_options and not isinstance(updated.rule, Hysteretic | OnPredicted):
         given = [name for name in ("actuator", "sensor", "disturbance", "delay") if name in updated.flight_options]
         raise SpecificationError(
             f"the {', '.join(given)} model(s) apply only to the loop as flown: add --hysteresis DELTA "
-            f"(the controller-side rule), got the rule {rule_name(updated.rule)!r}"
+            f"(the controller-side rule) or --predictor, got the rule {rule_name(updated.rule)!r}"
         )
     if updated.delay is not None:
         if updated.delay.tau_max != updated.tau:
@@ -420,6 +450,64 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
         low_samples, _ = _option_value("--jitter", lambda: updated.delay.bounds(updated.rate))  # type: ignore[union-attr]
         if low_samples < 1:
             raise SpecificationError(f"--jitter: TMIN must be >= 1/rate = {1.0 / updated.rate:g} s")
+    return updated
+
+
+def _apply_predictor_options(scenario: Scenario, args: argparse.Namespace) -> Scenario:
+    """``--predictor``, ``--predictor-inertia J...`` and ``--predictor-error E...`` applied to ``scenario``,
+    then the predictor checked against the rule, the history and the delay model (one-line errors)."""
+    from mrpctl.predictor import OnPredicted, Predictor
+
+    predictor = scenario.predictor
+    given = _predictor_given(args)
+    if args.predictor_inertia is not None and args.predictor_error is not None:
+        raise SpecificationError(
+            "--predictor-inertia (the model's J) and --predictor-error (relative to the plant) both give the "
+            "controller's model; give one of them"
+        )
+    if args.predictor_inertia is not None:
+        values = args.predictor_inertia
+        if len(values) not in (3, 9):
+            raise DimensionError(
+                f"--predictor-inertia: expected 3 principal values or 9 (a 3x3 matrix, row by row; kg m^2) but "
+                f"found {len(values)}"
+            )
+        inertia = values if len(values) == 3 else np.reshape(values, (3, 3))
+        model = _option_value("--predictor-inertia", lambda: predictor_model(scenario.spacecraft, inertia=inertia))
+        predictor = Predictor(model=model)
+    elif args.predictor_error is not None:
+        errors = args.predictor_error
+        if len(errors) not in (1, 3):
+            raise DimensionError(f"--predictor-error: expected 1 or 3 relative errors but found {len(errors)}")
+        error = errors[0] if len(errors) == 1 else errors
+        model = _option_value("--predictor-error", lambda: predictor_model(scenario.spacecraft, inertia_error=error))
+        predictor = Predictor(model=model)
+    elif args.predictor:
+        predictor = Predictor(model=scenario.spacecraft)
+    updated = replace(scenario, predictor=predictor) if predictor is not scenario.predictor else scenario
+    on_predicted = isinstance(updated.rule, OnPredicted)
+    if on_predicted and updated.predictor is None:
+        raise SpecificationError(
+            "--rule on-predicted switches on the predicted attitude: add --predictor (model = plant), "
+            "--predictor-inertia J... or --predictor-error E"
+        )
+    if updated.predictor is not None and not on_predicted:
+        where = given[0] if given else "the scenario's [predictor]"
+        raise SpecificationError(
+            f"{where}: the predictor chooses its MRP set on the predicted attitude, rule 'on-predicted' "
+            f"(--rule on-predicted, --alpha A), got the rule {rule_name(updated.rule)!r}"
+        )
+    if updated.predictor is not None:
+        if updated.history != "constant":
+            raise SpecificationError(
+                f"--history {updated.history}: the predictor's model copy starts at x0; only the constant "
+                "history applies with a predictor"
+            )
+        if updated.delay is not None:
+            raise SpecificationError(
+                "--jitter does not apply with the predictor: it runs with the constant delay tau only "
+                "(its correction needs the age of each measurement)"
+            )
     return updated
 
 
@@ -468,6 +556,7 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "history": scenario.history,
         "substeps": scenario.substeps,
         "flight_models": {name: str(model) for name, model in scenario.flight_options.items()},
+        "predictor_inertia": None if scenario.predictor is None else scenario.predictor.model.inertia,
     }
 
 
@@ -889,6 +978,13 @@ def _sweep(args: argparse.Namespace) -> int:
 
     base = load_scenario(args.scenario) if args.scenario else _paper_base()
     base = _apply_overrides(base, args)
+    from mrpctl.predictor import OnPredicted
+
+    if base.predictor is not None or isinstance(base.rule, OnPredicted):
+        raise SpecificationError(
+            "sweep does not run the predictor (rule 'on-predicted') yet; use mrpctl simulate, or "
+            "mrpctl.simulate_batch(..., predictor=mrpctl.Predictor(model)) from Python"
+        )
     _check_plot_path(args.plot)
     chunk = integer("--chunk", args.chunk, minimum=1)
     values, label, runs = _sweep_runs(args, base)
@@ -1013,7 +1109,7 @@ def _export(args: argparse.Namespace) -> int:
         substeps=scenario.substeps,
         overwrite=args.overwrite,
         compile=not args.no_compile,
-        **scenario.flight_options,
+        **scenario.run_options,
     )
     if args.json:
         _print_json(
@@ -1071,7 +1167,9 @@ def _add_rule_options(parser: argparse.ArgumentParser, what: str = "override the
     parser.add_argument("--rule", choices=sorted(RULE_NAMES), help=what)
     parser.add_argument("--eps", type=float, help="boundary layer thickness (with --rule boundary-layer)")
     parser.add_argument(
-        "--alpha", type=float, help="switching threshold >= 1 (with --rule delay-aware or hysteretic; default 1)"
+        "--alpha",
+        type=float,
+        help="switching threshold >= 1 (with --rule delay-aware, hysteretic or on-predicted; default 1)",
     )
 
 
@@ -1119,6 +1217,25 @@ def _add_flight_options(parser: argparse.ArgumentParser) -> None:
         help="seeded random delay uniform over the whole periods in [TMIN, TMAX] (s); sets tau = TMAX",
     )
     flown.add_argument("--jitter-seed", type=int, help="seed (>= 0) of the delay jitter (default 0)")
+    predicted = parser.add_argument_group(
+        "delay compensation (design/predictor.md): u = K x_hat, the state predicted by the controller's model; "
+        "each option selects the rule on-predicted (--alpha A: switch when |sigma_hat| >= A, default 1; inf: never)"
+    )
+    predicted.add_argument("--predictor", action="store_true", help="the predictor controller, model = the plant")
+    predicted.add_argument(
+        "--predictor-inertia",
+        type=float,
+        nargs="+",
+        metavar="J",
+        help="the predictor with this model inertia: 3 principal values or 9 (3x3, row by row; kg m^2)",
+    )
+    predicted.add_argument(
+        "--predictor-error",
+        type=float,
+        nargs="+",
+        metavar="E",
+        help="the predictor with model inertia (1 + E) J of the plant J: 1 value, or 3 per axis",
+    )
 
 
 def _add_plant_options(parser: argparse.ArgumentParser, default: str) -> None:

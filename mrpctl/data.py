@@ -3,8 +3,9 @@
 * :func:`to_xarray` / :func:`to_pandas`: a :class:`~mrpctl.simulation.SimulationResult`
   over ``time`` (and ``axis``), a :class:`~mrpctl.simulation.BatchResult` over ``run`` with
   each run's initial state and inputs.
-* :func:`save` / :func:`load`: one run with its inputs, the package versions and a seed,
-  as a NetCDF-3 file (xarray's scipy engine, no netCDF4 library needed), written
+* :func:`save` / :func:`load`: one run with its inputs (a predictor run's model inertia and
+  the flight loop's saturation metrics included), the package versions and a seed, as a
+  NetCDF-3 file (xarray's scipy engine, no netCDF4 library needed), written
   atomically (temporary file, then rename).
 * :func:`write_csv`: every n-th sample of a run, with the switches in between counted.
 """
@@ -59,6 +60,8 @@ def _rule(fields: dict[str, Any]) -> Any:
         return rule_from_name(name, alpha=value)
     if name == "hysteretic":
         return rule_from_name(name, delta=value)
+    if name == "on-predicted":
+        return rule_from_name(name, alpha=value)  # alpha = inf: never switch (OnPredicted(None))
     return rule_from_name(name)
 
 
@@ -114,6 +117,20 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
         "substeps": ((), int(result.substeps)),
         "t_final": ((), float(result.t_final), {"units": "s"}),
     }
+    if result.predictor is not None:
+        data["predictor_inertia"] = (
+            ("row", "col"),
+            np.asarray(result.predictor.model.inertia),
+            {"units": "kg m^2", "long_name": "the predictor's model inertia J_m"},
+        )
+    if result.saturated_fraction is not None:
+        data["saturated_fraction"] = ((), float(result.saturated_fraction), {"long_name": "samples at a torque limit"})
+    if result.peak_command is not None:
+        data["peak_command"] = (
+            ("command",),
+            np.asarray(result.peak_command),
+            {"units": "N m", "long_name": "max commanded |u_c,i| per axis and |u_c|"},
+        )
     attrs: dict[str, Any] = {
         **_rule_fields(result.rule),
         "history": "array",
@@ -317,6 +334,16 @@ def load(path: str | Path) -> SimulationResult:
     history: Any = dataset.attrs["history"]
     if history == "array":
         history = readonly(dataset["history"].values)
+    predictor = None
+    if "predictor_inertia" in dataset:
+        from mrpctl.predictor import Predictor
+
+        predictor = Predictor(model=Spacecraft(dataset["predictor_inertia"].values))
+    flown: dict[str, Any] = {}
+    if "saturated_fraction" in dataset:
+        flown["saturated_fraction"] = float(dataset["saturated_fraction"])
+    if "peak_command" in dataset:
+        flown["peak_command"] = readonly(dataset["peak_command"].values)
     return SimulationResult(
         t=readonly(dataset["time"].values),
         sigma=readonly(dataset["sigma"].values),
@@ -344,6 +371,8 @@ def load(path: str | Path) -> SimulationResult:
         x0=readonly(dataset["x0"].values),
         t_final=float(dataset["t_final"]),
         keep_every=None if keep_every == "none" else int(keep_every),
+        predictor=predictor,
+        **flown,
     )
 
 

@@ -11,10 +11,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
+from mrpctl._validation import (
+    check_spacecraft,
+    finite_array,
+    finite_scalar,
+    integer,
+    nonnegative_scalar,
+    positive_scalar,
+    readonly,
+)
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
+from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
@@ -27,6 +36,7 @@ __all__ = [
     "Scenario",
     "load_scenario",
     "parse_scenario",
+    "predictor_model",
     "resolve_scenario",
     "rule_from_name",
     "rule_name",
@@ -43,11 +53,14 @@ RULE_NAMES = {
     "boundary-layer": BoundaryLayer,
     "delay-aware": DelayAware,
     "hysteretic": Hysteretic,
+    "on-predicted": OnPredicted,
 }
 
 _TOP_KEYS = {"name", "description", "t_final", "tau", "rate", "history", "substeps"}
 _TABLES = {"spacecraft", "gains", "initial", "rule"}
-#: Tables of the loop as flown (``[rule] type = "hysteretic"`` only), all optional.
+#: The predictor controller's table (``[rule] type = "on-predicted"`` only, and then required).
+_PREDICTOR_TABLE = "predictor"
+#: Tables of the loop as flown (``[rule] type = "hysteretic"`` or ``"on-predicted"``), all optional.
 _FLIGHT_TABLES = {"actuator", "sensor", "disturbance", "delay"}
 _KEYS = {
     "spacecraft": {"inertia"},
@@ -58,6 +71,7 @@ _KEYS = {
     "sensor": {"attitude_noise", "rate_noise", "gyro_bias", "seed"},
     "disturbance": {"torque"},
     "delay": {"tau_min", "tau_max", "seed"},
+    "predictor": {"inertia", "inertia_error"},
 }
 
 
@@ -90,10 +104,15 @@ class Scenario:
     description : str
         Free text (the paper figure it reproduces, for instance).
     actuator, sensor, disturbance, delay : optional
-        The loop as flown (``rule`` a :class:`~mrpctl.flight.Hysteretic` only):
+        The loop as flown (``rule`` a :class:`~mrpctl.flight.Hysteretic`, or an
+        :class:`~mrpctl.predictor.OnPredicted` without ``delay``):
         :class:`~mrpctl.flight.ActuatorModel`, :class:`~mrpctl.flight.SensorModel`,
         :class:`~mrpctl.flight.Disturbance` (constant), :class:`~mrpctl.flight.DelayModel`
         (seeded jitter with ``tau_max`` = ``tau``). None: not modelled.
+    predictor : Predictor or None
+        The predictor controller (``rule`` an :class:`~mrpctl.predictor.OnPredicted`, and then
+        required): u = K x̂ with x̂ predicted by the controller's model ``predictor.model``
+        (``design/predictor.md``). None: the plain delayed law u = K x(t − τ).
     """
 
     name: str
@@ -111,6 +130,7 @@ class Scenario:
     sensor: SensorModel | None = None
     disturbance: Disturbance | None = None
     delay: DelayModel | None = None
+    predictor: Predictor | None = None
 
     @property
     def flight_options(self) -> dict[str, Any]:
@@ -118,6 +138,15 @@ class Scenario:
         options: dict[str, Any] = {"actuator": self.actuator, "sensor": self.sensor, "disturbance": self.disturbance}
         options["delay"] = self.delay
         return {key: value for key, value in options.items() if value is not None}
+
+    @property
+    def run_options(self) -> dict[str, Any]:
+        """:attr:`flight_options` and, when set, ``predictor``: the optional keywords of
+        :func:`mrpctl.simulate` and :func:`mrpctl.export` for this scenario."""
+        options = self.flight_options
+        if self.predictor is not None:
+            options["predictor"] = self.predictor
+        return options
 
     def with_rule(self, rule: SwitchingRule) -> Scenario:
         """The same scenario with another switching rule."""
@@ -137,7 +166,7 @@ class Scenario:
             rate=self.rate,
             history=self.history,
             substeps=self.substeps,
-            **self.flight_options,
+            **self.run_options,
         )
 
     def __str__(self) -> str:
@@ -149,7 +178,7 @@ class Scenario:
                 f"  sigma0 = {np.round(sigma0, 6).tolist()}, omega0 = {np.round(omega0, 6).tolist()} rad/s",
                 f"  tau = {self.tau:g} s at {self.rate:g} Hz, rule {self.rule}, history {self.history}",
                 f"  t_final = {self.t_final:g} s, {self.substeps} RK4 substep(s) per sample",
-                *(f"  {value}" for value in self.flight_options.values()),
+                *(f"  {value}" for value in self.run_options.values()),
             )
         )
 
@@ -160,16 +189,18 @@ def rule_from_name(
     """The switching rule called ``name`` (one of :data:`RULE_NAMES`).
 
     ``eps`` is required by (and only allowed for) ``boundary-layer``; ``alpha`` is
-    optional for ``delay-aware`` (default 1) and ``hysteretic``; ``delta`` (the hysteresis
-    δ ∈ [0, 1) on q₀) only for ``hysteretic``, which takes δ or α = √((1 + δ)/(1 − δ)), not
-    both (default δ = 0).
+    optional for ``delay-aware`` (default 1), ``hysteretic`` and ``on-predicted`` (default 1;
+    ``inf`` or None: never switch); ``delta`` (the hysteresis δ ∈ [0, 1) on q₀) only for
+    ``hysteretic``, which takes δ or α = √((1 + δ)/(1 − δ)), not both (default δ = 0).
     """
     if name not in RULE_NAMES:
         raise SpecificationError(f"rule type must be one of {sorted(RULE_NAMES)}, got {name!r}")
     if eps is not None and name != "boundary-layer":
         raise SpecificationError(f"rule: eps applies only to 'boundary-layer', not to {name!r}")
-    if alpha is not None and name not in ("delay-aware", "hysteretic"):
-        raise SpecificationError(f"rule: alpha applies only to 'delay-aware' and 'hysteretic', not to {name!r}")
+    if alpha is not None and name not in ("delay-aware", "hysteretic", "on-predicted"):
+        raise SpecificationError(
+            f"rule: alpha applies only to 'delay-aware', 'hysteretic' and 'on-predicted', not to {name!r}"
+        )
     if delta is not None and name != "hysteretic":
         raise SpecificationError(f"rule: delta applies only to 'hysteretic', not to {name!r}")
     if name == "hysteretic":
@@ -186,7 +217,18 @@ def rule_from_name(
         return BoundaryLayer(eps=finite_scalar("eps", eps))
     if name == "delay-aware":
         return DelayAware() if alpha is None else DelayAware(alpha=finite_scalar("alpha", alpha))
+    if name == "on-predicted":
+        return _on_predicted(alpha)
     return RULE_NAMES[name]()
+
+
+def _on_predicted(alpha: Any) -> OnPredicted:
+    """``OnPredicted(alpha)``: α >= 1 (default 1); α = +inf stands for None (never switch), as in a file."""
+    if alpha is None:
+        return OnPredicted()
+    if isinstance(alpha, int | float) and not isinstance(alpha, bool) and alpha == math.inf:
+        return OnPredicted(alpha=None)
+    return OnPredicted(alpha=alpha)
 
 
 def rule_name(rule: SwitchingRule) -> str:
@@ -210,10 +252,15 @@ def _flight_tables(data: dict[str, Any], rule: SwitchingRule, tau: float, rate: 
         if not isinstance(table, dict):
             raise SpecificationError(f"[{name}] must be a table of the scenario, got {table!r}")
         _check_keys(name, table, _KEYS[name])
-        if not isinstance(rule, Hysteretic):
+        if not isinstance(rule, Hysteretic | OnPredicted):
             raise SpecificationError(
                 f"[{name}] applies only to the loop as flown: set [rule] type = 'hysteretic' "
-                f"(the controller-side rule), got {rule_name(rule)!r}"
+                f"(the controller-side rule) or 'on-predicted' (the predictor), got {rule_name(rule)!r}"
+            )
+        if name == "delay" and isinstance(rule, OnPredicted):
+            raise SpecificationError(
+                "[delay] does not apply with [rule] type = 'on-predicted': the predictor runs with the constant "
+                "delay tau only (its correction needs the age of each measurement)"
             )
         try:
             models[name] = _FLIGHT_BUILDERS[name](table, tau, rate)
@@ -268,6 +315,74 @@ def _delay(table: dict[str, Any], tau: float, rate: float) -> DelayModel:
 
 
 _FLIGHT_BUILDERS = {"actuator": _actuator, "sensor": _sensor, "disturbance": _disturbance, "delay": _delay}
+
+
+def _predictor_table(
+    data: dict[str, Any], rule: SwitchingRule, spacecraft: Spacecraft, history: str
+) -> Predictor | None:
+    """The [predictor] table as a :class:`~mrpctl.predictor.Predictor` (required exactly with 'on-predicted')."""
+    if _PREDICTOR_TABLE not in data:
+        if isinstance(rule, OnPredicted):
+            raise SpecificationError(
+                "[rule] type = 'on-predicted' needs a [predictor] table (the controller's model): empty for the "
+                "exact model (the plant's inertia), inertia = [J1, J2, J3] (or 3x3, kg m^2), or inertia_error = e "
+                "(model inertia (1 + e) J)"
+            )
+        return None
+    table = data[_PREDICTOR_TABLE]
+    if not isinstance(table, dict):
+        raise SpecificationError(f"[predictor] must be a table of the scenario, got {table!r}")
+    _check_keys(_PREDICTOR_TABLE, table, _KEYS[_PREDICTOR_TABLE])
+    if not isinstance(rule, OnPredicted):
+        raise SpecificationError(
+            f"[predictor] applies only with [rule] type = 'on-predicted' (switching on the predicted attitude), "
+            f"got {rule_name(rule)!r}"
+        )
+    if history != "constant":
+        raise SpecificationError(
+            f"[predictor] needs history = 'constant' (the model copy starts at x0), got {history!r}"
+        )
+    try:
+        return Predictor(model=predictor_model(spacecraft, table.get("inertia"), table.get("inertia_error")))
+    except (SpecificationError, DimensionError) as exc:
+        raise type(exc)(f"[predictor] {exc}") from exc
+
+
+def predictor_model(spacecraft: Spacecraft, inertia: Any = None, inertia_error: Any = None) -> Spacecraft:
+    """The controller's model of a predictor: the plant, an explicit inertia, or the plant with a relative error.
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The plant (the scenario's spacecraft).
+    inertia : array_like, optional
+        The model's inertia J_m (3 principal values or a 3x3 matrix, kg m²).
+    inertia_error : float or array_like, optional
+        Relative error e of the model: J_m = (1 + e) J for a scalar; for 3 values e_i,
+        J_m = S J S with S = diag(√(1 + e_i)) (for a diagonal J, J_m,ii = (1 + e_i) J_ii).
+        Each e > −1 (dimensionless). Not together with ``inertia``.
+
+    Notes
+    -----
+    The margin of :func:`mrpctl.predictor.inertia_mismatch_margin` is stated the other way round,
+    J = (1 + e') J_m: a uniform model error e is the plant error e' = 1/(1 + e) − 1.
+    """
+    plant = check_spacecraft(spacecraft, "spacecraft")
+    if inertia is not None and inertia_error is not None:
+        raise SpecificationError("give inertia (the model's J) or inertia_error (relative to the plant), not both")
+    if inertia is not None:
+        return Spacecraft(inertia)
+    if inertia_error is None:
+        return plant
+    errors = finite_array("inertia_error", inertia_error)
+    if errors.ndim == 0:
+        errors = np.full(3, float(errors))
+    elif errors.shape != (3,):
+        raise DimensionError(f"inertia_error: expected a scalar or 3 per-axis values but found shape {errors.shape}")
+    if np.any(errors <= -1.0):
+        raise SpecificationError(f"inertia_error: each relative error must be > -1, got {errors.tolist()}")
+    scale = np.diag(np.sqrt(1.0 + errors))
+    return Spacecraft(scale @ plant.inertia @ scale)
 
 
 def _check_keys(table: str, data: dict[str, Any], allowed: set[str]) -> None:
@@ -342,7 +457,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
 
     Unknown keys raise a :class:`~mrpctl.errors.SpecificationError` naming the key.
     """
-    _check_keys("", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES)
+    _check_keys("", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES | {_PREDICTOR_TABLE})
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")
@@ -370,6 +485,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
         raise SpecificationError(f"history must be 'constant' or 'zero-input', got {history!r}")
     substeps = integer("substeps", data.get("substeps", 1), minimum=1)
     flight = _flight_tables(data, rule, tau, rate)
+    predictor = _predictor_table(data, rule, spacecraft, history)
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
@@ -382,6 +498,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
         history=history,
         substeps=substeps,
         description=str(data.get("description", "")),
+        predictor=predictor,
         **flight,
     )
 
@@ -460,6 +577,11 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
     bit for bit; the gain is written as the full 3×6 K, with the per-axis loop gains
     K₁, K₂ as a comment when they are diagonal.
     """
+    if isinstance(scenario.rule, OnPredicted) and scenario.predictor is None:
+        raise SpecificationError(
+            "rule: 'on-predicted' needs the scenario's predictor (the controller's model) to be written as a "
+            "[predictor] table; set Scenario.predictor = mrpctl.Predictor(model=...)"
+        )
     k1, k2 = pd_from_gain(scenario.spacecraft, scenario.K)
     inertia = scenario.spacecraft.inertia
     inertia_value = np.diag(inertia) if scenario.spacecraft.is_diagonal else inertia
@@ -502,6 +624,13 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
         lines.append(
             f"delta = {_toml_value(scenario.rule.delta)}  # hysteresis on q0; alpha = {scenario.rule.alpha:.6g}"
         )
+    if isinstance(scenario.rule, OnPredicted):
+        alpha = math.inf if scenario.rule.alpha is None else scenario.rule.alpha
+        lines.append(f"alpha = {_toml_value(alpha)}  # switch when |sigma_hat| >= alpha; inf: never switch")
+    if scenario.predictor is not None:
+        model = scenario.predictor.model
+        model_inertia = np.diag(model.inertia) if model.is_diagonal else model.inertia
+        lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
     lines += _flight_toml(scenario)
     return "\n".join(lines) + "\n"
 
@@ -581,7 +710,9 @@ omega = [0.3, 0.0, 0.0]  # body rates (rad/s)
 [rule]
 # Shadow-set switching: "none", "on-current" (|sigma(t)| >= 1), "on-delayed" (|sigma(t - tau)| >= 1),
 # "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1), or the
-# controller-side set selection of the loop as flown, "hysteretic" (delta in [0, 1) or alpha >= 1).
+# controller-side set selection of the loop as flown, "hysteretic" (delta in [0, 1) or alpha >= 1),
+# or "on-predicted" (the predictor controller; alpha >= 1, inf: never switch; needs a [predictor]
+# table: empty for the exact model, inertia = [...] or inertia_error = e; see predictor-paper).
 type = "delay-aware"
 
 # The loop as flown (only with type = "hysteretic"; see `mrpctl simulate flight-paper`), all optional:

@@ -58,7 +58,9 @@ def test_examples_are_the_package_data_files() -> None:
     """One copy: examples/scenarios is the package-data folder mrpctl/scenarios (shipped in the wheel)."""
     assert EXAMPLES.resolve() == PACKAGE.resolve()
     shipped = shipped_scenarios()
-    assert set(shipped) == set(paper_scenarios()) | set(flight_scenarios()) == {p.stem for p in PACKAGE.glob("*.toml")}
+    # predictor-paper: checked against mrpctl._predictor_study in tests/test_scenario_predictor.py
+    expected = set(paper_scenarios()) | set(flight_scenarios()) | {"predictor-paper"}
+    assert set(shipped) == expected == {p.stem for p in PACKAGE.glob("*.toml")}
     assert all(path.resolve().parent == PACKAGE.resolve() for path in shipped.values())
 
 
