@@ -49,6 +49,7 @@ def blank_figures(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr("mrpctl.reproduction._figures", figures)
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook, which turns the mark into the node id's @group
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Every test that uses the paper's reproduction runs on one xdist worker (``--dist loadgroup``),
     so the 60 s runs are computed once per test session, not once per worker."""

@@ -61,13 +61,36 @@ def test_images_exist() -> None:
             assert (page.parent / link).read_bytes()[:4] == b"\x89PNG", f"{page.name}: {link}"
 
 
-@pytest.mark.parametrize("page", PAGES_WITH_CODE, ids=lambda p: p.relative_to(DOCS).as_posix())
-def test_code_blocks_run(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The blocks of one page run in order in one namespace, in an empty folder; their asserts hold."""
-    monkeypatch.chdir(tmp_path)
+REPRODUCTION_PAGE = DOCS / "reproduction.md"
+
+
+def _run_blocks(page: Path) -> None:
     namespace: dict[str, object] = {"__name__": "__docs__"}
     for i, code in enumerate(_blocks(page)):
         exec(compile(code, f"{page.relative_to(DOCS)}[block {i}]", "exec"), namespace)
+
+
+@pytest.mark.parametrize(
+    "page", [p for p in PAGES_WITH_CODE if p != REPRODUCTION_PAGE], ids=lambda p: p.relative_to(DOCS).as_posix()
+)
+def test_code_blocks_run(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The blocks of one page run in order in one namespace, in an empty folder; their asserts hold."""
+    monkeypatch.chdir(tmp_path)
+    _run_blocks(page)
+
+
+def test_reproduction_page_blocks_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, paper_reproduction: tuple[Path, object]
+) -> None:
+    """The reproduction page's blocks, with ``reproduce()`` answering the session's reproduction (conftest)
+    instead of computing the whole paper a second time; the page's own asserts check its numbers."""
+    from mrpctl import reproduction
+
+    _, computed = paper_reproduction
+    monkeypatch.setattr(reproduction, "reproduce", lambda *args, **kwargs: computed)
+    monkeypatch.chdir(tmp_path)
+    assert REPRODUCTION_PAGE in PAGES_WITH_CODE
+    _run_blocks(REPRODUCTION_PAGE)
 
 
 @pytest.mark.slow
