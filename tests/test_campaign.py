@@ -433,6 +433,9 @@ def test_flight_dispersions_are_stored_and_a_replay_reproduces_each_run(tmp_path
         ({"dispersions": {"hysteresis": {"delta": [0.0, 1.0]}}}, r"\[0, 1\)"),
         ({"dispersions": {"actuator": {"u_max": [0.0, 1.0]}}}, "must be > 0"),
         ({"rule": {"type": "hysteretic", "eps": 0.1}}, "takes delta only"),
+        ({"rule": {"type": "on-predicted"}}, "campaigns do not run the predictor yet"),
+        ({"dispersions": {"rule": {"rules": ["on-predicted"]}}}, "campaigns do not run the predictor yet"),
+        ({"predictor": {}}, r"\[predictor\]: campaigns do not run the predictor yet"),
     ],
 )
 def test_rule_and_flight_keys_are_checked(change, message):

@@ -251,6 +251,11 @@ def parse_rule(where: str, value: Any) -> SwitchingRule:
         return Hysteretic(finite_scalar(f"{where}.delta", table.get("delta", 0.0)))
     if "delta" in table:
         raise SpecificationError(f"{where}: delta applies only to 'hysteretic', not to {name!r}")
+    if name == "on-predicted":  # refused when the file is read, not when the runs start
+        raise SpecificationError(
+            f"{where}: campaigns do not run the predictor yet (rule 'on-predicted'); "
+            "use mrpctl.simulate_batch(..., predictor=mrpctl.Predictor(model)) for a batch"
+        )
     if name not in RULE_NAMES:
         raise SpecificationError(f"{where}: rule type must be one of {names}, got {name!r}")
     return rule_from_name(name, eps=table.get("eps"), alpha=table.get("alpha"))
@@ -432,10 +437,12 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
     if "rule" not in data:
         raise SpecificationError(f"[rule] needs type, one of {sorted([*RULE_NAMES, 'hysteretic'])}")
-    tables = sorted(set(scenario_part) & {"actuator", "sensor", "disturbance", "delay"})
-    if tables:  # scenario-style flight tables would be dropped by the runner: refuse, never drop them
+    if "predictor" in scenario_part:
+        raise SpecificationError("[predictor]: campaigns do not run the predictor yet (use mrpctl.simulate_batch)")
+    flight_tables = sorted(set(scenario_part) & {"actuator", "sensor", "disturbance", "delay"})
+    if flight_tables:  # scenario-style flight tables would be dropped by the runner: refuse, never drop them
         raise SpecificationError(
-            f"[{tables[0]}]: a campaign gives the loop-as-flown models in its [flight] table "
+            f"[{flight_tables[0]}]: a campaign gives the loop-as-flown models in its [flight] table "
             "(see design/campaigns.md), not as scenario tables"
         )
     scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
