@@ -227,6 +227,8 @@ def flight_core_function(
     inertia: InertiaInput | None = None,
     saturation: Saturation = Saturation.SCALE,
     sensor: bool = True,
+    limited: bool = True,
+    disturbed: bool = True,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
 
@@ -237,7 +239,11 @@ def flight_core_function(
     ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) (N m, rad/s; inf: no limit), and per
     sample ``noise`` = (θ_k, η_k) (rad, rad/s). Without ``sensor`` the ``noise`` input and the
     ``measurement`` output are left out and the measurement is the bookkept state (the
-    virtual machine's form). At sample k:
+    virtual machine's form). The sample is specialised by structure, each form giving the full
+    sample's numbers bit for bit on the runs it serves: without ``sensor`` for an ideal sensor
+    (no noise, no bias: m_k = x_meas exactly), without ``limited`` for no actuator limit
+    (u_max = u_norm = inf: u = u_c, the saturated count stays 0; u_max, u_norm unused), without
+    ``disturbed`` for w = 0 (u + w = u; w unused). At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
@@ -270,14 +276,23 @@ def flight_core_function(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
     command = gain @ ca.vertcat(sigma_c, seen[3:6])
-    u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+    if limited:
+        u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+        count = memory[5] + saturated
+        if not disturbed:
+            u_plant = u
+    else:
+        # + the saturated count (0 in a run without a limit): −0 becomes +0, as the full sample's
+        # if_else in the actuator does (the recorded u keeps its bits, sign of zero included)
+        u, count = command + memory[5], memory[5]
+        u_plant = u + flight[4:7] if disturbed else u
     x_next = step(x_meas, u_plant, *extra)
     size = ca.fabs(command)
     memory_next = ca.vertcat(
         h_next,
         c_next,
         sigma_seen,
-        memory[5] + saturated,
+        count,
         ca.fmax(memory[6:9], size),
         ca.fmax(memory[9], ca.norm_2(command)),
     )

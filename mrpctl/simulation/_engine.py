@@ -259,13 +259,14 @@ class Engine:
         predictor: InertiaInput | None = None,
         sensor: bool = False,
         limited: bool = True,
+        disturbed: bool = True,
     ) -> None:
         self.d = d
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
         self.predictor = predictor is not None
         self.flight = isinstance(rule, Hysteretic) or self.predictor
-        self._structure = (spacecraft, d, period, substeps, saturation)
+        self._structure = (spacecraft, d, period, substeps, saturation, limited, disturbed)
         if predictor is not None:
             core = predictor_core_function(
                 spacecraft,
@@ -279,7 +280,17 @@ class Engine:
                 limited=limited,
             )
         elif self.flight:
-            core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation)
+            core = flight_core_function(
+                spacecraft,
+                d,
+                period,
+                substeps,
+                inertia=self.inertia,
+                saturation=saturation,
+                sensor=sensor,
+                limited=limited,
+                disturbed=disturbed,
+            )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
         self.memory_size = core.size1_in(1)
@@ -289,6 +300,8 @@ class Engine:
             label += f"_{saturation.value}"
         if predictor is not None:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
+        elif self.flight:
+            label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
         from mrpctl._vectorize import inline_min_max  # (it imports this module)
 
@@ -318,9 +331,17 @@ class Engine:
             return self.sample
         if self.predictor:
             raise CodegenError("the predictor loop needs the compiled engine (a C compiler); see mrpctl._compile")
-        spacecraft, d, period, substeps, saturation = self._structure
+        spacecraft, d, period, substeps, saturation, limited, disturbed = self._structure
         core = flight_core_function(
-            spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation, sensor=False
+            spacecraft,
+            d,
+            period,
+            substeps,
+            inertia=self.inertia,
+            saturation=saturation,
+            sensor=False,
+            limited=limited,
+            disturbed=disturbed,
         )
         return engine_sample(core, d, self.sample.name() + "_vm")
 
@@ -539,19 +560,25 @@ def engine(
     predictor: Spacecraft | None = None,
     sensor: bool = False,
     limited: bool = True,
+    disturbed: bool = True,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
     ``saturation`` (the actuator's mode) is part of the structure of the flight and predictor
     samples only. ``predictor``: the controller's model (its inertia layout is part of the
     structure, its values are run-time inputs) for the predictor sample, with a sensor port when
-    ``sensor`` and the actuator when ``limited``; the predictor needs a C compiler.
+    ``sensor`` and the actuator when ``limited``; the predictor needs a C compiler. The flight
+    sample (``rule`` a :class:`~mrpctl.flight.Hysteretic`) is specialised the same way, with a
+    sensor port when ``sensor``, the actuator when ``limited`` and the disturbance add when
+    ``disturbed`` (:func:`flight_structure` of a run's constants; one library per structure).
     """
     model = None if predictor is None else inertia_input(predictor)
-    if not isinstance(rule, Hysteretic) and model is None:
+    flight = isinstance(rule, Hysteretic)
+    if not flight and model is None:
         saturation = Saturation.SCALE
     if model is None:
-        sensor, limited = False, True
+        if not flight:
+            sensor, limited, disturbed = False, True, True
         key: tuple[Any, ...] = (
             inertia_input(spacecraft),
             type(rule),
@@ -560,14 +587,23 @@ def engine(
             period,
             substeps,
             saturation,
-        )
+        ) + ((sensor, limited, disturbed) if flight else ())
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
             found = Engine(
-                spacecraft, rule, d, period, substeps, saturation, predictor=model, sensor=sensor, limited=limited
+                spacecraft,
+                rule,
+                d,
+                period,
+                substeps,
+                saturation,
+                predictor=model,
+                sensor=sensor,
+                limited=limited,
+                disturbed=disturbed,
             )
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
@@ -575,6 +611,22 @@ def engine(
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)
             _ENGINES[key] = found
         return found
+
+
+def flight_structure(options: np.ndarray | None, sensor: SensorModel | None) -> dict[str, bool]:
+    """The flight sample's structure for a run's constants and sensor (keywords of :func:`engine`).
+
+    ``sensor``: noise or a gyro bias (an ideal sensor measures x_meas bit for bit); ``limited``:
+    a finite u_max or u_norm; ``disturbed``: a non-zero torque w. ``options`` as
+    :data:`NO_FLIGHT_OPTIONS` (None: none).
+    """
+    constants = NO_FLIGHT_OPTIONS if options is None else np.asarray(options, dtype=float)
+    noisy = sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
+    return {
+        "sensor": bool(noisy or np.any(constants[7:10] != 0.0)),
+        "limited": bool(np.any(np.isfinite(constants[0:4]))),
+        "disturbed": bool(np.any(constants[4:7] != 0.0)),
+    }
 
 
 def clear_engines() -> None:

@@ -35,6 +35,7 @@ from mrpctl.simulation._engine import (
     RunOutput,
     engine,
     flight_memory,
+    flight_structure,
     predictor_constants,
     rule_key,
     slice_samples,
@@ -142,6 +143,14 @@ def _flight_options(
             f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
         )
     return _flight_constants(actuator, disturbance, sensor)
+
+
+def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
+    """The engine's structure keywords: the predictor's (sensor given, actuator given), or the
+    flight sample's specialisation to the run's constants (:func:`~mrpctl.simulation._engine.flight_structure`)."""
+    if checked is not None:
+        return {"sensor": sensor is not None, "limited": actuator is not None}
+    return flight_structure(options, sensor)
 
 
 def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.ndarray | None, Saturation]:
@@ -348,8 +357,7 @@ def simulate(
         substeps,
         saturation,
         predictor=None if checked is None else checked.model,
-        sensor=sensor is not None,
-        limited=actuator is not None,
+        **_structure(checked, options, sensor, actuator),
     )
     stop = None
     if progress is not None:
@@ -586,8 +594,7 @@ def simulate_batch(
                 substeps,
                 saturation,
                 predictor=None if checked is None else checked.model,
-                sensor=sensor is not None,
-                limited=actuator is not None,
+                **_structure(checked, options, sensor, actuator),
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
