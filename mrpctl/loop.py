@@ -229,6 +229,7 @@ def flight_core_function(
     sensor: bool = True,
     limited: bool = True,
     disturbed: bool = True,
+    records: bool = False,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
 
@@ -243,7 +244,9 @@ def flight_core_function(
     sample's numbers bit for bit on the runs it serves: without ``sensor`` for an ideal sensor
     (no noise, no bias: m_k = x_meas exactly), without ``limited`` for no actuator limit
     (u_max = u_norm = inf: u = u_c, the saturated count stays 0; u_max, u_norm unused), without
-    ``disturbed`` for w = 0 (u + w = u; w unused). At sample k:
+    ``disturbed`` for w = 0 (u + w = u; w unused). With ``records`` a last output ``record`` =
+    (h_{k+1}, σ_c,k) (the logic variable after the rule, the MRP the control law used): the
+    result's per-sample records. At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
@@ -297,22 +300,13 @@ def flight_core_function(
         ca.fmax(memory[9], ca.norm_2(command)),
     )
     names = ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"]
-    outputs = ["x_next", "memory_next", "x_meas", "u", "switched"]
-    if not sensor:
-        return ca.Function(
-            "core",
-            [x, memory, x_delayed, gain, parameters, *extra, flight],
-            [x_next, memory_next, x_meas, u, switched],
-            names,
-            outputs,
-        )
-    return ca.Function(
-        "core",
-        [x, memory, x_delayed, gain, parameters, *extra, flight, noise],
-        [x_next, memory_next, x_meas, u, switched, measured],
-        [*names, "noise"],
-        [*outputs, "measurement"],
-    )
+    inputs = [x, memory, x_delayed, gain, parameters, *extra, flight] + ([noise] if sensor else [])
+    output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
+    outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
+    if records:
+        output_names.append("record")
+        outputs.append(ca.vertcat(h_next, sigma_c))
+    return ca.Function("core", inputs, outputs, names + (["noise"] if sensor else []), output_names)
 
 
 #: The predictor sample's memory: (1, 1, σ̂_prev (3), the actuator accumulators of the flight sample (5),

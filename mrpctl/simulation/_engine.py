@@ -212,7 +212,9 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_INERTIA_INPUT": int("J" in sample.name_in()),
         "MRPCTL_FLIGHT_INPUT": int("flight" in sample.name_in()),
         "MRPCTL_SENSOR": int("noise" in sample.name_in()),
-        "MRPCTL_RING_OUTPUT": int(sample.n_out() > 6),
+        "MRPCTL_RING_OUTPUT": int("measurement" in sample.name_out() or "ring" in sample.name_out()),
+        "MRPCTL_RECORD_OUTPUT": sample.name_out().index("record") if "record" in sample.name_out() else 0,
+        "MRPCTL_RECORD_WIDTH": sample.size1_out("record") if "record" in sample.name_out() else 1,
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
     }
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
@@ -239,6 +241,8 @@ class RunOutput:
     u: np.ndarray | None
     switch_indices: np.ndarray | None
     memory: np.ndarray | None = None  # the rule memory after the run (the flight accumulators)
+    records: np.ndarray | None = None  # flight: the kept (h, sigma_c) rows
+    delay_used: np.ndarray | None = None  # flight: the kept delays used (samples)
 
 
 class Engine:
@@ -290,6 +294,7 @@ class Engine:
                 sensor=sensor,
                 limited=limited,
                 disturbed=disturbed,
+                records=True,
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -322,7 +327,7 @@ class Engine:
                 + [ctypes.c_longlong, ctypes.c_void_p]
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
-                + [ctypes.c_void_p] * 3
+                + [ctypes.c_void_p] * 4
             )
 
     def virtual_machine_sample(self) -> ca.Function:
@@ -435,6 +440,10 @@ class Engine:
             measurements = np.empty((kept, STATE_SIZE))
             u = np.empty((kept, INPUT_SIZE))
             keep = keep_every
+        records = delay_used = None
+        if "record" in self.sample.name_out() and keep:
+            records = np.empty((kept, self.sample.size1_out("record")))
+            delay_used = np.full(kept, self.d, dtype=np.int64)
         switched = workspace.switched
         indices: list[np.ndarray] = []
         stored = 0
@@ -466,6 +475,9 @@ class Engine:
             if delay is not None:
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])
+                if delay_used is not None:  # the kept samples of the slice: k - j*(k)
+                    taken = np.arange(-(-k // keep) * keep, k1, keep)
+                    delay_used[taken // keep] = taken - schedule[taken - k]
             done = self._run_c(
                 address(state),
                 address(history),
@@ -487,6 +499,7 @@ class Engine:
                 None if measurements is None else address(measurements),
                 None if u is None else address(u),
                 None if switched is None else address(switched),
+                None if records is None else address(records),
             )
             if done < 0:
                 raise CodegenError(f"evaluation of the compiled engine {self.compiled.library} failed")
@@ -508,6 +521,8 @@ class Engine:
             u=u,
             switch_indices=switch_indices if switched is not None else None,
             memory=state[STATE_SIZE:memory_end].copy(),
+            records=records,
+            delay_used=delay_used,
         )
 
 
