@@ -10,7 +10,8 @@
  * controller's model state z_k); with MRPCTL_RING_OUTPUT the sample has a seventh output, the ring
  * entry, apart from x_meas (the flight and predictor samples), and with MRPCTL_SENSOR a per-sample
  * noise input. With MRPCTL_RECORD_OUTPUT (its output index) the flight sample's record of
- * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept).
+ * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept); with
+ * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque.
  *
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
  * stats alternate between two buffers; the sample writes m_k into a ring of ring_size
@@ -27,7 +28,8 @@
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
-    const casadi_real* noise, long long noise_stride, const long long* used, long long k0, long long k1,
+    const casadi_real* noise, long long noise_stride, const casadi_real* torque, long long torque_stride,
+    const long long* used, long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
     casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched, casadi_real* kept_records) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
@@ -64,6 +66,10 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   (void)noise;
   (void)noise_stride;
 #endif
+#if !MRPCTL_TORQUE_INPUT
+  (void)torque;
+  (void)torque_stride;
+#endif
 #if !MRPCTL_RING_OUTPUT
   (void)x_scratch;
 #endif
@@ -94,6 +100,10 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     res[2] = next + MRPCTL_X_MEMORY;
 #if MRPCTL_SENSOR
     arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise + noise_stride * (k - k0);
+#endif
+#if MRPCTL_TORQUE_INPUT
+    /* a per-sample disturbance w_k (the flight sample's last input) */
+    arg[MRPCTL_TORQUE_INPUT] = torque + torque_stride * (k - k0);
 #endif
 #if MRPCTL_RING_OUTPUT
     /* the flight and predictor samples: the sensor's measurement (and the model state) go to the ring,

@@ -35,6 +35,7 @@ from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
     NOISE_SIZE,
     DelayModel,
+    Disturbance,
     Hysteretic,
     Saturation,
     SensorModel,
@@ -214,6 +215,7 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_SENSOR": int("noise" in sample.name_in()),
         "MRPCTL_RING_OUTPUT": int("measurement" in sample.name_out() or "ring" in sample.name_out()),
         "MRPCTL_RECORD_OUTPUT": sample.name_out().index("record") if "record" in sample.name_out() else 0,
+        "MRPCTL_TORQUE_INPUT": sample.name_in().index("torque") if "torque" in sample.name_in() else 0,
         "MRPCTL_RECORD_WIDTH": sample.size1_out("record") if "record" in sample.name_out() else 1,
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
     }
@@ -264,6 +266,7 @@ class Engine:
         sensor: bool = False,
         limited: bool = True,
         disturbed: bool = True,
+        torque_input: bool = False,
     ) -> None:
         self.d = d
         self.substeps = substeps
@@ -271,6 +274,7 @@ class Engine:
         self.predictor = predictor is not None
         self.flight = isinstance(rule, Hysteretic) or self.predictor
         self._structure = (spacecraft, d, period, substeps, saturation, limited, disturbed)
+        self.torque_input = torque_input and self.flight and not self.predictor
         if predictor is not None:
             core = predictor_core_function(
                 spacecraft,
@@ -295,6 +299,7 @@ class Engine:
                 limited=limited,
                 disturbed=disturbed,
                 records=True,
+                torque_input=torque_input,
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -307,6 +312,7 @@ class Engine:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
         elif self.flight:
             label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
+            label += "_torque" if torque_input else ""
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
         from mrpctl._vectorize import inline_min_max  # (it imports this module)
 
@@ -324,7 +330,7 @@ class Engine:
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 6
-                + [ctypes.c_longlong, ctypes.c_void_p]
+                + [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_longlong, ctypes.c_void_p]
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 4
@@ -385,6 +391,7 @@ class Engine:
         sensor: SensorModel | None = None,
         delay: DelayModel | None = None,
         rate: float = 1.0,
+        disturbance: Disturbance | None = None,
     ) -> RunOutput:
         """One run of n samples, slice by slice.
 
@@ -414,7 +421,12 @@ class Engine:
             A time-varying delay (d_max = this engine's d, d_min >= 1) at ``rate`` (Hz): the
             newest-arrived index j*(k) of each slice is computed in NumPy
             (:func:`~mrpctl.flight.newest_arrived_slice`) and handed to the driver.
+        disturbance : Disturbance, optional
+            A per-sample torque (engine built with ``torque_input``): the rows of each slice
+            (:meth:`~mrpctl.flight.Disturbance.samples`) are handed to the driver.
         """
+        if self.torque_input != (disturbance is not None and not disturbance.constant):
+            raise ValueError("a per-sample disturbance needs an engine with a torque input, and only it")
         state = workspace.state
         history = np.ascontiguousarray(history, dtype=float)
         memory_end = STATE_SIZE + self.memory_size
@@ -472,6 +484,10 @@ class Engine:
                     noise_rows = np.empty((min(step, n), NOISE_SIZE))  # one buffer for the run's slices
                 noise = sensor.noise_rows(k, k1, out=noise_rows)
                 noise_stride = NOISE_SIZE
+            torque, torque_stride = _NO_NOISE, 0
+            if self.torque_input:
+                assert disturbance is not None
+                torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1)), INPUT_SIZE
             if delay is not None:
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])
@@ -489,6 +505,8 @@ class Engine:
                 address(options) if self.flight else None,
                 address(noise),
                 noise_stride,
+                address(torque),
+                torque_stride,
                 None if schedule is None else schedule.ctypes.data,
                 k,
                 k1,
@@ -576,6 +594,7 @@ def engine(
     sensor: bool = False,
     limited: bool = True,
     disturbed: bool = True,
+    torque_input: bool = False,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
@@ -593,7 +612,7 @@ def engine(
         saturation = Saturation.SCALE
     if model is None:
         if not flight:
-            sensor, limited, disturbed = False, True, True
+            sensor, limited, disturbed, torque_input = False, True, True, False
         key: tuple[Any, ...] = (
             inertia_input(spacecraft),
             type(rule),
@@ -602,7 +621,7 @@ def engine(
             period,
             substeps,
             saturation,
-        ) + ((sensor, limited, disturbed) if flight else ())
+        ) + ((sensor, limited, disturbed, torque_input) if flight else ())
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
     with _ENGINES_LOCK:
@@ -619,6 +638,7 @@ def engine(
                 sensor=sensor,
                 limited=limited,
                 disturbed=disturbed,
+                torque_input=torque_input and model is None,
             )
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine

@@ -132,7 +132,7 @@ def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: 
 
 
 def _flight_options(
-    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None
+    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None, *, per_sample: bool = False
 ) -> tuple[np.ndarray | None, Saturation]:
     """The flight sample's constants (u_max (3), u_norm, w (3), bias (3)) and the saturation mode."""
     if actuator is None and disturbance is None and sensor is None:
@@ -142,7 +142,19 @@ def _flight_options(
             "actuator, disturbance, sensor: the actuator, disturbance and sensor models run in the flight loop only; "
             f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
         )
-    return _flight_constants(actuator, disturbance, sensor)
+    return _flight_constants(actuator, disturbance, sensor, per_sample=per_sample)
+
+
+def _streamed_disturbance(disturbance: Any, n: int) -> Disturbance | None:
+    """The per-sample disturbance of a run of n samples (its rows checked), or None (none or constant)."""
+    if disturbance is None:
+        return None
+    if not isinstance(disturbance, Disturbance):
+        disturbance = Disturbance(disturbance)
+    if disturbance.constant:
+        return None
+    disturbance.check_horizon(n)
+    return disturbance
 
 
 def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
@@ -153,17 +165,22 @@ def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: 
     return flight_structure(options, sensor)
 
 
-def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.ndarray | None, Saturation]:
-    """The checked actuator, disturbance and sensor models as the flight constants and the saturation mode."""
+def _flight_constants(
+    actuator: Any, disturbance: Any, sensor: Any, *, per_sample: bool = False
+) -> tuple[np.ndarray | None, Saturation]:
+    """The checked actuator, disturbance and sensor models as the flight constants and the saturation mode.
+
+    ``per_sample``: an (n, 3) disturbance is accepted (streamed by the engine; w = 0 in the constants)."""
     if actuator is None and disturbance is None and sensor is None:
         return None, Saturation.SCALE
     if actuator is not None and not isinstance(actuator, ActuatorModel):
         raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel or None, got {actuator!r}")
     if disturbance is not None and not isinstance(disturbance, Disturbance):
         disturbance = Disturbance(disturbance)
-    if disturbance is not None and not disturbance.constant:
+    if disturbance is not None and not disturbance.constant and not per_sample:
         raise DimensionError(
-            f"disturbance: the engine takes a constant torque of shape (3,) so far, got {disturbance.torque.shape}"
+            "disturbance: a per-sample torque (n, 3) runs in mrpctl.simulate only; here a constant torque of "
+            f"shape (3,) is needed, got {disturbance.torque.shape}"
         )
     if sensor is not None and not isinstance(sensor, SensorModel):
         raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
@@ -174,7 +191,7 @@ def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.
     if actuator is not None:
         options[0:3] = actuator.u_max
         options[3] = actuator.norm_limit
-    if disturbance is not None:
+    if disturbance is not None and disturbance.constant:
         options[4:7] = disturbance.torque
     return options, Saturation.SCALE if actuator is None else actuator.mode
 
@@ -341,11 +358,12 @@ def simulate(
     limit = _memory_limit(memory_limit)
     checked = _check_predictor(predictor, rule, history, delay)
     if checked is None:
-        options, saturation = _flight_options(rule, actuator, disturbance, sensor)
+        options, saturation = _flight_options(rule, actuator, disturbance, sensor, per_sample=True)
         varying = _varying_delay(rule, delay, d, rate, n)
+        streamed = _streamed_disturbance(disturbance, n)
     else:
         options, saturation = _flight_constants(actuator, disturbance, sensor)
-        options, varying = predictor_constants(options, float(tau), checked.model), None
+        options, varying, streamed = predictor_constants(options, float(tau), checked.model), None, None
     width = 1 if checked is None else 2
     _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps, width), limit, t_final=t_final, keep_every=keep)
 
@@ -358,7 +376,12 @@ def simulate(
         saturation,
         predictor=None if checked is None else checked.model,
         **_structure(checked, options, sensor, actuator),
+        **({} if streamed is None else {"torque_input": True}),
     )
+    if streamed is not None and not found.compiled_code:
+        raise CodegenError(
+            "disturbance: a per-sample torque needs the compiled engine (install a C compiler: gcc or cc, or set CC)"
+        )
     stop = None
     if progress is not None:
 
@@ -382,6 +405,7 @@ def simulate(
         sensor=sensor,
         delay=varying,
         rate=rate,
+        **({} if streamed is None else {"disturbance": streamed}),
     )
     common = dict(
         spacecraft=spacecraft,
