@@ -7,7 +7,7 @@ import pytest
 from flight_reference import _tumbles, reference_loop
 
 from mrpctl import paper, simulate, simulate_batch
-from mrpctl.errors import DimensionError
+from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
 from mrpctl.simulation import _engine
 
@@ -109,3 +109,60 @@ def test_per_sample_disturbance_refuses_bad_input() -> None:
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, disturbance=np.zeros((N, 2)), **common)
     with pytest.raises(DimensionError, match=r"mrpctl\.simulate only"):
         simulate_batch(paper.SPACECRAFT, paper.GAIN, _tumbles(2, 1.0, 1), disturbance=np.zeros((N, 3)), **common)
+
+
+def _steps(t: np.ndarray) -> np.ndarray:
+    """An elementwise w(t) (N m): a step at 2 s, a ramp and a parabola."""
+    return np.column_stack((0.02 * (t > 2.0), -0.004 * t, 5e-4 * t * t))
+
+
+def test_function_of_time_equals_its_rows_and_the_reference_loop(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_engine, "SLICE_SAMPLES", 97)  # evaluated slice by slice
+    x0 = _tumbles(1, 2.0, 3)[0]
+    times = np.arange(N) / RATE
+    common = dict(tau=0.5, rate=RATE, t_final=T_FINAL, rule=Hysteretic(0.05), actuator=ActuatorModel([0.5, 0.5, 0.5]))
+    function = simulate(paper.SPACECRAFT, GAINS, x0, disturbance=Disturbance(function=_steps), **common)
+    rows = simulate(paper.SPACECRAFT, GAINS, x0, disturbance=Disturbance(_steps(times)), **common)
+    for name in ("sigma", "omega", "u", "switch_indices", "logic", "sigma_c"):
+        assert np.asarray(getattr(function, name)).tobytes() == np.asarray(getattr(rows, name)).tobytes(), name
+    ref = reference_loop(
+        paper.SPACECRAFT.inertia,
+        GAINS,
+        x0,
+        rate=RATE,
+        t_final=T_FINAL,
+        delta=0.05,
+        delays=50,
+        u_max=[0.5, 0.5, 0.5],
+        disturbance=_steps(times),
+    )
+    assert ref.sigma is not None and ref.u_applied is not None
+    assert np.max(np.abs(ref.sigma[0] - function.sigma)) < 1e-12
+    assert np.max(np.abs(ref.u_applied[0] - function.u)) < 1e-12
+    assert function.switch_indices.tolist() == ref.logic_switch_samples(0).tolist()
+
+
+def test_function_of_time_refuses_bad_input() -> None:
+    common = dict(tau=0.5, rate=RATE, t_final=1.0, rule=Hysteretic(0.0))
+    with pytest.raises(SpecificationError, match="function must be callable"):
+        Disturbance(function=3.0)
+    with pytest.raises(SpecificationError, match="not both"):
+        Disturbance([0.0, 0.0, 0.0], function=_steps)
+    with pytest.raises(SpecificationError, match="torque"):
+        Disturbance()
+    with pytest.raises(DimensionError, match="function"):
+        simulate(
+            paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, disturbance=Disturbance(function=lambda t: t), **common
+        )
+    with pytest.raises(SpecificationError, match="finite"):
+        simulate(
+            paper.SPACECRAFT,
+            paper.GAIN,
+            paper.INITIAL_STATE,
+            disturbance=Disturbance(function=lambda t: np.full((len(t), 3), np.nan)),
+            **common,
+        )
+    with pytest.raises(DimensionError, match="function of time"):
+        simulate_batch(
+            paper.SPACECRAFT, paper.GAIN, _tumbles(2, 1.0, 1), disturbance=Disturbance(function=_steps), **common
+        )

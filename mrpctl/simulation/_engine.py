@@ -487,7 +487,7 @@ class Engine:
             torque, torque_stride = _NO_NOISE, 0
             if self.torque_input:
                 assert disturbance is not None
-                torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1)), INPUT_SIZE
+                torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1, rate)), INPUT_SIZE
             if delay is not None:
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])

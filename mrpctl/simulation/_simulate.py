@@ -180,7 +180,7 @@ def _flight_constants(
     if disturbance is not None and not disturbance.constant and not per_sample:
         raise DimensionError(
             "disturbance: a per-sample torque (n, 3) runs in mrpctl.simulate only; here a constant torque of "
-            f"shape (3,) is needed, got {disturbance.torque.shape}"
+            f"shape (3,) is needed, got {'a function of time' if disturbance.shape is None else disturbance.shape}"
         )
     if sensor is not None and not isinstance(sensor, SensorModel):
         raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
