@@ -137,3 +137,22 @@ def test_records_are_absent_where_they_do_not_apply() -> None:
         assert run.logic is not None and alone.logic is not None and run.sigma_c is not None
         assert run.logic.tobytes() == alone.logic.tobytes() and run.sigma_c.tobytes() == alone.sigma_c.tobytes()
         assert not run.logic.flags.writeable and run.logic.shape == run.t.shape
+
+
+def test_the_memory_estimate_counts_the_records() -> None:
+    from mrpctl.errors import SpecificationError
+    from mrpctl.simulation import _simulate
+
+    n, d = 201, 5
+    common = dict(tau=0.05, rate=100.0, t_final=2.0, keep_every=1)
+    plain = _simulate.run_bytes(n, 1) + _simulate.workspace_bytes(n, d, 1)
+    flight = _simulate.run_bytes(n, 1, flight=True) + _simulate.workspace_bytes(n, d, 1)
+    run = simulate(
+        paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(0.1), memory_limit=flight, **common
+    )
+    assert run.logic is not None and run.sigma_c is not None and run.delay_used is not None
+    held = run.logic.nbytes + run.sigma_c.nbytes + run.delay_used.nbytes
+    assert flight - plain >= 2 * held  # the records as computed and their read-only copies
+    simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=OnCurrent(), memory_limit=plain, **common)
+    with pytest.raises(SpecificationError, match="memory_limit"):
+        simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(0.1), memory_limit=plain, **common)

@@ -51,6 +51,8 @@ SWITCH_LIMIT = 2**20
 # Bytes per kept sample in a result: m_k and u_k as computed (72), t (8), omega (24).
 _BYTES_PER_KEPT = 104
 _BYTES_PER_SWITCH = 16  # index and time
+# Flight runs: the records (h, sigma_c) and the delay used per kept sample as computed (40) and their copies (40).
+_BYTES_PER_RECORD = 80
 #: Metrics-only batches (``trajectories=False``) of compiled code run on the lane engine
 #: (:mod:`mrpctl._vectorize`); False runs them on the scalar engine (tests, benchmarks).
 _LANES = True
@@ -105,11 +107,13 @@ def _memory_limit(memory_limit: Any) -> float:
     return available / 2 if available else math.inf
 
 
-def run_bytes(n: int, keep_every: int | None, *, switches: bool = True) -> int:
-    """Bytes a result of n samples holds: the kept samples and (at most) its switch instants."""
+def run_bytes(n: int, keep_every: int | None, *, switches: bool = True, flight: bool = False) -> int:
+    """Bytes a result of n samples holds: the kept samples (with ``flight``, their records) and
+    (at most) its switch instants."""
     kept = 0 if keep_every is None else (n - 1) // keep_every + 1
     switch_cap = (n if keep_every == 1 else min(n, SWITCH_LIMIT)) if switches else 0
-    return kept * _BYTES_PER_KEPT + switch_cap * _BYTES_PER_SWITCH
+    per_kept = _BYTES_PER_KEPT + (_BYTES_PER_RECORD if flight else 0)
+    return kept * per_kept + switch_cap * _BYTES_PER_SWITCH
 
 
 def workspace_bytes(n: int, d: int, substeps: int, width: int = 1) -> int:
@@ -315,9 +319,11 @@ def simulate(
         Torque limits of the flight loop (``rule=Hysteretic(...)`` only); None: none. The
         result's ``u`` is then the applied torque, ``saturated_fraction`` and
         ``peak_command`` report the limits.
-    disturbance : mrpctl.flight.Disturbance or array_like (3,), keyword-only
-        A constant body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)``
-        only; a per-sample torque is not supported by the engine yet).
+    disturbance : mrpctl.flight.Disturbance or array_like (3,) or (n, 3), keyword-only
+        A body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)`` only):
+        constant (3,), one row per sample (n, 3), or ``Disturbance(function=w)`` with w(t) of the
+        sample times (evaluated slice by slice); the per-sample forms are streamed per slice
+        like the noise (compiled engine only; :func:`simulate_batch` takes a constant torque).
     sensor : mrpctl.flight.SensorModel, keyword-only
         Attitude and rate noise and gyro bias of the flight loop's measurements
         (``rule=Hysteretic(...)`` only); the noise of each slice of samples is generated in
@@ -365,7 +371,13 @@ def simulate(
         options, saturation = _flight_constants(actuator, disturbance, sensor)
         options, varying, streamed = predictor_constants(options, float(tau), checked.model), None, None
     width = 1 if checked is None else 2
-    _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps, width), limit, t_final=t_final, keep_every=keep)
+    records = checked is None and isinstance(rule, Hysteretic)
+    _check_memory(
+        run_bytes(n, keep, flight=records) + workspace_bytes(n, d, substeps, width),
+        limit,
+        t_final=t_final,
+        keep_every=keep,
+    )
 
     found = engine(
         spacecraft,
@@ -562,7 +574,8 @@ def simulate_batch(
     width = 1 if predictor is None else 2
     estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width) + n_runs * STATS_SIZE * 8 * 4
     if trajectories:
-        estimate += n_runs * run_bytes(n, keep)
+        records = predictor is None and any(isinstance(one, Hysteretic) for one in rules)
+        estimate += n_runs * run_bytes(n, keep, flight=records)
     elif _LANES:
         estimate += lane_bytes(n_runs, max(samples_by_run), workers)
     _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
