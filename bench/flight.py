@@ -21,7 +21,8 @@ only, on the lane engine (the default: W runs per C call, the noise and the jitt
 generated once per slice for the W lanes) and on the scalar engine (``_simulate._LANES =
 False``: one run per C call, the noise per run), runs/s in CPU time on one thread.
 
-Run: ``.venv/bin/python bench/flight.py [rounds]`` (default 9 rounds; about a minute).
+Run: ``.venv/bin/python bench/flight.py [rounds]`` (default 9 rounds; about a minute);
+``bench/flight.py hash [-v]`` prints the SHA-256 of 75 flight runs (:func:`flight_hash`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -49,40 +51,132 @@ JITTER = DelayModel.jitter(0.4, 0.5, seed=2)
 RULE = Hysteretic.from_alpha(1.2)
 
 
-def _run(rule: object = RULE, **options: object) -> Callable[[], object]:
+_SPECIALISED = _simulate.flight_structure
+
+
+def _full_structure(options: object, sensor: object) -> dict[str, bool]:
+    """The unspecialised flight sample (every port and expression), as before the specialisation."""
+    return {"sensor": True, "limited": True, "disturbed": True}
+
+
+def _run(rule: object = RULE, full: bool = False, **options: Any) -> Callable[[], object]:
     def call() -> object:
-        return simulate(
-            paper.SPACECRAFT,
-            paper.GAIN,
-            paper.INITIAL_STATE,
-            tau=TAU,
-            rule=rule,  # type: ignore[arg-type]
-            t_final=T_FINAL,
-            rate=RATE,
-            keep_every=None,
-            **options,  # type: ignore[arg-type]
-        )
+        _simulate.flight_structure = _full_structure if full else _SPECIALISED
+        try:
+            return _simulate_once(rule, options)
+        finally:
+            _simulate.flight_structure = _SPECIALISED
 
     return call
 
 
+def _simulate_once(rule: object, options: dict[str, object]) -> object:
+    return simulate(
+        paper.SPACECRAFT,
+        paper.GAIN,
+        paper.INITIAL_STATE,
+        tau=TAU,
+        rule=rule,  # type: ignore[arg-type]
+        t_final=T_FINAL,
+        rate=RATE,
+        keep_every=None,
+        **options,  # type: ignore[arg-type]
+    )
+
+
+FLIGHT: dict[str, tuple[object, dict[str, Any]]] = {
+    "Hysteretic(0), no option": (Hysteretic(0.0), {}),
+    "alpha 1.2, no option": (RULE, {}),
+    "alpha 1.2 + actuator limits": (RULE, {"actuator": ACTUATOR}),
+    "alpha 1.2 + disturbance": (RULE, {"disturbance": DISTURBANCE}),
+    "alpha 1.2 + sensor noise": (RULE, {"sensor": SENSOR}),
+    "alpha 1.2 + jitter 0.4-0.5 s": (RULE, {"delay": JITTER}),
+    "all options": (RULE, {"actuator": ACTUATOR, "disturbance": DISTURBANCE, "sensor": SENSOR, "delay": JITTER}),
+}
+
+
 def variants() -> dict[str, Callable[[], object]]:
-    """The measured calls, in table order."""
-    return {
-        "plain (OnCurrent)": _run(OnCurrent()),
-        "Hysteretic(0), no option": _run(Hysteretic(0.0)),
-        "alpha 1.2, no option": _run(),
-        "alpha 1.2 + actuator limits": _run(actuator=ACTUATOR),
-        "alpha 1.2 + disturbance": _run(disturbance=DISTURBANCE),
-        "alpha 1.2 + sensor noise": _run(sensor=SENSOR),
-        "alpha 1.2 + jitter 0.4-0.5 s": _run(delay=JITTER),
-        "all options": _run(actuator=ACTUATOR, disturbance=DISTURBANCE, sensor=SENSOR, delay=JITTER),
-        "  (noise generation alone)": lambda: SENSOR.noise(0, N),
-        "  (jitter schedule alone)": lambda: newest_arrived_slice(JITTER, RATE, 500, 0, N, -501),
-    }
+    """The measured calls, in table order; each flight variant also with the full sample ("[full]", A/B)."""
+    calls: dict[str, Callable[[], object]] = {"plain (OnCurrent)": _run(OnCurrent())}
+    for label, (rule, options) in FLIGHT.items():
+        calls[label] = _run(rule, **options)
+        calls[label + " [full]"] = _run(rule, full=True, **options)
+    calls["  (noise generation alone)"] = lambda: SENSOR.noise(0, N)
+    calls["  (jitter schedule alone)"] = lambda: newest_arrived_slice(JITTER, RATE, 500, 0, N, -501)
+    return calls
+
+
+def flight_hash(verbose: bool = False) -> str:
+    """SHA-256 over the result arrays of 75 flight runs of every structure (``bench/flight.py hash [-v]``).
+
+    Every actuator (none, SCALE, CLIP) x disturbance (none, constant, zero) x sensor (none, noisy,
+    bias only, ideal) for two rules, two jitter runs, a full inertia and three ``simulate_batch``
+    calls; the bytes (sign of zero included) of t, σ, ω, u, the switch times and the flight summaries.
+    It must not move when the flight sample is reorganised (``2257a7a2…2457f9`` since phase 2).
+    """
+    import hashlib
+
+    from mrpctl.flight import Saturation
+    from mrpctl.spacecraft import Spacecraft
+
+    general = Spacecraft(np.array([[140.0, 4.0, -2.0], [4.0, 100.0, 3.0], [-2.0, 3.0, 80.0]]))
+    x0 = np.array(paper.INITIAL_STATE, dtype=float)
+    scale = ActuatorModel([20.0, 25.0, 30.0], norm_max=35.0)
+    clip = ActuatorModel([20.0, 25.0, 30.0], norm_max=35.0, mode=Saturation.CLIP)
+    torque = Disturbance([1e-2, -2e-2, 5e-3])
+    noisy = SensorModel(attitude_noise=0.01, rate_noise=1e-4, seed=3)
+    jitter = DelayModel.jitter(0.4, 0.5, seed=2)
+    cases: list[dict[str, object]] = []
+    for rule in (Hysteretic(0.0), Hysteretic.from_alpha(1.2)):
+        for actuator in (None, scale, clip):
+            for disturbance in (None, torque, Disturbance([0.0, 0.0, 0.0])):
+                for sensor in (None, noisy, SensorModel(gyro_bias=[1e-4, -2e-4, 5e-5]), SensorModel()):
+                    cases.append(dict(rule=rule, actuator=actuator, disturbance=disturbance, sensor=sensor))
+    cases.append(dict(rule=Hysteretic(0.05), actuator=scale, sensor=noisy, delay=jitter))
+    cases.append(dict(rule=Hysteretic(0.05), delay=jitter))
+    digest = hashlib.sha256()
+    for i, case in enumerate(cases):
+        run: Any = simulate(paper.SPACECRAFT, paper.GAIN, x0, tau=0.5, rate=200.0, t_final=6.0, **case)  # type: ignore[arg-type]
+        part = hashlib.sha256()
+        for array in (
+            run.t,
+            run.sigma,
+            run.omega,
+            run.u,
+            np.asarray(run.switch_times, float),
+            np.asarray(run.peak_command, float),
+            np.array([run.saturated_fraction], float),
+        ):
+            part.update(np.ascontiguousarray(array).tobytes())
+        digest.update(part.digest())
+        if verbose:
+            print(i, part.hexdigest()[:16])
+    run = simulate(
+        general, paper.GAIN, x0, tau=0.02, rate=200.0, t_final=4.0, keep_every=3, rule=Hysteretic(0.1), actuator=scale
+    )
+    digest.update(np.ascontiguousarray(run.sigma).tobytes())
+    digest.update(np.ascontiguousarray(run.u).tobytes())
+    states = x0 + 0.01 * np.random.default_rng(5).standard_normal((12, 6))
+    for options in ({}, {"actuator": scale, "disturbance": torque}, {"sensor": noisy}):
+        batch: Any = simulate_batch(
+            paper.SPACECRAFT,
+            paper.GAIN,
+            states,
+            tau=0.5,
+            rate=200.0,
+            t_final=6.0,
+            rule=Hysteretic(0.05),
+            **options,
+        )
+        for name in ("settling_time", "switch_count", "max_sigma", "peak_torque"):
+            digest.update(np.ascontiguousarray(np.asarray(getattr(batch, name), float)).tobytes())
+    return digest.hexdigest()
 
 
 def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "hash":
+        print(flight_hash("-v" in sys.argv))
+        return
     rounds = int(sys.argv[1]) if len(sys.argv) > 1 else 9
     measures = variants()
     for call in measures.values():  # compile (or load) every engine first
@@ -98,10 +192,11 @@ def main() -> None:
         f"paper case, {T_FINAL:g} s at {RATE:g} Hz ({N} samples), keep_every=None; process CPU time, "
         f"{rounds} interleaved rounds; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
     )
-    print(f"{'variant':34s} {'min ms':>8s} {'median ms':>10s} {'x plain':>8s}")
+    print("[full]: the same run with the unspecialised flight sample (every port and expression), A/B")
+    print(f"{'variant':41s} {'min ms':>8s} {'median ms':>10s} {'x plain':>8s}")
     for label, values in times.items():
         best = min(values)
-        print(f"{label:34s} {1e3 * best:8.2f} {1e3 * statistics.median(values):10.2f} {best / plain:8.2f}")
+        print(f"{label:41s} {1e3 * best:8.2f} {1e3 * statistics.median(values):10.2f} {best / plain:8.2f}")
     batch_table(max(3, rounds // 3))
 
 

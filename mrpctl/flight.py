@@ -478,11 +478,25 @@ class Disturbance:
     ----------
     torque : array_like
         (3,) constant, or (n, 3) one row per measurement sample (held over the period).
+    function : callable, optional
+        Instead of ``torque``: w(t) of a (m,) array of sample times t_k = k h (s) returning an
+        (m, 3) array (N m), evaluated by the engine on each slice's times (so memory stays bounded
+        by the slice; the function should be elementwise in t, e.g. NumPy ufuncs, so that the run
+        does not depend on how it is sliced). :func:`mrpctl.simulate` only.
     """
 
-    torque: Any
+    torque: Any = None
+    function: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
+        if self.function is not None:
+            if self.torque is not None:
+                raise SpecificationError("torque, function: give a torque array or a function of time, not both")
+            if not callable(self.function):
+                raise SpecificationError(f"function must be callable (w(t) -> (m, 3) N m), got {self.function!r}")
+            return
+        if self.torque is None:
+            raise SpecificationError("torque: a (3,) or (n, 3) torque (N m), or function=w(t), is required")
         torque = finite_array("torque", self.torque)
         if torque.shape != (3,) and (torque.ndim != 2 or torque.shape[1] != 3 or torque.shape[0] == 0):
             raise DimensionError(f"torque: expected shape (3,) or (n, 3) but found {torque.shape}")
@@ -491,20 +505,34 @@ class Disturbance:
     @property
     def constant(self) -> bool:
         """True for a constant torque."""
-        return bool(self.torque.ndim == 1)
+        return self.function is None and bool(self.torque.ndim == 1)
+
+    @property
+    def shape(self) -> tuple[int, ...] | None:
+        """The torque array's shape (None for a function of time)."""
+        return None if self.function is not None else tuple(self.torque.shape)
 
     def check_horizon(self, n: int) -> None:
         """Raise :class:`DimensionError` if a per-sample torque does not have n rows."""
         n = integer("n", n, minimum=1)
-        if not self.constant and self.torque.shape != (n, 3):
+        if self.function is None and not self.constant and self.torque.shape != (n, 3):
             raise DimensionError(
                 f"torque: expected shape (n, 3) = ({n}, 3) (one row per measurement sample) but found "
                 f"{self.torque.shape}"
             )
 
-    def samples(self, k0: int, k1: int) -> np.ndarray:
-        """(k1 − k0, 3) torque over samples k0 … k1 − 1 (N m)."""
+    def samples(self, k0: int, k1: int, rate: float | None = None) -> np.ndarray:
+        """(k1 − k0, 3) torque over samples k0 … k1 − 1 (N m); ``rate`` (Hz) for a function of time."""
         start, stop = _slice(k0, k1)
+        if self.function is not None:
+            if rate is None:
+                raise SpecificationError("rate: a disturbance given as a function of time needs the sample rate")
+            times = np.arange(start, stop) / positive_scalar("rate", rate)
+            return finite_array(
+                f"function (the disturbance w(t) at t = {times[0] if len(times) else 0.0:g} s ...)",
+                self.function(times),
+                (stop - start, 3),
+            )
         if self.constant:
             return np.tile(self.torque, (stop - start, 1))
         if stop > len(self.torque):
@@ -512,6 +540,8 @@ class Disturbance:
         return np.array(self.torque[start:stop])
 
     def __str__(self) -> str:
+        if self.function is not None:
+            return f"Disturbance (a function of time, {getattr(self.function, '__name__', 'callable')})"
         if self.constant:
             return "Disturbance (constant [" + ", ".join(f"{w:g}" for w in self.torque) + "] N m)"
         return f"Disturbance ({len(self.torque)} samples, max |w| {np.linalg.norm(self.torque, axis=1).max():g} N m)"

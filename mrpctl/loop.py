@@ -227,6 +227,10 @@ def flight_core_function(
     inertia: InertiaInput | None = None,
     saturation: Saturation = Saturation.SCALE,
     sensor: bool = True,
+    limited: bool = True,
+    disturbed: bool = True,
+    records: bool = False,
+    torque_input: bool = False,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
 
@@ -237,7 +241,15 @@ def flight_core_function(
     ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) (N m, rad/s; inf: no limit), and per
     sample ``noise`` = (θ_k, η_k) (rad, rad/s). Without ``sensor`` the ``noise`` input and the
     ``measurement`` output are left out and the measurement is the bookkept state (the
-    virtual machine's form). At sample k:
+    virtual machine's form). The sample is specialised by structure, each form giving the full
+    sample's numbers bit for bit on the runs it serves: without ``sensor`` for an ideal sensor
+    (no noise, no bias: m_k = x_meas exactly), without ``limited`` for no actuator limit
+    (u_max = u_norm = inf: u = u_c, the saturated count stays 0; u_max, u_norm unused), without
+    ``disturbed`` for w = 0 (u + w = u; w unused). With ``records`` a last output ``record`` =
+    (h_{k+1}, σ_c,k) (the logic variable after the rule, the MRP the control law used): the
+    result's per-sample records. With ``torque_input`` a last input ``torque`` (3, N m) is the
+    disturbance w_k of the sample (a per-sample disturbance streamed by the engine; the constant
+    w in ``flight`` is then unused). At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
@@ -262,6 +274,9 @@ def flight_core_function(
     extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
     flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
     noise = ca.SX.sym("noise", NOISE_SIZE)
+    torque = ca.SX.sym("torque", INPUT_SIZE)
+    w = torque if torque_input else flight[4:7]
+    disturbed = disturbed or torque_input
     x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
     measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
     seen = x_delayed if d > 0 else measured
@@ -270,34 +285,38 @@ def flight_core_function(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
     command = gain @ ca.vertcat(sigma_c, seen[3:6])
-    u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+    if limited:
+        u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
+        count = memory[5] + saturated
+        if not disturbed:
+            u_plant = u
+    else:
+        # + the saturated count (0 in a run without a limit): −0 becomes +0, as the full sample's
+        # if_else in the actuator does (the recorded u keeps its bits, sign of zero included)
+        u, count = command + memory[5], memory[5]
+        u_plant = u + w if disturbed else u
     x_next = step(x_meas, u_plant, *extra)
     size = ca.fabs(command)
     memory_next = ca.vertcat(
         h_next,
         c_next,
         sigma_seen,
-        memory[5] + saturated,
+        count,
         ca.fmax(memory[6:9], size),
         ca.fmax(memory[9], ca.norm_2(command)),
     )
     names = ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"]
-    outputs = ["x_next", "memory_next", "x_meas", "u", "switched"]
-    if not sensor:
-        return ca.Function(
-            "core",
-            [x, memory, x_delayed, gain, parameters, *extra, flight],
-            [x_next, memory_next, x_meas, u, switched],
-            names,
-            outputs,
-        )
-    return ca.Function(
-        "core",
-        [x, memory, x_delayed, gain, parameters, *extra, flight, noise],
-        [x_next, memory_next, x_meas, u, switched, measured],
-        [*names, "noise"],
-        [*outputs, "measurement"],
-    )
+    inputs = [x, memory, x_delayed, gain, parameters, *extra, flight] + ([noise] if sensor else [])
+    names += ["noise"] if sensor else []
+    if torque_input:
+        inputs.append(torque)
+        names.append("torque")
+    output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
+    outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
+    if records:
+        output_names.append("record")
+        outputs.append(ca.vertcat(h_next, sigma_c))
+    return ca.Function("core", inputs, outputs, names, output_names)
 
 
 #: The predictor sample's memory: (1, 1, σ̂_prev (3), the actuator accumulators of the flight sample (5),

@@ -9,7 +9,9 @@
  * MRPCTL_RING_WIDTH is the width of one ring entry (6: m_k; 12 for the predictor sample: m_k and the
  * controller's model state z_k); with MRPCTL_RING_OUTPUT the sample has a seventh output, the ring
  * entry, apart from x_meas (the flight and predictor samples), and with MRPCTL_SENSOR a per-sample
- * noise input.
+ * noise input. With MRPCTL_RECORD_OUTPUT (its output index) the flight sample's record of
+ * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept); with
+ * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque.
  *
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
  * stats alternate between two buffers; the sample writes m_k into a ring of ring_size
@@ -26,9 +28,10 @@
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
-    const casadi_real* noise, long long noise_stride, const long long* used, long long k0, long long k1,
+    const casadi_real* noise, long long noise_stride, const casadi_real* torque, long long torque_stride,
+    const long long* used, long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
-    casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched) {
+    casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched, casadi_real* kept_records) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
   casadi_real* res[MRPCTL_SZ_RES];
   casadi_int iw[MRPCTL_SZ_IW];
@@ -63,8 +66,17 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   (void)noise;
   (void)noise_stride;
 #endif
+#if !MRPCTL_TORQUE_INPUT
+  (void)torque;
+  (void)torque_stride;
+#endif
 #if !MRPCTL_RING_OUTPUT
   (void)x_scratch;
+#endif
+#if MRPCTL_RECORD_OUTPUT
+  casadi_real record_scratch[MRPCTL_RECORD_WIDTH];
+#else
+  (void)kept_records;
 #endif
   for (k = k0; k < k1; ++k) {
     casadi_real* now = buffers[now_index];
@@ -89,6 +101,10 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #if MRPCTL_SENSOR
     arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise + noise_stride * (k - k0);
 #endif
+#if MRPCTL_TORQUE_INPUT
+    /* a per-sample disturbance w_k (the flight sample's last input) */
+    arg[MRPCTL_TORQUE_INPUT] = torque + torque_stride * (k - k0);
+#endif
 #if MRPCTL_RING_OUTPUT
     /* the flight and predictor samples: the sensor's measurement (and the model state) go to the ring,
        the true state to the kept array */
@@ -99,6 +115,10 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #endif
     res[4] = kept ? kept_u + 3 * kept_column : u_scratch;
     res[5] = switched ? switched + (k - k0) : switched_scratch;
+#if MRPCTL_RECORD_OUTPUT
+    /* the flight sample's per-sample record (h, sigma_c), kept like u */
+    res[MRPCTL_RECORD_OUTPUT] = kept && kept_records ? kept_records + MRPCTL_RECORD_WIDTH * kept_column : record_scratch;
+#endif
     if (MRPCTL_SAMPLE(arg, res, iw, w, 0)) return -1;
     if (kept) {
       if (!MRPCTL_RING_OUTPUT && kept_measurements != ring)

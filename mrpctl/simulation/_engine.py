@@ -35,6 +35,7 @@ from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
     NOISE_SIZE,
     DelayModel,
+    Disturbance,
     Hysteretic,
     Saturation,
     SensorModel,
@@ -212,7 +213,10 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_INERTIA_INPUT": int("J" in sample.name_in()),
         "MRPCTL_FLIGHT_INPUT": int("flight" in sample.name_in()),
         "MRPCTL_SENSOR": int("noise" in sample.name_in()),
-        "MRPCTL_RING_OUTPUT": int(sample.n_out() > 6),
+        "MRPCTL_RING_OUTPUT": int("measurement" in sample.name_out() or "ring" in sample.name_out()),
+        "MRPCTL_RECORD_OUTPUT": sample.name_out().index("record") if "record" in sample.name_out() else 0,
+        "MRPCTL_TORQUE_INPUT": sample.name_in().index("torque") if "torque" in sample.name_in() else 0,
+        "MRPCTL_RECORD_WIDTH": sample.size1_out("record") if "record" in sample.name_out() else 1,
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
     }
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
@@ -239,6 +243,8 @@ class RunOutput:
     u: np.ndarray | None
     switch_indices: np.ndarray | None
     memory: np.ndarray | None = None  # the rule memory after the run (the flight accumulators)
+    records: np.ndarray | None = None  # flight: the kept (h, sigma_c) rows
+    delay_used: np.ndarray | None = None  # flight: the kept delays used (samples)
 
 
 class Engine:
@@ -259,13 +265,16 @@ class Engine:
         predictor: InertiaInput | None = None,
         sensor: bool = False,
         limited: bool = True,
+        disturbed: bool = True,
+        torque_input: bool = False,
     ) -> None:
         self.d = d
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
         self.predictor = predictor is not None
         self.flight = isinstance(rule, Hysteretic) or self.predictor
-        self._structure = (spacecraft, d, period, substeps, saturation)
+        self._structure = (spacecraft, d, period, substeps, saturation, limited, disturbed)
+        self.torque_input = torque_input and self.flight and not self.predictor
         if predictor is not None:
             core = predictor_core_function(
                 spacecraft,
@@ -279,7 +288,19 @@ class Engine:
                 limited=limited,
             )
         elif self.flight:
-            core = flight_core_function(spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation)
+            core = flight_core_function(
+                spacecraft,
+                d,
+                period,
+                substeps,
+                inertia=self.inertia,
+                saturation=saturation,
+                sensor=sensor,
+                limited=limited,
+                disturbed=disturbed,
+                records=True,
+                torque_input=torque_input,
+            )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
         self.memory_size = core.size1_in(1)
@@ -289,6 +310,9 @@ class Engine:
             label += f"_{saturation.value}"
         if predictor is not None:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
+        elif self.flight:
+            label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
+            label += "_torque" if torque_input else ""
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
         from mrpctl._vectorize import inline_min_max  # (it imports this module)
 
@@ -306,10 +330,10 @@ class Engine:
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 6
-                + [ctypes.c_longlong, ctypes.c_void_p]
+                + [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_longlong, ctypes.c_void_p]
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
-                + [ctypes.c_void_p] * 3
+                + [ctypes.c_void_p] * 4
             )
 
     def virtual_machine_sample(self) -> ca.Function:
@@ -318,9 +342,17 @@ class Engine:
             return self.sample
         if self.predictor:
             raise CodegenError("the predictor loop needs the compiled engine (a C compiler); see mrpctl._compile")
-        spacecraft, d, period, substeps, saturation = self._structure
+        spacecraft, d, period, substeps, saturation, limited, disturbed = self._structure
         core = flight_core_function(
-            spacecraft, d, period, substeps, inertia=self.inertia, saturation=saturation, sensor=False
+            spacecraft,
+            d,
+            period,
+            substeps,
+            inertia=self.inertia,
+            saturation=saturation,
+            sensor=False,
+            limited=limited,
+            disturbed=disturbed,
         )
         return engine_sample(core, d, self.sample.name() + "_vm")
 
@@ -359,6 +391,7 @@ class Engine:
         sensor: SensorModel | None = None,
         delay: DelayModel | None = None,
         rate: float = 1.0,
+        disturbance: Disturbance | None = None,
     ) -> RunOutput:
         """One run of n samples, slice by slice.
 
@@ -388,7 +421,12 @@ class Engine:
             A time-varying delay (d_max = this engine's d, d_min >= 1) at ``rate`` (Hz): the
             newest-arrived index j*(k) of each slice is computed in NumPy
             (:func:`~mrpctl.flight.newest_arrived_slice`) and handed to the driver.
+        disturbance : Disturbance, optional
+            A per-sample torque (engine built with ``torque_input``): the rows of each slice
+            (:meth:`~mrpctl.flight.Disturbance.samples`) are handed to the driver.
         """
+        if self.torque_input != (disturbance is not None and not disturbance.constant):
+            raise ValueError("a per-sample disturbance needs an engine with a torque input, and only it")
         state = workspace.state
         history = np.ascontiguousarray(history, dtype=float)
         memory_end = STATE_SIZE + self.memory_size
@@ -414,6 +452,10 @@ class Engine:
             measurements = np.empty((kept, STATE_SIZE))
             u = np.empty((kept, INPUT_SIZE))
             keep = keep_every
+        records = delay_used = None
+        if "record" in self.sample.name_out() and keep:
+            records = np.empty((kept, self.sample.size1_out("record")))
+            delay_used = np.full(kept, self.d, dtype=np.int64)
         switched = workspace.switched
         indices: list[np.ndarray] = []
         stored = 0
@@ -442,9 +484,16 @@ class Engine:
                     noise_rows = np.empty((min(step, n), NOISE_SIZE))  # one buffer for the run's slices
                 noise = sensor.noise_rows(k, k1, out=noise_rows)
                 noise_stride = NOISE_SIZE
+            torque, torque_stride = _NO_NOISE, 0
+            if self.torque_input:
+                assert disturbance is not None
+                torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1, rate)), INPUT_SIZE
             if delay is not None:
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])
+                if delay_used is not None:  # the kept samples of the slice: k - j*(k)
+                    taken = np.arange(-(-k // keep) * keep, k1, keep)
+                    delay_used[taken // keep] = taken - schedule[taken - k]
             done = self._run_c(
                 address(state),
                 address(history),
@@ -456,6 +505,8 @@ class Engine:
                 address(options) if self.flight else None,
                 address(noise),
                 noise_stride,
+                address(torque),
+                torque_stride,
                 None if schedule is None else schedule.ctypes.data,
                 k,
                 k1,
@@ -466,6 +517,7 @@ class Engine:
                 None if measurements is None else address(measurements),
                 None if u is None else address(u),
                 None if switched is None else address(switched),
+                None if records is None else address(records),
             )
             if done < 0:
                 raise CodegenError(f"evaluation of the compiled engine {self.compiled.library} failed")
@@ -487,6 +539,8 @@ class Engine:
             u=u,
             switch_indices=switch_indices if switched is not None else None,
             memory=state[STATE_SIZE:memory_end].copy(),
+            records=records,
+            delay_used=delay_used,
         )
 
 
@@ -539,19 +593,26 @@ def engine(
     predictor: Spacecraft | None = None,
     sensor: bool = False,
     limited: bool = True,
+    disturbed: bool = True,
+    torque_input: bool = False,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
     ``saturation`` (the actuator's mode) is part of the structure of the flight and predictor
     samples only. ``predictor``: the controller's model (its inertia layout is part of the
     structure, its values are run-time inputs) for the predictor sample, with a sensor port when
-    ``sensor`` and the actuator when ``limited``; the predictor needs a C compiler.
+    ``sensor`` and the actuator when ``limited``; the predictor needs a C compiler. The flight
+    sample (``rule`` a :class:`~mrpctl.flight.Hysteretic`) is specialised the same way, with a
+    sensor port when ``sensor``, the actuator when ``limited`` and the disturbance add when
+    ``disturbed`` (:func:`flight_structure` of a run's constants; one library per structure).
     """
     model = None if predictor is None else inertia_input(predictor)
-    if not isinstance(rule, Hysteretic) and model is None:
+    flight = isinstance(rule, Hysteretic)
+    if not flight and model is None:
         saturation = Saturation.SCALE
     if model is None:
-        sensor, limited = False, True
+        if not flight:
+            sensor, limited, disturbed, torque_input = False, True, True, False
         key: tuple[Any, ...] = (
             inertia_input(spacecraft),
             type(rule),
@@ -560,14 +621,24 @@ def engine(
             period,
             substeps,
             saturation,
-        )
+        ) + ((sensor, limited, disturbed, torque_input) if flight else ())
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
             found = Engine(
-                spacecraft, rule, d, period, substeps, saturation, predictor=model, sensor=sensor, limited=limited
+                spacecraft,
+                rule,
+                d,
+                period,
+                substeps,
+                saturation,
+                predictor=model,
+                sensor=sensor,
+                limited=limited,
+                disturbed=disturbed,
+                torque_input=torque_input and model is None,
             )
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine
@@ -575,6 +646,22 @@ def engine(
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)
             _ENGINES[key] = found
         return found
+
+
+def flight_structure(options: np.ndarray | None, sensor: SensorModel | None) -> dict[str, bool]:
+    """The flight sample's structure for a run's constants and sensor (keywords of :func:`engine`).
+
+    ``sensor``: noise or a gyro bias (an ideal sensor measures x_meas bit for bit); ``limited``:
+    a finite u_max or u_norm; ``disturbed``: a non-zero torque w. ``options`` as
+    :data:`NO_FLIGHT_OPTIONS` (None: none).
+    """
+    constants = NO_FLIGHT_OPTIONS if options is None else np.asarray(options, dtype=float)
+    noisy = sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
+    return {
+        "sensor": bool(noisy or np.any(constants[7:10] != 0.0)),
+        "limited": bool(np.any(np.isfinite(constants[0:4]))),
+        "disturbed": bool(np.any(constants[4:7] != 0.0)),
+    }
 
 
 def clear_engines() -> None:

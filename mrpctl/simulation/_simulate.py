@@ -35,6 +35,7 @@ from mrpctl.simulation._engine import (
     RunOutput,
     engine,
     flight_memory,
+    flight_structure,
     predictor_constants,
     rule_key,
     slice_samples,
@@ -50,6 +51,8 @@ SWITCH_LIMIT = 2**20
 # Bytes per kept sample in a result: m_k and u_k as computed (72), t (8), omega (24).
 _BYTES_PER_KEPT = 104
 _BYTES_PER_SWITCH = 16  # index and time
+# Flight runs: the records (h, sigma_c) and the delay used per kept sample as computed (40) and their copies (40).
+_BYTES_PER_RECORD = 80
 #: Metrics-only batches (``trajectories=False``) of compiled code run on the lane engine
 #: (:mod:`mrpctl._vectorize`); False runs them on the scalar engine (tests, benchmarks).
 _LANES = True
@@ -104,11 +107,13 @@ def _memory_limit(memory_limit: Any) -> float:
     return available / 2 if available else math.inf
 
 
-def run_bytes(n: int, keep_every: int | None, *, switches: bool = True) -> int:
-    """Bytes a result of n samples holds: the kept samples and (at most) its switch instants."""
+def run_bytes(n: int, keep_every: int | None, *, switches: bool = True, flight: bool = False) -> int:
+    """Bytes a result of n samples holds: the kept samples (with ``flight``, their records) and
+    (at most) its switch instants."""
     kept = 0 if keep_every is None else (n - 1) // keep_every + 1
     switch_cap = (n if keep_every == 1 else min(n, SWITCH_LIMIT)) if switches else 0
-    return kept * _BYTES_PER_KEPT + switch_cap * _BYTES_PER_SWITCH
+    per_kept = _BYTES_PER_KEPT + (_BYTES_PER_RECORD if flight else 0)
+    return kept * per_kept + switch_cap * _BYTES_PER_SWITCH
 
 
 def workspace_bytes(n: int, d: int, substeps: int, width: int = 1) -> int:
@@ -131,7 +136,7 @@ def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: 
 
 
 def _flight_options(
-    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None
+    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None, *, per_sample: bool = False
 ) -> tuple[np.ndarray | None, Saturation]:
     """The flight sample's constants (u_max (3), u_norm, w (3), bias (3)) and the saturation mode."""
     if actuator is None and disturbance is None and sensor is None:
@@ -141,20 +146,45 @@ def _flight_options(
             "actuator, disturbance, sensor: the actuator, disturbance and sensor models run in the flight loop only; "
             f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
         )
-    return _flight_constants(actuator, disturbance, sensor)
+    return _flight_constants(actuator, disturbance, sensor, per_sample=per_sample)
 
 
-def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.ndarray | None, Saturation]:
-    """The checked actuator, disturbance and sensor models as the flight constants and the saturation mode."""
+def _streamed_disturbance(disturbance: Any, n: int) -> Disturbance | None:
+    """The per-sample disturbance of a run of n samples (its rows checked), or None (none or constant)."""
+    if disturbance is None:
+        return None
+    if not isinstance(disturbance, Disturbance):
+        disturbance = Disturbance(disturbance)
+    if disturbance.constant:
+        return None
+    disturbance.check_horizon(n)
+    return disturbance
+
+
+def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
+    """The engine's structure keywords: the predictor's (sensor given, actuator given), or the
+    flight sample's specialisation to the run's constants (:func:`~mrpctl.simulation._engine.flight_structure`)."""
+    if checked is not None:
+        return {"sensor": sensor is not None, "limited": actuator is not None}
+    return flight_structure(options, sensor)
+
+
+def _flight_constants(
+    actuator: Any, disturbance: Any, sensor: Any, *, per_sample: bool = False
+) -> tuple[np.ndarray | None, Saturation]:
+    """The checked actuator, disturbance and sensor models as the flight constants and the saturation mode.
+
+    ``per_sample``: an (n, 3) disturbance is accepted (streamed by the engine; w = 0 in the constants)."""
     if actuator is None and disturbance is None and sensor is None:
         return None, Saturation.SCALE
     if actuator is not None and not isinstance(actuator, ActuatorModel):
         raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel or None, got {actuator!r}")
     if disturbance is not None and not isinstance(disturbance, Disturbance):
         disturbance = Disturbance(disturbance)
-    if disturbance is not None and not disturbance.constant:
+    if disturbance is not None and not disturbance.constant and not per_sample:
         raise DimensionError(
-            f"disturbance: the engine takes a constant torque of shape (3,) so far, got {disturbance.torque.shape}"
+            "disturbance: a per-sample torque (n, 3) runs in mrpctl.simulate only; here a constant torque of "
+            f"shape (3,) is needed, got {'a function of time' if disturbance.shape is None else disturbance.shape}"
         )
     if sensor is not None and not isinstance(sensor, SensorModel):
         raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
@@ -165,7 +195,7 @@ def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.
     if actuator is not None:
         options[0:3] = actuator.u_max
         options[3] = actuator.norm_limit
-    if disturbance is not None:
+    if disturbance is not None and disturbance.constant:
         options[4:7] = disturbance.torque
     return options, Saturation.SCALE if actuator is None else actuator.mode
 
@@ -289,9 +319,11 @@ def simulate(
         Torque limits of the flight loop (``rule=Hysteretic(...)`` only); None: none. The
         result's ``u`` is then the applied torque, ``saturated_fraction`` and
         ``peak_command`` report the limits.
-    disturbance : mrpctl.flight.Disturbance or array_like (3,), keyword-only
-        A constant body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)``
-        only; a per-sample torque is not supported by the engine yet).
+    disturbance : mrpctl.flight.Disturbance or array_like (3,) or (n, 3), keyword-only
+        A body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)`` only):
+        constant (3,), one row per sample (n, 3), or ``Disturbance(function=w)`` with w(t) of the
+        sample times (evaluated slice by slice); the per-sample forms are streamed per slice
+        like the noise (compiled engine only; :func:`simulate_batch` takes a constant torque).
     sensor : mrpctl.flight.SensorModel, keyword-only
         Attitude and rate noise and gyro bias of the flight loop's measurements
         (``rule=Hysteretic(...)`` only); the noise of each slice of samples is generated in
@@ -332,13 +364,20 @@ def simulate(
     limit = _memory_limit(memory_limit)
     checked = _check_predictor(predictor, rule, history, delay)
     if checked is None:
-        options, saturation = _flight_options(rule, actuator, disturbance, sensor)
+        options, saturation = _flight_options(rule, actuator, disturbance, sensor, per_sample=True)
         varying = _varying_delay(rule, delay, d, rate, n)
+        streamed = _streamed_disturbance(disturbance, n)
     else:
         options, saturation = _flight_constants(actuator, disturbance, sensor)
-        options, varying = predictor_constants(options, float(tau), checked.model), None
+        options, varying, streamed = predictor_constants(options, float(tau), checked.model), None, None
     width = 1 if checked is None else 2
-    _check_memory(run_bytes(n, keep) + workspace_bytes(n, d, substeps, width), limit, t_final=t_final, keep_every=keep)
+    records = checked is None and isinstance(rule, Hysteretic)
+    _check_memory(
+        run_bytes(n, keep, flight=records) + workspace_bytes(n, d, substeps, width),
+        limit,
+        t_final=t_final,
+        keep_every=keep,
+    )
 
     found = engine(
         spacecraft,
@@ -348,9 +387,13 @@ def simulate(
         substeps,
         saturation,
         predictor=None if checked is None else checked.model,
-        sensor=sensor is not None,
-        limited=actuator is not None,
+        **_structure(checked, options, sensor, actuator),
+        **({} if streamed is None else {"torque_input": True}),
     )
+    if streamed is not None and not found.compiled_code:
+        raise CodegenError(
+            "disturbance: a per-sample torque needs the compiled engine (install a C compiler: gcc or cc, or set CC)"
+        )
     stop = None
     if progress is not None:
 
@@ -374,6 +417,7 @@ def simulate(
         sensor=sensor,
         delay=varying,
         rate=rate,
+        **({} if streamed is None else {"disturbance": streamed}),
     )
     common = dict(
         spacecraft=spacecraft,
@@ -530,7 +574,8 @@ def simulate_batch(
     width = 1 if predictor is None else 2
     estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width) + n_runs * STATS_SIZE * 8 * 4
     if trajectories:
-        estimate += n_runs * run_bytes(n, keep)
+        records = predictor is None and any(isinstance(one, Hysteretic) for one in rules)
+        estimate += n_runs * run_bytes(n, keep, flight=records)
     elif _LANES:
         estimate += lane_bytes(n_runs, max(samples_by_run), workers)
     _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
@@ -586,8 +631,7 @@ def simulate_batch(
                 substeps,
                 saturation,
                 predictor=None if checked is None else checked.model,
-                sensor=sensor is not None,
-                limited=actuator is not None,
+                **_structure(checked, options, sensor, actuator),
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs

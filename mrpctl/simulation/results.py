@@ -88,6 +88,15 @@ class SimulationResult(_Conversions):
     peak_command : numpy.ndarray or None
         Flight loop: (4,) max over the run of the *commanded* |u_c,i| per axis and of |u_c|
         (N m), before the actuator limits; None otherwise.
+    logic : numpy.ndarray or None
+        Flight loop (``rule=Hysteretic(...)``, compiled engine, trajectories kept): (m,) the
+        controller's logic variable h_k ∈ {−1, +1} after the rule at each kept sample (the h
+        of σ_c,k); None otherwise (other rules, the predictor, ``keep_every=None``, the virtual machine).
+    sigma_c : numpy.ndarray or None
+        Flight loop: (m, 3) σ_c,k, the MRP the control law used at each kept sample; None otherwise.
+    delay_used : numpy.ndarray or None
+        Flight loop: (m,) the delay used at each kept sample, k − j*(k) (samples; constant d
+        without a time-varying delay, from the newest-arrived schedule with one); None otherwise.
     predictor : mrpctl.Predictor or None
         The predictor controller of the run (the flight-loop fields above are then reported too);
         None for the plain delayed law.
@@ -124,6 +133,9 @@ class SimulationResult(_Conversions):
     saturated_fraction: float | None = None
     peak_command: np.ndarray | None = field(default=None, repr=False)
     predictor: Any = None
+    logic: np.ndarray | None = field(default=None, repr=False)
+    sigma_c: np.ndarray | None = field(default=None, repr=False)
+    delay_used: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -207,6 +219,11 @@ def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: d
     flight: dict[str, Any] = {}
     if output.memory is not None and output.memory.size in (FLIGHT_MEMORY_SIZE, PREDICTOR_MEMORY_SIZE):
         flight = dict(saturated_fraction=float(output.memory[5]) / valid, peak_command=readonly(output.memory[6:10]))
+    if output.records is not None and output.delay_used is not None and keep_every is not None:
+        rows = (valid - 1) // keep_every + 1
+        flight["logic"] = readonly(output.records[:rows, 0])
+        flight["sigma_c"] = readonly(output.records[:rows, 1:4])
+        flight["delay_used"] = readonly(output.delay_used[:rows], np.int64)
     return SimulationResult(
         t=sealed(t),
         sigma=sealed(measurements[:, 0:3]),
