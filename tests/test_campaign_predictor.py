@@ -143,3 +143,33 @@ def test_never_switch_round_trips_as_a_label():
     assert spec.rule_list[0].alpha is None
     again = parse_campaign({**data, "dispersions": {**data["dispersions"], "rule": {"rules": list(spec.rule_labels)}}})
     assert again.rule_labels == spec.rule_labels
+
+
+def test_a_torque_limit_and_a_disturbance_reach_the_predictor_runs():
+    """[flight] models other than jitter run with the predictor (it uses the applied torque): an independent
+    simulate_batch call with the models written by hand gives the chunk's metrics."""
+    from mrpctl.campaign._task import simulate_chunk
+    from mrpctl.flight import ActuatorModel, Disturbance, Saturation
+
+    data = copy.deepcopy(SPEC)
+    data["flight"] = {"u_max": 0.5, "disturbance": [0.01, 0.0, -0.02]}
+    spec = parse_campaign(data)
+    chunk = simulate_chunk(spec, 0, 2, threads=1)
+    inputs = run_inputs(spec, 0, 2)
+    batch = simulate_batch(
+        [Spacecraft(J) for J in inputs.inertia],
+        inputs.gain_scale[:, None, None] * spec.base.K[None],
+        inputs.x0,
+        tau=inputs.tau,
+        rule=[OnPredicted(1.0), OnPredicted(1.2)],
+        t_final=5.0,
+        rate=100.0,
+        predictor=Predictor(Spacecraft(MODEL)),
+        actuator=ActuatorModel(0.5, mode=Saturation.SCALE),
+        disturbance=Disturbance(np.array([0.01, 0.0, -0.02])),
+    )
+    for name in METRICS:
+        assert np.asarray(getattr(batch, name)).tobytes() == chunk[name].tobytes(), name
+    assert (chunk["peak_torque"] <= 0.5 * (1 + 1e-12)).all()
+    plain = simulate_chunk(parse_campaign(copy.deepcopy(SPEC)), 0, 2, threads=1)
+    assert not np.array_equal(plain["settling_time"], chunk["settling_time"], equal_nan=True)
