@@ -57,6 +57,18 @@ and their dispersions::
 
 Each run's noise and jitter streams are seeded from (seed, case) (:mod:`mrpctl.campaign.sampling`).
 
+The predictor controller (:class:`mrpctl.Predictor`; every rule ``on-predicted``, ``alpha`` >= 1
+may differ: ``"on-predicted:1.2"``, ``"on-predicted:inf"`` never switches)::
+
+    [rule]
+    type = "on-predicted"
+    [predictor]
+    inertia_error = 0.05            # the model: the NOMINAL [spacecraft], J_m = S J S, S = diag(sqrt(1 + e))
+                                    # (or inertia = [...]; empty: the nominal spacecraft itself)
+
+The model is the same for every run; the plant is each run's dispersed spacecraft. ``flight.jitter``
+and a ``history`` other than ``"constant"`` are refused with it.
+
 Unknown keys anywhere are errors naming the key.
 """
 
