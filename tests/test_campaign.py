@@ -433,9 +433,9 @@ def test_flight_dispersions_are_stored_and_a_replay_reproduces_each_run(tmp_path
         ({"dispersions": {"hysteresis": {"delta": [0.0, 1.0]}}}, r"\[0, 1\)"),
         ({"dispersions": {"actuator": {"u_max": [0.0, 1.0]}}}, "must be > 0"),
         ({"rule": {"type": "hysteretic", "eps": 0.1}}, "takes delta only"),
-        ({"rule": {"type": "on-predicted"}}, "campaigns do not run the predictor yet"),
-        ({"dispersions": {"rule": {"rules": ["on-predicted"]}}}, "campaigns do not run the predictor yet"),
-        ({"predictor": {}}, r"\[predictor\]: campaigns do not run the predictor yet"),
+        ({"rule": {"type": "on-predicted"}}, r"'on-predicted' needs a \[predictor\] table"),
+        ({"dispersions": {"rule": {"rules": ["on-predicted", "hysteretic"]}}}, "every rule must be 'on-predicted'"),
+        ({"predictor": {}}, r"\[predictor\] applies only with rule 'on-predicted'"),
     ],
 )
 def test_rule_and_flight_keys_are_checked(change, message):
@@ -446,7 +446,7 @@ def test_rule_and_flight_keys_are_checked(change, message):
         parse_campaign(data)
 
 
-@pytest.mark.parametrize("name", ["tumble", "tumble_fixed_inertia", "rules", "flight"])
+@pytest.mark.parametrize("name", ["tumble", "tumble_fixed_inertia", "rules", "flight", "predictor"])
 def test_shipped_campaign_files_parse_and_sample(name):
     from pathlib import Path
 

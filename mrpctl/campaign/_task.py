@@ -91,6 +91,7 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
         threads=threads,
         peak_torque=spec.peak_torque,
         flight=[models for _, models in per_run],
+        predictor=spec.predictor,
     )
     sigma_norm = np.linalg.norm(inputs.sigma0, axis=1)
     return {

@@ -481,6 +481,7 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
         history=base.history,
         substeps=base.substeps,
         **(models or {}),
+        **({} if spec.predictor is None else {"predictor": spec.predictor}),
     )
 
 

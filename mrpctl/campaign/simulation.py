@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl import simulate_batch
+from mrpctl.predictor import Predictor
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 
@@ -89,6 +90,7 @@ def simulate_runs(
     threads: int | None = None,
     peak_torque: bool = True,
     flight: Sequence[dict[str, Any] | None] | None = None,
+    predictor: Predictor | None = None,
 ) -> dict[str, np.ndarray]:
     """Simulate N runs, each with its own inertia, gain, initial state, delay, rule and flight models.
 
@@ -112,6 +114,9 @@ def simulate_runs(
         Per run, None or the flight models (``actuator``, ``disturbance``, ``sensor``, ``delay``
         of :func:`mrpctl.simulate_batch`). Runs with equal models share one call; the calls
         run on ``threads`` threads (one each), and every run's result is the same either way.
+    predictor : Predictor or None, optional
+        The predictor controller shared by every run (every rule an
+        :class:`~mrpctl.predictor.OnPredicted`): each call to :func:`mrpctl.simulate_batch` takes it.
 
     Returns
     -------
@@ -120,6 +125,8 @@ def simulate_runs(
     """
     n = len(x0)
     options: dict[str, Any] = dict(t_final=t_final, rate=rate, history=history, substeps=substeps, threads=threads)
+    if predictor is not None:
+        options["predictor"] = predictor
     if n == 0:
         return {name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()}
     rules = [rule] * n if isinstance(rule, SwitchingRule) else list(rule)

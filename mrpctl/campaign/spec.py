@@ -57,6 +57,18 @@ and their dispersions::
 
 Each run's noise and jitter streams are seeded from (seed, case) (:mod:`mrpctl.campaign.sampling`).
 
+The predictor controller (:class:`mrpctl.Predictor`; every rule ``on-predicted``, ``alpha`` >= 1
+may differ: ``"on-predicted:1.2"``, ``"on-predicted:inf"`` never switches)::
+
+    [rule]
+    type = "on-predicted"
+    [predictor]
+    inertia_error = 0.05            # the model: the NOMINAL [spacecraft], J_m = S J S, S = diag(sqrt(1 + e))
+                                    # (or inertia = [...]; empty: the nominal spacecraft itself)
+
+The model is the same for every run; the plant is each run's dispersed spacecraft. ``flight.jitter``
+and a ``history`` other than ``"constant"`` are refused with it.
+
 Unknown keys anywhere are errors naming the key.
 """
 
@@ -72,9 +84,10 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
-from mrpctl.errors import SpecificationError
+from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
-from mrpctl.scenario import RULE_NAMES, Scenario, parse_scenario, rule_from_name, rule_name
+from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.scenario import RULE_NAMES, Scenario, parse_scenario, predictor_model, rule_from_name, rule_name
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
 
 __all__ = [
@@ -93,7 +106,8 @@ __all__ = [
     "rule_label",
 ]
 
-_CAMPAIGN_KEYS = {"count", "seed", "dispersions", "peak_torque", "flight", "rule"}
+_CAMPAIGN_KEYS = {"count", "seed", "dispersions", "peak_torque", "flight", "rule", "predictor"}
+_PREDICTOR_KEYS = {"inertia", "inertia_error"}
 _DISPERSION_KEYS = {
     "attitude",
     "rate",
@@ -120,7 +134,7 @@ _KEYS = {
 }
 _FLIGHT_KEYS = {"u_max", "norm_max", "saturation", "disturbance", "attitude_noise", "rate_noise", "gyro_bias", "jitter"}
 #: The one parameter a rule string "name:value" sets, by rule name.
-_RULE_PARAMETER = {"boundary-layer": "eps", "delay-aware": "alpha", "hysteretic": "delta"}
+_RULE_PARAMETER = {"boundary-layer": "eps", "delay-aware": "alpha", "hysteretic": "delta", "on-predicted": "alpha"}
 #: Largest count a specification accepts (the run index is a 64-bit spawn key; this is a sanity bound).
 MAX_COUNT = 10**9
 
@@ -212,6 +226,10 @@ def rule_label(rule: SwitchingRule) -> str:
     """The campaign-file string of ``rule``: ``"name"`` or ``"name:parameter"`` (the inverse of :func:`parse_rule`)."""
     if isinstance(rule, Hysteretic):
         return f"hysteretic:{rule.delta!r}"
+    if isinstance(rule, OnPredicted):
+        if rule.alpha is None:
+            return "on-predicted:inf"
+        return "on-predicted" if float(rule.alpha) == 1.0 else f"on-predicted:{float(rule.alpha)!r}"
     name = rule_name(rule)
     if isinstance(rule, BoundaryLayer):
         return f"{name}:{float(rule.eps)!r}"
@@ -251,11 +269,6 @@ def parse_rule(where: str, value: Any) -> SwitchingRule:
         return Hysteretic(finite_scalar(f"{where}.delta", table.get("delta", 0.0)))
     if "delta" in table:
         raise SpecificationError(f"{where}: delta applies only to 'hysteretic', not to {name!r}")
-    if name == "on-predicted":  # refused when the file is read, not when the runs start
-        raise SpecificationError(
-            f"{where}: campaigns do not run the predictor yet (rule 'on-predicted'); "
-            "use mrpctl.simulate_batch(..., predictor=mrpctl.Predictor(model)) for a batch"
-        )
     if name not in RULE_NAMES:
         raise SpecificationError(f"{where}: rule type must be one of {names}, got {name!r}")
     return rule_from_name(name, eps=table.get("eps"), alpha=table.get("alpha"))
@@ -389,6 +402,7 @@ class CampaignSpec:
     rules: RuleDispersion | None = None
     flight: FlightOptions | None = None
     flight_dispersion: FlightDispersion = field(default_factory=FlightDispersion)
+    predictor: Predictor | None = None
 
     @property
     def rule_list(self) -> tuple[SwitchingRule, ...]:
@@ -416,6 +430,8 @@ class CampaignSpec:
         for name in ("attitude", "rate", "inertia", "tau", "gains", "rules"):
             value = getattr(self, name)
             parts.append(f"  {name:<9} {'base value' if value is None else value}")
+        if self.predictor is not None:
+            parts.append(f"  predictor {self.predictor} (the plant is the dispersed spacecraft)")
         if self.uses_flight:
             parts.append(f"  flight    {self.flight if self.flight is not None else 'base models'}")
             parts.append(f"  flight dispersions {self.flight_dispersion}")
@@ -437,8 +453,6 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
     if "rule" not in data:
         raise SpecificationError(f"[rule] needs type, one of {sorted([*RULE_NAMES, 'hysteretic'])}")
-    if "predictor" in scenario_part:
-        raise SpecificationError("[predictor]: campaigns do not run the predictor yet (use mrpctl.simulate_batch)")
     flight_tables = sorted(set(scenario_part) & {"actuator", "sensor", "disturbance", "delay"})
     if flight_tables:  # scenario-style flight tables would be dropped by the runner: refuse, never drop them
         raise SpecificationError(
@@ -524,9 +538,53 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
         rules=rules,
         flight=flight,
         flight_dispersion=flight_dispersion,
+        predictor=_predictor(data, base, rules.rules if rules is not None else (base.rule,)),
     )
     _check_flight(spec)
+    _check_predictor(spec)
     return spec
+
+
+def _predictor(data: dict[str, Any], base: Scenario, rules: tuple[SwitchingRule, ...]) -> Predictor | None:
+    """The [predictor] table: the controller's model is the campaign's nominal spacecraft (``base``),
+    optionally with a relative error (``inertia_error``) or an explicit ``inertia``; the plant is dispersed."""
+    predicted = [isinstance(rule, OnPredicted) for rule in rules]
+    if any(predicted) and not all(predicted):
+        mixed = next(rule_label(rule) for rule in rules if not isinstance(rule, OnPredicted))
+        raise SpecificationError(
+            "rules: a campaign runs either the predictor or the plain delayed law: with 'on-predicted', every "
+            f"rule must be 'on-predicted' (alpha may differ), got {mixed!r} (run two campaigns to compare them)"
+        )
+    if "predictor" not in data:
+        if any(predicted):
+            raise SpecificationError(
+                "[rule] type = 'on-predicted' needs a [predictor] table (the controller's model): empty for the "
+                "nominal spacecraft of the campaign, inertia_error = e (model (1 + e) J, or 3 per-axis values) or "
+                "inertia = [J1, J2, J3] (or 3x3, kg m^2)"
+            )
+        return None
+    table = _check_keys("[predictor]", data["predictor"], _PREDICTOR_KEYS)
+    if not any(predicted):
+        raise SpecificationError(
+            f"[predictor] applies only with rule 'on-predicted' (the predictor's rule), got {rule_label(rules[0])!r}"
+        )
+    if base.history != "constant":
+        raise SpecificationError(
+            f"[predictor] needs history = 'constant' (the model copy starts at x0), got {base.history!r}"
+        )
+    try:
+        return Predictor(predictor_model(base.spacecraft, table.get("inertia"), table.get("inertia_error")))
+    except (SpecificationError, DimensionError) as exc:
+        raise type(exc)(f"[predictor] {exc}") from exc
+
+
+def _check_predictor(spec: CampaignSpec) -> None:
+    """The predictor runs with the constant delay tau: a jittered delay is refused."""
+    if spec.predictor is not None and spec.flight is not None and spec.flight.jitter is not None:
+        raise SpecificationError(
+            "flight.jitter does not apply with the predictor: it runs with the constant delay tau only "
+            "(its correction needs the age of each measurement); remove flight.jitter"
+        )
 
 
 def _flight_options(table: Any, base: Scenario) -> FlightOptions:
@@ -597,11 +655,11 @@ def _check_flight(spec: CampaignSpec) -> None:
     if spec.flight_dispersion.delta is not None and not any(isinstance(r, Hysteretic) for r in labels.values()):
         raise SpecificationError("dispersions.hysteresis.delta: no rule of the campaign is 'hysteretic'")
     if spec.uses_flight:
-        other = [label for label, rule in labels.items() if not isinstance(rule, Hysteretic)]
+        other = [label for label, rule in labels.items() if not isinstance(rule, Hysteretic | OnPredicted)]
         if other:
             raise SpecificationError(
                 f"[flight] and the flight dispersions run in the flight loop only: every rule must be 'hysteretic' "
-                f"(hysteretic:0 is on-current's control), got {other[0]!r}"
+                f"(hysteretic:0 is on-current's control) or 'on-predicted' (the predictor), got {other[0]!r}"
             )
     if spec.flight is not None and spec.flight.jitter is not None and spec.tau is not None:
         raise SpecificationError("flight.jitter fixes tau (= tau_max); remove [dispersions.tau]")

@@ -102,6 +102,10 @@ def _attrs(spec: CampaignSpec) -> dict[str, Any]:
         "seed": spec.seed,
         "rule": str(spec.base.rule),
         "rules": json.dumps(list(spec.rule_labels)),
+        # the predictor's model inertia (kg m^2, 3x3 as JSON; "null" without the predictor)
+        "predictor_model_inertia": json.dumps(
+            None if spec.predictor is None else np.asarray(spec.predictor.model.inertia, dtype=float).tolist()
+        ),
         "versions": json.dumps(versions(), sort_keys=True),
     }
 
