@@ -157,7 +157,9 @@ def run_campaign(
         Runs per chunk for a new store (default 1000); a resumed store keeps its own.
     scheduler : str, optional
         None: run in this process (a thread pool over the compiled engine). ``"local"``:
-        a Dask ``LocalCluster`` of ``workers`` single-threaded processes. ``"tcp://host:port"``:
+        a Dask ``LocalCluster`` of ``workers`` single-threaded processes (it spawns them: a
+        script that calls this must do so under ``if __name__ == "__main__":``, as for any
+        process pool; the CLI does). ``"tcp://host:port"``:
         the Dask scheduler at that address (its workers need mrpctl and a C compiler, or
         use CasADi's virtual machine).
     workers : int, optional
