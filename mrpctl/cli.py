@@ -643,17 +643,6 @@ def _design(args: argparse.Namespace) -> int:
     decay = getattr(design, "decay_rate", None)
     written = None
     if toml_path is not None:
-        scenario = replace(
-            _paper_base(),
-            name=toml_path.stem,
-            description=f"mrpctl design: tau = {args.tau:g} s, {design.status.value}",
-            spacecraft=spacecraft,
-            K=K,
-            tau=float(args.tau),
-            rate=float(rate),
-            t_final=60.0 if args.t_final is None else float(args.t_final),
-            rule=rule_from_name("delay-aware" if args.rule is None else args.rule, eps=args.eps, alpha=args.alpha),
-        )
         comment = (
             f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g} "
             f"--zeta {args.zeta:g} --order {order}\n"
@@ -661,8 +650,7 @@ def _design(args: argparse.Namespace) -> int:
             f"exact delay margin {design.margin.margin if design.margin else float('nan'):.6g} s\n"
             "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
         )
-        with _atomic_output(toml_path) as stream:
-            stream.write(scenario_toml(scenario, comment=comment))
+        _write_design_toml(toml_path, spacecraft, K, args, rate, design.status.value, comment)
         written = toml_path
     if args.json:
         _print_json(

@@ -526,20 +526,30 @@ def solve_interval(
     def blocks(mats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return interval_blocks(scaled, h1, rate, mats, order=order)
 
+    meta = {"order": order, "tau_min": tau_min, "tau_max": tau_max, "rate": rate, "plants": len(plants)}
+    return _solve_and_recheck(unknowns, blocks, fixed, meta, margin_tol, preconditioned=None)
+
+
+def _solve_and_recheck(
+    unknowns: Sequence[UnknownRate],
+    blocks: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]],
+    fixed: dict[str, np.ndarray],
+    meta: dict[str, Any],
+    margin_tol: float,
+    *,
+    preconditioned: dict[str, float] | None,
+) -> IntervalCertificate:
+    """Solve, then let the float64 re-check of ``blocks`` decide the status (shared by both solvers).
+
+    ``preconditioned``: the scale of each unknown in the difference-coordinate problem (the
+    matrices are reported unscaled), or None for the plain problem.
+    """
     start = time.perf_counter()
     outcome, values, t_opt = solve_lmi(unknowns, blocks, fixed, [u.name for u in unknowns if u.symmetric])
-    elapsed = time.perf_counter() - start
-    base: dict[str, Any] = {
-        "order": order,
-        "tau_min": tau_min,
-        "tau_max": tau_max,
-        "rate": rate,
-        "plants": len(plants),
-        "solver_status": outcome.status,
-        "solve_time": elapsed,
-    }
+    base: dict[str, Any] = {**meta, "solver_status": outcome.status, "solve_time": time.perf_counter() - start}
     if values is None:
-        reason = outcome.error or f"solver status {outcome.status!r} is not 'optimal': no certificate"
+        where = "" if preconditioned is None else " (preconditioned)"
+        reason = outcome.error or f"solver status {outcome.status!r} is not 'optimal'{where}: no certificate"
         return IntervalCertificate(
             status=CertificateStatus.SOLVER_FAILED,
             matrices={},
@@ -548,15 +558,25 @@ def solve_interval(
             reason=reason,
             **base,
         )
-    mats = {**fixed, **values}
-    margins = interval_margins(blocks(mats))
+    solution = {**fixed, **values}
+    margins = interval_margins(blocks(solution))
     worst = min(margins, key=lambda m: m.relative)
     ok = worst.relative >= margin_tol
-    reason = (
-        f"every block positive definite; smallest relative margin {worst.relative:.3g} ({worst.name})"
-        if ok
-        else f"block {worst.name!r} has relative margin {worst.relative:.3g} < {margin_tol:g} (t = {t_opt:.3g})"
-    )
+    if preconditioned is None:
+        mats = solution
+        reason = (
+            f"every block positive definite; smallest relative margin {worst.relative:.3g} ({worst.name})"
+            if ok
+            else f"block {worst.name!r} has relative margin {worst.relative:.3g} < {margin_tol:g} (t = {t_opt:.3g})"
+        )
+    else:
+        mats = {k: preconditioned.get(k, 1.0) * v for k, v in solution.items()}
+        reason = (
+            f"every block positive definite (difference coordinates, power-of-two scaling); smallest relative "
+            f"margin {worst.relative:.3g} ({worst.name})"
+            if ok
+            else f"block {worst.name!r} has relative margin {worst.relative:.3g} < {margin_tol:g} (preconditioned)"
+        )
     return IntervalCertificate(
         status=CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED,
         matrices={k: readonly(v) for k, v in mats.items()},
@@ -863,43 +883,5 @@ def solve_interval_preconditioned(
     def blocks(matrices: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return {key: scale[key][:, None] * b * scale[key][None, :] for key, b in raw(matrices).items()}
 
-    start = time.perf_counter()
-    outcome, values, t_opt = solve_lmi(unknowns, blocks, fixed, [u.name for u in unknowns if u.symmetric])
-    elapsed = time.perf_counter() - start
-    base: dict[str, Any] = {
-        "order": order,
-        "tau_min": tau_min,
-        "tau_max": tau_max,
-        "rate": rate,
-        "plants": len(plants),
-        "solver_status": outcome.status,
-        "solve_time": elapsed,
-    }
-    if values is None:
-        reason = outcome.error or f"solver status {outcome.status!r} is not 'optimal' (preconditioned): no certificate"
-        return IntervalCertificate(
-            status=CertificateStatus.SOLVER_FAILED,
-            matrices={},
-            margins=(),
-            solver_margin=math.nan,
-            reason=reason,
-            **base,
-        )
-    margins = interval_margins(blocks({**fixed, **values}))
-    mats = {k: var_scale.get(k, 1.0) * v for k, v in {**fixed, **values}.items()}
-    worst = min(margins, key=lambda m: m.relative)
-    ok = worst.relative >= margin_tol
-    reason = (
-        f"every block positive definite (difference coordinates, power-of-two scaling); smallest relative "
-        f"margin {worst.relative:.3g} ({worst.name})"
-        if ok
-        else f"block {worst.name!r} has relative margin {worst.relative:.3g} < {margin_tol:g} (preconditioned)"
-    )
-    return IntervalCertificate(
-        status=CertificateStatus.CERTIFIED if ok else CertificateStatus.NOT_CERTIFIED,
-        matrices={k: readonly(v) for k, v in mats.items()},
-        margins=margins,
-        solver_margin=t_opt,
-        reason=reason,
-        **base,
-    )
+    meta = {"order": order, "tau_min": tau_min, "tau_max": tau_max, "rate": rate, "plants": len(plants)}
+    return _solve_and_recheck(unknowns, blocks, fixed, meta, margin_tol, preconditioned=var_scale)
