@@ -717,6 +717,13 @@ class ClosedLoopFunctions:
         return "\n".join(lines)
 
 
+def _as_disturbance(disturbance: Any) -> Disturbance | None:
+    """The export's disturbance as a :class:`~mrpctl.flight.Disturbance` (None: none given)."""
+    if disturbance is None or isinstance(disturbance, Disturbance):
+        return disturbance
+    return Disturbance(disturbance)
+
+
 def closed_loop_functions(
     spacecraft: Spacecraft,
     K: Any,
@@ -801,12 +808,9 @@ def closed_loop_functions(
     x_meas = ca.SX.sym("x_meas", STATE_SIZE)
     controller = ca.Function("controller", [x_meas], [ca.DM(gain) @ x_meas], ["x_meas"], ["u"])
     if isinstance(rule, Hysteretic):
-        disturbance_value = None
-        if disturbance is not None:
-            disturbance_value = disturbance if isinstance(disturbance, Disturbance) else Disturbance(disturbance)
         flight = FlightOptions(
             actuator=actuator,
-            disturbance=disturbance_value,
+            disturbance=_as_disturbance(disturbance),
             sensor=sensor,
             delay=varying,
             constants=readonly(NO_FLIGHT_OPTIONS if options is None else options),
@@ -1023,12 +1027,9 @@ def _predictor_loop(
         "sensor", [x, noise], [true_state, measurement], ["x", "noise"], ["x_true", "measurement"]
     )
     x_meas = ca.SX.sym("x_meas", STATE_SIZE)
-    disturbance_value = None
-    if disturbance is not None:
-        disturbance_value = disturbance if isinstance(disturbance, Disturbance) else Disturbance(disturbance)
     flight = FlightOptions(
         actuator=actuator,
-        disturbance=disturbance_value,
+        disturbance=_as_disturbance(disturbance),
         sensor=sensor,
         delay=None,
         constants=readonly(constants_array[0:FLIGHT_CONSTANTS_SIZE]),
