@@ -123,6 +123,11 @@ _FLIGHT_DESCRIPTIONS = {
     "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's measurements "
     "m_{k-d}, ..., m_{k-1} (oldest first), noise one column (theta_k; eta_k) per sample",
 }
+# With a per-sample disturbance the flown sample and chunk take w_k as a last input `torque`.
+_TORQUE_DESCRIPTIONS = {
+    "sample": _FLIGHT_DESCRIPTIONS["sample"] + "; torque = w_k, the per-sample disturbance (N m, body frame)",
+    "chunk": _FLIGHT_DESCRIPTIONS["chunk"] + ", torque one column w_k (N m) per sample",
+}
 
 # The Functions of the predictor loop (predictor=Predictor(...), rule OnPredicted).
 _PREDICTOR_DESCRIPTIONS = {
@@ -249,7 +254,9 @@ def export(
         RK4 substeps per measurement period in ``step``, default 1.
     actuator, disturbance, sensor, delay : keyword-only
         The flight loop's models (``rule=Hysteretic(...)`` only), as in :func:`mrpctl.simulate`:
-        torque limits and saturation mode, a constant disturbance torque (N m), the sensor's
+        torque limits and saturation mode, a disturbance torque (N m; constant: bound into the
+        Functions; per sample, (n, 3) rows or ``Disturbance(function=w)``: the ``torque`` input
+        w_k of ``sample`` (3) and ``chunk`` (3 × max(d, 1)), named in the manifest), the sensor's
         gyro bias (a constant of the Functions; its noise is the ``noise`` input of ``sample``
         and ``chunk``) and a time-varying delay (recorded in the manifest). Each is listed in
         the manifest's ``flight`` section.
@@ -580,6 +587,8 @@ def _manifest(
     descriptions = _DESCRIPTIONS if closed.flight is None else _FLIGHT_DESCRIPTIONS
     if closed.predictor is not None:
         descriptions = _PREDICTOR_DESCRIPTIONS
+    elif "torque" in functions["sample"].name_in():
+        descriptions = {**_FLIGHT_DESCRIPTIONS, **_TORQUE_DESCRIPTIONS}
     manifest: dict[str, Any] = {
         "format": "mrpctl-export",
         "format_version": MANIFEST_FORMAT_VERSION,
@@ -662,7 +671,7 @@ def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:
             "norm_max": actuator.norm_max,
             "saturation": actuator.mode.value,
         },
-        "disturbance": None if disturbance is None else {"torque": [float(w) for w in disturbance.torque]},
+        "disturbance": _disturbance_manifest(disturbance),
         "sensor": None
         if sensor is None
         else {
@@ -712,7 +721,7 @@ def _flight_manifest(closed: ClosedLoopFunctions, flight: FlightOptions) -> dict
             "saturation": actuator.mode.value,
         },
         "saturation": flight.saturation.value,
-        "disturbance": None if disturbance is None else {"torque": [float(w) for w in disturbance.torque]},
+        "disturbance": _disturbance_manifest(disturbance),
         "sensor": None
         if sensor is None
         else {
@@ -750,6 +759,24 @@ def _flight_manifest(closed: ClosedLoopFunctions, flight: FlightOptions) -> dict
         "history row, m_{-d} = x0 for the constant history; for d = 0 the short set of sigma0); the accumulators "
         "0 (mrpctl.loop.FlightOptions.initial_memory)",
         "history": "m_{-d}, ..., m_{-1}: noise-free states (the constant history x0 by default)",
+    }
+
+
+def _disturbance_manifest(disturbance: Any) -> dict[str, Any] | None:
+    """The flight manifest's ``disturbance``: the constant torque bound in, or the per-sample ``torque`` input."""
+    if disturbance is None:
+        return None
+    if disturbance.constant:
+        return {"torque": [float(w) for w in disturbance.torque]}
+    shape = disturbance.shape
+    return {
+        "torque": None,
+        "per_sample": True,
+        "input": "torque",
+        "samples": None if shape is None else int(shape[0]),
+        "function": None if disturbance.function is None else getattr(disturbance.function, "__name__", "callable"),
+        "note": "w_k (N m, body frame) is the input `torque` of sample (3) and chunk (3 x max(d, 1), one column "
+        "per sample), added to the applied torque and held over the period; it is not bound into the Functions",
     }
 
 

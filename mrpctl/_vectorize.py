@@ -64,7 +64,7 @@ import numpy as np
 from mrpctl import _compile
 from mrpctl._validation import integer
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
-from mrpctl.flight import DelayModel, Hysteretic, Saturation, SensorModel, newest_arrived_slice
+from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, rule_key
 from mrpctl.simulation._stats import S_DIVERGED, S_K, initial_stats
@@ -973,6 +973,7 @@ def lane_engine(
     *,
     width: int = DEFAULT_WIDTH,
     saturation: Saturation = Saturation.SCALE,
+    torque_input: bool = False,
     **options: Any,
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
@@ -983,7 +984,8 @@ def lane_engine(
     :class:`~mrpctl.flight.Hysteretic`, the actuator's ``saturation`` mode); plus W and the
     emitter options. The flight sample (:func:`mrpctl.loop.flight_core_function`) feeds its
     delayed input from its ``measurement`` output (the sensor's, as the scalar driver's ring
-    does) and takes its ``noise`` as a stream shared by the lanes.
+    does) and takes its ``noise`` as a stream shared by the lanes; with ``torque_input`` also its
+    per-sample disturbance ``torque`` (a stream shared by the lanes too).
 
     Raises
     ------
@@ -1003,6 +1005,7 @@ def lane_engine(
         substeps,
         width,
         saturation,
+        torque_input and flight,
         tuple(sorted(options.items())),
     )
     with _ENGINES_LOCK:
@@ -1010,9 +1013,12 @@ def lane_engine(
         if found is None:
             label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{layout.value}"
             if flight:
-                core = flight_core_function(spacecraft, d, period, substeps, inertia=layout, saturation=saturation)
-                label += f"_{saturation.value}"
-                options = {"delayed": ("x_delayed", "measurement"), "streamed": ("noise",), **options}
+                core = flight_core_function(
+                    spacecraft, d, period, substeps, inertia=layout, saturation=saturation, torque_input=torque_input
+                )
+                label += f"_{saturation.value}" + ("_torque" if torque_input else "")
+                streamed = ("noise", "torque") if torque_input else ("noise",)
+                options = {"delayed": ("x_delayed", "measurement"), "streamed": streamed, **options}
             else:
                 core = core_function(spacecraft, rule, d, period, substeps, inertia=layout)
             sample = engine_sample(core, d, f"mrpctl_lanes_{label}")
@@ -1037,6 +1043,7 @@ def closed_loop_batches(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     rate: float = 1.0,
+    disturbance: Disturbance | None = None,
 ) -> LaneBatches:
     """The closed-loop runs packed for :meth:`LaneBatches.run` (arguments as :func:`simulate_lanes`);
     read the statistics with :func:`lane_stats` once every batch has run.
@@ -1047,7 +1054,10 @@ def closed_loop_batches(
     gyro bias (3); default none), ``sensor`` the shared noise (:meth:`SensorModel.noise_rows`
     of each slice, the numbers the scalar engine gets) and ``delay`` a shared time-varying
     delay at ``rate`` (Hz), whose newest-arrived schedule is computed per slice
-    (:func:`~mrpctl.flight.newest_arrived_slice`), as in ``Engine.run``.
+    (:func:`~mrpctl.flight.newest_arrived_slice`), as in ``Engine.run``. ``flight_options`` may
+    also be (N, 10), one row per run. ``disturbance``: a per-sample torque shared by the runs (an
+    engine with a ``torque`` stream), its rows of each slice (:meth:`~mrpctl.flight.Disturbance.samples`)
+    streamed beside the noise.
     """
     runs = len(x0)
     crafts = (spacecraft,) * runs if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
@@ -1076,9 +1086,14 @@ def closed_loop_batches(
     schedule: Callable[[int, int, int], np.ndarray] | None = None
     if "noise" in engine.streamed:
         options = NO_FLIGHT_OPTIONS if flight_options is None else np.asarray(flight_options, dtype=float)
-        constants["flight"] = np.broadcast_to(options, (runs, options.size))
+        constants["flight"] = np.broadcast_to(options, (runs, options.shape[-1]))
         stream = np.zeros(engine.stream_size)  # no noise: the zero row at every sample, as Engine.run
-        if sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0):
+        noisy = sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
+        if ("torque" in engine.streamed) != (disturbance is not None):
+            raise SpecificationError("disturbance: a per-sample torque needs a lane engine with a torque stream")
+        if disturbance is not None:
+            stream = functools.partial(_noise_and_torque, sensor if noisy else None, disturbance, rate)
+        elif sensor is not None and noisy:
             stream = functools.partial(_noise_rows, sensor)
         if delay is not None:
             schedule = functools.partial(newest_arrived_slice, delay, rate, engine.d)
@@ -1099,6 +1114,17 @@ def closed_loop_batches(
 
 def _noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
     return sensor.noise_rows(k0, k1)
+
+
+def _noise_and_torque(
+    sensor: SensorModel | None, disturbance: Disturbance, rate: float, k0: int, k1: int
+) -> np.ndarray:
+    """The stream rows of a slice: the noise (zero without a noisy sensor) and the torque w_k, side by side."""
+    rows = np.zeros((k1 - k0, NOISE_SIZE + 3))
+    if sensor is not None:
+        rows[:, :NOISE_SIZE] = sensor.noise_rows(k0, k1)
+    rows[:, NOISE_SIZE:] = disturbance.samples(k0, k1, rate)
+    return rows
 
 
 def lane_stats(batches: LaneBatches) -> np.ndarray:

@@ -80,6 +80,15 @@ def _nan_or_time(value: Any) -> float | None:
     return None if np.isnan(number) else number
 
 
+#: The flight loop's per-sample records of a run (None when absent): name, dimensions, attributes.
+_FLIGHT_RECORDS: tuple[tuple[str, tuple[str, ...], dict[str, str]], ...] = (
+    ("logic", ("time",), {"long_name": "logic variable h after the rule (+1 or -1)"}),
+    ("sigma_c", ("time", "axis"), {"units": "1", "long_name": "MRP sigma_c used by the control law"}),
+    ("delay_used", ("time",), {"units": "samples", "long_name": "delay used k - j*(k)"}),
+    ("command", ("time", "axis"), {"units": "N m", "long_name": "commanded torque u_c before the limits"}),
+)
+
+
 def _run_dataset(result: SimulationResult) -> xr.Dataset:
     import xarray as xr
 
@@ -131,6 +140,10 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
             np.asarray(result.peak_command),
             {"units": "N m", "long_name": "max commanded |u_c,i| per axis and |u_c|"},
         )
+    for name, dims, attributes in _FLIGHT_RECORDS:
+        value = getattr(result, name)
+        if value is not None:
+            data[name] = (dims, np.asarray(value), attributes)
     attrs: dict[str, Any] = {
         **_rule_fields(result.rule),
         "history": "array",
@@ -344,6 +357,10 @@ def load(path: str | Path) -> SimulationResult:
         flown["saturated_fraction"] = float(dataset["saturated_fraction"])
     if "peak_command" in dataset:
         flown["peak_command"] = readonly(dataset["peak_command"].values)
+    for name, _, _ in _FLIGHT_RECORDS:
+        if name in dataset:
+            values = dataset[name].values
+            flown[name] = readonly(values, np.int64 if name == "delay_used" else float)
     return SimulationResult(
         t=readonly(dataset["time"].values),
         sigma=readonly(dataset["sigma"].values),

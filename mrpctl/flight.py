@@ -482,7 +482,8 @@ class Disturbance:
         Instead of ``torque``: w(t) of a (m,) array of sample times t_k = k h (s) returning an
         (m, 3) array (N m), evaluated by the engine on each slice's times (so memory stays bounded
         by the slice; the function should be elementwise in t, e.g. NumPy ufuncs, so that the run
-        does not depend on how it is sliced). :func:`mrpctl.simulate` only.
+        does not depend on how it is sliced). The flight loop only (:func:`mrpctl.simulate`,
+        :func:`mrpctl.simulate_batch`, :func:`mrpctl.export`: there w_k is an input).
     """
 
     torque: Any = None
@@ -501,6 +502,28 @@ class Disturbance:
         if torque.shape != (3,) and (torque.ndim != 2 or torque.shape[1] != 3 or torque.shape[0] == 0):
             raise DimensionError(f"torque: expected shape (3,) or (n, 3) but found {torque.shape}")
         object.__setattr__(self, "torque", readonly(torque))
+
+    @classmethod
+    def rows_view(cls, rows: np.ndarray, name: str = "torque") -> Disturbance:
+        """A per-sample disturbance on the (n, 3) float64 ``rows`` without copying them (a read-only view).
+
+        For the per-run slices of a (runs, n, 3) array given to :func:`mrpctl.simulate_batch`: the
+        rows are checked (finite, shape) but not copied, so the batch holds no second copy of the
+        array; the caller must not modify it while the view is in use.
+        """
+        array = np.asarray(rows)
+        if array.dtype != np.float64:
+            return cls(finite_array(name, array))
+        if array.ndim != 2 or array.shape[1] != 3 or array.shape[0] == 0:
+            raise DimensionError(f"{name}: expected shape (n, 3) but found {array.shape}")
+        if not np.all(np.isfinite(array)):
+            raise SpecificationError(f"{name} must be finite (no NaN or inf)")
+        view = array.view()
+        view.setflags(write=False)
+        made = object.__new__(cls)
+        object.__setattr__(made, "torque", view)
+        object.__setattr__(made, "function", None)
+        return made
 
     @property
     def constant(self) -> bool:

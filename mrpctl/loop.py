@@ -246,10 +246,11 @@ def flight_core_function(
     (no noise, no bias: m_k = x_meas exactly), without ``limited`` for no actuator limit
     (u_max = u_norm = inf: u = u_c, the saturated count stays 0; u_max, u_norm unused), without
     ``disturbed`` for w = 0 (u + w = u; w unused). With ``records`` a last output ``record`` =
-    (h_{k+1}, σ_c,k) (the logic variable after the rule, the MRP the control law used): the
-    result's per-sample records. With ``torque_input`` a last input ``torque`` (3, N m) is the
-    disturbance w_k of the sample (a per-sample disturbance streamed by the engine; the constant
-    w in ``flight`` is then unused). At sample k:
+    (h_{k+1}, σ_c,k, u_c,k) (the logic variable after the rule, the MRP the control law used, the
+    commanded torque before the actuator limits, N m): the result's per-sample records. With
+    ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the sample (a
+    per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
+    At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
@@ -315,7 +316,7 @@ def flight_core_function(
     outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
     if records:
         output_names.append("record")
-        outputs.append(ca.vertcat(h_next, sigma_c))
+        outputs.append(ca.vertcat(h_next, sigma_c, command))
     return ca.Function("core", inputs, outputs, names, output_names)
 
 
@@ -521,11 +522,12 @@ FLIGHT_MEMORY_LAYOUT = (
 
 
 def _flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
-    """``chunk(x, memory, history, noise) -> (x_end, memory_end, states, measurements, u, switched)``.
+    """``chunk(x, memory, history, noise[, torque]) -> (x_end, memory_end, states, measurements, u, switched)``.
 
     max(d, 1) samples of the flight ``sample`` (a ``mapaccum``); ``history`` holds the
     measurements m_{k−d}, …, m_{k−1} (the previous chunk's ``measurements``), ``noise`` one
-    column (θ_k; η_k) per sample, ``states`` the bookkept true states x_k.
+    column (θ_k; η_k) per sample, ``states`` the bookkept true states x_k; ``torque`` (when
+    ``sample`` has it: a per-sample disturbance) one column w_k (N m) per sample.
     """
     length = max(d, 1)
     accumulated = sample.mapaccum("chunk_samples", length, 2)
@@ -533,12 +535,16 @@ def _flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
     memory = ca.MX.sym("memory", FLIGHT_MEMORY_SIZE)
     history = ca.MX.sym("history", STATE_SIZE, length)
     noise = ca.MX.sym("noise", NOISE_SIZE, length)
-    xs, memories, states, u, switched, measurements = accumulated(x, memory, history, noise)
+    inputs, names = [x, memory, history, noise], ["x", "memory", "history", "noise"]
+    if "torque" in sample.name_in():
+        inputs.append(ca.MX.sym("torque", INPUT_SIZE, length))
+        names.append("torque")
+    xs, memories, states, u, switched, measurements = accumulated(*inputs)
     return ca.Function(
         "chunk",
-        [x, memory, history, noise],
+        inputs,
         [xs[:, length - 1], memories[:, length - 1], states, measurements, u, switched],
-        ["x", "memory", "history", "noise"],
+        names,
         ["x_end", "memory_end", "states", "measurements", "u", "switched"],
     )
 
@@ -552,7 +558,8 @@ class FlightOptions:
     actuator : mrpctl.flight.ActuatorModel or None
         Torque limits (None: none).
     disturbance : mrpctl.flight.Disturbance or None
-        Constant body-frame torque w (N m) (None: zero).
+        Body-frame torque w (N m) (None: zero): constant (bound into the Functions), or per sample
+        (then w_k is the ``torque`` input of ``sample`` and ``chunk``; not bound).
     sensor : mrpctl.flight.SensorModel or None
         Noise and gyro bias (None: an ideal sensor). The noise θ_k, η_k is an input of
         ``sample`` and ``chunk`` (``SensorModel.noise(k0, k1)``); the bias is a constant.
@@ -757,7 +764,8 @@ def closed_loop_functions(
     actuator, disturbance, sensor, delay : keyword-only
         The flight loop's models, as in :func:`mrpctl.simulate` (``rule=Hysteretic(...)``
         only; the same checks): :class:`~mrpctl.flight.ActuatorModel`, a constant
-        :class:`~mrpctl.flight.Disturbance` (or a (3,) torque, N m),
+        :class:`~mrpctl.flight.Disturbance` (or a (3,) torque, N m; a per-sample one, (n, 3) rows or
+        a function of time, makes w_k an input ``torque`` of ``sample`` (3) and ``chunk`` (3 × max(d, 1))),
         :class:`~mrpctl.flight.SensorModel`, :class:`~mrpctl.flight.DelayModel`.
     predictor : mrpctl.Predictor, keyword-only
         The predictor controller (with ``rule=OnPredicted(alpha)``; actuator, disturbance and sensor
@@ -768,7 +776,7 @@ def closed_loop_functions(
     Raises
     ------
     SpecificationError, DimensionError
-        On invalid parameters, a flight model with a paper rule, or a per-sample disturbance.
+        On invalid parameters, or a flight model with a paper rule.
     """
     # The simulator's own checks of the flight options (one copy); imported here because
     # mrpctl.simulation imports this module.
@@ -788,7 +796,7 @@ def closed_loop_functions(
         return _predictor_loop(
             spacecraft, gain, rule, d, float(tau), rate, substeps, actuator, disturbance, sensor, delay, predictor
         )
-    options, saturation = _flight_options(rule, actuator, disturbance, sensor)
+    options, saturation = _flight_options(rule, actuator, disturbance, sensor, per_sample=True)
     sequence = getattr(delay, "delays", None)
     horizon = 1 if sequence is None else len(sequence)
     varying = _varying_delay(rule, delay, d, rate, horizon)
@@ -866,17 +874,20 @@ def _flight_functions(
     ``sensor``, ``flight_controller`` and ``step`` gives the sample's numbers bit for bit.
     """
     constants = ca.DM(np.asarray(flight.constants))
-    core = flight_core_function(spacecraft, d, period, substeps, saturation=flight.saturation)
+    per_sample = flight.disturbance is not None and not flight.disturbance.constant
+    core = flight_core_function(spacecraft, d, period, substeps, saturation=flight.saturation, torque_input=per_sample)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
     noise = ca.SX.sym("noise", NOISE_SIZE)
-    bound = list(core(x, memory, x_delayed, ca.DM(gain), ca.DM(rule.parameters()), constants, noise))
+    inputs, names = [x, memory, x_delayed, noise], ["x", "memory", "x_delayed", "noise"]
+    torque = [ca.SX.sym("torque", INPUT_SIZE)] if per_sample else []  # w_k, the per-sample disturbance
+    bound = list(core(x, memory, x_delayed, ca.DM(gain), ca.DM(rule.parameters()), constants, noise, *torque))
     sample = ca.Function(
         "sample",
-        [x, memory, x_delayed, noise],
+        inputs + torque,
         bound,
-        ["x", "memory", "x_delayed", "noise"],
+        names + (["torque"] if per_sample else []),
         ["x_next", "memory_next", "x_meas", "u", "switched", "measurement"],
     )
 

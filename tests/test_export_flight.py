@@ -313,8 +313,8 @@ def test_flight_options_are_refused_before_writing(tmp_path):
         export(paper.SPACECRAFT, paper.GAIN, folder, tau=0.5, rule=OnDelayed(), actuator=limit)
     with pytest.raises(SpecificationError, match=r"actuator must be a mrpctl\.flight\.ActuatorModel"):
         export(paper.SPACECRAFT, paper.GAIN, folder, tau=0.5, rule=Hysteretic(0.1), actuator=1.0)
-    with pytest.raises(DimensionError, match="disturbance"):
-        export(paper.SPACECRAFT, paper.GAIN, folder, tau=0.5, rule=Hysteretic(0.1), disturbance=np.zeros((5, 3)))
+    with pytest.raises(DimensionError, match="torque: expected shape"):  # (n, 3) rows are a torque input
+        export(paper.SPACECRAFT, paper.GAIN, folder, tau=0.5, rule=Hysteretic(0.1), disturbance=np.zeros((5, 2)))
     with pytest.raises(SpecificationError, match="sensor must be"):
         export(paper.SPACECRAFT, paper.GAIN, folder, tau=0.5, rule=Hysteretic(0.1), sensor="noisy")
     with pytest.raises(SpecificationError, match="tau_max"):

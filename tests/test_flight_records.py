@@ -151,7 +151,8 @@ def test_the_memory_estimate_counts_the_records() -> None:
         paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(0.1), memory_limit=flight, **common
     )
     assert run.logic is not None and run.sigma_c is not None and run.delay_used is not None
-    held = run.logic.nbytes + run.sigma_c.nbytes + run.delay_used.nbytes
+    assert run.command is not None
+    held = run.logic.nbytes + run.sigma_c.nbytes + run.delay_used.nbytes + run.command.nbytes
     assert flight - plain >= 2 * held  # the records as computed and their read-only copies
     simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=OnCurrent(), memory_limit=plain, **common)
     with pytest.raises(SpecificationError, match="memory_limit"):

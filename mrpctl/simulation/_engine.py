@@ -243,7 +243,7 @@ class RunOutput:
     u: np.ndarray | None
     switch_indices: np.ndarray | None
     memory: np.ndarray | None = None  # the rule memory after the run (the flight accumulators)
-    records: np.ndarray | None = None  # flight: the kept (h, sigma_c) rows
+    records: np.ndarray | None = None  # flight: the kept (h, sigma_c, u_c) rows
     delay_used: np.ndarray | None = None  # flight: the kept delays used (samples)
 
 

@@ -31,6 +31,7 @@ from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.simulation._engine import (
+    NO_FLIGHT_OPTIONS,
     STATE_BLOCK,
     RunOutput,
     engine,
@@ -51,8 +52,9 @@ SWITCH_LIMIT = 2**20
 # Bytes per kept sample in a result: m_k and u_k as computed (72), t (8), omega (24).
 _BYTES_PER_KEPT = 104
 _BYTES_PER_SWITCH = 16  # index and time
-# Flight runs: the records (h, sigma_c) and the delay used per kept sample as computed (40) and their copies (40).
-_BYTES_PER_RECORD = 80
+# Flight runs: the records (h, sigma_c, u_c) and the delay used per kept sample as computed (64) and their
+# copies (64).
+_BYTES_PER_RECORD = 128
 #: Metrics-only batches (``trajectories=False``) of compiled code run on the lane engine
 #: (:mod:`mrpctl._vectorize`); False runs them on the scalar engine (tests, benchmarks).
 _LANES = True
@@ -161,6 +163,47 @@ def _streamed_disturbance(disturbance: Any, n: int) -> Disturbance | None:
     return disturbance
 
 
+def _per_run_disturbances(disturbance: Any, n_runs: int, n: int) -> list[Disturbance | None] | None:
+    """simulate_batch's per-run disturbances, or None when one disturbance is shared by the runs.
+
+    Per run: a list or tuple of 1 or N items of which at least one is None, a :class:`Disturbance`
+    or a NumPy array (each item as :func:`simulate` takes it), or a (N, n, 3) array (each run's
+    rows a read-only view, not a copy). Anything else is shared (a (3,) torque, (n, 3) rows, a
+    :class:`Disturbance`).
+    """
+    if disturbance is None or isinstance(disturbance, Disturbance):
+        return None
+    if isinstance(disturbance, list | tuple) and any(
+        item is None or isinstance(item, Disturbance | np.ndarray) for item in disturbance
+    ):
+        _broadcast("disturbance", len(disturbance), n_runs)
+        items = list(disturbance) * (n_runs if len(disturbance) == 1 else 1)
+        return [_one_disturbance(item, f"disturbance[{i}]") for i, item in enumerate(items)]
+    if isinstance(disturbance, np.ndarray) and disturbance.ndim == 3:
+        if disturbance.shape[0] not in (1, n_runs) or disturbance.shape[1:] != (n, 3):
+            raise DimensionError(
+                f"disturbance: a per-run per-sample torque has shape (runs, n, 3) = ({n_runs}, {n}, 3) "
+                f"(or (1, {n}, 3)) but found {disturbance.shape}"
+            )
+        return [
+            Disturbance.rows_view(disturbance[i if len(disturbance) > 1 else 0], f"disturbance[{i}]")
+            for i in range(n_runs)
+        ]
+    return None
+
+
+def _one_disturbance(item: Any, name: str) -> Disturbance | None:
+    """One run's disturbance as a Disturbance (float64 (n, 3) rows viewed, not copied), or None."""
+    if item is None or isinstance(item, Disturbance):
+        return item
+    if isinstance(item, np.ndarray) and item.ndim == 2:
+        return Disturbance.rows_view(item, name)
+    try:
+        return Disturbance(item)
+    except ValueError as error:
+        raise type(error)(f"{name}: {error}") from error
+
+
 def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
     """The engine's structure keywords: the predictor's (sensor given, actuator given), or the
     flight sample's specialisation to the run's constants (:func:`~mrpctl.simulation._engine.flight_structure`)."""
@@ -183,8 +226,9 @@ def _flight_constants(
         disturbance = Disturbance(disturbance)
     if disturbance is not None and not disturbance.constant and not per_sample:
         raise DimensionError(
-            "disturbance: a per-sample torque (n, 3) runs in mrpctl.simulate only; here a constant torque of "
-            f"shape (3,) is needed, got {'a function of time' if disturbance.shape is None else disturbance.shape}"
+            "disturbance: a per-sample torque (n, 3) runs in the flight loop (rule=Hysteretic: simulate, "
+            "simulate_batch, export) only; here (the predictor) a constant torque of shape (3,) is needed, got "
+            f"{'a function of time' if disturbance.shape is None else disturbance.shape}"
         )
     if sensor is not None and not isinstance(sensor, SensorModel):
         raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
@@ -512,12 +556,22 @@ def simulate_batch(
         ``progress(samples_done, samples_total)``, called from the calling thread while
         the workers run; an exception raised by it stops the batch and propagates.
 
-    actuator, disturbance, sensor, delay : keyword-only
+    actuator, sensor, delay : keyword-only
         The flight loop's models (as in :func:`simulate`), shared by every run; each rule
         must then be a :class:`mrpctl.flight.Hysteretic`. Without trajectories flight runs take
         the lane engine too (noise and jitter streamed per slice, shared by the lanes), bit
         for bit the scalar engine's; the result then has ``saturated_fraction`` and
         ``peak_command``.
+    disturbance : keyword-only
+        The body-frame torque w (N m), shared by every run in any form :func:`simulate` takes
+        (constant (3,), (n, 3) rows, ``Disturbance(function=w)`` of the sample times), or one per
+        run: a list or tuple of N items, each None, a :class:`mrpctl.flight.Disturbance` or a NumPy
+        array ((3,) or (n, 3)), or a (N, n, 3) array. Nothing of size (N, n, 3) is made that was not
+        given: a shared per-sample torque is evaluated slice by slice (a function on the slice's
+        times) and streamed, a given (N, n, 3) array is read through views. Each run equals
+        :func:`simulate` with its own disturbance bit for bit. Metrics-only runs with a shared
+        torque take the lane engine (its rows streamed beside the noise), runs with a per-sample
+        torque of their own the scalar engine (the lanes' stream is shared).
     predictor : mrpctl.Predictor, keyword-only
         The predictor controller (as in :func:`simulate`), shared by every run; each rule must
         then be a :class:`mrpctl.OnPredicted`. Predictor runs take the scalar engine (on the thread
@@ -585,15 +639,43 @@ def simulate_batch(
     for one in rules:
         checked = _check_predictor(predictor, one, history, delay)
     by_delay: dict[float, np.ndarray] = {}
+    per_run = _per_run_disturbances(disturbance, n_runs, n)
+    if per_run is not None and checked is not None:
+        raise SpecificationError(
+            "disturbance: the predictor takes one constant torque (3,) shared by the runs, not one per run"
+        )
+    shared = per_run is None
+    if shared and disturbance is not None and not isinstance(disturbance, Disturbance) and checked is None:
+        disturbance = Disturbance(disturbance)  # checked and copied once, shared by the runs
+    items = [disturbance] * n_runs if per_run is None else per_run
+    options_by_run: list[np.ndarray | None] = [None] * n_runs
+    streamed_by_run: list[Disturbance | None] = [None] * n_runs
     if checked is None:
-        for one in rules:  # the flight options are shared by the runs; every rule must be the flight rule
-            options, saturation = _flight_options(one, actuator, disturbance, sensor)
+        for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
+            options_by_run[i], saturation = _flight_options(one, actuator, items[i], sensor, per_sample=True)
+            streamed_by_run[i] = _streamed_disturbance(items[i], n) if (i == 0 or not shared) else streamed_by_run[0]
+        options = options_by_run[0]
         varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
     else:
         options, saturation = _flight_constants(actuator, disturbance, sensor)
+        options_by_run = [options] * n_runs
         varying = [None] * n_runs
         for value in set(float(v) for v in delays):
             by_delay[value] = predictor_constants(options, value, checked.model)
+    if any(each is not None for each in streamed_by_run):
+        if find_compiler() is None:
+            raise CodegenError(
+                "disturbance: a per-sample torque needs the compiled engine "
+                "(install a C compiler: gcc or cc, or set CC)"
+            )
+        # each worker's torque rows of one slice
+        _check_memory(
+            estimate + workers * min(slice_samples(substeps), n) * INPUT_SIZE * 8,
+            limit,
+            t_final=t_final,
+            keep_every=keep,
+            runs=n_runs,
+        )
 
     stats = np.full((n_runs, STATS_SIZE), np.nan)
     any_flight = any(isinstance(one, Hysteretic) for one in rules)
@@ -615,13 +697,16 @@ def simulate_batch(
             substeps=substeps,
             threads=threads,
             progress=progress,
-            flight=(options, saturation, sensor, varying),
+            flight=(options_by_run, saturation, sensor, varying),
+            torques=(streamed_by_run, shared),
         )
 
-    by_structure: dict[tuple[int, int, int], Any] = {}  # objects alive during the call: id() is safe
+    by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
     engines: dict[int, Any] = {}
     for i in scalar_runs:
-        key = (id(crafts[i]), id(rules[i]), samples_by_run[i])
+        structure = _structure(checked, options_by_run[i], sensor, actuator)
+        torque_input = streamed_by_run[i] is not None
+        key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input)
         if key not in by_structure:
             by_structure[key] = engine(
                 crafts[i],
@@ -631,7 +716,8 @@ def simulate_batch(
                 substeps,
                 saturation,
                 predictor=None if checked is None else checked.model,
-                **_structure(checked, options, sensor, actuator),
+                **structure,
+                **({"torque_input": True} if torque_input else {}),
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
@@ -671,10 +757,11 @@ def simulate_batch(
                 workspace=space,
                 switch_limit=n if keep == 1 else SWITCH_LIMIT,
                 stop=stop,
-                flight_options=options if checked is None else by_delay[float(delays[i])],
+                flight_options=options_by_run[i] if checked is None else by_delay[float(delays[i])],
                 sensor=sensor,
                 delay=varying[i],
                 rate=rate,
+                **({} if streamed_by_run[i] is None else {"disturbance": streamed_by_run[i]}),
             )
             previous += n
             done_samples[slot] = previous
@@ -762,34 +849,50 @@ def _run_lanes(
     substeps: int,
     threads: int,
     progress: Callable[[int, int], Any] | None,
-    flight: tuple[np.ndarray | None, Saturation, SensorModel | None, list[DelayModel | None]],
+    flight: tuple[list[np.ndarray | None], Saturation, SensorModel | None, list[DelayModel | None]],
+    torques: tuple[list[Disturbance | None], bool],
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
-    layout, rule expressions, d), W runs per C call, the batches on the thread pool; write the
-    rows of ``stats`` (and of ``flight_rows``: the flight sample's memory). ``flight`` is the
-    flight loop's (constants, saturation, sensor, per-run varying delay). Returns the runs left
-    to the scalar engine (a rule without lane form)."""
-    flight_options, saturation, sensor, varying = flight
+    layout, rule expressions, d, a torque stream), W runs per C call, the batches on the thread
+    pool; write the rows of ``stats`` (and of ``flight_rows``: the flight sample's memory).
+    ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
+    ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
+    streamed beside the noise). Returns the runs left to the scalar engine (a rule without lane
+    form; a per-sample torque of its own: the lanes' stream is shared)."""
+    options_by_run, saturation, sensor, varying = flight
+    streamed_by_run, shared = torques
     from mrpctl import _vectorize
 
     groups: dict[Any, list[int]] = {}
     keys: dict[tuple[int, int, int], Any] = {}  # objects alive during the call: id() is safe
+    left: list[int] = []
     for i in range(len(crafts)):
+        if streamed_by_run[i] is not None and not shared:
+            left.append(i)
+            continue
         memo = (id(crafts[i]), id(rules[i]), samples_by_run[i])
         key = keys.get(memo)
         if key is None:
             d = samples_by_run[i]
             key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d)
         groups.setdefault(key, []).append(i)
-    left: list[int] = []
     packs: list[tuple[list[int], _vectorize.LaneBatches]] = []
     step = slice_samples(substeps)
     for members in groups.values():
         first = members[0]
         d = samples_by_run[first]
         is_flight = isinstance(rules[first], Hysteretic)
+        torque = streamed_by_run[first] if is_flight else None
         try:
-            lanes = _vectorize.lane_engine(crafts[first], rules[first], d, 1.0 / rate, substeps, saturation=saturation)
+            lanes = _vectorize.lane_engine(
+                crafts[first],
+                rules[first],
+                d,
+                1.0 / rate,
+                substeps,
+                saturation=saturation,
+                torque_input=torque is not None,
+            )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
             left.extend(members)
@@ -816,10 +919,11 @@ def _run_lanes(
                     spacecraft=[crafts[i] for i in members],
                     threads=threads,
                     slice_samples=step,
-                    flight_options=flight_options if is_flight else None,
+                    flight_options=_lane_options(options_by_run, members) if is_flight else None,
                     sensor=sensor if is_flight else None,
                     delay=varying[first] if is_flight else None,
                     rate=rate,
+                    disturbance=torque,
                 ),
             )
         )
@@ -860,6 +964,14 @@ def _run_lanes(
         if flight_rows is not None and packed.engine.streamed:
             flight_rows[members] = _vectorize.lane_memory(packed)
     return left
+
+
+def _lane_options(options_by_run: list[np.ndarray | None], members: list[int]) -> np.ndarray | None:
+    """The flight constants of a lane group: one shared row, or (members, 10) when they differ by run."""
+    rows = [options_by_run[i] for i in members]
+    if all(row is rows[0] for row in rows):
+        return rows[0]
+    return np.array([NO_FLIGHT_OPTIONS if row is None else row for row in rows])
 
 
 def _run_polled(

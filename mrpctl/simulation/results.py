@@ -97,6 +97,10 @@ class SimulationResult(_Conversions):
     delay_used : numpy.ndarray or None
         Flight loop: (m,) the delay used at each kept sample, k − j*(k) (samples; constant d
         without a time-varying delay, from the newest-arrived schedule with one); None otherwise.
+    command : numpy.ndarray or None
+        Flight loop: (m, 3) the commanded torque u_c,k = K [σ_c,k; ω̃/4] at each kept sample, before
+        the actuator limits (N m); ``u`` is the applied torque (u = u_c bit for bit where no limit
+        acted). None otherwise.
     predictor : mrpctl.Predictor or None
         The predictor controller of the run (the flight-loop fields above are then reported too);
         None for the plain delayed law.
@@ -136,6 +140,7 @@ class SimulationResult(_Conversions):
     logic: np.ndarray | None = field(default=None, repr=False)
     sigma_c: np.ndarray | None = field(default=None, repr=False)
     delay_used: np.ndarray | None = field(default=None, repr=False)
+    command: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -223,6 +228,7 @@ def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: d
         rows = (valid - 1) // keep_every + 1
         flight["logic"] = readonly(output.records[:rows, 0])
         flight["sigma_c"] = readonly(output.records[:rows, 1:4])
+        flight["command"] = readonly(output.records[:rows, 4:7])
         flight["delay_used"] = readonly(output.delay_used[:rows], np.int64)
     return SimulationResult(
         t=sealed(t),
