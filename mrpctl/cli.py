@@ -417,10 +417,30 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
         fields["seed"] = base.seed
         fields.update(sensor_given)
         changes["sensor"] = _option_value(first, lambda: SensorModel(**fields))
-    if args.disturbance is not None:
-        from mrpctl.flight import Disturbance
+    from mrpctl.flight import Disturbance
+    from mrpctl.scenario import delay_sequence, delay_values, samples_file, torque_rows
 
+    samples = math.floor(scenario.t_final * scenario.rate + 1e-9) + 1  # n, as mrpctl.simulate counts them
+    if args.disturbance is not None and args.disturbance_file is not None:
+        raise SpecificationError(
+            "--disturbance (a constant torque) and --disturbance-file (one torque row per sample) both give the "
+            "disturbance; give one of them"
+        )
+    if args.disturbance is not None:
         changes["disturbance"] = _option_value("--disturbance", lambda: Disturbance(args.disturbance))
+    if args.disturbance_file is not None:
+        rows = torque_rows(samples_file(args.disturbance_file, "--disturbance-file"), "--disturbance-file", samples)
+        changes["disturbance"] = Disturbance(rows)
+    if args.delay_file is not None:
+        if args.jitter is not None:
+            raise SpecificationError(
+                "--jitter (seeded random delays) and --delay-file (a given delay per sample) both give the delay; "
+                "give one of them"
+            )
+        values = delay_values(samples_file(args.delay_file, "--delay-file"), "--delay-file", samples)
+        changes["delay"] = _option_value(
+            "--delay-file", lambda: delay_sequence(values, "--delay-file", tau=scenario.tau, rate=scenario.rate)
+        )
     if args.jitter is not None:
         low, high = args.jitter
         if args.tau is not None and args.tau != high:
@@ -1197,6 +1217,17 @@ def _add_flight_options(parser: argparse.ArgumentParser) -> None:
     flown.add_argument("--gyro-bias", type=float, nargs=3, metavar="B", help="constant gyro bias (rad/s)")
     flown.add_argument("--noise-seed", type=int, help="seed (>= 0) of the sensor noise")
     flown.add_argument("--disturbance", type=float, nargs=3, metavar="W", help="constant body-frame torque (N m)")
+    flown.add_argument(
+        "--disturbance-file",
+        metavar="F",
+        help="per-sample body-frame torque: a .csv or .npy file of n = floor(t_final * rate) + 1 rows of 3 (N m)",
+    )
+    flown.add_argument(
+        "--delay-file",
+        metavar="F",
+        help="per-sample delay sequence: a .csv or .npy file of n delays (s), each a whole number of periods in "
+        "[1/rate, tau]",
+    )
     flown.add_argument(
         "--jitter",
         type=float,

@@ -69,8 +69,8 @@ _KEYS = {
     "rule": {"type", "eps", "alpha", "delta"},
     "actuator": {"u_max", "u_norm", "saturation"},
     "sensor": {"attitude_noise", "rate_noise", "gyro_bias", "seed"},
-    "disturbance": {"torque"},
-    "delay": {"tau_min", "tau_max", "seed"},
+    "disturbance": {"torque", "torque_file"},
+    "delay": {"tau_min", "tau_max", "seed", "sequence_file"},
     "predictor": {"inertia", "inertia_error"},
 }
 
@@ -239,7 +239,84 @@ def rule_name(rule: SwitchingRule) -> str:
     raise SpecificationError(f"rule {rule!r} has no scenario-file name; use one of {sorted(RULE_NAMES)}")
 
 
-def _flight_tables(data: dict[str, Any], rule: SwitchingRule, tau: float, rate: float) -> dict[str, Any]:
+@dataclass(frozen=True)
+class _Horizon:
+    """What the per-sample files of a scenario are checked against: the folder of relative paths, n samples."""
+
+    base: Path | None
+    samples: int
+
+
+def samples_file(value: Any, key: str, *, base: Path | None = None) -> np.ndarray:
+    """The numbers of a per-sample file (a disturbance torque, a delay sequence) as a finite float array.
+
+    ``value`` is the file name: ``.npy`` (NumPy, no pickles) or ``.csv`` / ``.txt`` (comma-separated,
+    ``#`` comments), relative to ``base`` (the scenario file's folder; None: the working directory).
+    Errors (not a name, a missing file, an unknown suffix, unreadable or non-finite numbers) name ``key``.
+    """
+    if not isinstance(value, str | Path) or not str(value):
+        raise SpecificationError(
+            f"{key} must be a file name (.csv or .npy, relative to the scenario file), got {value!r}"
+        )
+    path = Path(value)
+    if not path.is_absolute() and base is not None:
+        path = base / path
+    if not path.is_file():
+        where = "the scenario file's folder" if base is not None else "the working directory"
+        raise SpecificationError(f"{key}: no file {path} (a relative name is taken from {where})")
+    suffix = path.suffix.lower()
+    if suffix not in (".npy", ".csv", ".txt"):
+        raise SpecificationError(f"{key}: {path} must be a .npy or a .csv (.txt) file, got the suffix {suffix!r}")
+    try:
+        if suffix == ".npy":
+            raw = np.load(path, allow_pickle=False)
+        else:
+            raw = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise SpecificationError(f"{key}: cannot read the numbers of {path}: {exc}") from exc
+    return finite_array(f"{key} ({path})", raw)
+
+
+def torque_rows(array: np.ndarray, key: str, n: int) -> np.ndarray:
+    """``array`` checked as the (n, 3) per-sample torque rows of a file named by ``key``."""
+    if array.shape != (n, 3):
+        raise DimensionError(
+            f"{key}: expected n rows of 3 torques (N m, body frame), one row per measurement sample: shape "
+            f"(n, 3) = ({n}, 3) with n = floor(t_final * rate) + 1, but the file has shape {array.shape}"
+        )
+    return array
+
+
+def delay_values(array: np.ndarray, key: str, n: int) -> np.ndarray:
+    """``array`` checked as the n per-sample delays (s) of a file named by ``key`` (one column or one row)."""
+    values = array.ravel() if array.ndim == 2 and 1 in array.shape else array
+    if values.shape != (n,):
+        raise DimensionError(
+            f"{key}: expected n delays (s), one per measurement sample (one column): n = floor(t_final * rate) + 1 "
+            f"= {n}, but the file has shape {array.shape}"
+        )
+    return values
+
+
+def delay_sequence(delays: np.ndarray, key: str, *, tau: float, rate: float, tau_min: Any = None) -> DelayModel:
+    """The per-sample delay sequence of a file named by ``key``: each delay in [tau_min, tau], whole periods.
+
+    ``tau_min`` defaults to one period 1/rate (the smallest delay the engine takes).
+    """
+    low = 1.0 / rate if tau_min is None else nonnegative_scalar("tau_min", tau_min)
+    model = DelayModel.sequence(delays, tau_min=low, tau_max=tau)
+    if model.bounds(rate)[0] < 1:
+        raise SpecificationError(f"tau_min must be >= 1/rate = {1.0 / rate:g} s, got {model.tau_min!r} s")
+    try:
+        model.samples(rate, 0, len(delays))  # each a whole number of periods
+    except (SpecificationError, DimensionError) as exc:
+        raise type(exc)(f"{key}: {exc}") from exc
+    return model
+
+
+def _flight_tables(
+    data: dict[str, Any], rule: SwitchingRule, tau: float, rate: float, horizon: _Horizon
+) -> dict[str, Any]:
     """The optional [actuator], [sensor], [disturbance] and [delay] tables as flight models.
 
     Each table is refused with a paper rule, and every error names the table and its key.
@@ -263,13 +340,13 @@ def _flight_tables(data: dict[str, Any], rule: SwitchingRule, tau: float, rate: 
                 "delay tau only (its correction needs the age of each measurement)"
             )
         try:
-            models[name] = _FLIGHT_BUILDERS[name](table, tau, rate)
+            models[name] = _FLIGHT_BUILDERS[name](table, tau, rate, horizon)
         except (SpecificationError, DimensionError) as exc:
             raise type(exc)(f"[{name}] {exc}") from exc
     return models
 
 
-def _actuator(table: dict[str, Any], tau: float, rate: float) -> ActuatorModel:
+def _actuator(table: dict[str, Any], tau: float, rate: float, horizon: _Horizon) -> ActuatorModel:
     if "u_max" not in table:
         raise SpecificationError("needs u_max (per-axis torque limit, N m; a scalar or 3 values)")
     modes = {mode.value: mode for mode in Saturation}
@@ -282,7 +359,7 @@ def _actuator(table: dict[str, Any], tau: float, rate: float) -> ActuatorModel:
     )
 
 
-def _sensor(table: dict[str, Any], tau: float, rate: float) -> SensorModel:
+def _sensor(table: dict[str, Any], tau: float, rate: float, horizon: _Horizon) -> SensorModel:
     return SensorModel(
         attitude_noise=table.get("attitude_noise", 0.0),
         rate_noise=table.get("rate_noise", 0.0),
@@ -291,16 +368,35 @@ def _sensor(table: dict[str, Any], tau: float, rate: float) -> SensorModel:
     )
 
 
-def _disturbance(table: dict[str, Any], tau: float, rate: float) -> Disturbance:
-    if "torque" not in table:
-        raise SpecificationError("needs torque (constant body-frame torque, 3 values, N m)")
+def _disturbance(table: dict[str, Any], tau: float, rate: float, horizon: _Horizon) -> Disturbance:
+    if ("torque" in table) == ("torque_file" in table):
+        raise SpecificationError(
+            "needs torque (constant body-frame torque, 3 values, N m) or torque_file (a .csv or .npy file of n rows "
+            "of 3 torques, one per measurement sample, relative to the scenario file), one of them"
+        )
+    if "torque_file" in table:
+        rows = samples_file(table["torque_file"], "torque_file", base=horizon.base)
+        return Disturbance(torque_rows(rows, "torque_file", horizon.samples))
     return Disturbance(finite_array("torque", table["torque"], (3,)))
 
 
-def _delay(table: dict[str, Any], tau: float, rate: float) -> DelayModel:
+def _delay(table: dict[str, Any], tau: float, rate: float, horizon: _Horizon) -> DelayModel:
+    if "sequence_file" in table:
+        if "seed" in table:
+            raise SpecificationError("seed applies to the jitter (tau_min, seed), not to a sequence_file")
+        tau_max = nonnegative_scalar("tau_max", table.get("tau_max", tau))
+        if tau_max != tau:
+            raise SpecificationError(
+                f"tau_max must equal the scenario's tau = {tau!r} s (the history depth), got {tau_max!r}"
+            )
+        values = delay_values(
+            samples_file(table["sequence_file"], "sequence_file", base=horizon.base), "sequence_file", horizon.samples
+        )
+        return delay_sequence(values, "sequence_file", tau=tau, rate=rate, tau_min=table.get("tau_min"))
     if "tau_min" not in table:
         raise SpecificationError(
-            "needs tau_min (s): the delay jitters uniformly over the whole periods in [tau_min, tau]"
+            "needs tau_min (s): the delay jitters uniformly over the whole periods in [tau_min, tau]; or "
+            "sequence_file (a .csv or .npy file of n delays in s, one per measurement sample)"
         )
     tau_max = nonnegative_scalar("tau_max", table.get("tau_max", tau))
     if tau_max != tau:
@@ -452,10 +548,12 @@ def _initial_state(initial: dict[str, Any]) -> np.ndarray:
     return state(sigma, finite_array("omega", initial["omega"], (3,)))
 
 
-def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
+def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | Path | None = None) -> Scenario:
     """Build a :class:`Scenario` from the parsed contents of a scenario file.
 
-    Unknown keys raise a :class:`~mrpctl.errors.SpecificationError` naming the key.
+    Unknown keys raise a :class:`~mrpctl.errors.SpecificationError` naming the key. ``base``: the
+    folder relative file names (``[disturbance] torque_file``, ``[delay] sequence_file``) are taken
+    from (:func:`load_scenario`: the scenario file's folder; None: the working directory).
     """
     _check_keys("", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES | {_PREDICTOR_TABLE})
     spacecraft_table = _table(data, "spacecraft")
@@ -484,7 +582,9 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
     if history not in ("constant", "zero-input"):
         raise SpecificationError(f"history must be 'constant' or 'zero-input', got {history!r}")
     substeps = integer("substeps", data.get("substeps", 1), minimum=1)
-    flight = _flight_tables(data, rule, tau, rate)
+    t_final = positive_scalar("t_final", data["t_final"])
+    samples = math.floor(t_final * rate + 1e-9) + 1  # as mrpctl.simulate counts them
+    flight = _flight_tables(data, rule, tau, rate, _Horizon(None if base is None else Path(base), samples))
     predictor = _predictor_table(data, rule, spacecraft, history)
     return Scenario(
         name=str(data.get("name", name)),
@@ -493,7 +593,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario") -> Scenario:
         x0=readonly(_initial_state(_table(data, "initial"))),
         tau=tau,
         rule=rule,
-        t_final=positive_scalar("t_final", data["t_final"]),
+        t_final=t_final,
         rate=rate,
         history=history,
         substeps=substeps,
@@ -556,7 +656,7 @@ def load_scenario(path: str | Path) -> Scenario:
         ) from exc
     except tomllib.TOMLDecodeError as exc:
         raise SpecificationError(f"scenario file {path} is not valid TOML: {exc}") from exc
-    return parse_scenario(data, name=path.stem)
+    return parse_scenario(data, name=path.stem, base=path.parent)
 
 
 def _toml_value(value: Any) -> str:
@@ -655,13 +755,17 @@ def _flight_toml(scenario: Scenario) -> list[str]:
         ]
     if scenario.disturbance is not None:
         if not scenario.disturbance.constant:
-            raise SpecificationError("disturbance: a per-sample torque array cannot be written to a scenario file")
+            raise SpecificationError(
+                "disturbance: a per-sample torque is not written into a scenario file; save its rows as a .npy or "
+                ".csv file and name it in [disturbance] torque_file"
+            )
         lines += ["", "[disturbance]", f"torque = {_toml_value(scenario.disturbance.torque)}  # N m, body frame"]
     if scenario.delay is not None:
         delay = scenario.delay
         if delay.kind is not DelayKind.JITTER:
             raise SpecificationError(
-                f"delay: only seeded jitter can be written to a scenario file, got {delay.kind.value}"
+                f"delay: only seeded jitter is written into a scenario file, got {delay.kind.value}; save a "
+                "delay sequence as a .npy or .csv file and name it in [delay] sequence_file"
             )
         lines += [
             "",
