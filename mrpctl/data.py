@@ -208,8 +208,9 @@ def to_xarray(result: SimulationResult | BatchResult) -> xr.Dataset:
 def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
     """The result as a :class:`pandas.DataFrame`.
 
-    A run: indexed by ``t`` (s), columns sigma1-3, omega1-3 (rad/s), u1-3 (N m), switched;
-    the inputs in ``DataFrame.attrs``. A batch: indexed by ``run``, columns for the initial
+    A run: indexed by ``t`` (s), columns sigma1-3, omega1-3 (rad/s), u1-3 (N m), switched (and,
+    for a flight run with records, logic, sigma_c1-3, u_c1-3 (N m, the commanded torque) and
+    delay_used (samples)); the inputs in ``DataFrame.attrs``. A batch: indexed by ``run``, columns for the initial
     state, τ, the rule and every metric.
     """
     import pandas as pd
@@ -223,6 +224,13 @@ def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
             for i in range(3):
                 columns[f"{name}{i + 1}"] = np.asarray(values[:, i])
         columns["switched"] = switched
+        if run.logic is not None and run.sigma_c is not None and run.command is not None:  # the flight records
+            columns["logic"] = np.asarray(run.logic)
+            for name, values in (("sigma_c", run.sigma_c), ("u_c", run.command)):
+                for i in range(3):
+                    columns[f"{name}{i + 1}"] = np.asarray(values[:, i])
+        if run.delay_used is not None:
+            columns["delay_used"] = np.asarray(run.delay_used)
         frame = pd.DataFrame(columns, index=pd.Index(np.asarray(run.t), name="t"))
         frame.attrs.update(
             inertia=run.spacecraft.inertia.tolist(),

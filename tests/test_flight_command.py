@@ -120,3 +120,9 @@ def test_the_records_survive_save_and_load(tmp_path: Path) -> None:
     other = simulate(paper.SPACECRAFT, GAINS, paper.INITIAL_STATE, tau=0.05, rate=100.0, t_final=1.0, rule=OnCurrent())
     plain = data.load(data.save(other, tmp_path / "plain.nc"))
     assert plain.command is None and plain.logic is None
+    frame = run.to_pandas()
+    assert run.command is not None and run.logic is not None and run.delay_used is not None
+    assert frame["u_c2"].to_numpy().tobytes() == run.command[:, 1].tobytes()
+    assert frame["logic"].to_numpy().tolist() == run.logic.tolist()
+    assert frame["delay_used"].to_numpy().tolist() == run.delay_used.tolist()
+    assert "u_c1" not in other.to_pandas().columns
