@@ -604,6 +604,10 @@ class LaneEngine:
         Inputs given per sample and shared by the W lanes (e.g. the flight sample's ``noise``):
         their values of sample k are row k − k0 of the ``stream`` of :meth:`LaneBatches.run`
         (the inputs side by side, :attr:`stream_size` values a row).
+    lane_streamed : sequence of str, keyword-only
+        Inputs given per sample and per lane (e.g. each run's own disturbance ``torque``): in the
+        same row after the shared ones, nnz × W values each (nonzero j of lane l at j W + l); the
+        ``stream`` is then called as ``stream(k0, k1, runs)`` with the W runs of the batch.
     """
 
     def __init__(
@@ -618,6 +622,7 @@ class LaneEngine:
         flags: tuple[str, ...] = LANE_FLAGS,
         delayed: tuple[str, str] = ("x_delayed", "x_meas"),
         streamed: Sequence[str] = (),
+        lane_streamed: Sequence[str] = (),
     ) -> None:
         self.d = integer("delay_samples", delay_samples, minimum=0)
         self.width = integer("width", width, minimum=1)
@@ -633,18 +638,33 @@ class LaneEngine:
         if sample.nnz_in(names_in.index(delayed_in)) != self.measured:
             raise DimensionError(f"{delayed_in} and {measured_out} of {sample.name()} differ in size")
         carried = [name for name in names_in if name + "_next" in names_out]
-        unknown = sorted(set(streamed) - set(names_in))
-        if unknown or delayed_in in streamed or set(streamed) & set(carried):
+        every_stream = [*streamed, *lane_streamed]
+        unknown = sorted(set(every_stream) - set(names_in))
+        if (
+            unknown
+            or delayed_in in every_stream
+            or set(every_stream) & set(carried)
+            or set(streamed) & set(lane_streamed)
+        ):
             raise SpecificationError(
-                f"streamed: {list(streamed)} must name inputs of {sample.name()} that are constants"
+                f"streamed, lane_streamed: {list(streamed)}, {list(lane_streamed)} must name distinct inputs of "
+                f"{sample.name()} that are constants"
             )
         self.carried: dict[str, slice] = {}
         self.constants: dict[str, slice] = {}
         self.streamed: dict[str, slice] = {}
+        self.lane_streamed: dict[str, slice] = {}  # offsets in the row; nnz x W values each
         in_role, in_offset, offset_carried, offset_constant, offset_stream = [], [], 0, 0, 0
+        shared_size = sum(sample.nnz_in(i) for i, name in enumerate(names_in) if name in streamed)
+        offset_lanes = shared_size
         for i, name in enumerate(names_in):
             size = sample.nnz_in(i)
-            if name in streamed:
+            if name in lane_streamed:
+                in_role.append(_ROLE_STREAMED)
+                in_offset.append(offset_lanes)
+                self.lane_streamed[name] = slice(offset_lanes, offset_lanes + size * self.width)
+                offset_lanes += size * self.width
+            elif name in streamed:
                 in_role.append(_ROLE_STREAMED)
                 in_offset.append(offset_stream)
                 self.streamed[name] = slice(offset_stream, offset_stream + size)
@@ -676,7 +696,7 @@ class LaneEngine:
                 out_role.append(_ROLE_DROPPED)
                 out_offset.append(0)
                 drop.append(name)
-        self.carried_size, self.constant_size, self.stream_size = offset_carried, offset_constant, offset_stream
+        self.carried_size, self.constant_size, self.stream_size = offset_carried, offset_constant, offset_lanes
         program = emit_lanes(
             sample,
             self.width,
@@ -739,7 +759,7 @@ class LaneEngine:
         threads: int = 1,
         slice_samples: int = SLICE_SAMPLES,
         finished: str | None = None,
-        stream: Callable[[int, int], np.ndarray] | np.ndarray | None = None,
+        stream: Callable[..., np.ndarray] | np.ndarray | None = None,
         schedule: Callable[[int, int, int], np.ndarray] | None = None,
     ) -> LaneBatches:
         """The N runs packed into batches of W lanes, checked and ready to run (see :meth:`run`).
@@ -750,13 +770,18 @@ class LaneEngine:
 
         ``stream`` gives the streamed inputs (shared by every run): ``stream(k0, k1)`` the
         (k1 − k0, :attr:`stream_size`) rows of a slice, or one (:attr:`stream_size`,) row for
-        every sample. ``schedule(k0, k1, newest_before)`` gives the newest arrived measurement
-        j*(k) (int64, in [k − d, k − 1]) of the samples of a slice under a time-varying delay
+        every sample; with per-lane streamed inputs ``stream(k0, k1, runs)``, ``runs`` the W run
+        indices of the batch (padding lanes repeat its first run). ``schedule(k0, k1,
+        newest_before)`` gives the newest arrived measurement j*(k) (int64, in [k − d, k − 1])
+        of the samples of a slice under a time-varying delay
         (``newest_before`` is j*(k0 − 1), −1 − d at k0 = 0), shared by every run; None: the
         constant delay d.
         """
-        if self.streamed and stream is None:
-            raise SpecificationError(f"stream: the inputs {sorted(self.streamed)} are streamed; give their values")
+        if (self.streamed or self.lane_streamed) and stream is None:
+            names = sorted([*self.streamed, *self.lane_streamed])
+            raise SpecificationError(f"stream: the inputs {names} are streamed; give their values")
+        if self.lane_streamed and not callable(stream):
+            raise SpecificationError("stream: per-lane streamed inputs need a function stream(k0, k1, runs)")
         n = integer("n", n, minimum=0)
         slice_samples = integer("slice_samples", slice_samples, minimum=1)
         missing = sorted((set(self.carried) - set(carried)) | (set(self.constants) - set(constants)))
@@ -857,7 +882,7 @@ class LaneBatches:
         slice_samples: int,
         finished_row: int | None,
         *,
-        stream: Callable[[int, int], np.ndarray] | np.ndarray | None = None,
+        stream: Callable[..., np.ndarray] | np.ndarray | None = None,
         schedule: Callable[[int, int, int], np.ndarray] | None = None,
     ) -> None:
         self.engine = engine
@@ -899,7 +924,8 @@ class LaneBatches:
             k1 = min(k + self._slice, self.n)
             rows, stride = constant_row, 0
             if callable(self._stream):
-                rows, stride = np.ascontiguousarray(self._stream(k, k1), dtype=float), engine.stream_size
+                given = self._stream(k, k1, lanes) if engine.lane_streamed else self._stream(k, k1)
+                rows, stride = np.ascontiguousarray(given, dtype=float), engine.stream_size
                 if rows.shape != (k1 - k, engine.stream_size):
                     raise DimensionError(
                         f"stream: expected shape ({k1 - k}, {engine.stream_size}) but found {rows.shape}"
@@ -974,6 +1000,7 @@ def lane_engine(
     width: int = DEFAULT_WIDTH,
     saturation: Saturation = Saturation.SCALE,
     torque_input: bool = False,
+    torque_per_lane: bool = False,
     **options: Any,
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
@@ -985,7 +1012,8 @@ def lane_engine(
     emitter options. The flight sample (:func:`mrpctl.loop.flight_core_function`) feeds its
     delayed input from its ``measurement`` output (the sensor's, as the scalar driver's ring
     does) and takes its ``noise`` as a stream shared by the lanes; with ``torque_input`` also its
-    per-sample disturbance ``torque`` (a stream shared by the lanes too).
+    per-sample disturbance ``torque`` (a stream shared by the lanes too; with ``torque_per_lane`` a
+    stream of each lane's own torque).
 
     Raises
     ------
@@ -1006,6 +1034,7 @@ def lane_engine(
         width,
         saturation,
         torque_input and flight,
+        torque_per_lane and torque_input and flight,
         tuple(sorted(options.items())),
     )
     with _ENGINES_LOCK:
@@ -1017,8 +1046,15 @@ def lane_engine(
                     spacecraft, d, period, substeps, inertia=layout, saturation=saturation, torque_input=torque_input
                 )
                 label += f"_{saturation.value}" + ("_torque" if torque_input else "")
-                streamed = ("noise", "torque") if torque_input else ("noise",)
-                options = {"delayed": ("x_delayed", "measurement"), "streamed": streamed, **options}
+                label += "_lanes" if torque_input and torque_per_lane else ""
+                streamed = ("noise", "torque") if torque_input and not torque_per_lane else ("noise",)
+                lane_streamed = ("torque",) if torque_input and torque_per_lane else ()
+                options = {
+                    "delayed": ("x_delayed", "measurement"),
+                    "streamed": streamed,
+                    "lane_streamed": lane_streamed,
+                    **options,
+                }
             else:
                 core = core_function(spacecraft, rule, d, period, substeps, inertia=layout)
             sample = engine_sample(core, d, f"mrpctl_lanes_{label}")
@@ -1043,7 +1079,7 @@ def closed_loop_batches(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     rate: float = 1.0,
-    disturbance: Disturbance | None = None,
+    disturbance: Disturbance | Sequence[Disturbance] | None = None,
 ) -> LaneBatches:
     """The closed-loop runs packed for :meth:`LaneBatches.run` (arguments as :func:`simulate_lanes`);
     read the statistics with :func:`lane_stats` once every batch has run.
@@ -1057,7 +1093,8 @@ def closed_loop_batches(
     (:func:`~mrpctl.flight.newest_arrived_slice`), as in ``Engine.run``. ``flight_options`` may
     also be (N, 10), one row per run. ``disturbance``: a per-sample torque shared by the runs (an
     engine with a ``torque`` stream), its rows of each slice (:meth:`~mrpctl.flight.Disturbance.samples`)
-    streamed beside the noise.
+    streamed beside the noise; or one per-sample torque per run (an engine with a per-lane ``torque``
+    stream: :func:`lane_engine` with ``torque_per_lane``), each batch's lanes streamed their own rows.
     """
     runs = len(x0)
     crafts = (spacecraft,) * runs if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
@@ -1082,16 +1119,22 @@ def closed_loop_batches(
                 values = cache[id(craft)] = inertia_values(craft, layout)
             inertia[i, 0], inertia[i, 1] = values[0].ravel(), values[1].ravel()  # column-major, as Engine.run
         constants["J"], constants["J_inv"] = inertia[:, 0], inertia[:, 1]
-    stream: Callable[[int, int], np.ndarray] | np.ndarray | None = None
+    stream: Callable[..., np.ndarray] | np.ndarray | None = None
     schedule: Callable[[int, int, int], np.ndarray] | None = None
     if "noise" in engine.streamed:
         options = NO_FLIGHT_OPTIONS if flight_options is None else np.asarray(flight_options, dtype=float)
         constants["flight"] = np.broadcast_to(options, (runs, options.shape[-1]))
         stream = np.zeros(engine.stream_size)  # no noise: the zero row at every sample, as Engine.run
         noisy = sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
-        if ("torque" in engine.streamed) != (disturbance is not None):
+        per_lane = "torque" in engine.lane_streamed
+        if ("torque" in engine.streamed or per_lane) != (disturbance is not None):
             raise SpecificationError("disturbance: a per-sample torque needs a lane engine with a torque stream")
-        if disturbance is not None:
+        if per_lane:
+            torques = tuple(disturbance) if isinstance(disturbance, Sequence) else ()
+            if len(torques) != runs or not all(isinstance(w, Disturbance) for w in torques):
+                raise DimensionError(f"disturbance: this lane engine takes one Disturbance per run ({runs})")
+            stream = functools.partial(_lane_torques, sensor if noisy else None, torques, rate, engine.width)
+        elif isinstance(disturbance, Disturbance):
             stream = functools.partial(_noise_and_torque, sensor if noisy else None, disturbance, rate)
         elif sensor is not None and noisy:
             stream = functools.partial(_noise_rows, sensor)
@@ -1124,6 +1167,27 @@ def _noise_and_torque(
     if sensor is not None:
         rows[:, :NOISE_SIZE] = sensor.noise_rows(k0, k1)
     rows[:, NOISE_SIZE:] = disturbance.samples(k0, k1, rate)
+    return rows
+
+
+def _lane_torques(
+    sensor: SensorModel | None,
+    torques: Sequence[Disturbance],
+    rate: float,
+    width: int,
+    k0: int,
+    k1: int,
+    runs: np.ndarray,
+) -> np.ndarray:
+    """The stream rows of a slice for the W ``runs`` of a batch: the shared noise, then each lane's own
+    torque w_k (nonzero j of lane l at NOISE_SIZE + j W + l)."""
+    rows = np.zeros((k1 - k0, NOISE_SIZE + 3 * width))
+    if sensor is not None:
+        rows[:, :NOISE_SIZE] = sensor.noise_rows(k0, k1)
+    lanes = np.empty((k1 - k0, 3, width))
+    for lane, run in enumerate(runs):
+        lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)
+    rows[:, NOISE_SIZE:] = lanes.reshape(k1 - k0, 3 * width)
     return rows
 
 

@@ -69,8 +69,10 @@ def test_a_shared_per_sample_torque_equals_simulate_run_by_run(shared: str, monk
         _same_metrics(metrics, alone)  # the lane engine, the rows streamed beside the noise
 
 
-def test_the_lanes_take_the_shared_torque(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Metrics-only batches with a shared per-sample torque run on the lanes, not on the scalar engine."""
+@pytest.mark.parametrize("shared", [True, False])
+def test_the_lanes_take_the_torques(shared: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Metrics-only batches with a per-sample torque (shared, or one per run) run on the lanes, not on the scalar
+    engine."""
     runs: list[int] = []
     original = _engine.Engine.run
 
@@ -79,7 +81,8 @@ def test_the_lanes_take_the_shared_torque(monkeypatch: pytest.MonkeyPatch) -> No
         return original(self, *args, **kwargs)
 
     monkeypatch.setattr(_engine.Engine, "run", counted)
-    batch = simulate_batch(paper.SPACECRAFT, GAINS, X0, disturbance=_rows(2), **COMMON)
+    torque: Any = _rows(2) if shared else [_rows(2), None, Disturbance(function=_gust)]
+    batch = simulate_batch(paper.SPACECRAFT, GAINS, X0, disturbance=torque, **COMMON)
     assert runs == [] and batch.saturated_fraction is not None
 
 
@@ -104,9 +107,12 @@ def test_the_lane_torque_equals_the_reference_loop() -> None:
     np.testing.assert_allclose(batch.peak_command[:, 0:3], ref.peak_command, rtol=1e-12, atol=0)
 
 
-def test_per_run_torques_equal_simulate_run_by_run() -> None:
+def test_per_run_torques_equal_simulate_run_by_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_engine, "SLICE_SAMPLES", 97)
+    # 11 runs: two lane batches of W = 8 with per-lane torques (the second padded), constants and None
     items: list[Any] = [None, np.array([0.02, -0.01, 0.03]), _rows(4), Disturbance(function=_gust)]
-    x0 = _tumbles(4, 3.0, 12)
+    items += [_rows(20 + i) for i in range(7)]
+    x0 = _tumbles(len(items), 3.0, 12)
     alone = [simulate(paper.SPACECRAFT, GAINS, x, disturbance=w, **COMMON) for x, w in zip(x0, items, strict=True)]
     serial = simulate_batch(paper.SPACECRAFT, GAINS, x0, disturbance=items, trajectories=True, threads=1, **COMMON)
     pooled = simulate_batch(paper.SPACECRAFT, GAINS, x0, disturbance=items, trajectories=True, threads=2, **COMMON)

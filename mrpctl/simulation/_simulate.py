@@ -569,9 +569,9 @@ def simulate_batch(
         array ((3,) or (n, 3)), or a (N, n, 3) array. Nothing of size (N, n, 3) is made that was not
         given: a shared per-sample torque is evaluated slice by slice (a function on the slice's
         times) and streamed, a given (N, n, 3) array is read through views. Each run equals
-        :func:`simulate` with its own disturbance bit for bit. Metrics-only runs with a shared
-        torque take the lane engine (its rows streamed beside the noise), runs with a per-sample
-        torque of their own the scalar engine (the lanes' stream is shared).
+        :func:`simulate` with its own disturbance bit for bit. Metrics-only runs take the lane
+        engine, a shared torque's rows streamed beside the noise, per-run torques as a per-lane
+        stream.
     predictor : mrpctl.Predictor, keyword-only
         The predictor controller (as in :func:`simulate`), shared by every run; each rule must
         then be a :class:`mrpctl.OnPredicted`. Predictor runs take the scalar engine (on the thread
@@ -668,9 +668,12 @@ def simulate_batch(
                 "disturbance: a per-sample torque needs the compiled engine "
                 "(install a C compiler: gcc or cc, or set CC)"
             )
-        # each worker's torque rows of one slice
+        from mrpctl._vectorize import DEFAULT_WIDTH
+
+        # each worker's torque rows of one slice (the lanes: W runs' rows side by side)
+        rows = INPUT_SIZE * (1 if trajectories else DEFAULT_WIDTH)
         _check_memory(
-            estimate + workers * min(slice_samples(substeps), n) * INPUT_SIZE * 8,
+            estimate + workers * min(slice_samples(substeps), n) * rows * 8,
             limit,
             t_final=t_final,
             keep_every=keep,
@@ -857,24 +860,22 @@ def _run_lanes(
     pool; write the rows of ``stats`` (and of ``flight_rows``: the flight sample's memory).
     ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
-    streamed beside the noise). Returns the runs left to the scalar engine (a rule without lane
-    form; a per-sample torque of its own: the lanes' stream is shared)."""
+    streamed beside the noise; else each lane is streamed its run's rows). Returns the runs left
+    to the scalar engine (a rule without lane form)."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
     from mrpctl import _vectorize
 
     groups: dict[Any, list[int]] = {}
-    keys: dict[tuple[int, int, int], Any] = {}  # objects alive during the call: id() is safe
+    keys: dict[tuple[int, int, int, bool], Any] = {}  # objects alive during the call: id() is safe
     left: list[int] = []
     for i in range(len(crafts)):
-        if streamed_by_run[i] is not None and not shared:
-            left.append(i)
-            continue
-        memo = (id(crafts[i]), id(rules[i]), samples_by_run[i])
+        own_torque = streamed_by_run[i] is not None and not shared  # streamed per lane
+        memo = (id(crafts[i]), id(rules[i]), samples_by_run[i], own_torque)
         key = keys.get(memo)
         if key is None:
             d = samples_by_run[i]
-            key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d)
+            key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d, own_torque)
         groups.setdefault(key, []).append(i)
     packs: list[tuple[list[int], _vectorize.LaneBatches]] = []
     step = slice_samples(substeps)
@@ -882,7 +883,10 @@ def _run_lanes(
         first = members[0]
         d = samples_by_run[first]
         is_flight = isinstance(rules[first], Hysteretic)
-        torque = streamed_by_run[first] if is_flight else None
+        own_torque = is_flight and streamed_by_run[first] is not None and not shared
+        torque: Any = streamed_by_run[first] if is_flight else None
+        if own_torque:
+            torque = [streamed_by_run[i] for i in members]
         try:
             lanes = _vectorize.lane_engine(
                 crafts[first],
@@ -892,6 +896,7 @@ def _run_lanes(
                 substeps,
                 saturation=saturation,
                 torque_input=torque is not None,
+                torque_per_lane=own_torque,
             )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
