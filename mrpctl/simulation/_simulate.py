@@ -367,7 +367,7 @@ def simulate(
         A body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)`` only):
         constant (3,), one row per sample (n, 3), or ``Disturbance(function=w)`` with w(t) of the
         sample times (evaluated slice by slice); the per-sample forms are streamed per slice
-        like the noise (compiled engine only; :func:`simulate_batch` takes a constant torque).
+        like the noise (compiled engine only; :func:`simulate_batch` takes them too, shared or per run).
     sensor : mrpctl.flight.SensorModel, keyword-only
         Attitude and rate noise and gyro bias of the flight loop's measurements
         (``rule=Hysteretic(...)`` only); the noise of each slice of samples is generated in
