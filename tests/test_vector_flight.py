@@ -9,28 +9,24 @@ import math
 import numpy as np
 import pytest
 
-from mrpctl import _compile, _vectorize
+from mrpctl import _compile, _vectorize, flight
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.flight import NOISE_BLOCK, DelayModel, SensorModel
+from mrpctl.flight import DelayModel, SensorModel
 
 
-def _whole_blocks(seed: int, stream: int, blocks: int) -> np.ndarray:
-    """The documented stream, written out independently: block b is Philox(SeedSequence(seed, (stream, b)))."""
-    out = []
-    for b in range(blocks):
-        generator = np.random.Generator(np.random.Philox(np.random.SeedSequence(seed, spawn_key=(stream, b))))
-        out.append(generator.standard_normal((NOISE_BLOCK, 3)))
-    return np.vstack(out)
+def _whole_stream(seed: int, stream: int, n: int) -> np.ndarray:
+    """The documented layout, written out: component c of sample k is normal number 3k + c of the stream."""
+    return flight.stream_normals(flight.stream_key(seed, stream), 0, 3 * n).reshape(n, 3)
 
 
 # ============================================================================ noise in place
 def test_noise_rows_are_the_documented_streams_bit_for_bit_in_any_slicing():
     sensor = SensorModel(attitude_noise=0.01, rate_noise=2e-4, seed=5)
-    n = 2 * NOISE_BLOCK + 77
-    attitude = 0.01 * _whole_blocks(5, 0, 3)[:n]
-    rate = 2e-4 * _whole_blocks(5, 1, 3)[:n]
-    buffer = np.full((NOISE_BLOCK + 10, 6), np.nan)  # reused slice after slice, larger than a slice
-    cuts = [0, 1, 300, NOISE_BLOCK - 1, NOISE_BLOCK + 2, 2 * NOISE_BLOCK, n]
+    n = 2 * 4096 + 77
+    attitude = 0.01 * _whole_stream(5, flight.STREAM_ATTITUDE, n)
+    rate = 2e-4 * _whole_stream(5, flight.STREAM_RATE, n)
+    buffer = np.full((4096 + 10, 6), np.nan)  # reused slice after slice, larger than a slice
+    cuts = [0, 1, 300, 4095, 4096 + 2, 2 * 4096, n]
     for a, b in itertools.pairwise(cuts):
         rows = sensor.noise_rows(a, b, out=buffer)
         assert rows.shape == (b - a, 6) and np.shares_memory(rows, buffer)
@@ -48,12 +44,12 @@ def test_noise_rows_of_a_zero_sigma_are_zero_and_a_bad_buffer_is_refused():
         SensorModel(rate_noise=1e-3).noise_rows(0, 5, out=np.empty((6, 10)).T)
 
 
-def test_jitter_prefixes_of_a_block_are_the_whole_block_s_integers():
+def test_jitter_is_the_multiply_shift_of_the_stream_values_in_any_slicing():
     model = DelayModel.jitter(0.01, 0.05, seed=4)
-    generator = np.random.Generator(np.random.Philox(np.random.SeedSequence(4, spawn_key=(2, 0))))
-    whole = generator.integers(10, 50, size=NOISE_BLOCK, endpoint=True)
-    assert np.array_equal(model.samples(1000.0, 0, 123), whole[:123])
-    assert np.array_equal(model.samples(1000.0, 100, 2000), whole[100:2000])
+    key = flight.stream_key(4, flight.STREAM_JITTER)
+    whole = [10 + ((flight._value(key, k << 12) >> 32) * 41 >> 32) for k in range(2000)]  # Python ints
+    assert model.samples(1000.0, 0, 123).tolist() == whole[:123]
+    assert model.samples(1000.0, 100, 2000).tolist() == whole[100:2000]
 
 
 # ============================================================================ fmax/fmin inlined

@@ -34,12 +34,17 @@ from mrpctl.errors import CodegenError
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
     NOISE_SIZE,
+    STREAM_ATTITUDE,
+    STREAM_JITTER,
+    STREAM_RATE,
+    DelayKind,
     DelayModel,
     Disturbance,
     Hysteretic,
     Saturation,
     SensorModel,
     newest_arrived_slice,
+    stream_key,
 )
 from mrpctl.loop import (
     PREDICTOR_MEMORY_SIZE,
@@ -220,8 +225,10 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
     }
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
-    body = resources.files("mrpctl.simulation").joinpath("_driver.c").read_text(encoding="utf-8")
-    return "\n" + header + body
+    folder = resources.files("mrpctl.simulation")
+    noise = folder.joinpath("_noise.c").read_text(encoding="utf-8")  # the random streams the driver draws
+    body = folder.joinpath("_driver.c").read_text(encoding="utf-8")
+    return "\n" + noise + header + body
 
 
 @dataclass
@@ -329,8 +336,9 @@ class Engine:
             self._run_c.restype = ctypes.c_longlong
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
-                + [ctypes.c_void_p] * 6
-                + [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_longlong, ctypes.c_void_p]
+                + [ctypes.c_void_p] * 8
+                + [ctypes.c_longlong]
+                + [ctypes.c_void_p] * 3
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 4
@@ -460,11 +468,18 @@ class Engine:
         indices: list[np.ndarray] = []
         stored = 0
         ring = workspace.ring
-        noisy = (
-            "noise" in self.sample.name_in()
-            and sensor is not None
-            and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
-        )
+        noise, noise_key = _NO_NOISE[0:2], np.zeros(2, dtype=np.uint64)  # the driver draws the noise itself
+        if "noise" in self.sample.name_in() and sensor is not None:
+            noise = np.array([sensor.attitude_noise, sensor.rate_noise])
+            keys = [stream_key(sensor.seed, STREAM_ATTITUDE), stream_key(sensor.seed, STREAM_RATE)]
+            noise_key = np.array(keys, dtype=np.uint64)
+        jitter: np.ndarray | None = None  # seeded jitter: the driver draws the delays and schedules
+        if delay is not None and delay.kind is DelayKind.JITTER:
+            low, high = delay.bounds(rate)
+            if high != self.d or low < 1:
+                raise ValueError(f"jitter in [{low}, {high}] periods: the engine needs d_min >= 1, d_max = {self.d}")
+            jitter = np.empty(3 + self.d + 1, dtype=np.int64)
+            jitter[0:3] = (np.uint64(stream_key(delay.seed, STREAM_JITTER)).view(np.int64), low, -1 - self.d)
         if self.predictor and flight_options is None:
             raise ValueError("the predictor engine needs its constants (predictor_constants)")
         if keep == 1 and measurements is not None and self.ring_width == STATE_SIZE and not self.flight:
@@ -472,28 +487,17 @@ class Engine:
         step = slice_samples(self.substeps)
         newest = -1 - self.d
         schedule: np.ndarray | None = None
-        noise_rows: np.ndarray | None = None
         k = 0
         diverged = memory_end + S_DIVERGED
         while k < n:
             k1 = min(k + step, n)
-            noise, noise_stride = _NO_NOISE, 0
-            if noisy:
-                assert sensor is not None
-                if noise_rows is None:
-                    noise_rows = np.empty((min(step, n), NOISE_SIZE))  # one buffer for the run's slices
-                noise = sensor.noise_rows(k, k1, out=noise_rows)
-                noise_stride = NOISE_SIZE
             torque, torque_stride = _NO_NOISE, 0
             if self.torque_input:
                 assert disturbance is not None
                 torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1, rate)), INPUT_SIZE
-            if delay is not None:
+            if delay is not None and jitter is None:  # a given sequence: j*(k) of the slice from NumPy
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])
-                if delay_used is not None:  # the kept samples of the slice: k - j*(k)
-                    taken = np.arange(-(-k // keep) * keep, k1, keep)
-                    delay_used[taken // keep] = taken - schedule[taken - k]
             done = self._run_c(
                 address(state),
                 address(history),
@@ -504,10 +508,12 @@ class Engine:
                 address(inertia_inverse),
                 address(options) if self.flight else None,
                 address(noise),
-                noise_stride,
+                noise_key.ctypes.data,
                 address(torque),
                 torque_stride,
                 None if schedule is None else schedule.ctypes.data,
+                None if jitter is None else jitter.ctypes.data,
+                None if delay_used is None else delay_used.ctypes.data,
                 k,
                 k1,
                 self.d,
