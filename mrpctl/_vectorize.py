@@ -66,7 +66,7 @@ from mrpctl._validation import integer
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import DelayModel, Hysteretic, Saturation, SensorModel, newest_arrived_slice
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
-from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, rule_key
+from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, noise_rows, rule_key
 from mrpctl.simulation._stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
@@ -1098,7 +1098,7 @@ def closed_loop_batches(
 
 
 def _noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
-    return sensor.noise_rows(k0, k1)
+    return noise_rows(sensor, k0, k1)  # SensorModel.noise_rows drawn by the C code (the same bits)
 
 
 def lane_stats(batches: LaneBatches) -> np.ndarray:

@@ -37,16 +37,16 @@ def c_fill(tmp_path_factory):
     fill = library.mrpctl_stream_fill
     fill.restype = None
     fill.argtypes = [ctypes.c_ulonglong, ctypes.c_longlong, ctypes.c_longlong, ctypes.c_double, ctypes.c_int]
-    fill.argtypes += [ctypes.c_longlong, ctypes.c_longlong, ctypes.c_void_p]
+    fill.argtypes += [ctypes.c_longlong, ctypes.c_longlong, ctypes.c_void_p, ctypes.c_longlong]
 
     def normals(key: int, n0: int, count: int, scale: float = 1.0) -> np.ndarray:
         out = np.full(count, np.nan)
-        fill(key, n0, count, scale, 0, 0, 0, out.ctypes.data)
+        fill(key, n0, count, scale, 0, 0, 0, out.ctypes.data, 3)
         return out
 
     def integers(key: int, k0: int, count: int, low: int, high: int) -> np.ndarray:
         out = np.full(count, np.nan)
-        fill(key, k0, count, 0.0, 1, low, high, out.ctypes.data)
+        fill(key, k0, count, 0.0, 1, low, high, out.ctypes.data, 3)
         return out.astype(np.int64)
 
     return normals, integers
@@ -109,6 +109,16 @@ def test_sensor_noise_rows_are_the_streams_in_any_slicing(c_fill):
         rows = sensor.noise_rows(a, b, out=buffer)
         assert np.shares_memory(rows, buffer)
         assert np.array_equal(rows[:, 0:3], attitude[a:b]) and np.array_equal(rows[:, 3:6], rate[a:b])
+
+
+def test_the_compiled_noise_rows_of_the_lane_engine_are_the_numpy_mirror_s():
+    from mrpctl.simulation._engine import noise_rows
+
+    if _compile.find_compiler() is None:
+        pytest.skip("no C compiler")
+    for sensor in (SensorModel(attitude_noise=0.01, rate_noise=2e-4, seed=5), SensorModel(rate_noise=1e-3, seed=1)):
+        for a, b in ((0, 5000), (4999, 70_000)):
+            assert np.array_equal(_bits(noise_rows(sensor, a, b)), _bits(sensor.noise_rows(a, b)))
 
 
 def test_jitter_integers_c_and_numpy_agree_and_are_uniform(c_fill):

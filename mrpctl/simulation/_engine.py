@@ -29,7 +29,14 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl._compile import SIMULATION_FLAGS, CompiledFunction, address, compile_function
+from mrpctl._compile import (
+    SIMULATION_FLAGS,
+    CompiledFunction,
+    address,
+    compile_function,
+    compile_source,
+    find_compiler,
+)
 from mrpctl.errors import CodegenError
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
@@ -135,6 +142,45 @@ def predictor_constants(options: np.ndarray | None, tau: float, model: Spacecraf
 #: The flight sample's constants without actuator limits or disturbance: u_max = u_norm = inf, w = 0.
 NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 _NO_NOISE = np.zeros(NOISE_SIZE)
+
+
+_NOISE_FILL: list[Any] = []  # mrpctl_stream_fill of _noise.c compiled alone (loaded once), or None
+_NOISE_FILL_LOCK = threading.Lock()
+
+
+def _noise_fill() -> Any:
+    """``mrpctl_stream_fill`` of ``_noise.c`` (compiled once, cached on disk), or None without a compiler."""
+    with _NOISE_FILL_LOCK:
+        if not _NOISE_FILL:
+            fill = None
+            if find_compiler() is not None:
+                code = resources.files("mrpctl.simulation").joinpath("_noise.c").read_text(encoding="utf-8")
+                library = ctypes.CDLL(str(compile_source(code, "mrpctl_noise", flags=SIMULATION_FLAGS)))
+                fill = library.mrpctl_stream_fill
+                fill.restype = None
+                fill.argtypes = [ctypes.c_ulonglong, ctypes.c_longlong, ctypes.c_longlong, ctypes.c_double]
+                fill.argtypes += [
+                    ctypes.c_int,
+                    ctypes.c_longlong,
+                    ctypes.c_longlong,
+                    ctypes.c_void_p,
+                    ctypes.c_longlong,
+                ]
+            _NOISE_FILL.append(fill)
+        return _NOISE_FILL[0]
+
+
+def noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
+    """:meth:`SensorModel.noise_rows` (k1 − k0, 6) drawn by the C code of ``_noise.c`` (the same bits, ≈ 15×
+    faster than its NumPy mirror); the NumPy mirror when there is no C compiler."""
+    fill = _noise_fill()
+    if fill is None:
+        return sensor.noise_rows(k0, k1)
+    rows = np.empty((k1 - k0, NOISE_SIZE))
+    for column, sigma, stream in ((0, sensor.attitude_noise, STREAM_ATTITUDE), (3, sensor.rate_noise, STREAM_RATE)):
+        target = rows.ctypes.data + 8 * column
+        fill(stream_key(sensor.seed, stream), 3 * k0, 3 * (k1 - k0), sigma, 0, 0, 0, target, NOISE_SIZE)
+    return rows
 
 
 def slice_samples(substeps: int) -> int:
@@ -282,6 +328,7 @@ class Engine:
         self.flight = isinstance(rule, Hysteretic) or self.predictor
         self._structure = (spacecraft, d, period, substeps, saturation, limited, disturbed)
         self.torque_input = torque_input and self.flight and not self.predictor
+        self._sensor = sensor
         if predictor is not None:
             core = predictor_core_function(
                 spacecraft,
@@ -345,7 +392,8 @@ class Engine:
             )
 
     def virtual_machine_sample(self) -> ca.Function:
-        """The sample for the virtual machine: the flight sample without its per-sample sensor ports."""
+        """The sample for the virtual machine: the flight sample with the sensor ports of this structure,
+        without the records and the torque input."""
         if not self.flight:
             return self.sample
         if self.predictor:
@@ -358,7 +406,7 @@ class Engine:
             substeps,
             inertia=self.inertia,
             saturation=saturation,
-            sensor=False,
+            sensor=self._sensor,
             limited=limited,
             disturbed=disturbed,
         )

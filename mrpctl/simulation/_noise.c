@@ -229,14 +229,16 @@ static inline long long mrpctl_stream_integer(uint64_t key, uint64_t k, long lon
   return lo + (long long)(((h >> 32) * (uint64_t)(hi - lo + 1)) >> 32);
 }
 
-/* Test entry: out[i] = scale * normal(n0 + i) for i < count (scale 0: exact zeros), or, with
- * integers != 0, the jitter integers of k = n0 + i in [lo, hi] (as doubles). */
+/* Fill entry (the tests, and the noise rows of the lane engine): value i < count (of normal or jitter number
+ * n0 + i) goes to out[(i / 3) * row_stride + i % 3] (row_stride 3: contiguous; 6: one half of the (theta, eta)
+ * rows); scale * normal (scale 0: exact zeros), or, with integers != 0, the jitter integer in [lo, hi]. */
 __attribute__((visibility("default"))) void mrpctl_stream_fill(unsigned long long key, long long n0, long long count,
                                                                double scale, int integers, long long lo, long long hi,
-                                                               double* out) {
+                                                               double* out, long long row_stride) {
   long long i;
   for (i = 0; i < count; ++i) {
-    if (integers) out[i] = (double)mrpctl_stream_integer(key, (uint64_t)(n0 + i), lo, hi);
-    else out[i] = scale > 0.0 ? scale * mrpctl_stream_normal(key, (uint64_t)(n0 + i)) : 0.0;
+    double* target = out + (i / 3) * row_stride + i % 3;
+    if (integers) *target = (double)mrpctl_stream_integer(key, (uint64_t)(n0 + i), lo, hi);
+    else *target = scale > 0.0 ? scale * mrpctl_stream_normal(key, (uint64_t)(n0 + i)) : 0.0;
   }
 }
