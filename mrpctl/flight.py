@@ -732,8 +732,10 @@ def rotation_vector_to_mrp_expr(theta: Any) -> Any:
     angle = ca.sqrt(angle_squared)
     small = angle < _SMALL_ANGLE
     safe = ca.if_else(small, 1.0, angle)
-    # tan(Φ/4)/Φ and its series 1/4 + Φ²/192 + Φ⁴/7680 near 0.
-    factor = ca.if_else(small, 0.25 + angle_squared / 192.0 + angle_squared**2 / 7680.0, ca.tan(safe / 4.0) / safe)
+    # tan(Φ/4)/Φ and its series 1/4 + Φ²/192 + Φ⁴/7680 near 0 (both branches are evaluated: the
+    # series by multiplications, x/4 as the exact 0.25 x; no division but the one of tan(Φ/4)/Φ)
+    series = 0.25 + angle_squared * (1.0 / 192.0) + angle_squared**2 * (1.0 / 7680.0)
+    factor = ca.if_else(small, series, ca.tan(0.25 * safe) / safe)
     return factor * theta
 
 
@@ -747,7 +749,7 @@ def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
     s1 = ca.dot(sigma_first, sigma_first)
     s2 = ca.dot(sigma_second, sigma_second)
     numerator = (1 - s1) * sigma_second + (1 - s2) * sigma_first - 2 * (skew_expr(sigma_second) @ sigma_first)
-    return numerator / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second))
+    return numerator * (1 / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second)))  # one division, not three
 
 
 def short_expr(sigma: Any) -> Any:
@@ -759,7 +761,7 @@ def short_expr(sigma: Any) -> Any:
 def _safe_shadow_expr(sigma: Any) -> Any:
     # Both if_else branches are evaluated: keep the unused shadow of σ = 0 finite.
     squared = ca.dot(sigma, sigma)
-    return -sigma / ca.if_else(squared > 0, squared, 1.0)
+    return sigma * (-1 / ca.if_else(squared > 0, squared, 1.0))  # one division, not three
 
 
 def quaternion_from_mrp_expr(sigma: Any) -> Any:
@@ -783,7 +785,7 @@ def measurement_function() -> ca.Function:
     bias = ca.SX.sym("bias", 3)
     sigma_meas = short_expr(compose_mrp_expr(x[0:3], rotation_vector_to_mrp_expr(theta)))
     omega_meas = 4 * x[3:6] + bias + eta
-    x_meas = ca.vertcat(sigma_meas, omega_meas / 4)
+    x_meas = ca.vertcat(sigma_meas, 0.25 * omega_meas)  # = omega_meas / 4 exactly (a power of two)
     return ca.Function(
         "measurement",
         [x, theta, eta, bias],

@@ -173,3 +173,27 @@ def test_seeds_outside_64_bits_are_refused():
         SensorModel(attitude_noise=0.01, seed=2**64)
     with pytest.raises(SpecificationError, match="seed"):
         DelayModel.jitter(0.01, 0.02, seed=-1)
+
+
+# ============================================================================ jitter scheduled in the C driver
+@pytest.mark.parametrize("slice_samples", [7, 64, 2**16])
+def test_the_driver_s_jitter_schedule_is_newest_arrived_in_any_slicing(slice_samples, monkeypatch):
+    """d_min = 1 period (the engine's smallest), slices shorter and longer than d_max: j* as newest_arrived says."""
+    from mrpctl import paper, simulate
+    from mrpctl.flight import Hysteretic, newest_arrived
+    from mrpctl.simulation import _engine
+
+    if _compile.find_compiler() is None:
+        pytest.skip("no C compiler")
+    rate, n, depth = 100.0, 601, 12
+    model = DelayModel.jitter(0.01, 0.12, seed=6)
+    monkeypatch.setattr(_engine, "SLICE_SAMPLES", slice_samples)
+    run = simulate(
+        paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=0.12, rate=rate, rule=Hysteretic(0.1), t_final=6.0,
+        delay=model, keep_every=1,
+    )  # fmt: skip
+    used, delay_used = newest_arrived(model.samples(rate, 0, n), history=depth)
+    assert run.delay_used is not None and run.delay_used.tolist() == delay_used.tolist()
+    seen = set(delay_used[depth:].tolist())
+    assert seen <= set(range(1, depth + 1)) and {1, 2, 3, 4} <= seen  # the delay used varies, d_min included
+    assert np.all(np.diff(used) >= 0)  # an overtaken measurement is never used
