@@ -495,7 +495,8 @@ class DelayModel:
     def samples(self, rate: float, k0: int, k1: int) -> np.ndarray:
         """Delays d_k in samples of measurement samples k0 … k1 − 1 (int64), at ``rate`` (Hz).
 
-        Jitter is uniform over the integers in [d_min, d_max], keyed by (seed, k).
+        Jitter is uniform over the integers in [d_min, d_max], keyed by (seed, k) (a multiply-shift
+        map of a 32-bit value: the relative error of each integer's probability is below (d_max − d_min + 1)/2³²).
         """
         start, stop = _slice(k0, k1)
         low, high = self.bounds(rate)

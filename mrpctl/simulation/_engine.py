@@ -470,11 +470,12 @@ class Engine:
             The flight sample's constants (u_max (3), u_norm, w (3)); default
             :data:`NO_FLIGHT_OPTIONS`. Ignored by the other engines.
         sensor : SensorModel, optional
-            The flight sample's noise: θ_k, η_k of each slice's samples are generated in
-            NumPy (:meth:`SensorModel.noise`, slice independent) and handed to the driver;
-            its gyro bias is in ``flight_options``. None: no noise.
+            The flight sample's noise: the driver draws θ_k, η_k of every sample itself
+            (``_noise.c``, from the seed's stream keys and the two 1σ; the bits of
+            :meth:`SensorModel.noise`); its gyro bias is in ``flight_options``. None: no noise.
         delay, rate : DelayModel, float, optional
-            A time-varying delay (d_max = this engine's d, d_min >= 1) at ``rate`` (Hz): the
+            A time-varying delay (d_max = this engine's d, d_min >= 1) at ``rate`` (Hz): seeded
+            jitter is drawn and scheduled by the driver (O(1) a sample); for a given sequence the
             newest-arrived index j*(k) of each slice is computed in NumPy
             (:func:`~mrpctl.flight.newest_arrived_slice`) and handed to the driver.
         disturbance : Disturbance, optional

@@ -28,7 +28,7 @@
  * the driver is compiled with -ffp-contract=off (no fused multiply-add).
  *
  * The jitter of sample k is lo + (((value >> 32) (hi - lo + 1)) >> 32) with value number idx = k << 12
- * (a multiply-shift map to [lo, hi]; its bias is below (hi - lo + 1) / 2^32 per integer).
+ * (a multiply-shift map to [lo, hi]: the relative error of each integer's probability is below (hi - lo + 1) / 2^32).
  */
 #include <math.h>
 #include <limits.h>
