@@ -10,10 +10,11 @@ The 60 s paper case (the paper's spacecraft, gain and initial state, tau = 0.5 s
 * ``all``: every option at once;
 
 plus the NumPy side of the streams alone: the noise (``SensorModel.noise(0, n)``, the NumPy
-mirror of ``_noise.c`` that the lane engine and the reference loop use; the scalar engine draws
-the noise in C) and the newest-arrived schedule of a delay sequence (``newest_arrived_slice``; the
-scalar engine schedules seeded jitter in C), so that the table says where the time goes. All in this process, the variants interleaved round by round, each timed by the
-process's CPU time (``time.process_time``: the least disturbed by other jobs on a shared
+mirror of ``_noise.c`` that the virtual machine and the reference loop use; the scalar engine
+draws the noise in C, the lane engine gets C-drawn rows) and the newest-arrived schedule of a
+delay sequence (``newest_arrived_slice``; the scalar engine schedules seeded jitter in C), so
+that the table says where the time goes. All in this process, the variants interleaved round by
+round, each timed by the process's CPU time (``time.process_time``: the least disturbed by other jobs on a shared
 machine); each entry is the minimum and the median over the rounds, and the ratio is to the
 plain run's minimum of the same process.
 
