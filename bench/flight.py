@@ -9,10 +9,12 @@ The 60 s paper case (the paper's spacecraft, gain and initial state, tau = 0.5 s
   disturbance, sensor noise (0.01 rad, 1e-4 rad/s, a gyro bias), a 0.4–0.5 s jitter,
 * ``all``: every option at once;
 
-plus, for the noise, the cost of generating it alone (``SensorModel.noise(0, n)``) and, for the
-jitter, of the newest-arrived schedule (``newest_arrived_slice``), so that the table says where
-the time goes. All in this process, the variants interleaved round by round, each timed by the
-process's CPU time (``time.process_time``: the least disturbed by other jobs on a shared
+plus the NumPy side of the streams alone: the noise (``SensorModel.noise(0, n)``, the NumPy
+mirror of ``_noise.c`` that the virtual machine and the reference loop use; the scalar engine
+draws the noise in C, the lane engine gets C-drawn rows) and the newest-arrived schedule of a
+delay sequence (``newest_arrived_slice``; the scalar engine schedules seeded jitter in C), so
+that the table says where the time goes. All in this process, the variants interleaved round by
+round, each timed by the process's CPU time (``time.process_time``: the least disturbed by other jobs on a shared
 machine); each entry is the minimum and the median over the rounds, and the ratio is to the
 plain run's minimum of the same process.
 
@@ -101,8 +103,8 @@ def variants() -> dict[str, Callable[[], object]]:
     for label, (rule, options) in FLIGHT.items():
         calls[label] = _run(rule, **options)
         calls[label + " [full]"] = _run(rule, full=True, **options)
-    calls["  (noise generation alone)"] = lambda: SENSOR.noise(0, N)
-    calls["  (jitter schedule alone)"] = lambda: newest_arrived_slice(JITTER, RATE, 500, 0, N, -501)
+    calls["  (noise alone, NumPy mirror)"] = lambda: SENSOR.noise(0, N)
+    calls["  (jitter schedule alone, NumPy)"] = lambda: newest_arrived_slice(JITTER, RATE, 500, 0, N, -501)
     return calls
 
 
@@ -112,7 +114,8 @@ def flight_hash(verbose: bool = False) -> str:
     Every actuator (none, SCALE, CLIP) x disturbance (none, constant, zero) x sensor (none, noisy,
     bias only, ideal) for two rules, two jitter runs, a full inertia and three ``simulate_batch``
     calls; the bytes (sign of zero included) of t, σ, ω, u, the switch times and the flight summaries.
-    It must not move when the flight sample is reorganised (``2257a7a2…2457f9`` since phase 2).
+    It must not move when the flight sample is reorganised (``2257a7a2…2457f9`` from phase 2 to 4, with
+    NumPy's Philox noise; see design/flight.md, phase 5, for the value with the noise of ``_noise.c``).
     """
     import hashlib
 

@@ -40,7 +40,7 @@ import casadi as ca
 
 from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_library, compiler_version, find_compiler
 from mrpctl.errors import CodegenError, SpecificationError
-from mrpctl.flight import NOISE_BLOCK, ActuatorModel, DelayModel, SensorModel
+from mrpctl.flight import ActuatorModel, DelayModel, SensorModel
 from mrpctl.loop import FLIGHT_MEMORY_LAYOUT, ClosedLoopFunctions, FlightOptions, closed_loop_functions
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
@@ -730,7 +730,8 @@ def _flight_manifest(closed: ClosedLoopFunctions, flight: FlightOptions) -> dict
             "gyro_bias": [float(b) for b in sensor.gyro_bias],
             "seed": sensor.seed,
             "noise": "the noise input of sample/chunk: (theta_k; eta_k) = mrpctl.flight.SensorModel(...).noise(k0, k1) "
-            f"(counter-based Philox streams, blocks of {NOISE_BLOCK} samples keyed by (seed, stream, block))",
+            "(counter-based: SplitMix64 values of (seed, stream, 3k + component) and a 256-layer ziggurat, "
+            "mrpctl/simulation/_noise.c)",
         },
         "delay": None
         if delay is None

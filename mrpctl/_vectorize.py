@@ -66,7 +66,7 @@ from mrpctl._validation import integer
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
-from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, rule_key
+from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, noise_rows, rule_key
 from mrpctl.simulation._stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
@@ -1156,7 +1156,7 @@ def closed_loop_batches(
 
 
 def _noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
-    return sensor.noise_rows(k0, k1)
+    return noise_rows(sensor, k0, k1)  # SensorModel.noise_rows drawn by the C code (the same bits)
 
 
 def _noise_and_torque(
@@ -1165,7 +1165,7 @@ def _noise_and_torque(
     """The stream rows of a slice: the noise (zero without a noisy sensor) and the torque w_k, side by side."""
     rows = np.zeros((k1 - k0, NOISE_SIZE + 3))
     if sensor is not None:
-        rows[:, :NOISE_SIZE] = sensor.noise_rows(k0, k1)
+        rows[:, :NOISE_SIZE] = noise_rows(sensor, k0, k1)  # drawn by _noise.c
     rows[:, NOISE_SIZE:] = disturbance.samples(k0, k1, rate)
     return rows
 
@@ -1183,7 +1183,7 @@ def _lane_torques(
     torque w_k (nonzero j of lane l at NOISE_SIZE + j W + l)."""
     rows = np.zeros((k1 - k0, NOISE_SIZE + 3 * width))
     if sensor is not None:
-        rows[:, :NOISE_SIZE] = sensor.noise_rows(k0, k1)
+        rows[:, :NOISE_SIZE] = noise_rows(sensor, k0, k1)  # drawn by _noise.c
     lanes = np.empty((k1 - k0, 3, width))
     for lane, run in enumerate(runs):
         lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)

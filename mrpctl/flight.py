@@ -39,8 +39,10 @@ from mrpctl.switching import SwitchingRule
 __all__ = [
     "FLIGHT_CONSTANTS_SIZE",
     "FLIGHT_MEMORY_SIZE",
-    "NOISE_BLOCK",
     "NOISE_SIZE",
+    "STREAM_ATTITUDE",
+    "STREAM_JITTER",
+    "STREAM_RATE",
     "ActuatorModel",
     "DelayKind",
     "DelayModel",
@@ -58,11 +60,10 @@ __all__ = [
     "rotation_vector_to_mrp_expr",
     "selection_function",
     "short_expr",
+    "stream_key",
+    "stream_normals",
 ]
 
-#: Samples per block of the counter-based random streams: the generator of block b is keyed by
-#: (seed, stream, b), so sample k's value never depends on the slice it was asked for in.
-NOISE_BLOCK = 4096
 #: The memory a controller-side rule carries in the compiled engine: (h, c, σ̃_prev) and the
 #: actuator accumulators (saturated samples, peak commanded |u_c,i| per axis, peak |u_c|).
 FLIGHT_MEMORY_SIZE = 10
@@ -70,19 +71,139 @@ FLIGHT_MEMORY_SIZE = 10
 FLIGHT_CONSTANTS_SIZE = 10
 #: The flight sample's per-sample input ``noise``: (θ_k (3), η_k (3)).
 NOISE_SIZE = 6
-_STREAM_ATTITUDE, _STREAM_RATE, _STREAM_JITTER = 0, 1, 2
+#: The stream numbers of the attitude noise, the rate noise and the delay jitter (:func:`stream_key`).
+STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 _SMALL_ANGLE = 1e-4
 
 
 # ================================================================== random streams
-def _block_generator(seed: int, stream: int, block: int) -> np.random.Generator:
-    return np.random.Generator(np.random.Philox(np.random.SeedSequence(seed, spawn_key=(stream, block))))
+# The NumPy mirror of mrpctl/simulation/_noise.c (read that file's header: SplitMix64 values of
+# (key, idx), a 256-layer ziggurat on them); the C driver generates the same bits per sample.
+_MASK64 = (1 << 64) - 1
+_GAMMA = 0x9E3779B97F4A7C15
+_ZIG_LAYERS = 256
+_ZIG_R = 3.6541528853610088
+_ATTEMPTS, _TAIL_TRIES = 64, 31  # the C loops' caps: attempt 63, tail try 30 accept their candidate
+_TWO_M53 = 2.0**-53
 
 
-def _blocks(k0: int, k1: int) -> range:
-    """The blocks of :data:`NOISE_BLOCK` samples that samples k0 … k1 − 1 touch."""
-    return range(k0 // NOISE_BLOCK, -(-k1 // NOISE_BLOCK)) if k1 > k0 else range(0)
+def _mix64(z: int) -> int:
+    """Stafford's Mix13, the SplitMix64 finaliser, on a Python int (mod 2^64)."""
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return z ^ (z >> 31)
+
+
+def stream_key(seed: int, stream: int) -> int:
+    """The 64-bit key of one stream (0 attitude, 1 rate, 2 jitter) of ``seed`` (< 2^64)."""
+    return _mix64((_mix64((seed + _GAMMA) & _MASK64) + (stream + 1) * 0xD1B54A32D192ED03) & _MASK64)
+
+
+def _value(key: int, idx: int) -> int:
+    """Value number idx of the stream with ``key`` (scalar, Python ints)."""
+    return _mix64((key + (idx + 1) * _GAMMA) & _MASK64)
+
+
+def _values(key: int, idx: np.ndarray) -> np.ndarray:
+    """:func:`_value` of a uint64 array of indices (uint64 arithmetic wraps mod 2^64)."""
+    z = (idx + np.uint64(1)) * np.uint64(_GAMMA) + np.uint64(key)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+def _ziggurat_tables() -> tuple[list[float], list[float]]:
+    """X (257) and F = exp(−X²/2) of the 256-layer ziggurat, computed in float64 as documented in _noise.c."""
+    r = _ZIG_R
+    v = r * math.exp(-0.5 * r * r) + math.sqrt(math.pi / 2.0) * math.erfc(r / math.sqrt(2.0))
+    x = [0.0] * (_ZIG_LAYERS + 1)
+    x[0], x[1] = v / math.exp(-0.5 * r * r), r
+    for i in range(1, _ZIG_LAYERS - 1):
+        x[i + 1] = math.sqrt(-2.0 * math.log(v / x[i] + math.exp(-0.5 * x[i] * x[i])))
+    f = [math.exp(-0.5 * value * value) for value in x]
+    f[_ZIG_LAYERS] = 1.0
+    return x, f
+
+
+@lru_cache(maxsize=1)
+def _c_tables() -> tuple[np.ndarray, np.ndarray]:
+    """The tables as written in mrpctl/simulation/_noise.c (hex-float literals): the bits both sides use."""
+    from importlib import resources
+
+    text = resources.files("mrpctl").joinpath("simulation", "_noise.c").read_text(encoding="utf-8")
+    tables = []
+    for name in ("mrpctl_zig_x", "mrpctl_zig_f"):
+        body = text.split(f"{name}[{_ZIG_LAYERS + 1}] = {{", 1)[1].split("}", 1)[0]
+        values = [float.fromhex(item) for item in body.replace("\n", " ").split(",") if item.strip()]
+        if len(values) != _ZIG_LAYERS + 1:
+            raise RuntimeError(f"_noise.c: {name} has {len(values)} entries, expected {_ZIG_LAYERS + 1}")
+        tables.append(np.array(values))
+    return tables[0], tables[1]
+
+
+def _normal_slow(key: int, n: int, table_x: np.ndarray, table_f: np.ndarray) -> float:
+    """Normal number n by the C code's loop, in Python floats (math.exp / math.log: the same libm)."""
+    r = float(table_x[1])
+    for attempt in range(_ATTEMPTS):
+        base = (n << 12) | (attempt << 6)
+        h = _value(key, base)
+        i, negative = h & 255, (h >> 8) & 1
+        x = float(h >> 11) * _TWO_M53 * float(table_x[i])
+        if x < table_x[i + 1]:
+            return -x if negative else x
+        if i == 0:
+            for t in range(_TAIL_TRIES):
+                u1 = float((_value(key, base | (2 * t + 1)) >> 11) + 1) * _TWO_M53
+                u2 = float((_value(key, base | (2 * t + 2)) >> 11) + 1) * _TWO_M53
+                xt = -math.log(u1) / r
+                y = -math.log(u2)
+                if y + y > xt * xt or t == _TAIL_TRIES - 1:
+                    x = r + xt
+                    return -x if negative else x
+        else:
+            u2 = float(_value(key, base | 1) >> 11) * _TWO_M53
+            f_i, f_next = float(table_f[i]), float(table_f[i + 1])
+            if f_i + u2 * (f_next - f_i) < math.exp(-0.5 * x * x) or attempt == _ATTEMPTS - 1:
+                return -x if negative else x
+    raise AssertionError("unreachable: the last attempt accepts")  # pragma: no cover
+
+
+def stream_normals(key: int, n0: int, n1: int) -> np.ndarray:
+    """Standard normal numbers n0 … n1 − 1 of the stream with ``key``, as the C code draws them (float64).
+
+    Vectorised over the values attempt by attempt (the C loop of each value, in the same
+    arithmetic); the exponentials of the wedge tests are Python's ``math.exp`` (the libm's, as in
+    the C code: NumPy's own exp may differ in the last bit) and the tail, about 4 values in 10⁴,
+    runs the C loop value by value (:func:`_normal_slow`, ``math.log``).
+    """
+    table_x, table_f = _c_tables()
+    out = np.empty(n1 - n0)
+    pending = np.arange(n1 - n0, dtype=np.int64)
+    counters = np.arange(n0, n1, dtype=np.uint64) << np.uint64(12)
+    for attempt in range(_ATTEMPTS - 1):  # the last attempt (never reached in practice) is _normal_slow's
+        if pending.size == 0:
+            break
+        base = counters[pending] | np.uint64(attempt << 6)
+        h = _values(key, base)
+        layer = (h & np.uint64(255)).astype(np.intp)
+        x = (h >> np.uint64(11)).astype(np.float64) * _TWO_M53 * table_x[layer]
+        signed = np.where((h & np.uint64(256)) != 0, -x, x)
+        accept = x < table_x[layer + 1]
+        wedge = np.flatnonzero(~accept & (layer != 0))
+        if wedge.size:
+            wx, wi = x[wedge], layer[wedge]
+            u2 = (_values(key, base[wedge] | np.uint64(1)) >> np.uint64(11)).astype(np.float64) * _TWO_M53
+            height = table_f[wi] + u2 * (table_f[wi + 1] - table_f[wi])
+            density = np.array([math.exp(value) for value in (-0.5 * wx * wx).tolist()])
+            accept[wedge] = height < density
+        out[pending[accept]] = signed[accept]
+        for position in pending[~accept & (layer == 0)].tolist():  # the tail: its own loop, value by value
+            out[position] = _normal_slow(key, n0 + position, table_x, table_f)
+        pending = pending[~accept & (layer != 0)]
+    for position in pending.tolist():
+        out[position] = _normal_slow(key, n0 + position, table_x, table_f)
+    return out
 
 
 def _stream_normals(
@@ -90,30 +211,23 @@ def _stream_normals(
 ) -> np.ndarray:
     """(k1 − k0, 3) standard normals of samples k0 … k1 − 1 of one stream, times ``scale``.
 
-    Block b's normals are the first values of ``standard_normal((NOISE_BLOCK, 3))`` of its
-    generator; a block is generated only up to the last sample asked for (the generator fills
-    sequentially, so a prefix is the same numbers: tested), straight into ``out`` (any (k1 − k0, 3)
-    float64 view, e.g. three columns of a wider array) when the slice covers it from its start,
-    and ``scale * value`` is the same IEEE product whichever way it is formed.
+    Component c of sample k is normal number 3k + c of the stream's key (:func:`stream_normals`),
+    written into ``out`` (any (k1 − k0, 3) float64 view, e.g. three columns of a wider array);
+    ``scale * value`` is the C driver's product.
     """
     out = np.empty((k1 - k0, 3)) if out is None else out
-    for block in _blocks(k0, k1):
-        start = block * NOISE_BLOCK
-        lo, hi = max(k0, start), min(k1, start + NOISE_BLOCK)
-        values = _block_generator(seed, stream, block).standard_normal((hi - start, 3))
-        np.multiply(values[lo - start :], scale, out=out[lo - k0 : hi - k0])
+    values = stream_normals(stream_key(seed, stream), 3 * k0, 3 * k1).reshape(k1 - k0, 3)
+    np.multiply(values, scale, out=out)
     return out
 
 
 def _stream_integers(seed: int, stream: int, k0: int, k1: int, low: int, high: int) -> np.ndarray:
-    """(k1 − k0,) integers uniform in [low, high] of samples k0 … k1 − 1 of one stream (prefix of each block)."""
-    out = np.empty(k1 - k0, dtype=np.int64)
-    for block in _blocks(k0, k1):
-        start = block * NOISE_BLOCK
-        lo, hi = max(k0, start), min(k1, start + NOISE_BLOCK)
-        values = _block_generator(seed, stream, block).integers(low, high, size=hi - start, endpoint=True)
-        out[lo - k0 : hi - k0] = values[lo - start :]
-    return out
+    """(k1 − k0,) integers uniform in [low, high] of samples k0 … k1 − 1 of one stream (_noise.c's map)."""
+    count = high - low + 1
+    if not 0 < count <= 2**32:
+        raise SpecificationError(f"the jitter range [{low}, {high}] must hold 1 to 2^32 whole periods")
+    h = _values(stream_key(seed, stream), np.arange(k0, k1, dtype=np.uint64) << np.uint64(12))
+    return low + (((h >> np.uint64(32)) * np.uint64(count)) >> np.uint64(32)).astype(np.int64)
 
 
 def _slice(k0: Any, k1: Any) -> tuple[int, int]:
@@ -123,7 +237,7 @@ def _slice(k0: Any, k1: Any) -> tuple[int, int]:
 
 
 def _seed(seed: Any) -> int:
-    return integer("seed", seed, minimum=0)
+    return integer("seed", seed, minimum=0, maximum=_MASK64)
 
 
 # ================================================================== option values
@@ -173,8 +287,8 @@ class SensorModel:
         rotation, rate : numpy.ndarray
             (k1 − k0, 3) attitude error rotation vectors θ_k (rad) and rate noise η_k (rad/s).
             Exactly zero when the corresponding 1σ is zero. Identical for any slicing of the
-            horizon (counter-based: block b of :data:`NOISE_BLOCK` samples is keyed by
-            (seed, stream, b)).
+            horizon (counter-based: component c of sample k is normal number 3k + c of the
+            stream keyed by (seed, stream), :func:`stream_normals`).
         """
         rows = self.noise_rows(k0, k1)
         return rows[:, 0:3], rows[:, 3:6]
@@ -200,7 +314,7 @@ class SensorModel:
             if not out.flags.c_contiguous:
                 raise SpecificationError("out must be C-contiguous (the engine reads its rows as one block)")
             rows = out[:count]
-        for column, sigma, stream in ((0, self.attitude_noise, _STREAM_ATTITUDE), (3, self.rate_noise, _STREAM_RATE)):
+        for column, sigma, stream in ((0, self.attitude_noise, STREAM_ATTITUDE), (3, self.rate_noise, STREAM_RATE)):
             target = rows[:, column : column + 3]
             if sigma > 0.0:
                 _stream_normals(self.seed, stream, start, stop, scale=sigma, out=target)
@@ -381,7 +495,8 @@ class DelayModel:
     def samples(self, rate: float, k0: int, k1: int) -> np.ndarray:
         """Delays d_k in samples of measurement samples k0 … k1 − 1 (int64), at ``rate`` (Hz).
 
-        Jitter is uniform over the integers in [d_min, d_max], keyed by (seed, k).
+        Jitter is uniform over the integers in [d_min, d_max], keyed by (seed, k) (a multiply-shift
+        map of a 32-bit value: the relative error of each integer's probability is below (d_max − d_min + 1)/2³²).
         """
         start, stop = _slice(k0, k1)
         low, high = self.bounds(rate)
@@ -390,7 +505,7 @@ class DelayModel:
         if self.kind is DelayKind.JITTER:
             if low == high:
                 return np.full(stop - start, low, dtype=np.int64)
-            return _stream_integers(self.seed, _STREAM_JITTER, start, stop, low, high)
+            return _stream_integers(self.seed, STREAM_JITTER, start, stop, low, high)
         assert self.delays is not None  # a SEQUENCE always has delays (checked in __post_init__)
         if stop > len(self.delays):
             raise DimensionError(
@@ -641,8 +756,10 @@ def rotation_vector_to_mrp_expr(theta: Any) -> Any:
     angle = ca.sqrt(angle_squared)
     small = angle < _SMALL_ANGLE
     safe = ca.if_else(small, 1.0, angle)
-    # tan(Φ/4)/Φ and its series 1/4 + Φ²/192 + Φ⁴/7680 near 0.
-    factor = ca.if_else(small, 0.25 + angle_squared / 192.0 + angle_squared**2 / 7680.0, ca.tan(safe / 4.0) / safe)
+    # tan(Φ/4)/Φ and its series 1/4 + Φ²/192 + Φ⁴/7680 near 0 (both branches are evaluated: the
+    # series by multiplications, x/4 as the exact 0.25 x; no division but the one of tan(Φ/4)/Φ)
+    series = 0.25 + angle_squared * (1.0 / 192.0) + angle_squared**2 * (1.0 / 7680.0)
+    factor = ca.if_else(small, series, ca.tan(0.25 * safe) / safe)
     return factor * theta
 
 
@@ -656,7 +773,7 @@ def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
     s1 = ca.dot(sigma_first, sigma_first)
     s2 = ca.dot(sigma_second, sigma_second)
     numerator = (1 - s1) * sigma_second + (1 - s2) * sigma_first - 2 * (skew_expr(sigma_second) @ sigma_first)
-    return numerator / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second))
+    return numerator * (1 / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second)))  # one division, not three
 
 
 def short_expr(sigma: Any) -> Any:
@@ -668,7 +785,7 @@ def short_expr(sigma: Any) -> Any:
 def _safe_shadow_expr(sigma: Any) -> Any:
     # Both if_else branches are evaluated: keep the unused shadow of σ = 0 finite.
     squared = ca.dot(sigma, sigma)
-    return -sigma / ca.if_else(squared > 0, squared, 1.0)
+    return sigma * (-1 / ca.if_else(squared > 0, squared, 1.0))  # one division, not three
 
 
 def quaternion_from_mrp_expr(sigma: Any) -> Any:
@@ -692,7 +809,7 @@ def measurement_function() -> ca.Function:
     bias = ca.SX.sym("bias", 3)
     sigma_meas = short_expr(compose_mrp_expr(x[0:3], rotation_vector_to_mrp_expr(theta)))
     omega_meas = 4 * x[3:6] + bias + eta
-    x_meas = ca.vertcat(sigma_meas, omega_meas / 4)
+    x_meas = ca.vertcat(sigma_meas, 0.25 * omega_meas)  # = omega_meas / 4 exactly (a power of two)
     return ca.Function(
         "measurement",
         [x, theta, eta, bias],

@@ -15,7 +15,6 @@ from scipy.spatial.transform import Rotation
 from mrpctl import OnCurrent, mrp, paper, simulate_batch
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import (
-    NOISE_BLOCK,
     ActuatorModel,
     DelayKind,
     DelayModel,
@@ -140,9 +139,9 @@ def test_disturbance_refuses_wrong_shapes():
 # ============================================================================ random streams
 def test_noise_stream_does_not_depend_on_slicing_and_is_seeded():
     sensor = SensorModel(attitude_noise=0.01, rate_noise=0.002, seed=7)
-    n = 2 * NOISE_BLOCK + 123
+    n = 2 * 4096 + 123
     whole = sensor.noise(0, n)
-    cuts = [0, 1, 17, NOISE_BLOCK - 1, NOISE_BLOCK + 5, 2 * NOISE_BLOCK, n]
+    cuts = [0, 1, 17, 4095, 4096 + 5, 2 * 4096, n]
     parts = [sensor.noise(a, b) for a, b in itertools.pairwise(cuts)]
     for i in range(2):
         assert np.array_equal(np.vstack([p[i] for p in parts]), whole[i])
@@ -157,10 +156,10 @@ def test_noise_stream_does_not_depend_on_slicing_and_is_seeded():
 
 def test_jitter_stream_does_not_depend_on_slicing_and_stays_in_bounds():
     model = DelayModel.jitter(0.01, 0.05, seed=3)
-    whole = model.samples(1000.0, 0, NOISE_BLOCK + 500)
+    whole = model.samples(1000.0, 0, 4096 + 500)
     assert whole.min() == 10 and whole.max() == 50
     assert np.array_equal(
-        np.concatenate((model.samples(1000.0, 0, 300), model.samples(1000.0, 300, NOISE_BLOCK + 500))), whole
+        np.concatenate((model.samples(1000.0, 0, 300), model.samples(1000.0, 300, 4096 + 500))), whole
     )
     assert np.array_equal(DelayModel.jitter(0.02, 0.02, seed=3).samples(1000.0, 0, 100), np.full(100, 20))
 

@@ -55,5 +55,5 @@ def test_flight_loop_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     run = scope["run"]
     assert run.switch_count == 1 and run.converged and "converged" in out  # type: ignore[attr-defined]
-    assert round(100 * run.saturated_fraction, 1) == 10.3  # type: ignore[attr-defined]
+    assert round(100 * run.saturated_fraction, 1) == 10.4  # type: ignore[attr-defined]
     assert float(abs(run.u).max()) <= 20.0  # type: ignore[attr-defined]

@@ -9,7 +9,9 @@
  * MRPCTL_RING_WIDTH is the width of one ring entry (6: m_k; 12 for the predictor sample: m_k and the
  * controller's model state z_k); with MRPCTL_RING_OUTPUT the sample has a seventh output, the ring
  * entry, apart from x_meas (the flight and predictor samples), and with MRPCTL_SENSOR a per-sample
- * noise input. With MRPCTL_RECORD_OUTPUT (its output index) the flight sample's record of
+ * noise input, generated here: row k is (sigma[0] n_a(3k + c), sigma[1] n_r(3k + c)), c = 0, 1, 2, with the
+ * normals of _noise.c (included in front of this file) of the streams noise_key[0] (attitude) and
+ * noise_key[1] (rate); a zero sigma gives exact zeros (the NumPy mirror: mrpctl.flight.SensorModel.noise_rows). With MRPCTL_RECORD_OUTPUT (its output index) the flight sample's record of
  * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept); with
  * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque.
  *
@@ -18,7 +20,14 @@
  * columns (slot k mod ring_size) from which m_{k-d} is read (from the history for k < d);
  * every keep_every-th m_k and u_k are copied to the kept arrays (column k / keep_every;
  * with keep_every = 1 the caller may pass the kept array itself as a ring of n columns),
- * the switch flags of the slice go to switched[k - k0]. The arithmetic is the sample's,
+ * the switch flags of the slice go to switched[k - k0]. A time-varying delay: either `used` (j*(k) of
+ * each sample of the slice, a given delay sequence, from NumPy) or `jitter` (in-out: key bits, d_min, j*(k0 - 1),
+ * then d + 1 ring entries), whose delays d_j = integer(key, j) in [d_min, d] come from _noise.c and whose
+ * schedule is computed here, O(1) per sample: measurement j is registered at its arrival slot
+ * latest[(j + d_j) mod (d + 1)] = max(., j), and j*(k) = max(j*(k - 1), latest[k mod (d + 1)], min(k - d, -1));
+ * the slot is then cleared. The pending measurements j in [k0 - d, k0) are registered again at the start of a
+ * slice (their delays are a function of j), so only j*(k0 - 1) is carried. The delay used k - j*(k) of kept
+ * samples goes to kept_delays (when not NULL). The arithmetic is the sample's,
  * unchanged: a run cut into slices gives the same bits as one call.
  *
  * Returns the number of samples done: k1 - k0, or fewer when the run diverged (the last
@@ -28,8 +37,8 @@
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
-    const casadi_real* noise, long long noise_stride, const casadi_real* torque, long long torque_stride,
-    const long long* used, long long k0, long long k1,
+    const casadi_real* noise, const unsigned long long* noise_key, const casadi_real* torque,
+    long long torque_stride, const long long* used, long long* jitter, long long* kept_delays, long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
     casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched, casadi_real* kept_records) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
@@ -41,7 +50,21 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   const long long width = MRPCTL_RING_WIDTH;
   long long k, slot, delayed_slot = 0, phase = 1, kept_column = 0;
   int i, now_index = 0;
+  long long newest = 0, j_used = 0, d_min = 0;
+  long long* latest = 0;
+  uint64_t jitter_key = 0;
   for (i = 0; i < MRPCTL_STATE; ++i) buffers[0][i] = state[i];
+  if (jitter) {
+    jitter_key = (uint64_t)jitter[0];
+    d_min = jitter[1];
+    newest = jitter[2];
+    latest = jitter + 3;
+    for (i = 0; i <= d; ++i) latest[i] = LLONG_MIN;
+    for (k = k0 - d > 0 ? k0 - d : 0; k < k0; ++k) {
+      const long long a = k + mrpctl_stream_integer(jitter_key, (uint64_t)k, d_min, d);
+      if (a >= k0 && k > latest[a % (d + 1)]) latest[a % (d + 1)] = k;
+    }
+  }
   slot = k0 % ring_size;
   if (k0 >= d) delayed_slot = (k0 - d) % ring_size;
   if (keep_every > 0) {
@@ -62,9 +85,11 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #else
   (void)flight;
 #endif
-#if !MRPCTL_SENSOR
+#if MRPCTL_SENSOR
+  casadi_real noise_row[6];
+#else
   (void)noise;
-  (void)noise_stride;
+  (void)noise_key;
 #endif
 #if !MRPCTL_TORQUE_INPUT
   (void)torque;
@@ -90,16 +115,31 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     } else {
       arg[3] = k < d ? history + history_stride * k : ring + width * delayed_slot;
     }
-    if (used) {
+    if (jitter) {
+      /* seeded jitter: measurement k arrives at k + d_k (d_k >= d_min >= 1, so never at k itself) */
+      const long long s = k % (d + 1), a = k + mrpctl_stream_integer(jitter_key, (uint64_t)k, d_min, d);
+      if (latest[s] > newest) newest = latest[s];
+      if (k - d > newest) newest = k - d; /* the history sample k - d arrives at k */
+      latest[s] = LLONG_MIN;
+      if (k > latest[a % (d + 1)]) latest[a % (d + 1)] = k;
+      j_used = newest;
+    } else if (used) {
+      j_used = used[k - k0]; /* a given delay sequence: j*(k) from NumPy */
+    }
+    if (jitter || used) {
       /* a time-varying delay: the newest arrived measurement j*(k) in [k - d, k - 1] (d = d_max) */
-      long long j = used[k - k0];
-      arg[3] = j < 0 ? history + history_stride * (j + d) : ring + width * (j % ring_size);
+      arg[3] = j_used < 0 ? history + history_stride * (j_used + d) : ring + width * (j_used % ring_size);
+      if (kept && kept_delays) kept_delays[kept_column] = k - j_used;
     }
     res[0] = next;
     res[1] = next + MRPCTL_X;
     res[2] = next + MRPCTL_X_MEMORY;
 #if MRPCTL_SENSOR
-    arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise + noise_stride * (k - k0);
+    for (i = 0; i < 3; ++i) {
+      noise_row[i] = noise[0] > 0.0 ? noise[0] * mrpctl_stream_normal(noise_key[0], (uint64_t)(3 * k + i)) : 0.0;
+      noise_row[3 + i] = noise[1] > 0.0 ? noise[1] * mrpctl_stream_normal(noise_key[1], (uint64_t)(3 * k + i)) : 0.0;
+    }
+    arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise_row;
 #endif
 #if MRPCTL_TORQUE_INPUT
     /* a per-sample disturbance w_k (the flight sample's last input) */
@@ -135,5 +175,6 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     }
   }
   for (i = 0; i < MRPCTL_STATE; ++i) state[i] = buffers[now_index][i];
+  if (jitter) jitter[2] = newest;
   return k - k0;
 }

@@ -29,9 +29,12 @@ _BLOCK_TARGET = 500  # samples per block (a whole number of chunks)
 def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function, int]:
     """A whole number of chunks of max(d, 1) samples (about 500 samples), as one MX Function.
 
-    ``block(x, memory, stats, history, K, parameters[, J, J_inv]) ->
+    ``block(x, memory, stats, history, K, parameters[, J, J_inv][, flight][, noise]) ->
     (x_end, memory_end, stats_end, history_end, measurements, u, switched)``: the inputs after
-    ``history`` are the sample's constant inputs (the same at every sample).
+    ``history`` are the sample's constant inputs (the same at every sample), but for the flight
+    sample's per-sample ``noise`` (6, samples): column k of the block is the noise (θ_k, η_k) of its
+    sample k. With a sensor the history is the sensor's measurements m_k (the sample's ``measurement``
+    output, the compiled driver's ring) and ``measurements`` the true states x_meas.
     """
     length = max(d, 1)
     chunks = max(1, round(_BLOCK_TARGET / length))
@@ -42,32 +45,46 @@ def _block_function(sample: ca.Function, d: int, name: str) -> tuple[ca.Function
     history = ca.MX.sym("history", STATE_SIZE, length)
     constants = _constant_symbols(sample)
     names = ["x", "memory", "stats", "history"] + [sample.name_in(i) for i in range(4, sample.n_in())]
+    sensor = "noise" in sample.name_in()  # the flight sample with its sensor ports
+    noise_chunk = ca.MX.sym("noise", STATE_SIZE, length)
+    noise_block = ca.MX.sym("noise", STATE_SIZE, samples)
+
+    def per_sample(values: list[Any], columns: int, noise: Any) -> list[Any]:
+        """The constants repeated over ``columns`` samples, the noise (last input) as given."""
+        repeated = [ca.repmat(value, 1, columns) for value in values]
+        return [*repeated[:-1], noise] if sensor else repeated
 
     # One chunk: the method of steps over d samples (accumulators x, memory, stats).
     chunk_samples = sample.mapaccum("chunk_samples", length, 3)
-    xs, memories, statss, measurements, u, switched = chunk_samples(
-        x, memory, stats, history, *[ca.repmat(value, 1, length) for value in constants]
+    outs = chunk_samples(x, memory, stats, history, *per_sample(constants, length, noise_chunk))
+    xs, memories, statss, measurements, u, switched = outs[0:6]
+    ring = outs[6] if sensor else measurements  # what the next chunk reads as m_{k-d}
+    chunk_inputs = (
+        [x, memory, stats, history, *constants[:-1], noise_chunk] if sensor else [x, memory, stats, history, *constants]
     )
     chunk = ca.Function(
         "chunk",
-        [x, memory, stats, history, *constants],
-        [xs[:, -1], memories[:, -1], statss[:, -1], measurements, u, switched],
+        chunk_inputs,
+        [xs[:, -1], memories[:, -1], statss[:, -1], ring, measurements, u, switched],
         names,
-        ["x_end", "memory_end", "stats_end", "measurements", "u", "switched"],
+        ["x_end", "memory_end", "stats_end", "ring", "measurements", "u", "switched"],
     )
-    # A block: chunks chained, each one's measurements being the next one's history.
+    # A block: chunks chained, each one's ring (measurements) being the next one's history.
     chained = chunk.mapaccum("block_chunks", chunks, 4)
-    xs, memories, statss, measurements, u, switched = chained(
-        x, memory, stats, history, *[ca.repmat(value, 1, chunks) for value in constants]
+    xs, memories, statss, rings, measurements, u, switched = chained(
+        x, memory, stats, history, *per_sample(constants, chunks, noise_block)
+    )
+    block_inputs = (
+        [x, memory, stats, history, *constants[:-1], noise_block] if sensor else [x, memory, stats, history, *constants]
     )
     block = ca.Function(
         name,
-        [x, memory, stats, history, *constants],
+        block_inputs,
         [
             xs[:, -1],
             memories[:, -1],
             statss[:, -1],
-            measurements[:, samples - length :],
+            rings[:, samples - length :],
             measurements,
             u,
             switched,
@@ -93,6 +110,7 @@ class VirtualMachineEngine:
         self.flight = flight
         self.inertia = inertia
         self.sample = sample
+        self.sensor = "noise" in sample.name_in()
         self.history_columns = max(d, 1)
         block, self.block_samples = _block_function(sample, d, sample.name().replace("sample", "block"))
         self.block = block.expand()  # one SX Function: no MX layers per sample in the VM
@@ -140,15 +158,15 @@ class VirtualMachineEngine:
                 "delay: a time-varying delay needs the compiled engine (install a C compiler: gcc or cc, or set CC); "
                 "the virtual machine runs the constant delay only"
             )
-        if self.flight and sensor is not None and not sensor.ideal:
-            # the virtual machine's flight sample has no sensor ports: noise and bias would be dropped
-            raise CodegenError(
-                "sensor: attitude/rate noise and a gyro bias need the compiled engine (install a C compiler: gcc or "
-                f"cc, or set CC); the virtual machine runs an ideal sensor only, got {sensor}"
-            )
+        if self.flight and sensor is not None and not sensor.ideal and not self.sensor:
+            raise ValueError("a sensor with noise or a bias needs the flight sample with its sensor ports")
         if self.flight:
             memory0 = flight_memory(x0, np.ascontiguousarray(history, dtype=float), self.d)  # type: ignore[assignment]
             constants.append(NO_FLIGHT_OPTIONS if flight_options is None else flight_options)
+        if self.sensor:  # the noise of every sample of the chain: the NumPy mirror of the compiled driver's
+            padded = self.blocks(n) * self.block_samples
+            noise = np.zeros((padded, STATE_SIZE)) if sensor is None else sensor.noise_rows(0, padded)
+            constants.append(np.ascontiguousarray(noise.T))
         out = self.horizon(self.blocks(n), trajectories)(
             x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *constants
         )
@@ -196,10 +214,16 @@ class VirtualMachineEngine:
         stats = ca.MX.sym("stats", STATS_SIZE)
         history = ca.MX.sym("history", STATE_SIZE, self.history_columns)
         constants = _constant_symbols(self.sample)
+        if self.sensor:  # the per-sample noise of the whole horizon, (6, blocks * block_samples)
+            constants[-1] = ca.MX.sym("noise", STATE_SIZE, blocks * self.block_samples)
         carry: tuple[Any, ...] = (x, memory, stats, history)
         pieces: list[tuple[Any, ...]] = []
-        for _ in range(blocks):
-            out = self.block(*carry, *constants)
+        for b in range(blocks):
+            if self.sensor:
+                noise = constants[-1][:, b * self.block_samples : (b + 1) * self.block_samples]
+                out = self.block(*carry, *constants[:-1], noise)
+            else:
+                out = self.block(*carry, *constants)
             carry = tuple(out[0:4])
             pieces.append(tuple(out[4:7]))
         outputs = [carry[2]]
