@@ -201,3 +201,12 @@ def test_uncertainty_round_trips_and_is_shown() -> None:
     assert "J_ii within +-10 %" in str(parsed) and "|J_ij| <= 2.5 kg m^2" in str(parsed)
     assert replace(scenario, uncertainty=None).uncertainty is None
     assert "[uncertainty]" not in scenario_toml(replace(scenario, uncertainty=None))
+
+
+def test_the_documented_table_is_what_the_parser_reads() -> None:
+    """docs/how-to/certify.md shows the [uncertainty] table: appended to a scenario it parses as documented."""
+    page = (Path(__file__).resolve().parents[1] / "docs" / "how-to" / "certify.md").read_text(encoding="utf-8")
+    block = page.split("```toml\n", 1)[1].split("```", 1)[0]
+    base = scenario_toml(replace(load_scenario("flight-paper"), uncertainty=None))
+    parsed = parse_scenario(tomllib.loads(base + "\n" + block))
+    assert parsed.uncertainty == InertiaUncertainty(0.05, 0.0)
