@@ -210,3 +210,10 @@ def test_the_documented_table_is_what_the_parser_reads() -> None:
     base = scenario_toml(replace(load_scenario("flight-paper"), uncertainty=None))
     parsed = parse_scenario(tomllib.loads(base + "\n" + block))
     assert parsed.uncertainty == InertiaUncertainty(0.05, 0.0)
+
+
+def test_a_lifted_loop_too_large_is_refused_up_front(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """d = 2500 samples per axis is a 5002-row companion matrix (> MAX_LIFTED_SIZE): one line, with the way out."""
+    path = _write(tmp_path / "long.toml", tau=2.5, rate=1000.0, delay=None, uncertainty=None)
+    assert main(["verify", str(path), "--orders", "1"]) == USER_ERROR
+    _one_line_error(capsys, "rate = 1000 Hz", "5002x5002", "--no-flown")
