@@ -98,6 +98,13 @@ class InertiaUncertainty:
     tolerance: float
     product_bound: float = 0.0
 
+    def __post_init__(self) -> None:
+        tolerance = positive_scalar("inertia_tolerance", self.tolerance)
+        if tolerance >= 1.0:
+            raise SpecificationError(f"inertia_tolerance must be < 1 (relative), got {tolerance!r}")
+        object.__setattr__(self, "tolerance", tolerance)
+        object.__setattr__(self, "product_bound", nonnegative_scalar("product_bound", self.product_bound))
+
     def __str__(self) -> str:
         products = f", |J_ij| <= {self.product_bound:g} kg m^2" if self.product_bound else ""
         return f"inertia uncertainty: J_ii within +-{100 * self.tolerance:g} %{products}"
@@ -550,16 +557,16 @@ def _uncertainty_table(data: dict[str, Any], spacecraft: Spacecraft) -> InertiaU
             "[uncertainty] needs inertia_tolerance (relative per-axis tolerance on J_ii, 0 < tol < 1); "
             "product_bound (|J_ij| bound, kg m^2) is optional"
         )
-    tolerance = positive_scalar("[uncertainty] inertia_tolerance", table["inertia_tolerance"])
-    if tolerance >= 1.0:
-        raise SpecificationError(f"[uncertainty] inertia_tolerance must be < 1 (relative), got {tolerance!r}")
-    bound = nonnegative_scalar("[uncertainty] product_bound", table.get("product_bound", 0.0))
+    try:
+        uncertainty = InertiaUncertainty(table["inertia_tolerance"], table.get("product_bound", 0.0))
+    except (SpecificationError, DimensionError) as exc:
+        raise type(exc)(f"[uncertainty] {exc}") from exc
     if not spacecraft.is_diagonal:
         raise SpecificationError(
             "[uncertainty] needs a diagonal nominal [spacecraft] inertia (the box is built around principal "
             "axes); give the 3 principal values"
         )
-    return InertiaUncertainty(tolerance=tolerance, product_bound=bound)
+    return uncertainty
 
 
 def _check_delay(tau: float, rate: float) -> None:

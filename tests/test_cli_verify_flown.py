@@ -21,6 +21,7 @@ import scipy.linalg
 
 from mrpctl import paper
 from mrpctl.cli import USER_ERROR, main
+from mrpctl.errors import SpecificationError
 from mrpctl.flight import DelayModel
 from mrpctl.scenario import InertiaUncertainty, load_scenario, parse_scenario, scenario_toml
 
@@ -217,3 +218,18 @@ def test_a_lifted_loop_too_large_is_refused_up_front(tmp_path: Path, capsys: pyt
     path = _write(tmp_path / "long.toml", tau=2.5, rate=1000.0, delay=None, uncertainty=None)
     assert main(["verify", str(path), "--orders", "1"]) == USER_ERROR
     _one_line_error(capsys, "rate = 1000 Hz", "5002x5002", "--no-flown")
+
+
+@pytest.mark.parametrize(
+    ("tolerance", "bound", "needle"),
+    [
+        (1.0, 0.0, "inertia_tolerance"),
+        (0.0, 0.0, "inertia_tolerance"),
+        (True, 0.0, "inertia_tolerance"),
+        (0.1, -1.0, "product_bound"),
+        (0.1, math.nan, "product_bound"),
+    ],
+)
+def test_inertia_uncertainty_checks_its_values(tolerance: float, bound: float, needle: str) -> None:
+    with pytest.raises(SpecificationError, match=needle):
+        InertiaUncertainty(tolerance, bound)
