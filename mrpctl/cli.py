@@ -1565,7 +1565,8 @@ def _add_verify(commands: Any) -> None:
         "--jitter",
         type=float,
         metavar="TAU_MIN",
-        help="time-varying delay tau(t) in [TAU_MIN, tau]: interval certificate (Wirtinger + reciprocal convexity)",
+        help="time-varying delay tau(t) in [TAU_MIN, tau] (+ one period when the loop is sampled): interval "
+        "certificate (Wirtinger + reciprocal convexity)",
     )
     flown.add_argument(
         "--jitter-rate", type=float, metavar="MU", help="with --jitter: |d tau/dt| <= MU (default: rate unknown)"
