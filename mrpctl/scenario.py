@@ -33,6 +33,7 @@ if TYPE_CHECKING:
 __all__ = [
     "RULE_NAMES",
     "STARTER_SCENARIO",
+    "InertiaUncertainty",
     "Scenario",
     "load_scenario",
     "parse_scenario",
@@ -62,6 +63,8 @@ _TABLES = {"spacecraft", "gains", "initial", "rule"}
 _PREDICTOR_TABLE = "predictor"
 #: Tables of the loop as flown (``[rule] type = "hysteretic"`` or ``"on-predicted"``), all optional.
 _FLIGHT_TABLES = {"actuator", "sensor", "disturbance", "delay"}
+#: The inertia uncertainty that ``mrpctl verify`` certifies (any rule; the simulation flies the nominal J).
+_UNCERTAINTY_TABLE = "uncertainty"
 _KEYS = {
     "spacecraft": {"inertia"},
     "gains": {"K", "k_sigma", "k_omega", "K1", "K2"},
@@ -72,7 +75,39 @@ _KEYS = {
     "disturbance": {"torque", "torque_file"},
     "delay": {"tau_min", "tau_max", "seed", "sequence_file"},
     "predictor": {"inertia", "inertia_error"},
+    "uncertainty": {"inertia_tolerance", "product_bound"},
 }
+
+
+@dataclass(frozen=True)
+class InertiaUncertainty:
+    """The inertias a scenario's gain must be certified for (``[uncertainty]``; ``mrpctl verify``).
+
+    Every J with |J_ii − J0_ii| <= ``tolerance`` · J0_ii and symmetric products of inertia
+    |J_ij| <= ``product_bound`` (kg m²) around the scenario's diagonal J0
+    (:func:`mrpctl.design.inertia_polytope`). Only the certificates use it: the simulation flies J0.
+
+    Attributes
+    ----------
+    tolerance : float
+        Relative per-axis tolerance, 0 < tolerance < 1.
+    product_bound : float
+        Bound on the products of inertia (kg m²), >= 0 (default 0).
+    """
+
+    tolerance: float
+    product_bound: float = 0.0
+
+    def __post_init__(self) -> None:
+        tolerance = positive_scalar("inertia_tolerance", self.tolerance)
+        if tolerance >= 1.0:
+            raise SpecificationError(f"inertia_tolerance must be < 1 (relative), got {tolerance!r}")
+        object.__setattr__(self, "tolerance", tolerance)
+        object.__setattr__(self, "product_bound", nonnegative_scalar("product_bound", self.product_bound))
+
+    def __str__(self) -> str:
+        products = f", |J_ij| <= {self.product_bound:g} kg m^2" if self.product_bound else ""
+        return f"inertia uncertainty: J_ii within +-{100 * self.tolerance:g} %{products}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,6 +148,9 @@ class Scenario:
         The predictor controller (``rule`` an :class:`~mrpctl.predictor.OnPredicted`, and then
         required): u = K x̂ with x̂ predicted by the controller's model ``predictor.model``
         (``design/predictor.md``). None: the plain delayed law u = K x(t − τ).
+    uncertainty : InertiaUncertainty or None
+        The inertia box ``mrpctl verify`` certifies the gain over (``[uncertainty]``, any rule); not
+        used by the simulation. None: the nominal inertia only.
     """
 
     name: str
@@ -131,6 +169,7 @@ class Scenario:
     disturbance: Disturbance | None = None
     delay: DelayModel | None = None
     predictor: Predictor | None = None
+    uncertainty: InertiaUncertainty | None = None
 
     @property
     def flight_options(self) -> dict[str, Any]:
@@ -179,6 +218,7 @@ class Scenario:
                 f"  tau = {self.tau:g} s at {self.rate:g} Hz, rule {self.rule}, history {self.history}",
                 f"  t_final = {self.t_final:g} s, {self.substeps} RK4 substep(s) per sample",
                 *(f"  {value}" for value in self.run_options.values()),
+                *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
             )
         )
 
@@ -555,7 +595,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     folder relative file names (``[disturbance] torque_file``, ``[delay] sequence_file``) are taken
     from (:func:`load_scenario`: the scenario file's folder; None: the working directory).
     """
-    _check_keys("", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES | {_PREDICTOR_TABLE})
+    _check_keys("", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE})
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")
@@ -599,8 +639,34 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         substeps=substeps,
         description=str(data.get("description", "")),
         predictor=predictor,
+        uncertainty=_uncertainty_table(data, spacecraft),
         **flight,
     )
+
+
+def _uncertainty_table(data: dict[str, Any], spacecraft: Spacecraft) -> InertiaUncertainty | None:
+    """The [uncertainty] table (optional, any rule): the inertia box ``mrpctl verify`` certifies."""
+    if _UNCERTAINTY_TABLE not in data:
+        return None
+    table = data[_UNCERTAINTY_TABLE]
+    if not isinstance(table, dict):
+        raise SpecificationError(f"[uncertainty] must be a table of the scenario, got {table!r}")
+    _check_keys(_UNCERTAINTY_TABLE, table, _KEYS[_UNCERTAINTY_TABLE])
+    if "inertia_tolerance" not in table:
+        raise SpecificationError(
+            "[uncertainty] needs inertia_tolerance (relative per-axis tolerance on J_ii, 0 < tol < 1); "
+            "product_bound (|J_ij| bound, kg m^2) is optional"
+        )
+    try:
+        uncertainty = InertiaUncertainty(table["inertia_tolerance"], table.get("product_bound", 0.0))
+    except (SpecificationError, DimensionError) as exc:
+        raise type(exc)(f"[uncertainty] {exc}") from exc
+    if not spacecraft.is_diagonal:
+        raise SpecificationError(
+            "[uncertainty] needs a diagonal nominal [spacecraft] inertia (the box is built around principal "
+            "axes); give the 3 principal values"
+        )
+    return uncertainty
 
 
 def _check_delay(tau: float, rate: float) -> None:
@@ -732,6 +798,13 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
         model_inertia = np.diag(model.inertia) if model.is_diagonal else model.inertia
         lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
     lines += _flight_toml(scenario)
+    if scenario.uncertainty is not None:
+        lines += [
+            "",
+            "[uncertainty]",
+            f"inertia_tolerance = {_toml_value(scenario.uncertainty.tolerance)}  # relative, per axis (verify only)",
+            f"product_bound = {_toml_value(scenario.uncertainty.product_bound)}  # |J_ij|, kg m^2",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -824,6 +897,10 @@ type = "delay-aware"
 # [sensor]       attitude_noise = 0.01 (rad, 1 sigma per axis), rate_noise = 1e-4 (rad/s), gyro_bias, seed = 1
 # [disturbance]  torque = [1e-3, 0.0, 0.0] (N m, body frame)
 # [delay]        tau_min = 0.15 (s; the delay jitters over the whole periods in [tau_min, tau]), seed = 2
+#
+# What `mrpctl verify` certifies besides the idealised constant delay (any rule): the sampled loop at
+# `rate` (exact lifted check + certificate), the [delay] jitter (interval certificate), and
+# [uncertainty]  inertia_tolerance = 0.05 (every J_ii within +-5 %), product_bound = 0.0 (|J_ij|, kg m^2)
 """
 
 
