@@ -1075,7 +1075,21 @@ def _synthesize_lmi_robust(
             f"K synthesized for {where}; certified for the set at alpha = 0 and {alpha:g} 1/s "
             f"({cert.solve_time + decay_cert.solve_time:.2f} s of analysis)"
         )
-    return LMISynthesis(status, tau, alpha, order, readonly(k), eps, cert, decay_cert, margin, solves, reason, **base)
+    return LMISynthesis(
+        status,
+        tau,
+        alpha,
+        order,
+        readonly(k),
+        eps,
+        cert,
+        decay_cert,
+        margin,
+        solves,
+        reason,
+        exact_check=exact_text,
+        **base,
+    )
 
 
 def _shifted_certificate(
