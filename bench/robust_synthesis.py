@@ -5,7 +5,7 @@ SYNTHESIZED (bisection on alpha to 2 % relative width; every probe is a full syn
 re-verification), the synthesized per-axis loop gains at that alpha, the time of one synthesis,
 and the ``synthesize_pd`` robust design (omega_n) for the same set.
 
-Run: ``python bench/robust_synthesis.py [row ...]`` (rows: nominal tol5 tol10 tol20 s1k s10 jit);
+Run: ``python bench/robust_synthesis.py [row ...]`` (rows: see ROWS);
 prints one Markdown row per set.
 """
 
@@ -22,6 +22,8 @@ from mrpctl.model import pd_from_gain
 TAU = 0.5
 ROWS = {
     "nominal": ("nominal", {}, 1),
+    "nominal0": ("nominal", {}, 0),
+    "pb": ("+-5 % and |J_ij| <= 0.5 kg m^2 (6x6, 64 vertices)", {"tolerance": 0.05, "product_bound": 0.5}, 0),
     "tol5": ("+-5 % inertia", {"tolerance": 0.05}, 1),
     "tol10": ("+-10 % inertia", {"tolerance": 0.10}, 1),
     "tol20": ("+-20 % inertia", {"tolerance": 0.20}, 1),

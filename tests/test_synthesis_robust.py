@@ -73,7 +73,7 @@ def input_gains(tolerance: float, points: int) -> np.ndarray:
 
 def test_lmi_over_a_10_percent_inertia_box_is_stable_and_decays_on_a_fine_grid() -> None:
     alpha = 0.3
-    res = synthesize_lmi(paper.SPACECRAFT, TAU, decay_rate=alpha, tolerance=0.1, epsilons=[1.2])
+    res = synthesize_lmi(paper.SPACECRAFT, TAU, decay_rate=alpha, order=1, tolerance=0.1, epsilons=[1.2])
     assert res.status is SynthesisStatus.SYNTHESIZED, str(res)
     assert isinstance(res.certificate, PolytopeCertificate) and res.certificate.certified
     assert isinstance(res.decay_certificate, PolytopeCertificate) and res.decay_certificate.certified
@@ -95,9 +95,12 @@ def test_zero_tolerance_and_tau_min_equal_to_tau_reproduce_the_nominal_lmi_desig
         assert again.epsilon == nominal.epsilon and not again.robust
 
 
-def test_jitter_design_is_stable_at_every_constant_delay_of_the_interval() -> None:
+@pytest.mark.parametrize("order", [0, pytest.param(1, marks=pytest.mark.slow)])
+def test_jitter_design_is_stable_at_every_constant_delay_of_the_interval(order: int) -> None:
     alpha = 0.3
-    res = synthesize_lmi(paper.SPACECRAFT, TAU, decay_rate=alpha, tau_min=0.4, tolerance=0.05, epsilons=[0.5])
+    res = synthesize_lmi(
+        paper.SPACECRAFT, TAU, decay_rate=alpha, order=order, tau_min=0.4, tolerance=0.05, epsilons=[0.5]
+    )
     assert res.status is SynthesisStatus.SYNTHESIZED, str(res)
     assert res.model is DelayModel.INTERVAL and (res.tau_min, res.tau_max) == (0.4, TAU)
     assert isinstance(res.certificate, PolytopeCertificate) and len(res.certificate.interval) == 3
@@ -110,9 +113,10 @@ def test_jitter_design_is_stable_at_every_constant_delay_of_the_interval() -> No
             assert abscissa(b * k1, b * k2, tau) < -alpha
 
 
-def test_sampled_design_at_10_hz_is_stable_and_decays_when_lifted() -> None:
+@pytest.mark.parametrize("order", [0, pytest.param(1, marks=pytest.mark.slow)])
+def test_sampled_design_at_10_hz_is_stable_and_decays_when_lifted(order: int) -> None:
     alpha, h, d = 0.3, 0.1, 5
-    res = synthesize_lmi(paper.SPACECRAFT, TAU, decay_rate=alpha, period=h, tolerance=0.05, epsilons=[0.6])
+    res = synthesize_lmi(paper.SPACECRAFT, TAU, decay_rate=alpha, order=order, period=h, tolerance=0.05, epsilons=[0.6])
     assert res.status is SynthesisStatus.SYNTHESIZED, str(res)
     assert res.model is DelayModel.SAMPLED and res.tau_max == pytest.approx(TAU + h, rel=1e-15)
     k1, k2 = axis_gains(np.asarray(res.K))
@@ -136,16 +140,16 @@ def test_a_tolerance_beyond_the_exact_limit_is_never_synthesized() -> None:
     # the characteristic function is <= 0 at s = 0). The largest ratio of such scales is about 1.6
     # (tol ~ 0.24); tol = 0.8 needs (1 + tol)/(1 - tol) = 9.
     beta = 0.25
-    scales = np.geomspace(1e-2, 3.0, 50)  # step factor 1.124
+    scales = np.geomspace(1e-2, 3.0, 40)  # step factor 1.158
     best_ratio = 0.0
-    for theta in np.linspace(0.0, math.pi, 92)[1:-1]:
+    for theta in np.linspace(0.0, math.pi, 62)[1:-1]:
         ok = np.array([abscissa(-s * math.sin(theta), -s * math.cos(theta), 1.0, 16) < -beta for s in scales])
         assert not (ok[0] or ok[-1])  # the decaying scales lie inside the grid
         if ok.any():
             inside = scales[ok]
             best_ratio = max(best_ratio, float(inside[-1] / inside[0]))
     # One grid step at each end, and a factor 2 for the resolution in theta.
-    assert 1.0 < 2.0 * best_ratio * 1.124**2 < 9.0
+    assert 1.0 < 2.0 * best_ratio * 1.158**2 < 9.0
     res = synthesize_lmi(paper.SPACECRAFT, TAU, decay_rate=beta / TAU, tolerance=0.8, epsilons=[0.3, 0.6, 1.2])
     assert res.status is not SynthesisStatus.SYNTHESIZED
 
@@ -208,37 +212,6 @@ def test_robust_options_need_a_diagonal_nominal_inertia() -> None:
         synthesize_lmi(_coupled(), 0.4, decay_rate=0.1, tolerance=0.1)
     with pytest.raises(SpecificationError, match="diagonal"):
         synthesize_pd(_coupled(), 0.4, tolerance=0.1)
-
-
-@pytest.mark.slow
-def test_products_of_inertia_use_the_6x6_loop_and_every_sampled_inertia_decays() -> None:
-    from mrpctl import plant_model
-
-    alpha, tol, bound = 0.1, 0.05, 0.5
-    res = synthesize_lmi(
-        paper.SPACECRAFT, TAU, decay_rate=alpha, order=0, tolerance=tol, product_bound=bound, epsilons=[0.6]
-    )
-    assert res.status is SynthesisStatus.SYNTHESIZED, str(res)
-    assert res.K is not None and "6x6" in res.reason
-    rng = np.random.default_rng(11)
-    j0 = np.diag(paper.SPACECRAFT.inertia)
-    for _ in range(6):
-        off = rng.uniform(-bound, bound, 3)
-        j = np.diag(j0 * rng.uniform(1 - tol, 1 + tol, 3))
-        j[0, 1] = j[1, 0] = off[0]
-        j[0, 2] = j[2, 0] = off[1]
-        j[1, 2] = j[2, 1] = off[2]
-        a, a_d = plant_model(Spacecraft(j)).closed_loop_matrices(res.K)
-        m = 24
-        x = np.cos(np.pi * np.arange(m + 1) / m)
-        c = np.hstack([2.0, np.ones(m - 1), 2.0]) * (-1.0) ** np.arange(m + 1)
-        d = np.outer(c, 1.0 / c) / (x[:, None] - x[None, :] + np.eye(m + 1))
-        d = d - np.diag(d.sum(axis=1))
-        gen = np.kron(d * (2.0 / TAU), np.eye(6))
-        gen[:6, :] = 0.0
-        gen[:6, :6] = a
-        gen[:6, 6 * m :] = a_d
-        assert float(np.max(np.linalg.eigvals(gen).real)) < -alpha
 
 
 @pytest.mark.slow
