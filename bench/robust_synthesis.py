@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import Any
 
 from mrpctl import paper
 from mrpctl.design import synthesize_lmi, synthesize_pd
@@ -20,7 +21,7 @@ from mrpctl.design.synthesis import SynthesisStatus
 from mrpctl.model import pd_from_gain
 
 TAU = 0.5
-ROWS = {
+ROWS: dict[str, tuple[str, dict[str, Any], int]] = {
     "nominal": ("nominal", {}, 1),
     "nominal0": ("nominal", {}, 0),
     "pb": ("+-5 % and |J_ij| <= 0.5 kg m^2 (6x6, 64 vertices)", {"tolerance": 0.05, "product_bound": 0.5}, 0),
@@ -61,11 +62,15 @@ def main(names: list[str]) -> None:
     for name in names:
         label, kwargs, order = ROWS[name]
         alpha, res, seconds, probes = largest_alpha(kwargs, order)
-        k1, k2 = pd_from_gain(paper.SPACECRAFT, res.K) if res.K is not None else (None, None)  # type: ignore[attr-defined]
-        gains = f"{k1[0, 0]:.4f}, {k2[0, 0]:.4f}" if k1 is not None else "-"
+        gains = "-"
+        if getattr(res, "K", None) is not None:
+            k1, k2 = pd_from_gain(paper.SPACECRAFT, res.K)  # type: ignore[attr-defined]
+            gains = f"{k1[0, 0]:.4f}, {k2[0, 0]:.4f}"
         start = time.perf_counter()
-        pd = synthesize_pd(paper.SPACECRAFT, TAU, order=order, **kwargs) if kwargs else synthesize_pd(
-            paper.SPACECRAFT, TAU, order=order
+        pd = (
+            synthesize_pd(paper.SPACECRAFT, TAU, order=order, **kwargs)
+            if kwargs
+            else synthesize_pd(paper.SPACECRAFT, TAU, order=order)
         )
         pd_time = time.perf_counter() - start
         print(
