@@ -221,3 +221,20 @@ def test_sampled_design_at_1_khz_is_stable_when_lifted() -> None:
     assert res.status is SynthesisStatus.SYNTHESIZED, str(res)
     k1, k2 = axis_gains(np.asarray(res.K))
     assert lifted_radius(k1, k2, h, d) < math.exp(-alpha * h)
+
+
+@pytest.mark.slow
+def test_robust_lmi_synthesis_is_identical_from_a_thread_pool() -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    def run(tol: float) -> np.ndarray:
+        res = synthesize_lmi(paper.SPACECRAFT, TAU, decay_rate=0.2, order=0, tolerance=tol, epsilons=[0.6])
+        assert res.status is SynthesisStatus.SYNTHESIZED and res.K is not None
+        return np.asarray(res.K)
+
+    tols = [0.05, 0.15]
+    serial = [run(t) for t in tols]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        pooled = list(pool.map(run, tols))
+    for a, b in zip(serial, pooled, strict=True):
+        np.testing.assert_array_equal(a, b)
