@@ -1550,8 +1550,8 @@ def _add_design(commands: Any) -> None:
     parser.add_argument(
         "--order",
         type=int,
-        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); default 3, with --inertia-tolerance/--jitter 2, "
-        "with --sampled 0; --method lmi: 1, with --sampled 0",
+        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); default 3, with --inertia-tolerance 2, with --sampled 0 "
+        "(with --jitter 2; --method lmi: 1, with --sampled 0)",
     )
     parser.add_argument(
         "--method",

@@ -29,7 +29,15 @@ from mrpctl.design.sampled import sampled_stability, spacecraft_axes
 from mrpctl.errors import SpecificationError
 from mrpctl.spacecraft import Spacecraft
 
-__all__ = ["DelayModel", "DelaySet", "RobustPDSynthesis", "RobustStatus", "delay_set", "synthesize_robust_pd"]
+__all__ = [
+    "DelayModel",
+    "DelaySet",
+    "RobustPDSynthesis",
+    "RobustStatus",
+    "delay_set",
+    "exact_check_of_set",
+    "synthesize_robust_pd",
+]
 
 
 class DelayModel(enum.Enum):
@@ -124,15 +132,14 @@ def synthesize_robust_pd(
     period : float, optional
         Sampling period h (s): certify the sawtooth τ(t) ∈ [τ, τ + h], τ̇ = 1.
     tau_min : float, optional
-        Lower end of a jitter interval [tau_min, tau] (s), with ``rate`` (None: unknown rate).
+        Lower end of a jitter interval [tau_min, tau] (s), with ``rate`` (None: unknown rate);
+        ``tau_min`` equal to ``tau`` is the constant delay, and ``rate`` without ``tau_min`` is refused.
     rtol : float, optional
         Relative width of the final ωₙ bracket.
     omega_max : float, optional
         Search no higher than this ωₙ (rad/s): it is tested first and returned when certified, else
         the search runs below it. :func:`~mrpctl.design.synthesis.synthesize_pd` passes its
         decay-optimal nominal ωₙ, so a set close to the nominal one gives the nominal design.
-
-    A ``tau_min`` equal to ``tau`` is the constant delay; ``rate`` without ``tau_min`` is refused.
     """
     sc = check_spacecraft(spacecraft)
     tau = positive_scalar("tau", tau)
@@ -166,7 +173,7 @@ def synthesize_robust_pd(
         cert = test(top)
         if cert.certified:
             gains = pd_gains(sc, zeta=zeta, omega_n=top, allow_underdamped=True)
-            ok, check = _exact_check(poly, gains.K, model, lo, hi, period, d)
+            ok, check = exact_check_of_set(poly, gains.K, model, lo, hi, period, d)
             return RobustPDSynthesis(
                 RobustStatus.SYNTHESIZED if ok else RobustStatus.NOT_VERIFIED,
                 omega_n=top,
@@ -214,7 +221,7 @@ def synthesize_robust_pd(
         else:
             bad = mid
     gains = pd_gains(sc, zeta=zeta, omega_n=good, allow_underdamped=True)
-    ok, check = _exact_check(poly, gains.K, model, lo, hi, period, d)
+    ok, check = exact_check_of_set(poly, gains.K, model, lo, hi, period, d)
     return RobustPDSynthesis(
         RobustStatus.SYNTHESIZED if ok else RobustStatus.NOT_VERIFIED,
         omega_n=good,
@@ -289,14 +296,28 @@ def _failed(count: int) -> str:
     return f" ({count} certificate test(s) SOLVER_FAILED, counted as not certified)" if count else ""
 
 
-def _exact_check(
+def exact_check_of_set(
     poly: Any, K: Any, model: DelayModel, lo: float, hi: float, period: float | None, d: int
 ) -> tuple[bool, str]:
-    """The exact reference for the gain K at the extreme inertias of the (diagonal) set.
+    """The exact reference for the gain K over an inertia set: (passed, what it found).
 
     Sampled loop: the lifted spectral radius per axis at J = (1 ± tol) J₀ (the lifted check needs a
     diagonal J, so products of inertia are not covered by it). Otherwise the smallest exact
-    constant-delay margin over the grid of :func:`~mrpctl.design.polytope.exact_polytope_margin`.
+    constant-delay margin over the grid of :func:`~mrpctl.design.polytope.exact_polytope_margin`
+    (21 points per axis), which must exceed ``hi``.
+
+    Parameters
+    ----------
+    poly : InertiaPolytope
+    K : array_like
+        (3, 6) gain (N m).
+    model : DelayModel
+    lo, hi : float
+        The delay interval (s).
+    period : float or None
+        Sampling period h (s) of the sampled loop.
+    d : int
+        Delay in samples of the sampled loop.
     """
     if model is DelayModel.SAMPLED and period is not None:
         worst = 0.0

@@ -48,8 +48,8 @@ from mrpctl.design.robust import (
     DelayModel,
     DelaySet,
     RobustPDSynthesis,
-    _exact_check,
     delay_set,
+    exact_check_of_set,
     synthesize_robust_pd,
 )
 from mrpctl.errors import SpecificationError
@@ -509,6 +509,10 @@ def synthesize_pd(
 class LMISynthesis:
     """Result of :func:`synthesize_lmi`: a delayed state feedback u = K x(t − τ).
 
+    With the robust options, ``certificate`` and ``decay_certificate`` are
+    :class:`~mrpctl.design.polytope.PolytopeCertificate` objects of the whole set (the independent
+    analysis of K and of its α-shifted loops).
+
     Attributes
     ----------
     status : SynthesisStatus
@@ -540,10 +544,6 @@ class LMISynthesis:
         The inertia set covered (0, 0: the nominal spacecraft).
     exact_check : str
         Robust synthesis: what the exact reference said about K over the set (empty otherwise).
-
-    With the robust options, ``certificate`` and ``decay_certificate`` are
-    :class:`~mrpctl.design.polytope.PolytopeCertificate` objects of the whole set (the independent
-    analysis of K and of its α-shifted loops).
     """
 
     status: SynthesisStatus
@@ -1058,7 +1058,7 @@ def _synthesize_lmi_robust(
     extra: dict[str, Any] = {"tau_min": lo, "rate": delays.rate} if interval else {}
     cert = certify_polytope(poly, k, hi, order=order, margin_tol=margin_tol, **extra)
     decay_cert = certify_polytope(poly, k, hi, order=order, margin_tol=margin_tol, decay_rate=alpha, **extra)
-    exact_ok, exact_text = _exact_check(poly, k, delays.model, lo, hi, delays.period, delays.samples)
+    exact_ok, exact_text = exact_check_of_set(poly, k, delays.model, lo, hi, delays.period, delays.samples)
     loop = linearized_loop(spacecraft, k)
     margin = delay_margin(loop.A, loop.A_d)
     checks = (
