@@ -642,10 +642,18 @@ def _design(args: argparse.Namespace) -> int:
     toml_path = None if args.toml is None else Path(args.toml)
     if args.product_bound and args.inertia_tolerance is None:
         raise SpecificationError("--product-bound applies only with --inertia-tolerance TOL")
-    if args.inertia_tolerance is not None or args.sampled is not None:
+    if args.jitter_rate is not None and args.jitter is None:
+        raise SpecificationError("--jitter-rate applies only with --jitter TAU_MIN")
+    if args.jitter is not None and args.sampled is not None:
+        raise SpecificationError("give either --jitter TAU_MIN or --sampled HZ, not both")
+    if args.decay_rate is not None and args.method != "lmi":
+        raise SpecificationError("--decay-rate applies only with --method lmi")
+    if args.method == "lmi":
+        return _lmi_design(args, spacecraft, toml_path)
+    if args.inertia_tolerance is not None or args.sampled is not None or args.jitter is not None:
         return _robust_design(args, spacecraft, toml_path)
     if args.rtol is not None:
-        raise SpecificationError("--rtol applies only with --inertia-tolerance or --sampled")
+        raise SpecificationError("--rtol applies only with --inertia-tolerance, --sampled or --jitter")
     rate = 1000.0 if args.rate is None else args.rate
     if toml_path is not None:
         _refuse_existing(toml_path, args.overwrite, "--toml")
@@ -1419,12 +1427,10 @@ def _write_design_toml(
         stream.write(scenario_toml(scenario, comment=comment))
 
 
-def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Path | None) -> int:
-    """``mrpctl design --inertia-tolerance TOL [--product-bound P] [--sampled HZ]``: synthesize_robust_pd."""
-    from mrpctl.design import analyze_gains
-    from mrpctl.design.robust import RobustStatus, synthesize_robust_pd
-    from mrpctl.scenario import _check_delay
-
+def _robust_options(
+    args: argparse.Namespace, spacecraft: Spacecraft
+) -> tuple[float, float, float | None, float, float | None, float | None]:
+    """(tolerance, product bound, period, --toml rate, tau_min, jitter rate) of ``design``'s robust options."""
     tolerance = 0.0
     if args.inertia_tolerance is not None:
         tolerance = nonnegative_scalar("--inertia-tolerance", args.inertia_tolerance)
@@ -1433,7 +1439,8 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     bound = nonnegative_scalar("--product-bound", args.product_bound)
     if not spacecraft.is_diagonal:
         raise SpecificationError(
-            "--inertia: --inertia-tolerance and --sampled need a diagonal nominal inertia (3 principal values)"
+            "--inertia: --inertia-tolerance, --sampled and --jitter need a diagonal nominal inertia "
+            "(3 principal values)"
         )
     period = None
     rate = 1000.0 if args.rate is None else args.rate
@@ -1445,6 +1452,34 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         if args.rate is not None and args.rate != hz:
             raise SpecificationError(f"--rate {args.rate:g} differs from --sampled {hz:g}: give one rate")
         period, rate = 1.0 / hz, hz
+    tau_min = None
+    jitter_rate = None
+    if args.jitter is not None:
+        tau_min = nonnegative_scalar("--jitter", args.jitter)
+        if tau_min >= args.tau:
+            raise SpecificationError(f"--jitter TAU_MIN must be < tau = {args.tau:g} s, got {tau_min:g}")
+        if args.jitter_rate is not None:
+            jitter_rate = nonnegative_scalar("--jitter-rate", args.jitter_rate)
+    return tolerance, bound, period, rate, tau_min, jitter_rate
+
+
+def _robust_flags(tolerance: float, bound: float, period: float | None, rate: float, tau_min: float | None) -> str:
+    """The robust options as written on the command line (for the --toml comment)."""
+    out = f" --inertia-tolerance {tolerance:g} --product-bound {bound:g}"
+    if period is not None:
+        out += f" --sampled {rate:g}"
+    if tau_min is not None:
+        out += f" --jitter {tau_min:g}"
+    return out
+
+
+def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Path | None) -> int:
+    """``mrpctl design --inertia-tolerance TOL [--product-bound P] [--sampled HZ | --jitter TAU_MIN]``."""
+    from mrpctl.design import analyze_gains
+    from mrpctl.design.robust import RobustStatus, synthesize_robust_pd
+    from mrpctl.scenario import _check_delay
+
+    tolerance, bound, period, rate, tau_min, jitter_rate = _robust_options(args, spacecraft)
     if toml_path is not None:
         _refuse_existing(toml_path, args.overwrite, "--toml")
         _check_delay(args.tau, rate)
@@ -1460,6 +1495,8 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         tolerance=tolerance,
         product_bound=bound,
         period=period,
+        tau_min=tau_min,
+        rate=jitter_rate,
         rtol=rtol,
     )
     if result.gains is None or result.status is RobustStatus.INFEASIBLE:
@@ -1479,8 +1516,8 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     if toml_path is not None:
         comment = (
             f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g} "
-            f"--zeta {args.zeta:g} --order {order} --inertia-tolerance {tolerance:g} --product-bound {bound:g}"
-            + ("" if period is None else f" --sampled {rate:g}")
+            f"--zeta {args.zeta:g} --order {order}"
+            + _robust_flags(tolerance, bound, period, rate, tau_min)
             + f"\n{result.status.value}: omega_n = {result.omega_n:.6g} rad/s; {result.exact_check}\n"
             "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
         )
@@ -1527,6 +1564,99 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     return 0
 
 
+def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Path | None) -> int:
+    """``mrpctl design --method lmi --decay-rate ALPHA [robust options]``: synthesize_lmi (descriptor method)."""
+    from mrpctl.design import SynthesisStatus, analyze_gains, synthesize_lmi
+    from mrpctl.scenario import _check_delay
+
+    if args.decay_rate is None:
+        raise SpecificationError("--method lmi needs --decay-rate ALPHA (1/s): the decay rate the LMI imposes")
+    alpha = nonnegative_scalar("--decay-rate", args.decay_rate)
+    if args.rtol is not None:
+        raise SpecificationError("--rtol applies only with --method pd (the omega_n search)")
+    robust = args.inertia_tolerance is not None or args.sampled is not None or args.jitter is not None
+    rate = 1000.0 if args.rate is None else args.rate
+    options: dict[str, Any] = {}
+    flags = ""
+    period = None
+    if robust:
+        tolerance, bound, period, rate, tau_min, jitter_rate = _robust_options(args, spacecraft)
+        options = {
+            "tolerance": tolerance,
+            "product_bound": bound,
+            "period": period,
+            "tau_min": tau_min,
+            "rate": jitter_rate,
+        }
+        flags = _robust_flags(tolerance, bound, period, rate, tau_min)
+    if toml_path is not None:
+        _refuse_existing(toml_path, args.overwrite, "--toml")
+        _check_delay(args.tau, rate)
+    # As for the PD design: Jensen for the sampled loop (Wirtinger's re-verification is inaccurate at 1 kHz).
+    order = (0 if period is not None else 1) if args.order is None else args.order
+    result = synthesize_lmi(spacecraft, args.tau, decay_rate=alpha, order=order, **options)
+    if result.K is None or result.status is not SynthesisStatus.SYNTHESIZED:
+        raise SpecificationError(
+            f"no certified state feedback for tau = {args.tau:g} s at decay rate {alpha:g} 1/s "
+            f"({result.status.value}): {result.reason}; try a smaller --decay-rate or another --order"
+        )
+    K = np.asarray(result.K, dtype=float)
+    written = None
+    if toml_path is not None:
+        comment = (
+            f"Written by: mrpctl design --method lmi --inertia {' '.join(f'{v:g}' for v in args.inertia)} "
+            f"--tau {args.tau:g} --decay-rate {alpha:g} --order {order}{flags}\n"
+            f"{result.status.value}: {result.reason}\n"
+            "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
+        )
+        _write_design_toml(toml_path, spacecraft, K, args, rate, result.status.value, comment)
+        written = toml_path
+    analysis = analyze_gains(spacecraft, K)
+    cert = result.certificate
+    if args.json:
+        _print_json(
+            {
+                "status": result.status.name,
+                "synthesized": result.synthesized,
+                "method": "lmi",
+                "model": result.model.name,
+                "tau": args.tau,
+                "tau_min": result.tau_min,
+                "tau_max": result.tau_max,
+                "inertia_tolerance": result.tolerance,
+                "product_bound": result.product_bound,
+                "sampled_rate": None if period is None else rate,
+                "order": order,
+                "decay_rate": alpha,
+                "epsilon": result.epsilon,
+                "K": K,
+                "K1": np.diag(analysis.K1) if analysis.axes else None,
+                "K2": np.diag(analysis.K2) if analysis.axes else None,
+                "certified": cert is not None and cert.certified,
+                "exact_delay_margin": result.margin.margin if result.margin is not None else None,
+                "exact_check": result.exact_check,
+                "reason": result.reason,
+                "toml": written,
+            }
+        )
+        return 0
+    print(result)
+    if cert is not None and result.robust:
+        print(cert)
+    print("K (3x6, N m) on x = [sigma; omega/4], u = K x(t - tau):")
+    print(np.array2string(K, precision=6, max_line_width=200, suppress_small=False))
+    for axis in analysis.axes:
+        print(
+            f"  axis {axis.axis}: K1 = {axis.K1:.6g} 1/s^2, K2 = {axis.K2:.6g} 1/s, omega_n = {axis.omega_n:.6g} "
+            f"rad/s, zeta = {axis.zeta:.4g} ({_damping_kind(axis.zeta)}) at the nominal inertia"
+        )
+    if not analysis.axes:
+        print("  axes coupled: K1, K2 are not diagonal")
+    if written is not None:
+        print(f"scenario written to {written} (run: mrpctl verify {written}; mrpctl simulate {written})")
+    return 0
+
+
 def _add_design(commands: Any) -> None:
     parser = commands.add_parser(
         "design",
@@ -1544,9 +1674,22 @@ def _add_design(commands: Any) -> None:
     parser.add_argument(
         "--order",
         type=int,
-        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); default 3, with --inertia-tolerance 2, with --sampled 0",
+        help="Bessel-Legendre order (0 Jensen, 1 Wirtinger); default 3, with --inertia-tolerance 2, with --sampled 0 "
+        "(with --jitter 2; --method lmi: 1, with --sampled 0)",
     )
-    robust = parser.add_argument_group("robust design (synthesize_robust_pd; see design/lmi.md section 7.5)")
+    parser.add_argument(
+        "--method",
+        choices=("pd", "lmi"),
+        default="pd",
+        help="pd: PD gains (synthesize_pd; robust: synthesize_robust_pd); lmi: state feedback by the descriptor "
+        "LMI (synthesize_lmi, needs --decay-rate; --zeta does not apply)",
+    )
+    parser.add_argument(
+        "--decay-rate", type=float, metavar="ALPHA", help="with --method lmi: the decay rate (1/s) the LMI imposes"
+    )
+    robust = parser.add_argument_group(
+        "robust design (synthesize_robust_pd, or synthesize_lmi with --method lmi; see design/lmi.md 7.5, 7.8)"
+    )
     robust.add_argument(
         "--inertia-tolerance",
         type=float,
@@ -1561,6 +1704,15 @@ def _add_design(commands: Any) -> None:
         type=float,
         metavar="HZ",
         help="certify the sampled loop at HZ with ZOH and d = tau*HZ samples (sawtooth delay); also the --toml rate",
+    )
+    robust.add_argument(
+        "--jitter",
+        type=float,
+        metavar="TAU_MIN",
+        help="certify every time-varying delay tau(t) in [TAU_MIN, tau] (interval criterion, common functional)",
+    )
+    robust.add_argument(
+        "--jitter-rate", type=float, metavar="MU", help="with --jitter: |d tau/dt| <= MU (default: rate unknown)"
     )
     robust.add_argument(
         "--rtol", type=float, metavar="R", help="relative width of the final omega_n bracket (default 1e-3)"

@@ -221,11 +221,13 @@ class IntervalDelayCertification:
 
 
 class _Layout:
-    def __init__(self, n: int, order: int, has0: bool) -> None:
+    def __init__(self, n: int, order: int, has0: bool, descriptor: bool = False) -> None:
         self.n, self.order, self.has0 = n, order, has0
         names = ["x0"] + (["x1"] if has0 else []) + ["xt", "x2"]
         for seg in (["0"] if has0 else []) + ["a", "b"]:
             names += [f"O{seg}{k}" for k in range(order)]
+        if descriptor:
+            names.append("dx")  # ẋ(t) as a free block (descriptor form, used by the synthesis)
         self.index = {name: i for i, name in enumerate(names)}
         self.m = len(names) * n
         # Built eagerly and read-only: a cached layout is shared safely between threads.
@@ -254,8 +256,8 @@ class _Layout:
 
 
 @functools.lru_cache(maxsize=64)
-def _layout(n: int, order: int, has0: bool) -> _Layout:
-    return _Layout(n, order, has0)
+def _layout(n: int, order: int, has0: bool, descriptor: bool = False) -> _Layout:
+    return _Layout(n, order, has0, descriptor)
 
 
 def _g_matrix(lay: _Layout, h1: float, tau: float, rate: DelayRate) -> np.ndarray:
@@ -308,11 +310,26 @@ def _vertex_points(h1: float, rate: DelayRate) -> list[tuple[float, float]]:
 
 
 def _phi(
-    lay: _Layout, a: np.ndarray, a_d: np.ndarray, h1: float, tau: float, rate: DelayRate, d: float, mats: Any, mm: Any
+    lay: _Layout,
+    a: np.ndarray,
+    a_d: np.ndarray,
+    h1: float,
+    tau: float,
+    rate: DelayRate,
+    d: float,
+    mats: Any,
+    mm: Any,
+    f0: np.ndarray | None = None,
 ) -> Any:
-    """Φ(τ, τ̇) for one plant; ``mats`` holds numbers or cvxpy expressions, ``mm`` is the matmul."""
+    """Φ(τ, τ̇) for one plant; ``mats`` holds numbers or cvxpy expressions, ``mm`` is the matmul.
+
+    ``f0``: the row that ẋ(t) is in ζ; default A x(t) + A_d x(t − τ) (the plant substituted). The
+    descriptor form of the synthesis passes the selector of a free ẋ block instead (then ``a`` and
+    ``a_d`` are unused and the plant enters through the descriptor term only).
+    """
     n, order = lay.n, lay.order
-    f0 = a @ lay.e("x0") + a_d @ lay.e("xt")
+    if f0 is None:
+        f0 = a @ lay.e("x0") + a_d @ lay.e("xt")
     g = _g_matrix(lay, h1, tau, rate)
     h = _h_matrix(lay, f0, rate, d)
     P, S1, S2, Q, R1, R2 = (mats[k] for k in ("P", "S1", "S2", "Q", "R1", "R2"))
@@ -402,6 +419,18 @@ def interval_blocks(
     n = plants[0][0].shape[0]
     has0 = h1 > 0.0
     lay = _layout(n, order, has0)
+    mats, blocks = _functional_blocks(matrices, has0, rate, order, n)
+    for p, (a, a_d) in enumerate(plants):
+        for tau, d in _vertex_points(h1, rate):
+            phi = _phi(lay, a, a_d, h1, tau, rate, d, mats, np.matmul)
+            blocks[f"derivative[plant {p}, tau {tau:.3g}, rate {d:g}]"] = _sym(-phi)
+    return blocks
+
+
+def _functional_blocks(
+    matrices: dict[str, Any], has0: bool, rate: DelayRate, order: int, n: int
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """(the matrices with the RCC block assembled, the positivity blocks of the functional)."""
     mats = {k: np.asarray(v, dtype=float) for k, v in matrices.items()}
     mats["RCC"] = _assemble_rcc(mats["R2"], mats["X"], order, n, numeric=True)
     blocks: dict[str, np.ndarray] = {"P": _sym(mats["P"]), "S2": _sym(mats["S2"]), "R2": _sym(mats["R2"])}
@@ -414,9 +443,59 @@ def interval_blocks(
         blocks["U"] = _sym(mats["U"])
         blocks["Z"] = _sym(mats["Z"])
     blocks["RCC"] = _sym(mats["RCC"])
-    for p, (a, a_d) in enumerate(plants):
+    return mats, blocks
+
+
+def interval_unknowns(n: int, order: int, has0: bool, rate: DelayRate) -> list[UnknownRate]:
+    """The decision matrices of the interval criterion (P, S2, R2, [S1, R1], [Q], [U, Z], X)."""
+    nx = _xi_size(n, order, has0, rate)
+    unknowns = [UnknownRate("P", nx, nx, True), UnknownRate("S2", n, n, True), UnknownRate("R2", n, n, True)]
+    if has0:
+        unknowns += [UnknownRate("S1", n, n, True), UnknownRate("R1", n, n, True)]
+    if rate.kind is RateKind.BOUNDED:
+        unknowns.append(UnknownRate("Q", n, n, True))
+    if _fridman(rate, has0):
+        unknowns += [UnknownRate("U", n, n, True), UnknownRate("Z", n, n, True)]
+    unknowns.append(UnknownRate("X", (order + 1) * n, (order + 1) * n, False))
+    return unknowns
+
+
+def descriptor_interval_blocks(
+    plants: Sequence[tuple[np.ndarray, np.ndarray]],
+    h1: float,
+    rate: DelayRate,
+    matrices: dict[str, Any],
+    *,
+    order: int,
+    epsilon: float,
+) -> dict[str, np.ndarray]:
+    """The interval criterion in descriptor form, after the synthesis congruence (time normalised by τ_max).
+
+    ``plants`` are (A, B) pairs of ẋ = A x + B u, u = K x(t − τ(t)). ζ gets a free block ẋ(t); every
+    occurrence of A x + A_d x(t − τ) in :func:`interval_blocks` becomes that block, and the descriptor
+    identity 2(xᵀP₂ᵀ + ε ẋᵀP₂ᵀ)(A x + B K x(t − τ) − ẋ) = 0 (Fridman 2001) is added. After the
+    congruence diag(G, …, G), G = P₂⁻¹ (every other selector of ζ is a scalar combination of
+    blocks, so it commutes), with Y = K G and the functional's matrices read as G-transformed:
+
+        −Φ̄(τ, τ̇) = −Φ_ẋ(τ, τ̇) − He((e₀ + ε e_ẋ)ᵀ (A G e₀ + B Y e_τ − G e_ẋ)),
+
+    linear in (P̄, S̄, R̄, X̄, …, G, Y) for fixed ε and affine in the plant (A, B): the blocks at the
+    vertices of a polytope of plants certify its convex hull, and K = Y G⁻¹. ``matrices`` holds the
+    interval unknowns (see :func:`interval_unknowns`) and ``G`` (n, n), ``Y`` (m, n).
+    """
+    n = plants[0][0].shape[0]
+    has0 = h1 > 0.0
+    lay = _layout(n, order, has0, True)
+    mats, blocks = _functional_blocks({k: v for k, v in matrices.items() if k not in ("G", "Y")}, has0, rate, order, n)
+    g = np.asarray(matrices["G"], dtype=float)
+    y = np.asarray(matrices["Y"], dtype=float)
+    zero = np.zeros((n, n))
+    e0, et, edx = lay.e("x0"), lay.e("xt"), lay.e("dx")
+    left = e0 + epsilon * edx
+    for p, (a, b) in enumerate(plants):
+        desc = left.T @ (a @ g @ e0 + b @ y @ et - g @ edx)
         for tau, d in _vertex_points(h1, rate):
-            phi = _phi(lay, a, a_d, h1, tau, rate, d, mats, np.matmul)
+            phi = _phi(lay, zero, zero, h1, tau, rate, d, mats, np.matmul, f0=edx) + desc + desc.T
             blocks[f"derivative[plant {p}, tau {tau:.3g}, rate {d:g}]"] = _sym(-phi)
     return blocks
 

@@ -42,6 +42,7 @@ from mrpctl.design.interval import (
     interval_margins,
     rate_value,
     solve_interval,
+    solve_interval_preconditioned,
     solve_lmi,
 )
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, lmi_blocks, lmi_structure
@@ -511,17 +512,28 @@ def _vertex_constant(
 def _interval_with_retry(
     plants: list[tuple[np.ndarray, np.ndarray]], lo: float, tau: float, rate: DelayRate, order: int, margin_tol: float
 ) -> tuple[IntervalCertificate, str]:
-    """solve_interval; after SOLVER_FAILED once more in balanced coordinates (exact power-of-two similarity)."""
+    """solve_interval; after SOLVER_FAILED once more in balanced coordinates (exact power-of-two similarity),
+    then the preconditioned problems of the sampled loop (difference coordinates, design/lmi.md 7.3).
+
+    Each retry is an equivalent LMI re-checked in float64, so the first one that certifies is sound.
+    """
     cert = solve_interval(plants, lo, tau, rate, order, margin_tol)
     if cert.status is not CertificateStatus.SOLVER_FAILED:
         return cert, ""
     mag = sum((np.abs(a) + np.abs(a_d) for a, a_d in plants), np.zeros_like(plants[0][0]))
     scale = balancing(mag, np.zeros_like(mag))
-    if np.all(scale == 1.0):
-        return cert, ""
-    balanced = [(similarity(a, scale), similarity(a_d, scale)) for a, a_d in plants]
-    second = solve_interval(balanced, lo, tau, rate, order, margin_tol)
-    return second, f"balanced retry after solver failure ({cert.reason}): "
+    last, prefix = cert, ""
+    if not np.all(scale == 1.0):
+        balanced = [(similarity(a, scale), similarity(a_d, scale)) for a, a_d in plants]
+        last = solve_interval(balanced, lo, tau, rate, order, margin_tol)
+        prefix = f"balanced retry after solver failure ({cert.reason}): "
+        if last.certified:
+            return last, prefix
+    for scale_variables in (False, True):
+        retry = solve_interval_preconditioned(plants, lo, tau, rate, order, margin_tol, scale_variables=scale_variables)
+        if retry.certified:
+            return retry, f"preconditioned retry after solver failure ({cert.reason}): "
+    return last, prefix
 
 
 def _check_functional(functional: Any) -> None:
@@ -545,6 +557,7 @@ def certify_polytope(
     rate: DelayRate | float | None = None,
     margin_tol: float = DEFAULT_MARGIN_TOL,
     functional: Functional | None = None,
+    decay_rate: float = 0.0,
 ) -> PolytopeCertificate:
     """Certify u = K x(t − τ) for every inertia of the polytope (per axis when the loop splits, else 6×6).
 
@@ -574,6 +587,11 @@ def certify_polytope(
     functional : Functional, optional
         Which functional (constant delay only); None (default): VERTEX for sub-problems of at most
         :data:`VERTEX_LIMIT` vertices (every diagonal box: 2 per axis), COMMON above.
+    decay_rate : float, optional
+        α >= 0 (1/s): certify the shifted loops ż = (A + αI) z + g A_d z(t − τ(t)) instead, with
+        g = e^{ατ} (constant delay) or g ∈ {e^{ατ_min}, e^{ατ_max}} as extra vertices (interval:
+        z = e^{αt} x sees the time-varying gain e^{ατ(t)}); then every solution decays like e^{−αt}.
+        Default 0 (the plain loops).
     """
     if not isinstance(polytope, InertiaPolytope):
         raise SpecificationError(f"polytope must be an InertiaPolytope, got {type(polytope).__name__}")
@@ -581,8 +599,13 @@ def certify_polytope(
     order = order_value(order)
     margin_tol = positive_scalar("margin_tol", margin_tol)
     _check_functional(functional)
+    alpha = nonnegative_scalar("decay_rate", decay_rate)
     axes = _axis_loops(polytope, K)
     groups = axes if axes is not None else [_vertex_loops(polytope, K)]
+    if alpha > 0.0:
+        ends = (tau,) if tau_min is None else (nonnegative_scalar("tau_min", tau_min), tau)
+        gains = sorted({math.exp(alpha * end) for end in ends})
+        groups = [[(a + alpha * np.eye(a.shape[0]), g * a_d) for a, a_d in plants for g in gains] for plants in groups]
     status = CertificateStatus.CERTIFIED
     margins: list[BlockMargin] = []
     total = 0.0

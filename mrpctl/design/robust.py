@@ -29,7 +29,15 @@ from mrpctl.design.sampled import sampled_stability, spacecraft_axes
 from mrpctl.errors import SpecificationError
 from mrpctl.spacecraft import Spacecraft
 
-__all__ = ["DelayModel", "RobustPDSynthesis", "RobustStatus", "synthesize_robust_pd"]
+__all__ = [
+    "DelayModel",
+    "DelaySet",
+    "RobustPDSynthesis",
+    "RobustStatus",
+    "delay_set",
+    "exact_check_of_set",
+    "synthesize_robust_pd",
+]
 
 
 class DelayModel(enum.Enum):
@@ -104,6 +112,7 @@ def synthesize_robust_pd(
     tau_min: float | None = None,
     rate: DelayRate | float | None = None,
     rtol: float = 1e-3,
+    omega_max: float | None = None,
 ) -> RobustPDSynthesis:
     """The largest ωₙ (at ζ) whose PD gains are certified for every inertia of the set and the delay.
 
@@ -123,9 +132,14 @@ def synthesize_robust_pd(
     period : float, optional
         Sampling period h (s): certify the sawtooth τ(t) ∈ [τ, τ + h], τ̇ = 1.
     tau_min : float, optional
-        Lower end of a jitter interval [tau_min, tau] (s), with ``rate`` (None: unknown rate).
+        Lower end of a jitter interval [tau_min, tau] (s), with ``rate`` (None: unknown rate);
+        ``tau_min`` equal to ``tau`` is the constant delay, and ``rate`` without ``tau_min`` is refused.
     rtol : float, optional
         Relative width of the final ωₙ bracket.
+    omega_max : float, optional
+        Search no higher than this ωₙ (rad/s): it is tested first and returned when certified, else
+        the search runs below it. :func:`~mrpctl.design.synthesis.synthesize_pd` passes its
+        decay-optimal nominal ωₙ, so a set close to the nominal one gives the nominal design.
     """
     sc = check_spacecraft(spacecraft)
     tau = positive_scalar("tau", tau)
@@ -135,23 +149,9 @@ def synthesize_robust_pd(
     pb = nonnegative_scalar("product_bound", product_bound)
     rtol = positive_scalar("rtol", rtol)
     poly = inertia_polytope(sc, tol, product_bound=pb)
-    if period is not None and tau_min is not None:
-        raise SpecificationError("give either period (sampled loop) or tau_min (jitter interval), not both")
-    d = 0
-    if period is not None:
-        h = positive_scalar("period", period)
-        ratio = tau / h
-        d = integer("tau / period", round(ratio), minimum=0)
-        if abs(ratio - d) > 1e-9 * max(1.0, ratio):
-            raise SpecificationError(f"tau / period must be an integer number of samples, got {ratio:.12g}")
-        model, lo, hi, rate_v = DelayModel.SAMPLED, tau, tau + h, DelayRate.sawtooth()
-    elif tau_min is not None:
-        lo = nonnegative_scalar("tau_min", tau_min)
-        if not tau > lo:
-            raise SpecificationError(f"tau must exceed tau_min, got [{lo}, {tau}]")
-        model, hi, rate_v = DelayModel.INTERVAL, tau, rate_value(rate)
-    else:
-        model, lo, hi, rate_v = DelayModel.CONSTANT, tau, tau, DelayRate.unknown()
+    delays = delay_set(tau, period=period, tau_min=tau_min, rate=rate)
+    model, lo, hi, rate_v, d = delays.model, delays.tau_min, delays.tau_max, delays.rate, delays.samples
+    top = None if omega_max is None else positive_scalar("omega_max", omega_max)
     solves = 0
     failures = 0
 
@@ -168,13 +168,29 @@ def synthesize_robust_pd(
 
     unit = delay_margin([[0.0, 1.0], [0.0, 0.0]], [[0.0, 0.0], [-1.0, -2.0 * zeta]]).margin
     bound = unit / hi
+    base: dict[str, Any] = {"model": model, "tau_min": lo, "tau_max": hi, "tolerance": tol, "product_bound": pb}
+    if top is not None:
+        cert = test(top)
+        if cert.certified:
+            gains = pd_gains(sc, zeta=zeta, omega_n=top, allow_underdamped=True)
+            ok, check = exact_check_of_set(poly, gains.K, model, lo, hi, period, d)
+            return RobustPDSynthesis(
+                RobustStatus.SYNTHESIZED if ok else RobustStatus.NOT_VERIFIED,
+                omega_n=top,
+                gains=gains,
+                certificate=cert,
+                exact_check=check,
+                solves=solves,
+                reason=f"omega_max = {top:.6g} rad/s itself is certified for the whole set{_failed(failures)}",
+                **base,
+            )
+        bound = min(bound, top)
     good, good_cert = math.nan, None
     for f in (0.5, 0.1, 0.01):
         cert = test(f * bound)
         if cert.certified:
             good, good_cert = f * bound, cert
             break
-    base: dict[str, Any] = {"model": model, "tau_min": lo, "tau_max": hi, "tolerance": tol, "product_bound": pb}
     if good_cert is None:
         return RobustPDSynthesis(
             RobustStatus.INFEASIBLE,
@@ -186,12 +202,15 @@ def synthesize_robust_pd(
             reason=f"no omega_n down to 1 % of {bound:.6g} rad/s certified{_failed(failures)}",
             **base,
         )
-    bad = 2.0 * good
+    bad = 2.0 * good if top is None else min(2.0 * good, top)
     for _ in range(40):
+        if top is not None and bad >= top:
+            break  # omega_max was tested first: not certified
         cert = test(bad)
         if not cert.certified:
             break
-        good, good_cert, bad = bad, cert, 2.0 * bad
+        good, good_cert = bad, cert
+        bad = 2.0 * bad if top is None else min(2.0 * bad, top)
     for _ in range(100):
         if bad - good <= rtol * good:
             break
@@ -202,7 +221,7 @@ def synthesize_robust_pd(
         else:
             bad = mid
     gains = pd_gains(sc, zeta=zeta, omega_n=good, allow_underdamped=True)
-    ok, check = _exact_check(poly, gains, model, lo, hi, period, d)
+    ok, check = exact_check_of_set(poly, gains.K, model, lo, hi, period, d)
     return RobustPDSynthesis(
         RobustStatus.SYNTHESIZED if ok else RobustStatus.NOT_VERIFIED,
         omega_n=good,
@@ -215,22 +234,99 @@ def synthesize_robust_pd(
     )
 
 
+@dataclass(frozen=True)
+class DelaySet:
+    """The delay a robust certificate covers (see :func:`delay_set`).
+
+    Attributes
+    ----------
+    model : DelayModel
+    tau_min, tau_max : float
+        The delay interval (s); equal for a constant delay.
+    rate : DelayRate
+        τ̇ bound (sawtooth for the sampled loop; unknown for a constant delay, where it is unused).
+    samples : int
+        d = τ/h of the sampled loop (0 otherwise).
+    period : float or None
+        Sampling period h (s) of the sampled loop.
+    """
+
+    model: DelayModel
+    tau_min: float
+    tau_max: float
+    rate: DelayRate
+    samples: int = 0
+    period: float | None = None
+
+
+def delay_set(
+    tau: float, *, period: float | None = None, tau_min: float | None = None, rate: DelayRate | float | None = None
+) -> DelaySet:
+    """Check and classify the delay options shared by the robust syntheses.
+
+    ``period`` h: the sampled loop, τ(t) ∈ [τ, τ + h], τ̇ = 1 (τ/h must be whole to 1e-9);
+    ``tau_min`` (with ``rate``, None = unknown): τ(t) ∈ [tau_min, τ] (``tau_min`` = τ is the constant
+    delay); neither: the constant delay τ. ``period`` with ``tau_min``, ``rate`` without
+    ``tau_min`` and ``tau_min`` > τ are refused (SpecificationError naming the parameter).
+    """
+    tau = positive_scalar("tau", tau)
+    if period is not None and tau_min is not None:
+        raise SpecificationError("give either period (sampled loop) or tau_min (jitter interval), not both")
+    if rate is not None and tau_min is None:
+        raise SpecificationError("rate applies only with tau_min (the jitter interval [tau_min, tau])")
+    if period is not None:
+        h = positive_scalar("period", period)
+        ratio = tau / h
+        d = integer("tau / period", round(ratio), minimum=0)
+        if abs(ratio - d) > 1e-9 * max(1.0, ratio):
+            raise SpecificationError(f"tau / period must be an integer number of samples, got {ratio:.12g}")
+        return DelaySet(DelayModel.SAMPLED, tau, tau + h, DelayRate.sawtooth(), d, h)
+    if tau_min is not None:
+        lo = nonnegative_scalar("tau_min", tau_min)
+        rate_v = rate_value(rate)
+        if lo == tau:
+            return DelaySet(DelayModel.CONSTANT, tau, tau, rate_v)
+        if not tau > lo:
+            raise SpecificationError(f"tau_min must not exceed tau, got [{lo}, {tau}]")
+        return DelaySet(DelayModel.INTERVAL, lo, tau, rate_v)
+    return DelaySet(DelayModel.CONSTANT, tau, tau, DelayRate.unknown())
+
+
 def _failed(count: int) -> str:
     return f" ({count} certificate test(s) SOLVER_FAILED, counted as not certified)" if count else ""
 
 
-def _exact_check(
-    poly: Any, gains: PDGains, model: DelayModel, lo: float, hi: float, period: float | None, d: int
+def exact_check_of_set(
+    poly: Any, K: Any, model: DelayModel, lo: float, hi: float, period: float | None, d: int
 ) -> tuple[bool, str]:
-    """The exact reference for the returned gains at the extreme inertias of the (diagonal) set."""
+    """The exact reference for the gain K over an inertia set: (passed, what it found).
+
+    Sampled loop: the lifted spectral radius per axis at J = (1 ± tol) J₀ (the lifted check needs a
+    diagonal J, so products of inertia are not covered by it). Otherwise the smallest exact
+    constant-delay margin over the grid of :func:`~mrpctl.design.polytope.exact_polytope_margin`
+    (21 points per axis), which must exceed ``hi``.
+
+    Parameters
+    ----------
+    poly : InertiaPolytope
+    K : array_like
+        (3, 6) gain (N m).
+    model : DelayModel
+    lo, hi : float
+        The delay interval (s).
+    period : float or None
+        Sampling period h (s) of the sampled loop.
+    d : int
+        Delay in samples of the sampled loop.
+    """
     if model is DelayModel.SAMPLED and period is not None:
         worst = 0.0
         for scale in (1.0 - poly.tolerance, 1.0 + poly.tolerance):
             sc = Spacecraft(scale * poly.nominal.inertia)
-            for a, b, k in spacecraft_axes(sc, gains.K):
+            for a, b, k in spacecraft_axes(sc, K):
                 if a.shape[0] * (d + 1) > 4000:
                     return True, "exact lifted check skipped (companion too large)"
                 worst = max(worst, sampled_stability(a, b, k, period, delay_samples=d).spectral_radius)
         return worst < 1.0, f"exact lifted spectral radius at the box ends: {worst:.9f}"
-    margin = exact_polytope_margin(poly, gains.K, points=21)
+    margin = exact_polytope_margin(poly, K, points=21)
     return margin > hi, f"exact worst constant-delay margin over the inertia grid {margin:.6g} s (need > {hi:.6g})"

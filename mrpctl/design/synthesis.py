@@ -6,13 +6,20 @@ import enum
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
 from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.design._common import OPTIMAL, order_value, solve
 from mrpctl.design.gains import PDGains, damping_kind, pd_gains
+from mrpctl.design.interval import (
+    DelayRate,
+    UnknownRate,
+    descriptor_interval_blocks,
+    interval_unknowns,
+    solve_lmi,
+)
 from mrpctl.design.lmi import (
     DEFAULT_MARGIN_TOL,
     WIRTINGER,
@@ -28,6 +35,23 @@ from mrpctl.design.lmi import (
 )
 from mrpctl.design.loop import linearized_loop
 from mrpctl.design.margin import DelayMargin, delay_margin
+from mrpctl.design.polytope import (
+    VERTEX_LIMIT,
+    Functional,
+    InertiaPolytope,
+    PolytopeCertificate,
+    certify_polytope,
+    inertia_polytope,
+    vertex_blocks,
+)
+from mrpctl.design.robust import (
+    DelayModel,
+    DelaySet,
+    RobustPDSynthesis,
+    delay_set,
+    exact_check_of_set,
+    synthesize_robust_pd,
+)
 from mrpctl.errors import SpecificationError
 from mrpctl.model import gain_from_pd, plant_model
 from mrpctl.spacecraft import Spacecraft
@@ -255,6 +279,7 @@ class PDSynthesis:
         )
 
 
+@overload
 def synthesize_pd(
     spacecraft: Spacecraft,
     tau: float,
@@ -265,7 +290,49 @@ def synthesize_pd(
     rtol: float = 1e-4,
     positivity: Positivity = Positivity.RELAXED,
     margin_tol: float = DEFAULT_MARGIN_TOL,
-) -> PDSynthesis:
+    tolerance: None = None,
+    product_bound: None = None,
+    period: None = None,
+    tau_min: None = None,
+    rate: None = None,
+) -> PDSynthesis: ...
+
+
+@overload
+def synthesize_pd(
+    spacecraft: Spacecraft,
+    tau: float,
+    *,
+    zeta: float | None = 1.0,
+    order: int = 3,
+    allow_underdamped: bool = False,
+    rtol: float = 1e-4,
+    positivity: Positivity = Positivity.RELAXED,
+    margin_tol: float = DEFAULT_MARGIN_TOL,
+    tolerance: float | None = None,
+    product_bound: float | None = None,
+    period: float | None = None,
+    tau_min: float | None = None,
+    rate: DelayRate | float | None = None,
+) -> PDSynthesis | RobustPDSynthesis: ...
+
+
+def synthesize_pd(
+    spacecraft: Spacecraft,
+    tau: float,
+    *,
+    zeta: float | None = 1.0,
+    order: int = 3,
+    allow_underdamped: bool = False,
+    rtol: float = 1e-4,
+    positivity: Positivity = Positivity.RELAXED,
+    margin_tol: float = DEFAULT_MARGIN_TOL,
+    tolerance: float | None = None,
+    product_bound: float | None = None,
+    period: float | None = None,
+    tau_min: float | None = None,
+    rate: DelayRate | float | None = None,
+) -> PDSynthesis | RobustPDSynthesis:
     """The fastest-decaying delayed PD gains for the delay τ, with a certified decay rate.
 
     The loop per axis is σ̈ = K₁σ(t − τ) + K₂σ̇(t − τ), K₁ = −ωₙ², K₂ = −2ζωₙ (the gains of
@@ -299,15 +366,38 @@ def synthesize_pd(
         Positivity condition of the certificates.
     margin_tol : float, optional
         Relative eigenvalue margin of the certificates.
+    tolerance, product_bound : float, optional
+        Robust design over the inertia set of :func:`~mrpctl.design.polytope.inertia_polytope`
+        (relative per-axis tolerance 0 <= tol < 1 on the diagonal of a diagonal nominal J; bound on
+        |J_ij| (kg m²)).
+    period : float, optional
+        Robust design for the sampled loop at period h (s) with ZOH: the sawtooth τ(t) ∈ [τ, τ + h],
+        τ̇ = 1 (τ/h must be a whole number).
+    tau_min : float, optional
+        Robust design for the jitter τ(t) ∈ [tau_min, τ] (s) (``tau_min`` = τ: the constant delay).
+    rate : DelayRate or float, optional
+        With ``tau_min``: the bound on τ̇ (a number μ means |τ̇| <= μ; None: unknown rate).
 
     Returns
     -------
-    PDSynthesis
+    PDSynthesis or RobustPDSynthesis
+        PDSynthesis without the robust options (the nominal design above). With any of
+        ``tolerance``, ``product_bound``, ``period``, ``tau_min``, ``rate`` given:
+        :class:`~mrpctl.design.robust.RobustPDSynthesis` from
+        :func:`~mrpctl.design.robust.synthesize_robust_pd` (the one robust search), started at the
+        decay-optimal nominal ωₙ = w/τ above: when the polytope certificate (order ``order``) holds
+        there for the whole set, those are the gains (so a tolerance 0 returns the nominal design's
+        gains); else the largest ωₙ below it that is certified, to relative width max(``rtol``,
+        1e-3), then checked exactly (grid margin, or the lifted spectral radius for the sampled
+        loop). Infeasible is a status, not an exception. ``positivity`` and ``margin_tol`` apply to
+        the nominal design only (non-default values are refused with the robust options).
 
     Raises
     ------
     SpecificationError
-        If τ <= 0 or NaN, ζ <= 0 (or < 1 without ``allow_underdamped``), or an option is invalid.
+        If τ <= 0 or NaN, ζ <= 0 (or < 1 without ``allow_underdamped``), or an option is invalid
+        (tolerance < 0 or >= 1, τ/period not whole, both ``period`` and ``tau_min``, ``rate``
+        without ``tau_min``, a coupled nominal J with the robust options).
 
     Examples
     --------
@@ -334,6 +424,25 @@ def synthesize_pd(
         pd_gains(spacecraft, zeta=z, omega_n=1.0, allow_underdamped=allow_underdamped)  # checks ζ
         w, lam = _best_w(z)
         how = f"w = omega_n tau optimised at zeta = {z:g}"
+    if any(v is not None for v in (tolerance, product_bound, period, tau_min, rate)):
+        if positivity is not Positivity.RELAXED or margin_tol != DEFAULT_MARGIN_TOL:
+            raise SpecificationError(
+                "positivity and margin_tol apply only to the nominal design (not with tolerance, product_bound, "
+                "period, tau_min or rate)"
+            )
+        return synthesize_robust_pd(
+            spacecraft,
+            tau,
+            zeta=z,
+            order=order,
+            tolerance=0.0 if tolerance is None else tolerance,
+            product_bound=0.0 if product_bound is None else product_bound,
+            period=period,
+            tau_min=tau_min,
+            rate=rate,
+            rtol=max(rtol, 1e-3),
+            omega_max=w / tau,
+        )
     a_u = _axis_a()
     a_d_u = np.array([[0.0, 0.0], [-w * w, -2.0 * z * w]])
     solves = 0
@@ -400,6 +509,10 @@ def synthesize_pd(
 class LMISynthesis:
     """Result of :func:`synthesize_lmi`: a delayed state feedback u = K x(t − τ).
 
+    With the robust options, ``certificate`` and ``decay_certificate`` are
+    :class:`~mrpctl.design.polytope.PolytopeCertificate` objects of the whole set (the independent
+    analysis of K and of its α-shifted loops).
+
     Attributes
     ----------
     status : SynthesisStatus
@@ -418,10 +531,19 @@ class LMISynthesis:
     decay_certificate : Certificate or None
         :func:`~mrpctl.design.lmi.certify` of the shifted system ż = (A + αI) z + e^{ατ} B K z(t − τ).
     margin : DelayMargin or None
-        Exact delay margin of the loop under K.
+        Exact delay margin of the loop under K (at the nominal inertia).
     solves : int
         Synthesis LMI solves (ε line search).
     reason : str
+    model : DelayModel
+        The delay covered (robust synthesis; CONSTANT for the nominal one).
+    tau_min, tau_max : float
+        The delay interval covered (s): [τ, τ] for a constant delay, [d·h, d·h + h] = [τ, τ + h] for
+        the sampled loop, [tau_min, τ] for the jitter.
+    tolerance, product_bound : float
+        The inertia set covered (0, 0: the nominal spacecraft).
+    exact_check : str
+        Robust synthesis: what the exact reference said about K over the set (empty otherwise).
     """
 
     status: SynthesisStatus
@@ -430,23 +552,42 @@ class LMISynthesis:
     order: int
     K: np.ndarray | None = field(repr=False)
     epsilon: float
-    certificate: Certificate | None = field(repr=False)
-    decay_certificate: Certificate | None = field(repr=False)
+    certificate: Certificate | PolytopeCertificate | None = field(repr=False)
+    decay_certificate: Certificate | PolytopeCertificate | None = field(repr=False)
     margin: DelayMargin | None = field(repr=False)
     solves: int
     reason: str
+    model: DelayModel = DelayModel.CONSTANT
+    tau_min: float = math.nan
+    tau_max: float = math.nan
+    tolerance: float = 0.0
+    product_bound: float = 0.0
+    exact_check: str = ""
 
     @property
     def synthesized(self) -> bool:
         """True when K was found and verified."""
         return self.status is SynthesisStatus.SYNTHESIZED
 
+    @property
+    def robust(self) -> bool:
+        """True when the synthesis covered a delay interval, a sampled loop or an inertia set."""
+        return self.model is not DelayModel.CONSTANT or self.tolerance > 0.0 or self.product_bound > 0.0
+
     def __str__(self) -> str:
         head = (
             f"LMI synthesis for tau = {self.tau:g} s, decay rate {self.decay_rate:g} 1/s "
             f"({criterion_name(self.order)}, descriptor method): {self.status.value}"
         )
-        lines = [head, f"  {self.reason}"]
+        lines = [head]
+        if self.robust:
+            span = f"{self.model.value}, tau in [{self.tau_min:.6g}, {self.tau_max:.6g}] s"
+            lines.append(
+                f"  robust: {span}, inertia +/-{100 * self.tolerance:g} %, |J_ij| <= {self.product_bound:g} kg m^2"
+            )
+            if self.exact_check:
+                lines.append(f"  {self.exact_check}")
+        lines.append(f"  {self.reason}")
         if self.K is not None:
             margin = self.margin.margin if self.margin is not None else math.nan
             lines.append(f"  epsilon = {self.epsilon:.4g} s; exact delay margin {margin:.6g} s")
@@ -577,6 +718,11 @@ def synthesize_lmi(
     order: int = WIRTINGER,
     epsilons: Any = None,
     margin_tol: float = DEFAULT_MARGIN_TOL,
+    tolerance: float | None = None,
+    product_bound: float | None = None,
+    period: float | None = None,
+    tau_min: float | None = None,
+    rate: DelayRate | float | None = None,
 ) -> LMISynthesis:
     """Delayed state feedback u = K x(t − τ) with decay rate α by the descriptor method.
 
@@ -605,27 +751,72 @@ def synthesize_lmi(
         Values of ε (s) to try; default τ × logspace(−1.5, 1.5, 9).
     margin_tol : float, optional
         Relative eigenvalue margin for the re-verification certificates.
+    tolerance, product_bound : float, optional
+        Robust synthesis over the inertia set of :func:`~mrpctl.design.polytope.inertia_polytope`
+        (relative per-axis tolerance 0 <= tol < 1 of a diagonal nominal J; |J_ij| bound, kg m²).
+    period : float, optional
+        Robust synthesis for the sampled loop at period h (s), ZOH: the sawtooth τ(t) ∈ [τ, τ + h],
+        τ̇ = 1 (τ/h must be whole).
+    tau_min : float, optional
+        Robust synthesis for the jitter τ(t) ∈ [tau_min, τ] (s); ``tau_min`` = τ is the constant delay.
+    rate : DelayRate or float, optional
+        With ``tau_min``: bound on τ̇ (a number μ means |τ̇| <= μ; None: unknown).
 
     Returns
     -------
     LMISynthesis
 
+    Notes
+    -----
+    **Robust synthesis** (any of ``tolerance``, ``product_bound``, ``period``, ``tau_min``,
+    ``rate``; design/lmi.md section 7.8). The multipliers X = P₂⁻¹ and Y = K X are common to every
+    vertex of the plant polytope, so the congruenced LMI is affine in the plant matrices (A, B) and
+    the vertex LMIs cover the convex hull. Diagonal set: per axis the normalised loop has the input
+    gain b = J₀/J ∈ [1/(1+tol), 1/(1−tol)] (2 vertices, one 2×2 synthesis shared by the axes);
+    with products of inertia the 6×6 loop at the (deduplicated) vertices of the J⁻¹ box. Constant
+    delay: the order-N functional of this function, vertex-dependent up to
+    :data:`~mrpctl.design.polytope.VERTEX_LIMIT` vertices (common above). Jitter and sampled loop:
+    the interval criterion of :mod:`~mrpctl.design.interval` (order-N Bessel-Legendre with the
+    reciprocally convex combination, N = 1: Wirtinger) in descriptor form
+    (:func:`~mrpctl.design.interval.descriptor_interval_blocks`), one functional common to the
+    vertices; the decay rate enters as z = e^{αt} x, whose delayed gain e^{ατ(t)} varies in
+    [e^{ατ_min}, e^{ατ_max}] (two more vertices). Every K found is re-verified by
+    :func:`~mrpctl.design.polytope.certify_polytope` (the analysis, at α = 0 and at the decay rate)
+    and by the exact reference (the grid of exact constant-delay margins over the set, or the
+    lifted spectral radius of the sampled loop at the box ends). The set equal to the nominal one
+    (tolerance 0, no products, constant delay) runs the nominal synthesis above, number for number.
+
     Raises
     ------
     SpecificationError
-        If τ <= 0 or NaN, α < 0 or NaN, or ε values are not positive.
+        If τ <= 0 or NaN, α < 0 or NaN, ε values are not positive, or a robust option is invalid
+        (tolerance < 0 or >= 1, τ/period not whole, both ``period`` and ``tau_min``, ``rate``
+        without ``tau_min``, a coupled nominal J with a robust option).
     """
     spacecraft = check_spacecraft(spacecraft)
     tau = positive_scalar("tau", tau)
     alpha = nonnegative_scalar("decay_rate", decay_rate)
     order = order_value(order)
     margin_tol = positive_scalar("margin_tol", margin_tol)
+    robust = any(v is not None for v in (tolerance, product_bound, period, tau_min, rate))
+    delays = delay_set(tau, period=period, tau_min=tau_min, rate=rate)
+    poly = None
+    if robust:
+        poly = inertia_polytope(
+            spacecraft,
+            0.0 if tolerance is None else tolerance,
+            product_bound=0.0 if product_bound is None else product_bound,
+        )
+    scale = delays.tau_max
     if epsilons is None:
-        eps_grid = tau * np.logspace(-1.5, 1.5, 9)
+        eps_grid = scale * np.logspace(-1.5, 1.5, 9)
     else:
         eps_grid = np.atleast_1d(np.asarray(epsilons, dtype=float))
         if eps_grid.ndim != 1 or eps_grid.size == 0 or not np.all(np.isfinite(eps_grid)) or np.any(eps_grid <= 0):
             raise SpecificationError(f"epsilons must be a non-empty list of finite values > 0, got {epsilons!r}")
+    nominal_set = poly is None or (poly.tolerance == 0.0 and poly.product_bound == 0.0)
+    if poly is not None and not (nominal_set and delays.model is DelayModel.CONSTANT):
+        return _synthesize_lmi_robust(spacecraft, poly, delays, alpha, order, eps_grid, margin_tol)
     gain = math.exp(alpha * tau)
     if spacecraft.is_diagonal:
         # Per axis, in (σᵢ, ωᵢ/4): ẋ = [[0, 1], [0, 0]] x + [0; 1] v with v = uᵢ / (4Jᵢ), and
@@ -654,6 +845,8 @@ def synthesize_lmi(
             None,
             solves,
             f"synthesis LMI {text} for {where} at every epsilon tried",
+            tau_min=tau,
+            tau_max=tau,
         )
     if spacecraft.is_diagonal:
         k = gain_from_pd(spacecraft, np.full(3, k_part[0, 0]), np.full(3, k_part[0, 1]))
@@ -688,6 +881,214 @@ def synthesize_lmi(
         margin,
         solves,
         reason,
+        tau_min=tau,
+        tau_max=tau,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Robust descriptor synthesis: common X = P₂⁻¹ and Y = K X over the vertices of the plant polytope.
+# Time is normalised by τ_max (A·τ_max, B·τ_max, ε/τ_max); K is unchanged by the normalisation.
+# --------------------------------------------------------------------------------------------
+
+
+def _robust_plants(
+    spacecraft: Spacecraft, poly: InertiaPolytope, delays: DelaySet, alpha: float
+) -> tuple[np.ndarray, list[np.ndarray], list[float], bool]:
+    """(A + αI, the vertex input matrices B_i, the delayed gains g, per-axis?) of the shifted loop."""
+    if poly.diagonal:
+        a = _axis_a() + alpha * np.eye(2)
+        ends = sorted({1.0 / (1.0 + poly.tolerance), 1.0 / (1.0 - poly.tolerance)})
+        bs = [np.array([[0.0], [b]]) for b in ends]
+        split = True
+    else:
+        a = plant_model(spacecraft).A + alpha * np.eye(6)
+        bs = []
+        seen: set[bytes] = set()
+        for jinv in poly.vertices:
+            if jinv.tobytes() not in seen:
+                seen.add(jinv.tobytes())
+                bs.append(np.vstack((np.zeros((3, 3)), jinv / 4.0)))
+        split = False
+    ends_t = (delays.tau_max,) if delays.model is DelayModel.CONSTANT else (delays.tau_min, delays.tau_max)
+    gains = sorted({math.exp(alpha * t) for t in ends_t})
+    return a, bs, gains, split
+
+
+def _constant_blocks(
+    plants: list[tuple[np.ndarray, np.ndarray]], order: int, eps: float, vertex: bool
+) -> tuple[list[UnknownRate], Any, list[str]]:
+    """Unknowns, block function and normalised blocks of the constant-delay descriptor synthesis (τ = 1).
+
+    ζ̃ = [x; x(t − 1); Ω₀ … Ω_{N−1}; ẋ] as in :func:`~mrpctl.design.polytope.vertex_blocks`, whose
+    plant-free part Ψ (A = A_d = 0, M = 0) is reused; the descriptor term after the congruence is
+    He((e_x + ε e_ẋ)ᵀ (A X e_x + B Y e_d − X e_ẋ)).
+    """
+    n, m = plants[0][0].shape[0], plants[0][1].shape[1]
+    size = (order + 1) * n
+    k = (order + 3) * n
+    zero_n = np.zeros((n, n))
+    zero_m = np.zeros((k, n))
+    ex = np.zeros((n, k))
+    ex[:, :n] = np.eye(n)
+    ed = np.zeros((n, k))
+    ed[:, n : 2 * n] = np.eye(n)
+    edx = np.zeros((n, k))
+    edx[:, k - n :] = np.eye(n)
+    left = ex + eps * edx
+    tags = [str(i) for i in range(len(plants))] if vertex else [""]
+    unknowns = []
+    for tag in tags:
+        unknowns += [UnknownRate(f"P{tag}", size, size, True), UnknownRate(f"S{tag}", n, n, True)]
+        unknowns.append(UnknownRate(f"R{tag}", n, n, True))
+    unknowns += [UnknownRate("G", n, n, False), UnknownRate("Y", m, n, False)]
+
+    def blocks(mats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        g, y = mats["G"], mats["Y"]
+        for i, (a, b) in enumerate(plants):
+            tag = tags[i] if vertex else ""
+            base = vertex_blocks(zero_n, zero_n, mats[f"P{tag}"], mats[f"S{tag}"], mats[f"R{tag}"], zero_m, order=order)
+            desc = left.T @ (a @ g @ ex + b @ y @ ed - g @ edx)
+            out[f"derivative[vertex {i}]"] = base["derivative"] - (desc + desc.T)
+            if vertex or i == 0:
+                for name in ("S", "R", "positivity"):
+                    out[f"{name}[vertex {i}]"] = base[name]
+        return out
+
+    count = len(plants) if vertex else 1
+    normalise = [f"{name}[vertex {i}]" for i in range(count) for name in ("S", "R", "positivity")]
+    return unknowns, blocks, normalise
+
+
+def _interval_problem(
+    plants: list[tuple[np.ndarray, np.ndarray]], h1: float, rate: DelayRate, order: int, eps: float
+) -> tuple[list[UnknownRate], Any, list[str]]:
+    """Unknowns, block function and normalised blocks of the interval descriptor synthesis (τ_max = 1)."""
+    n, m = plants[0][0].shape[0], plants[0][1].shape[1]
+    unknowns = interval_unknowns(n, order, h1 > 0.0, rate)
+    normalise = [u.name for u in unknowns if u.symmetric]
+    unknowns += [UnknownRate("G", n, n, False), UnknownRate("Y", m, n, False)]
+    fixed = {key: np.zeros((n, n)) for key in ("S1", "R1", "Q", "U", "Z")}
+
+    def blocks(mats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return descriptor_interval_blocks(plants, h1, rate, {**fixed, **mats}, order=order, epsilon=eps)
+
+    return unknowns, blocks, normalise
+
+
+def _robust_gain(
+    plants: list[tuple[np.ndarray, np.ndarray]],
+    delays: DelaySet,
+    order: int,
+    eps_grid: np.ndarray,
+    vertex: bool,
+) -> tuple[np.ndarray | None, float, int, str]:
+    """Line search on ε of the robust synthesis LMI; (K, ε (s), solves, status text) for the best t > 0."""
+    hi = delays.tau_max
+    scaled = [(hi * a, hi * b) for a, b in plants]
+    best: tuple[float, np.ndarray, float] | None = None
+    statuses = []
+    for eps in eps_grid:
+        if delays.model is DelayModel.CONSTANT:
+            unknowns, blocks, normalise = _constant_blocks(scaled, order, float(eps) / hi, vertex)
+        else:
+            unknowns, blocks, normalise = _interval_problem(
+                scaled, delays.tau_min / hi, delays.rate, order, float(eps) / hi
+            )
+        outcome, values, t_opt = solve_lmi(unknowns, blocks, {}, normalise)
+        statuses.append(outcome.status)
+        if values is None or not t_opt > 0.0 or (best is not None and t_opt <= best[0]):
+            continue
+        g = values["G"]
+        if np.linalg.cond(g) > 1e12:
+            continue
+        best = (t_opt, values["Y"] @ np.linalg.inv(g), float(eps))
+    if best is None:
+        failed = all(st != OPTIMAL for st in statuses)
+        return None, math.nan, len(eps_grid), "solver failed" if failed else "infeasible"
+    return best[1], best[2], len(eps_grid), "optimal"
+
+
+def _synthesize_lmi_robust(
+    spacecraft: Spacecraft,
+    poly: InertiaPolytope,
+    delays: DelaySet,
+    alpha: float,
+    order: int,
+    eps_grid: np.ndarray,
+    margin_tol: float,
+) -> LMISynthesis:
+    a, bs, gains, split = _robust_plants(spacecraft, poly, delays, alpha)
+    plants = [(a, g * b) for b in bs for g in gains]
+    vertex = delays.model is DelayModel.CONSTANT and len(plants) <= VERTEX_LIMIT
+    functional = Functional.VERTEX if vertex else Functional.COMMON
+    where = (
+        f"{'the per-axis loop' if split else 'the 6x6 loop'} at {len(plants)} vertices "
+        f"({functional.value}), {delays.model.value}"
+    )
+    k_part, eps, solves, text = _robust_gain(plants, delays, order, eps_grid, vertex)
+    lo, hi = delays.tau_min, delays.tau_max
+    base: dict[str, Any] = {
+        "model": delays.model,
+        "tau_min": lo,
+        "tau_max": hi,
+        "tolerance": poly.tolerance,
+        "product_bound": poly.product_bound,
+    }
+    tau = hi if delays.model is not DelayModel.SAMPLED else lo
+    if k_part is None:
+        status = SynthesisStatus.SOLVER_FAILED if text == "solver failed" else SynthesisStatus.INFEASIBLE
+        return LMISynthesis(
+            status,
+            tau,
+            alpha,
+            order,
+            None,
+            math.nan,
+            None,
+            None,
+            None,
+            solves,
+            f"robust synthesis LMI {text} for {where} at every epsilon tried",
+            **base,
+        )
+    k = gain_from_pd(spacecraft, np.full(3, k_part[0, 0]), np.full(3, k_part[0, 1])) if split else k_part
+    interval = delays.model is not DelayModel.CONSTANT
+    extra: dict[str, Any] = {"tau_min": lo, "rate": delays.rate} if interval else {}
+    cert = certify_polytope(poly, k, hi, order=order, margin_tol=margin_tol, **extra)
+    decay_cert = certify_polytope(poly, k, hi, order=order, margin_tol=margin_tol, decay_rate=alpha, **extra)
+    exact_ok, exact_text = exact_check_of_set(poly, k, delays.model, lo, hi, delays.period, delays.samples)
+    loop = linearized_loop(spacecraft, k)
+    margin = delay_margin(loop.A, loop.A_d)
+    checks = (
+        (cert.certified, f"certificate of the set: {cert.status.value}"),
+        (decay_cert.certified, f"decay certificate of the set: {decay_cert.status.value}"),
+        (exact_ok, exact_text),
+    )
+    failed = [why for ok, why in checks if not ok]
+    if failed:
+        status, reason = SynthesisStatus.NOT_VERIFIED, "re-verification failed: " + "; ".join(failed)
+    else:
+        status = SynthesisStatus.SYNTHESIZED
+        reason = (
+            f"K synthesized for {where}; certified for the set at alpha = 0 and {alpha:g} 1/s "
+            f"({cert.solve_time + decay_cert.solve_time:.2f} s of analysis)"
+        )
+    return LMISynthesis(
+        status,
+        tau,
+        alpha,
+        order,
+        readonly(k),
+        eps,
+        cert,
+        decay_cert,
+        margin,
+        solves,
+        reason,
+        exact_check=exact_text,
+        **base,
     )
 
 
