@@ -1475,8 +1475,8 @@ def _robust_flags(tolerance: float, bound: float, period: float | None, rate: fl
 
 def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Path | None) -> int:
     """``mrpctl design --inertia-tolerance TOL [--product-bound P] [--sampled HZ | --jitter TAU_MIN]``."""
-    from mrpctl.design import analyze_gains
-    from mrpctl.design.robust import RobustStatus, synthesize_robust_pd
+    from mrpctl.design import analyze_gains, synthesize_pd
+    from mrpctl.design.robust import RobustPDSynthesis, RobustStatus
     from mrpctl.scenario import _check_delay
 
     tolerance, bound, period, rate, tau_min, jitter_rate = _robust_options(args, spacecraft)
@@ -1487,11 +1487,14 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     # (design/lmi.md section 7.3): the sampled loop defaults to Jensen; the constant delay to N = 2.
     order = (0 if period is not None else 2) if args.order is None else args.order
     rtol = 1e-3 if args.rtol is None else positive_scalar("--rtol", args.rtol)
-    result = synthesize_robust_pd(
+    # The robust synthesize_pd: the decay-optimal nominal design when the whole set certifies it, else the
+    # largest certified omega_n below it (not the largest certified omega_n, which sits on the stability boundary).
+    result = synthesize_pd(
         spacecraft,
         args.tau,
         zeta=args.zeta,
         order=order,
+        allow_underdamped=args.allow_underdamped,
         tolerance=tolerance,
         product_bound=bound,
         period=period,
@@ -1499,6 +1502,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         rate=jitter_rate,
         rtol=rtol,
     )
+    assert isinstance(result, RobustPDSynthesis)
     if result.gains is None or result.status is RobustStatus.INFEASIBLE:
         raise SpecificationError(
             f"no robustly certified gains for tau = {args.tau:g} s at zeta = {args.zeta:g}, "
@@ -1681,14 +1685,15 @@ def _add_design(commands: Any) -> None:
         "--method",
         choices=("pd", "lmi"),
         default="pd",
-        help="pd: PD gains (synthesize_pd; robust: synthesize_robust_pd); lmi: state feedback by the descriptor "
+        help="pd: PD gains (synthesize_pd, also the robust options); lmi: state feedback by the descriptor "
         "LMI (synthesize_lmi, needs --decay-rate; --zeta does not apply)",
     )
     parser.add_argument(
         "--decay-rate", type=float, metavar="ALPHA", help="with --method lmi: the decay rate (1/s) the LMI imposes"
     )
     robust = parser.add_argument_group(
-        "robust design (synthesize_robust_pd, or synthesize_lmi with --method lmi; see design/lmi.md 7.5, 7.8)"
+        "robust design (synthesize_pd with the robust options, or synthesize_lmi with --method lmi; "
+        "see design/lmi.md 7.5, 7.9)"
     )
     robust.add_argument(
         "--inertia-tolerance",
