@@ -588,7 +588,15 @@ class Hysteretic(SwitchingRule):
         alpha = finite_scalar("alpha", alpha)
         if alpha < 1.0:
             raise SpecificationError(f"alpha (bound on |sigma_c|) must be >= 1, got {alpha}")
-        return cls((alpha**2 - 1.0) / (alpha**2 + 1.0))
+        square = alpha * alpha  # inf (not OverflowError, as alpha**2 raises) above ~1.3e154
+        delta = (square - 1.0) / (square + 1.0) if math.isfinite(square) else 1.0
+        if not delta < 1.0:
+            raise SpecificationError(
+                f"alpha (bound on |sigma_c|) = {alpha:g} is too large: delta = (alpha^2 - 1)/(alpha^2 + 1) rounds "
+                "to 1 in floating point (alpha must stay below about 9.7e7; any alpha above the largest |sigma| of "
+                "the run never switches)"
+            )
+        return cls(delta)
 
     @property
     def alpha(self) -> float:
