@@ -131,6 +131,24 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
             np.asarray(result.peak_command),
             {"units": "N m", "long_name": "max commanded |u_c,i| per axis and |u_c|"},
         )
+    if result.logic is not None:  # the flight loop's per-sample records (kept samples)
+        data["logic"] = (
+            ("time",),
+            np.asarray(result.logic),
+            {"long_name": "controller logic variable h after the rule"},
+        )
+    if result.sigma_c is not None:
+        data["sigma_c"] = (
+            ("time", "axis"),
+            np.asarray(result.sigma_c),
+            {"units": "1", "long_name": "MRP sigma_c fed to the control law"},
+        )
+    if result.delay_used is not None:
+        data["delay_used"] = (
+            ("time",),
+            np.asarray(result.delay_used, dtype=np.int64),
+            {"units": "samples", "long_name": "delay of the measurement used, k - j*(k)"},
+        )
     attrs: dict[str, Any] = {
         **_rule_fields(result.rule),
         "history": "array",
@@ -344,6 +362,9 @@ def load(path: str | Path) -> SimulationResult:
         flown["saturated_fraction"] = float(dataset["saturated_fraction"])
     if "peak_command" in dataset:
         flown["peak_command"] = readonly(dataset["peak_command"].values)
+    for name, dtype in (("logic", float), ("sigma_c", float), ("delay_used", np.int64)):
+        if name in dataset:
+            flown[name] = readonly(dataset[name].values, dtype)
     return SimulationResult(
         t=readonly(dataset["time"].values),
         sigma=readonly(dataset["sigma"].values),
