@@ -68,6 +68,13 @@ BAD_API = [
         SpecificationError,
         r"attitude_noise must be finite",
     ),
+    # before the fix: accepted, the squared error angle overflowed and the run was "DIVERGED at 0.011 s"
+    (
+        "attitude noise 1e160 rad",
+        lambda: SensorModel(attitude_noise=1e160),
+        SpecificationError,
+        r"attitude_noise must be <=",
+    ),
     ("NaN rate noise", lambda: SensorModel(rate_noise=math.nan), SpecificationError, r"rate_noise must be finite"),
     ("infinite rate noise", lambda: SensorModel(rate_noise=math.inf), SpecificationError, r"rate_noise must be finite"),
     ("gyro bias of 2", lambda: SensorModel(gyro_bias=[1e-3, 0.0]), DimensionError, r"gyro_bias: expected shape"),
@@ -424,6 +431,13 @@ def test_tiny_noise_is_a_tiny_perturbation_and_huge_noise_matches_the_reference(
     run = simulate(SC, K, X0, tau=0.01, rule=Hysteretic(0.2), t_final=0.5, sensor=loud)
     ref = reference_loop(SC.inertia, K, X0, rate=1000.0, t_final=0.5, delta=0.2, delays=10, sensors=loud)
     assert run.switch_count > 50 and np.all(np.isfinite(run.u))
+    assert run.switch_indices.tolist() == ref.logic_switch_samples().tolist()
+    assert np.max(np.abs(run.u - ref.u_applied[0])) < 1e-12 * np.max(np.abs(ref.u_applied[0]))
+    # the largest accepted 1 sigma still gives finite measurements, the reference's
+    widest = SensorModel(1e150, 0.0, seed=2)
+    run = simulate(SC, K, X0, tau=0.01, rule=Hysteretic(0.2), t_final=0.1, sensor=widest)
+    ref = reference_loop(SC.inertia, K, X0, rate=1000.0, t_final=0.1, delta=0.2, delays=10, sensors=widest)
+    assert not run.diverged and not ref.diverged[0] and run.switch_count > 5
     assert run.switch_indices.tolist() == ref.logic_switch_samples().tolist()
     assert np.max(np.abs(run.u - ref.u_applied[0])) < 1e-12 * np.max(np.abs(ref.u_applied[0]))
 
