@@ -686,6 +686,8 @@ def test_ctrl_c_during_an_export_overwrite_leaves_the_old_export(scenario, tmp_p
         text=True,
         env=env,
         cwd=REPO,
+        # xdist's workers ignore SIGINT and a child inherits that (Python then installs no handler)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.monotonic() + 300
     while not list(tmp_path.glob(".export.export-*")) and child.poll() is None and time.monotonic() < deadline:
