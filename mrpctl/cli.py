@@ -467,6 +467,7 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
                 f"the jittering delay's tau_max = {updated.delay.tau_max:g} s must equal tau = {updated.tau:g} s; "
                 "give --jitter TMIN TMAX instead of --tau"
             )
+        positive_scalar("rate", updated.rate)  # a bad --rate is the rate's error, not the jitter's
         low_samples, _ = _option_value("--jitter", lambda: updated.delay.bounds(updated.rate))  # type: ignore[union-attr]
         if low_samples < 1:
             raise SpecificationError(f"--jitter: TMIN must be >= 1/rate = {1.0 / updated.rate:g} s")

@@ -75,6 +75,8 @@ NOISE_SIZE = 6
 STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 _SMALL_ANGLE = 1e-4
+#: Largest attitude 1σ (rad): |θ|² of σ_θ·N(0, I₃) must stay finite (overflow from |θ| ≈ 1.3e154).
+_MAX_ATTITUDE_NOISE = 1e150
 
 
 # ================================================================== random streams
@@ -254,7 +256,7 @@ class SensorModel:
     Parameters
     ----------
     attitude_noise : float
-        σ_θ >= 0, 1σ per body axis of the attitude error rotation vector (rad). Default 0.
+        σ_θ in [0, 1e150], 1σ per body axis of the attitude error rotation vector (rad). Default 0.
     rate_noise : float
         σ_ω >= 0, 1σ per axis of the white rate noise (rad/s). Default 0.
     gyro_bias : array_like
@@ -269,7 +271,14 @@ class SensorModel:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "attitude_noise", nonnegative_scalar("attitude_noise", self.attitude_noise))
+        attitude_noise = nonnegative_scalar("attitude_noise", self.attitude_noise)
+        if attitude_noise > _MAX_ATTITUDE_NOISE:
+            raise SpecificationError(
+                f"attitude_noise must be <= {_MAX_ATTITUDE_NOISE:g} rad, got {attitude_noise:g}: the squared error "
+                "angle |theta|^2 overflows beyond (NaN measurements, which a run would report as divergence); "
+                "a 1 sigma of a few rad already gives an error rotation spread over every angle"
+            )
+        object.__setattr__(self, "attitude_noise", attitude_noise)
         object.__setattr__(self, "rate_noise", nonnegative_scalar("rate_noise", self.rate_noise))
         object.__setattr__(self, "gyro_bias", readonly(finite_array("gyro_bias", self.gyro_bias, (3,))))
         object.__setattr__(self, "seed", _seed(self.seed))
@@ -726,7 +735,15 @@ class Hysteretic(SwitchingRule):
         alpha = finite_scalar("alpha", alpha)
         if alpha < 1.0:
             raise SpecificationError(f"alpha (bound on |sigma_c|) must be >= 1, got {alpha}")
-        return cls((alpha**2 - 1.0) / (alpha**2 + 1.0))
+        square = alpha * alpha  # inf (not OverflowError, as alpha**2 raises) above ~1.3e154
+        delta = (square - 1.0) / (square + 1.0) if math.isfinite(square) else 1.0
+        if not delta < 1.0:
+            raise SpecificationError(
+                f"alpha (bound on |sigma_c|) = {alpha:g} is too large: delta = (alpha^2 - 1)/(alpha^2 + 1) rounds "
+                "to 1 in floating point (alpha must stay below about 9.7e7; any alpha above the largest |sigma| of "
+                "the run never switches)"
+            )
+        return cls(delta)
 
     @property
     def alpha(self) -> float:

@@ -391,7 +391,7 @@ def _actuator(table: dict[str, Any], tau: float, rate: float, horizon: _Horizon)
         raise SpecificationError("needs u_max (per-axis torque limit, N m; a scalar or 3 values)")
     modes = {mode.value: mode for mode in Saturation}
     mode = table.get("saturation", Saturation.SCALE.value)
-    if mode not in modes:
+    if not isinstance(mode, str) or mode not in modes:  # a TOML list or table is not hashable
         raise SpecificationError(f"saturation must be one of {sorted(modes)}, got {mode!r}")
     norm = table.get("u_norm")
     return ActuatorModel(

@@ -593,7 +593,7 @@ def _flight_options(table: Any, base: Scenario) -> FlightOptions:
     if "u_max" in table:
         mode_name = table.get("saturation", "scale")
         modes = {mode.value: mode for mode in Saturation}
-        if mode_name not in modes:
+        if not isinstance(mode_name, str) or mode_name not in modes:  # a TOML list or table is not hashable
             raise SpecificationError(f"flight.saturation must be one of {sorted(modes)}, got {mode_name!r}")
         norm = table.get("norm_max")
         actuator = ActuatorModel(
