@@ -664,22 +664,9 @@ def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:
         "alpha": None if math.isinf(alpha) else alpha,
         "rule": "sigma_hat in the set nearest the previous sigma_hat, then its shadow when |sigma_hat| >= alpha "
         "(null: never)",
-        "actuator": None
-        if actuator is None
-        else {
-            "u_max": [float(value) for value in actuator.u_max],
-            "norm_max": actuator.norm_max,
-            "saturation": actuator.mode.value,
-        },
+        "actuator": _actuator_manifest(actuator),
         "disturbance": _disturbance_manifest(disturbance),
-        "sensor": None
-        if sensor is None
-        else {
-            "attitude_noise": sensor.attitude_noise,
-            "rate_noise": sensor.rate_noise,
-            "gyro_bias": [float(b) for b in sensor.gyro_bias],
-            "seed": sensor.seed,
-        },
+        "sensor": _sensor_manifest(sensor),
         "constants": {
             "u_max": [_limit(value) for value in constants[0:3]],
             "u_norm": _limit(constants[3]),
@@ -701,6 +688,32 @@ def _limit(value: float) -> float | None:
     return None if math.isinf(value) else float(value)
 
 
+def _actuator_manifest(actuator: ActuatorModel | None) -> dict[str, Any] | None:
+    """The manifest's description of the torque limits (None: no actuator model)."""
+    if actuator is None:
+        return None
+    return {
+        "u_max": [float(value) for value in actuator.u_max],
+        "norm_max": actuator.norm_max,
+        "saturation": actuator.mode.value,
+    }
+
+
+def _sensor_manifest(sensor: SensorModel | None, noise: str | None = None) -> dict[str, Any] | None:
+    """The manifest's description of the sensor (None: ideal), with the meaning of the noise input if any."""
+    if sensor is None:
+        return None
+    out: dict[str, Any] = {
+        "attitude_noise": sensor.attitude_noise,
+        "rate_noise": sensor.rate_noise,
+        "gyro_bias": [float(b) for b in sensor.gyro_bias],
+        "seed": sensor.seed,
+    }
+    if noise is not None:
+        out["noise"] = noise
+    return out
+
+
 def _flight_manifest(closed: ClosedLoopFunctions, flight: FlightOptions) -> dict[str, Any]:
     """The manifest's ``flight`` section: the models, the bound constants and the memory layouts."""
     rule = closed.rule
@@ -713,26 +726,15 @@ def _flight_manifest(closed: ClosedLoopFunctions, flight: FlightOptions) -> dict
             "law": "h <- -h when h q0 < -delta on the delayed measured quaternion (sign kept continuous by c); "
             "sigma_c = sigma~ when h c = +1, else its shadow; |sigma_c| <= alpha",
         },
-        "actuator": None
-        if actuator is None
-        else {
-            "u_max": [float(value) for value in actuator.u_max],
-            "norm_max": actuator.norm_max,
-            "saturation": actuator.mode.value,
-        },
+        "actuator": _actuator_manifest(actuator),
         "saturation": flight.saturation.value,
         "disturbance": _disturbance_manifest(disturbance),
-        "sensor": None
-        if sensor is None
-        else {
-            "attitude_noise": sensor.attitude_noise,
-            "rate_noise": sensor.rate_noise,
-            "gyro_bias": [float(b) for b in sensor.gyro_bias],
-            "seed": sensor.seed,
-            "noise": "the noise input of sample/chunk: (theta_k; eta_k) = mrpctl.flight.SensorModel(...).noise(k0, k1) "
+        "sensor": _sensor_manifest(
+            sensor,
+            noise="the noise input of sample/chunk: (theta_k; eta_k) = mrpctl.flight.SensorModel(...).noise(k0, k1) "
             "(counter-based: SplitMix64 values of (seed, stream, 3k + component) and a 256-layer ziggurat, "
             "mrpctl/simulation/_noise.c)",
-        },
+        ),
         "delay": None
         if delay is None
         else {

@@ -263,15 +263,15 @@ def _gain_from_args(args: argparse.Namespace) -> np.ndarray | None:
     return np.hstack((_per_axis_gain("--k-sigma", args.k_sigma), _per_axis_gain("--k-omega", args.k_omega)))
 
 
+def _given(*options: tuple[str, object]) -> list[str]:
+    """The names of the (name, value) options whose value is not None (the ones given)."""
+    return [option for option, value in options if value is not None]
+
+
 def _plant_given(args: argparse.Namespace) -> list[str]:
-    given = [
-        option
-        for option, value in (("--inertia", args.inertia), ("--K", args.K), ("--k-sigma", args.k_sigma))
-        if value is not None
-    ]
-    if args.k_omega is not None:
-        given.append("--k-omega")
-    return given
+    return _given(
+        ("--inertia", args.inertia), ("--K", args.K), ("--k-sigma", args.k_sigma), ("--k-omega", args.k_omega)
+    )
 
 
 def _paper_base() -> Scenario:
@@ -309,12 +309,11 @@ def _scenario_from_args(args: argparse.Namespace, *, file: Path | str | None) ->
 
 def _predictor_given(args: argparse.Namespace) -> list[str]:
     """The predictor options given on the command line (``simulate`` and ``export`` have them)."""
-    options = (
+    return _given(
         ("--predictor", getattr(args, "predictor", False) or None),
         ("--predictor-inertia", getattr(args, "predictor_inertia", None)),
         ("--predictor-error", getattr(args, "predictor_error", None)),
     )
-    return [option for option, value in options if value is not None]
 
 
 def _apply_overrides(scenario: Scenario, args: argparse.Namespace) -> Scenario:
@@ -672,14 +671,17 @@ def _design(args: argparse.Namespace) -> int:
     decay = getattr(design, "decay_rate", None)
     written = None
     if toml_path is not None:
-        comment = (
-            f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g} "
-            f"--zeta {args.zeta:g} --order {order}\n"
+        _write_design_toml(
+            toml_path,
+            spacecraft,
+            K,
+            args,
+            rate,
+            design.status.value,
+            f" --zeta {args.zeta:g} --order {order}",
             f"{design.status.value}: omega_n = {design.omega_n:.6g} rad/s, "
-            f"exact delay margin {design.margin.margin if design.margin else float('nan'):.6g} s\n"
-            "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
+            f"exact delay margin {design.margin.margin if design.margin else float('nan'):.6g} s",
         )
-        _write_design_toml(toml_path, spacecraft, K, args, rate, design.status.value, comment)
         written = toml_path
     if args.json:
         _print_json(
@@ -727,17 +729,13 @@ def _flown_plan(args: argparse.Namespace, tau: float, scenario: Scenario | None)
     and its ``[uncertainty]`` inertia box. ``--jitter``, ``--jitter-rate``, ``--sampled`` and
     ``--inertia-tolerance`` override the scenario's values; ``--no-flown`` keeps the idealised loop only.
     """
-    given = [
-        option
-        for option, value in (
-            ("--jitter", args.jitter),
-            ("--jitter-rate", args.jitter_rate),
-            ("--sampled", args.sampled),
-            ("--inertia-tolerance", args.inertia_tolerance),
-            ("--product-bound", args.product_bound),
-        )
-        if value is not None
-    ]
+    given = _given(
+        ("--jitter", args.jitter),
+        ("--jitter-rate", args.jitter_rate),
+        ("--sampled", args.sampled),
+        ("--inertia-tolerance", args.inertia_tolerance),
+        ("--product-bound", args.product_bound),
+    )
     if args.no_flown and given:
         raise SpecificationError(f"{given[0]} does not apply with --no-flown (the idealised loop only)")
     from_file = scenario is not None and not args.no_flown
@@ -1039,17 +1037,13 @@ _SWEEP_HEADER = (
 
 def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, str, list[dict[str, Any]]]:
     """The swept values, their label and one dict of changes per run; refuses options that do not apply."""
-    tumble_options = [
-        option
-        for option, value in (
-            ("--count", args.count),
-            ("--seed", args.seed),
-            ("--angle-range", args.angle_range),
-            ("--rate-range", args.rate_range),
-            ("--cross-rate", args.cross_rate),
-        )
-        if value is not None
-    ]
+    tumble_options = _given(
+        ("--count", args.count),
+        ("--seed", args.seed),
+        ("--angle-range", args.angle_range),
+        ("--rate-range", args.rate_range),
+        ("--cross-rate", args.cross_rate),
+    )
     if args.parameter != "tumble" and tumble_options:
         raise SpecificationError(f"{tumble_options[0]} applies only to 'sweep tumble', not to 'sweep {args.parameter}'")
     if args.parameter == "eps":
@@ -1411,8 +1405,21 @@ def _add_reproduce(commands: Any) -> None:
 
 
 def _write_design_toml(
-    path: Path, spacecraft: Spacecraft, K: np.ndarray, args: argparse.Namespace, rate: float, status: str, comment: str
+    path: Path,
+    spacecraft: Spacecraft,
+    K: np.ndarray,
+    args: argparse.Namespace,
+    rate: float,
+    status: str,
+    options: str,
+    summary: str,
 ) -> None:
+    """The runnable scenario of ``design --toml``; its comment names the command (``options`` after --tau)."""
+    comment = (
+        f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g}{options}\n"
+        f"{summary}\n"
+        "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
+    )
     scenario = replace(
         _paper_base(),
         name=path.stem,
@@ -1519,14 +1526,16 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     cert = result.certificate
     written = None
     if toml_path is not None:
-        comment = (
-            f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g} "
-            f"--zeta {args.zeta:g} --order {order}"
-            + _robust_flags(tolerance, bound, period, rate, tau_min)
-            + f"\n{result.status.value}: omega_n = {result.omega_n:.6g} rad/s; {result.exact_check}\n"
-            "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
+        _write_design_toml(
+            toml_path,
+            spacecraft,
+            K,
+            args,
+            rate,
+            result.status.value,
+            f" --zeta {args.zeta:g} --order {order}" + _robust_flags(tolerance, bound, period, rate, tau_min),
+            f"{result.status.value}: omega_n = {result.omega_n:.6g} rad/s; {result.exact_check}",
         )
-        _write_design_toml(toml_path, spacecraft, K, args, rate, result.status.value, comment)
         written = toml_path
     if args.json:
         _print_json(
@@ -1608,13 +1617,16 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
     K = np.asarray(result.K, dtype=float)
     written = None
     if toml_path is not None:
-        comment = (
-            f"Written by: mrpctl design --method lmi --inertia {' '.join(f'{v:g}' for v in args.inertia)} "
-            f"--tau {args.tau:g} --decay-rate {alpha:g} --order {order}{flags}\n"
-            f"{result.status.value}: {result.reason}\n"
-            "Initial state: the paper's tumble (Phi = 171.69 deg about x, omega = 0.46 rad/s); edit freely."
+        _write_design_toml(
+            toml_path,
+            spacecraft,
+            K,
+            args,
+            rate,
+            result.status.value,
+            f" --method lmi --decay-rate {alpha:g} --order {order}{flags}",
+            f"{result.status.value}: {result.reason}",
         )
-        _write_design_toml(toml_path, spacecraft, K, args, rate, result.status.value, comment)
         written = toml_path
     analysis = analyze_gains(spacecraft, K)
     cert = result.certificate

@@ -14,6 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from cli_assertions import one_line_error as _one_line_error
 
 from mrpctl import __version__, paper
 from mrpctl.cli import EXIT_BROKEN_PIPE, EXIT_DIVERGED, USER_ERROR, main
@@ -23,15 +24,6 @@ from mrpctl.switching import BoundaryLayer
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenarios"
 FIG4 = EXAMPLES / "paper_fig4_on_delayed.toml"
 FIG2 = EXAMPLES / "paper_fig2_tau0_on_current.toml"
-
-
-def _one_line_error(capsys: pytest.CaptureFixture[str], *needles: str) -> str:
-    err = capsys.readouterr().err
-    assert err.startswith("mrpctl: error:"), err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    return err
 
 
 def test_example(capsys: pytest.CaptureFixture[str]) -> None:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_assertions import one_line_error as _one_line_error
 
 from mrpctl.cli import USER_ERROR, main
 from mrpctl.design import delay_margin
@@ -15,13 +16,6 @@ from mrpctl.scenario import load_scenario
 
 J = np.array([140.0, 100.0, 80.0])
 BASE = ["design", "--inertia", "140", "100", "80"]
-
-
-def _one_line_error(capsys: pytest.CaptureFixture[str], *needles: str) -> None:
-    err = capsys.readouterr().err
-    assert err.startswith("mrpctl: error:") and err.count("\n") == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
 
 
 def test_inertia_tolerance_gains_are_stable_at_every_box_end(capsys: pytest.CaptureFixture[str]) -> None:

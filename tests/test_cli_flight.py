@@ -7,20 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_assertions import one_line_error as _one_line_error
 
 from mrpctl import paper, simulate
 from mrpctl.cli import USER_ERROR, main
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.scenario import load_scenario
-
-
-def _one_line_error(capsys: pytest.CaptureFixture[str], *needles: str) -> str:
-    err = capsys.readouterr().err
-    assert err.startswith("mrpctl: error:"), err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    return err
 
 
 def _json(capsys: pytest.CaptureFixture[str]) -> dict:

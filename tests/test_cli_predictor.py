@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_assertions import one_line_error as _one_line_error
 
 from mrpctl import OnPredicted, Predictor, paper, simulate
 from mrpctl._compile import find_compiler
@@ -20,15 +21,6 @@ from mrpctl.spacecraft import Spacecraft
 needs_compiler = pytest.mark.skipif(find_compiler() is None, reason="no C compiler on this machine")
 README = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
 J = np.diag([140.0, 100.0, 80.0])
-
-
-def _one_line_error(capsys: pytest.CaptureFixture[str], *needles: str) -> str:
-    err = capsys.readouterr().err
-    assert err.startswith("mrpctl: error:"), err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    return err
 
 
 def _json(capsys: pytest.CaptureFixture[str]) -> dict:

@@ -18,21 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.linalg
+from cli_assertions import one_line_error as _one_line_error
 
 from mrpctl import paper
 from mrpctl.cli import USER_ERROR, main
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import DelayModel
 from mrpctl.scenario import InertiaUncertainty, load_scenario, parse_scenario, scenario_toml
-
-
-def _one_line_error(capsys: pytest.CaptureFixture[str], *needles: str) -> str:
-    err = capsys.readouterr().err
-    assert err.startswith("mrpctl: error:"), err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    return err
 
 
 def _lifted_radius(inertia: float, k_sigma: float, k_omega: float, h: float, d: int) -> float:

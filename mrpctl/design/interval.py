@@ -591,15 +591,7 @@ def solve_interval(
     h1 = tau_min / tau_max
     has0 = h1 > 0.0
     scaled = [(tau_max * a, tau_max * a_d) for a, a_d in plants]
-    nx = _xi_size(n, order, has0, rate)
-    unknowns = [UnknownRate("P", nx, nx, True), UnknownRate("S2", n, n, True), UnknownRate("R2", n, n, True)]
-    if has0:
-        unknowns += [UnknownRate("S1", n, n, True), UnknownRate("R1", n, n, True)]
-    if rate.kind is RateKind.BOUNDED:
-        unknowns.append(UnknownRate("Q", n, n, True))
-    if _fridman(rate, has0):
-        unknowns += [UnknownRate("U", n, n, True), UnknownRate("Z", n, n, True)]
-    unknowns.append(UnknownRate("X", (order + 1) * n, (order + 1) * n, False))
+    unknowns = interval_unknowns(n, order, has0, rate)
     fixed = {k: np.zeros((n, n)) for k in ("S1", "R1", "Q", "U", "Z")}
 
     def blocks(mats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -915,15 +907,7 @@ def solve_interval_preconditioned(
     eps0 = _pow2(min(1.0, c * h1)) if has0 else 1.0
     eps_ab = _pow2(min(1.0, c * (1.0 - h1)))
     lay = _DifferenceLayout(_layout(n, order, has0), _difference_coordinates(_layout(n, order, has0), eps0, eps_ab))
-    nx = _xi_size(n, order, has0, rate)
-    unknowns = [UnknownRate("P", nx, nx, True), UnknownRate("S2", n, n, True), UnknownRate("R2", n, n, True)]
-    if has0:
-        unknowns += [UnknownRate("S1", n, n, True), UnknownRate("R1", n, n, True)]
-    if rate.kind is RateKind.BOUNDED:
-        unknowns.append(UnknownRate("Q", n, n, True))
-    if _fridman(rate, has0):
-        unknowns += [UnknownRate("U", n, n, True), UnknownRate("Z", n, n, True)]
-    unknowns.append(UnknownRate("X", (order + 1) * n, (order + 1) * n, False))
+    unknowns = interval_unknowns(n, order, has0, rate)
     fixed = {k: np.zeros((n, n)) for k in ("S1", "R1", "Q", "U", "Z")}
     # Optionally the integral weights in units of 1/ε (their natural size when the dynamics are slow).
     var_scale = (

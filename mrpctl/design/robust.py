@@ -169,21 +169,26 @@ def synthesize_robust_pd(
     unit = delay_margin([[0.0, 1.0], [0.0, 0.0]], [[0.0, 0.0], [-1.0, -2.0 * zeta]]).margin
     bound = unit / hi
     base: dict[str, Any] = {"model": model, "tau_min": lo, "tau_max": hi, "tolerance": tol, "product_bound": pb}
+
+    def checked(omega: float, cert: PolytopeCertificate, reason: str) -> RobustPDSynthesis:
+        """The certified gains at ``omega``, checked by the exact reference."""
+        gains = pd_gains(sc, zeta=zeta, omega_n=omega, allow_underdamped=True)
+        ok, check = exact_check_of_set(poly, gains.K, model, lo, hi, period, d)
+        return RobustPDSynthesis(
+            RobustStatus.SYNTHESIZED if ok else RobustStatus.NOT_VERIFIED,
+            omega_n=omega,
+            gains=gains,
+            certificate=cert,
+            exact_check=check,
+            solves=solves,
+            reason=reason + _failed(failures),
+            **base,
+        )
+
     if top is not None:
         cert = test(top)
         if cert.certified:
-            gains = pd_gains(sc, zeta=zeta, omega_n=top, allow_underdamped=True)
-            ok, check = exact_check_of_set(poly, gains.K, model, lo, hi, period, d)
-            return RobustPDSynthesis(
-                RobustStatus.SYNTHESIZED if ok else RobustStatus.NOT_VERIFIED,
-                omega_n=top,
-                gains=gains,
-                certificate=cert,
-                exact_check=check,
-                solves=solves,
-                reason=f"omega_max = {top:.6g} rad/s itself is certified for the whole set{_failed(failures)}",
-                **base,
-            )
+            return checked(top, cert, f"omega_max = {top:.6g} rad/s itself is certified for the whole set")
         bound = min(bound, top)
     good, good_cert = math.nan, None
     for f in (0.5, 0.1, 0.01):
@@ -220,18 +225,7 @@ def synthesize_robust_pd(
             good, good_cert = mid, cert
         else:
             bad = mid
-    gains = pd_gains(sc, zeta=zeta, omega_n=good, allow_underdamped=True)
-    ok, check = exact_check_of_set(poly, gains.K, model, lo, hi, period, d)
-    return RobustPDSynthesis(
-        RobustStatus.SYNTHESIZED if ok else RobustStatus.NOT_VERIFIED,
-        omega_n=good,
-        gains=gains,
-        certificate=good_cert,
-        exact_check=check,
-        solves=solves,
-        reason=f"largest certified omega_n to rtol {rtol:g}{_failed(failures)}",
-        **base,
-    )
+    return checked(good, good_cert, f"largest certified omega_n to rtol {rtol:g}")
 
 
 @dataclass(frozen=True)
