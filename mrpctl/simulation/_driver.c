@@ -52,6 +52,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   int i, now_index = 0;
   long long newest = 0, j_used = 0, d_min = 0;
   long long* latest = 0;
+  long long jitter_slot = 0;
   uint64_t jitter_key = 0;
   for (i = 0; i < MRPCTL_STATE; ++i) buffers[0][i] = state[i];
   if (jitter) {
@@ -66,6 +67,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     }
   }
   slot = k0 % ring_size;
+  if (jitter) jitter_slot = k0 % (d + 1);
   if (k0 >= d) delayed_slot = (k0 - d) % ring_size;
   if (keep_every > 0) {
     phase = k0 % keep_every;
@@ -117,18 +119,29 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     }
     if (jitter) {
       /* seeded jitter: measurement k arrives at k + d_k (d_k >= d_min >= 1, so never at k itself) */
-      const long long s = k % (d + 1), a = k + mrpctl_stream_integer(jitter_key, (uint64_t)k, d_min, d);
+      /* s = k mod (d + 1) and arrival = (k + d_k) mod (d + 1) by counting, not by 64-bit division */
+      const long long s = jitter_slot;
+      long long arrival = s + mrpctl_stream_integer(jitter_key, (uint64_t)k, d_min, d);
+      if (arrival > d) arrival -= d + 1;
       if (latest[s] > newest) newest = latest[s];
       if (k - d > newest) newest = k - d; /* the history sample k - d arrives at k */
       latest[s] = LLONG_MIN;
-      if (k > latest[a % (d + 1)]) latest[a % (d + 1)] = k;
+      if (k > latest[arrival]) latest[arrival] = k;
       j_used = newest;
+      if (++jitter_slot > d) jitter_slot = 0;
     } else if (used) {
       j_used = used[k - k0]; /* a given delay sequence: j*(k) from NumPy */
     }
     if (jitter || used) {
       /* a time-varying delay: the newest arrived measurement j*(k) in [k - d, k - 1] (d = d_max) */
-      arg[3] = j_used < 0 ? history + history_stride * (j_used + d) : ring + width * (j_used % ring_size);
+      if (j_used < 0) {
+        arg[3] = history + history_stride * (j_used + d);
+      } else {
+        /* slot of j*(k) = (k - (k - j*(k))) mod ring_size from k's slot: 1 <= k - j*(k) <= d < ring_size */
+        long long used_slot = slot - (k - j_used);
+        if (used_slot < 0) used_slot += ring_size;
+        arg[3] = ring + width * used_slot;
+      }
       if (kept && kept_delays) kept_delays[kept_column] = k - j_used;
     }
     res[0] = next;
