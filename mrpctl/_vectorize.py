@@ -102,6 +102,8 @@ SLICE_SAMPLES = 2**16
 _DRIVER_FILE = "_lanes_driver.c"
 _ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT, _ROLE_STREAMED = 0, 1, 2, 3
 _ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
+#: The keywords of the flight sample's structure (:func:`mrpctl.simulation._engine.flight_structure`).
+_STRUCTURE = ("sensor", "limited", "disturbed")
 
 # ------------------------------------------------------------------ the operations
 # Each entry: the C expression of one lane, as CasADi 3.8's code generator writes it for a
@@ -1002,8 +1004,6 @@ def _pool_map(task: Callable[[int], Any], count: int, threads: int) -> None:
 # ------------------------------------------------------------------ the closed loop
 _ENGINES: dict[tuple[Any, ...], LaneEngine] = {}
 _ENGINES_LOCK = threading.Lock()
-#: The keywords of the flight sample's structure (:func:`mrpctl.simulation._engine.flight_structure`).
-_STRUCTURE = ("sensor", "limited", "disturbed")
 
 
 def lane_engine(
