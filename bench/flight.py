@@ -18,10 +18,22 @@ round, each timed by the process's CPU time (``time.process_time``: the least di
 machine); each entry is the minimum and the median over the rounds, and the ratio is to the
 plain run's minimum of the same process.
 
-A second table: ``simulate_batch`` of 32 perturbations of the paper case with every option, metrics
-only, on the lane engine (the default: W runs per C call, the noise and the jitter schedule
-generated once per slice for the W lanes) and on the scalar engine (``_simulate._LANES =
-False``: one run per C call, the noise per run), runs/s in CPU time on one thread.
+A second table: ``simulate_batch`` of 32 perturbations of the paper case, metrics only, with every
+option and with no option (an ideal sensor, no limits, no disturbance: the flight sample's
+cheapest structure), on the lane engine (the default: W runs per C call, the noise and the
+jitter schedule generated once per slice for the W lanes) and on the scalar engine
+(``_simulate._LANES = False``: one run per C call, the noise per run), runs/s in CPU time on one
+thread, min over the rounds (``bench/flight.py batch [rounds]``: this table alone, default 3).
+Measured (design/flight.md, phase 7; three pairs of ``batch 3``, before = the commit before the
+lane engine's specialisation by structure, run alternately on the same shared 2-core machine):
+
+| batch | before: lanes, scalar (runs/s) | after: lanes, scalar (runs/s) |
+|---|---|---|
+| every option | 176-214, 48-57 | 193-227, 49-64 |
+| no option | 224-257, 91-113 | 394-417, 82-102 |
+
+(every option runs the full sample before and after: its change is the machine's noise; with no
+option the lanes run the ideal / unlimited / free sample: 1.7 x the runs/s, 4-5 x the scalar engine.)
 
 Run: ``.venv/bin/python bench/flight.py [rounds]`` (default 9 rounds; about a minute);
 ``bench/flight.py hash [-v]`` prints the SHA-256 of 75 flight runs (:func:`flight_hash`).
@@ -180,6 +192,9 @@ def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "hash":
         print(flight_hash("-v" in sys.argv))
         return
+    if len(sys.argv) > 1 and sys.argv[1] == "batch":
+        batch_table(int(sys.argv[2]) if len(sys.argv) > 2 else 3)
+        return
     rounds = int(sys.argv[1]) if len(sys.argv) > 1 else 9
     measures = variants()
     for call in measures.values():  # compile (or load) every engine first
@@ -203,12 +218,19 @@ def main() -> None:
     batch_table(max(3, rounds // 3))
 
 
+BATCH_OPTIONS: dict[str, dict[str, Any]] = {
+    "every option": {"actuator": ACTUATOR, "disturbance": DISTURBANCE, "sensor": SENSOR, "delay": JITTER},
+    "no option": {},
+}
+
+
 def batch_table(rounds: int, runs: int = 32) -> None:
-    """simulate_batch with every option: the lane engine against the scalar engine, CPU time, one thread."""
+    """simulate_batch with every option and with none: the lane engine against the scalar engine, CPU time,
+    one thread, min over ``rounds`` (the four calls interleaved round by round)."""
     rng = np.random.default_rng(3)
     x0 = np.array(paper.INITIAL_STATE) + np.hstack((rng.normal(0, 0.01, (runs, 3)), rng.normal(0, 0.005, (runs, 3))))
 
-    def batch(lanes: bool) -> object:
+    def batch(lanes: bool, options: dict[str, Any]) -> object:
         _simulate._LANES = lanes
         try:
             return simulate_batch(
@@ -220,34 +242,39 @@ def batch_table(rounds: int, runs: int = 32) -> None:
                 t_final=T_FINAL,
                 rate=RATE,
                 threads=1,
-                actuator=ACTUATOR,
-                disturbance=DISTURBANCE,
-                sensor=SENSOR,
-                delay=JITTER,
+                **options,
             )
         finally:
             _simulate._LANES = True
 
-    best = {"lane engine": np.inf, "scalar engine": np.inf}
+    engines = (("lane engine", True), ("scalar engine", False))
+    cases = [(case, label, lanes) for case in BATCH_OPTIONS for label, lanes in engines]
+    best = {(case, label): np.inf for case, label, _ in cases}
     results = {}
+    for case, _, lanes in cases:  # compile (or load) every engine first
+        batch(lanes, BATCH_OPTIONS[case])
     for _ in range(rounds):
-        for label, lanes in (("lane engine", True), ("scalar engine", False)):
+        for case, label, lanes in cases:
             start = time.process_time()
-            results[label] = batch(lanes)
-            best[label] = min(best[label], time.process_time() - start)
-    same = all(
-        np.array_equal(
-            np.asarray(getattr(results["lane engine"], name)),
-            np.asarray(getattr(results["scalar engine"], name)),
-            equal_nan=True,
-        )
-        for name in ("switch_count", "max_sigma", "peak_torque", "saturated_fraction", "peak_command")
-    )
+            results[case, label] = batch(lanes, BATCH_OPTIONS[case])
+            best[case, label] = min(best[case, label], time.process_time() - start)
     print()
-    print(f"simulate_batch, {runs} paper-case perturbations, every option, metrics only, 1 thread, best of {rounds}")
-    for label, seconds in best.items():
-        print(f"{label:34s} {runs / seconds:8.1f} runs/s {seconds / best['lane engine']:8.2f} x the lane engine's time")
-    print(f"lane engine = scalar engine on every metric: {same}")
+    print(f"simulate_batch, {runs} paper-case perturbations, metrics only, 1 thread, CPU time, min of {rounds}")
+    for case in BATCH_OPTIONS:
+        same = all(
+            np.array_equal(
+                np.asarray(getattr(results[case, "lane engine"], name)),
+                np.asarray(getattr(results[case, "scalar engine"], name)),
+                equal_nan=True,
+            )
+            for name in ("switch_count", "max_sigma", "peak_torque", "saturated_fraction", "peak_command")
+        )
+        lane_time = best[case, "lane engine"]
+        for label, _ in engines:
+            seconds = best[case, label]
+            ratio = seconds / lane_time
+            print(f"{case:13s} {label:14s} {runs / seconds:8.1f} runs/s {ratio:8.2f} x the lane engine's time")
+        print(f"{case:13s} lane engine = scalar engine on every metric: {same}")
 
 
 if __name__ == "__main__":

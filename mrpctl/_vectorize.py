@@ -35,10 +35,13 @@ The closed loop comes from :mod:`mrpctl.simulation._engine` (``engine_sample`` o
 one library serves every spacecraft of an inertia layout); :func:`simulate_lanes` gives the
 statistics rows of :mod:`mrpctl.simulation._stats`, bit for bit those of the scalar ``Engine.run``,
 and ``simulate_batch`` uses it for metrics-only batches. The flight loop
-(``mrpctl.loop.flight_core_function``) runs the same way: its delayed input is fed from its
-``measurement`` output, its per-sample ``noise`` is a stream shared by the lanes (one
-:meth:`~mrpctl.flight.SensorModel.noise_rows` per slice and batch) and a time-varying delay's
-newest-arrived schedule is shared per slice (:func:`closed_loop_batches`).
+(``mrpctl.loop.flight_core_function``) runs the same way, specialised by structure as the scalar
+engine is (:func:`lane_engine` with ``sensor``, ``limited``, ``disturbed``: the union over a
+batch's runs of :func:`mrpctl.simulation._engine.flight_structure`): with a sensor its delayed
+input is fed from its ``measurement`` output and its per-sample ``noise`` is a stream shared by
+the lanes (one :meth:`~mrpctl.flight.SensorModel.noise_rows` per slice and batch), without one
+from ``x_meas`` with no stream; a time-varying delay's newest-arrived schedule is shared per
+slice (:func:`closed_loop_batches`).
 """
 
 from __future__ import annotations
@@ -66,7 +69,7 @@ from mrpctl._validation import integer
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
-from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, noise_rows, rule_key
+from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, flight_structure, noise_rows, rule_key
 from mrpctl.simulation._stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
@@ -99,6 +102,8 @@ SLICE_SAMPLES = 2**16
 _DRIVER_FILE = "_lanes_driver.c"
 _ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT, _ROLE_STREAMED = 0, 1, 2, 3
 _ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
+#: The keywords of the flight sample's structure (:func:`mrpctl.simulation._engine.flight_structure`).
+_STRUCTURE = ("sensor", "limited", "disturbed")
 
 # ------------------------------------------------------------------ the operations
 # Each entry: the C expression of one lane, as CasADi 3.8's code generator writes it for a
@@ -608,6 +613,10 @@ class LaneEngine:
         Inputs given per sample and per lane (e.g. each run's own disturbance ``torque``): in the
         same row after the shared ones, nnz × W values each (nonzero j of lane l at j W + l); the
         ``stream`` is then called as ``stream(k0, k1, runs)`` with the W runs of the batch.
+    structure : mapping of str to bool, keyword-only
+        When ``sample`` is the flight sample: its structure, the keywords ``sensor``, ``limited``,
+        ``disturbed`` of :func:`mrpctl.loop.flight_core_function` (kept as :attr:`structure`, the
+        explicit mark of a flight engine); None (default) for any other sample.
     """
 
     def __init__(
@@ -623,8 +632,15 @@ class LaneEngine:
         delayed: tuple[str, str] = ("x_delayed", "x_meas"),
         streamed: Sequence[str] = (),
         lane_streamed: Sequence[str] = (),
+        structure: Mapping[str, bool] | None = None,
     ) -> None:
         self.d = integer("delay_samples", delay_samples, minimum=0)
+        if structure is not None and set(structure) != set(_STRUCTURE):
+            raise SpecificationError(f"structure: expected the keys {list(_STRUCTURE)} but found {sorted(structure)}")
+        #: The flight sample's structure (sensor, limited, disturbed), or None for another sample.
+        self.structure: dict[str, bool] | None = (
+            None if structure is None else {name: bool(structure[name]) for name in _STRUCTURE}
+        )
         self.width = integer("width", width, minimum=1)
         names_in = [sample.name_in(i) for i in range(sample.n_in())]
         names_out = [sample.name_out(i) for i in range(sample.n_out())]
@@ -999,6 +1015,9 @@ def lane_engine(
     *,
     width: int = DEFAULT_WIDTH,
     saturation: Saturation = Saturation.SCALE,
+    sensor: bool = True,
+    limited: bool = True,
+    disturbed: bool = True,
     torque_input: bool = False,
     torque_per_lane: bool = False,
     **options: Any,
@@ -1008,12 +1027,17 @@ def lane_engine(
     The structure is the scalar engine's (:func:`mrpctl.simulation._engine.engine`): the
     inertia layout of ``spacecraft`` (J and J⁻¹ are run-time inputs, one per lane), the
     rule's expressions, d, h, substeps (and, for the flight rule
-    :class:`~mrpctl.flight.Hysteretic`, the actuator's ``saturation`` mode); plus W and the
-    emitter options. The flight sample (:func:`mrpctl.loop.flight_core_function`) feeds its
+    :class:`~mrpctl.flight.Hysteretic`, the actuator's ``saturation`` mode and the sample's
+    specialisation ``sensor``, ``limited``, ``disturbed`` of
+    :func:`mrpctl.loop.flight_core_function`: for a batch, the union over its runs of
+    :func:`~mrpctl.simulation._engine.flight_structure`; default the full sample, which serves
+    every run); plus W and the emitter options. The flight sample with a ``sensor`` feeds its
     delayed input from its ``measurement`` output (the sensor's, as the scalar driver's ring
-    does) and takes its ``noise`` as a stream shared by the lanes; with ``torque_input`` also its
+    does) and takes its ``noise`` as a stream shared by the lanes; without one (an ideal sensor)
+    it has neither and the delayed input is fed from ``x_meas``. With ``torque_input`` it takes its
     per-sample disturbance ``torque`` (a stream shared by the lanes too; with ``torque_per_lane`` a
-    stream of each lane's own torque).
+    stream of each lane's own torque; ``disturbed`` is then implied). The keywords are ignored for
+    the other rules. The engine's :attr:`LaneEngine.structure` is the flight sample's structure.
 
     Raises
     ------
@@ -1024,6 +1048,11 @@ def lane_engine(
     flight = isinstance(rule, Hysteretic)
     if not flight:
         saturation = Saturation.SCALE
+    structure = (
+        {"sensor": bool(sensor), "limited": bool(limited), "disturbed": bool(disturbed or torque_input)}
+        if flight
+        else None
+    )
     key = (
         layout,
         type(rule),
@@ -1033,6 +1062,7 @@ def lane_engine(
         substeps,
         width,
         saturation,
+        None if structure is None else tuple(structure.values()),
         torque_input and flight,
         torque_per_lane and torque_input and flight,
         tuple(sorted(options.items())),
@@ -1041,18 +1071,26 @@ def lane_engine(
         found = _ENGINES.get(key)
         if found is None:
             label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{layout.value}"
-            if flight:
+            if structure is not None:
                 core = flight_core_function(
-                    spacecraft, d, period, substeps, inertia=layout, saturation=saturation, torque_input=torque_input
+                    spacecraft,
+                    d,
+                    period,
+                    substeps,
+                    inertia=layout,
+                    saturation=saturation,
+                    torque_input=torque_input,
+                    **structure,
                 )
-                label += f"_{saturation.value}" + ("_torque" if torque_input else "")
-                label += "_lanes" if torque_input and torque_per_lane else ""
-                streamed = ("noise", "torque") if torque_input and not torque_per_lane else ("noise",)
-                lane_streamed = ("torque",) if torque_input and torque_per_lane else ()
+                label += f"_{saturation.value}" + ("" if structure["sensor"] else "_ideal")
+                label += ("" if structure["limited"] else "_unlimited") + ("" if structure["disturbed"] else "_free")
+                label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
+                noise = ("noise",) if structure["sensor"] else ()
                 options = {
-                    "delayed": ("x_delayed", "measurement"),
-                    "streamed": streamed,
-                    "lane_streamed": lane_streamed,
+                    "delayed": ("x_delayed", "measurement" if structure["sensor"] else "x_meas"),
+                    "streamed": (*noise, "torque") if torque_input and not torque_per_lane else noise,
+                    "lane_streamed": ("torque",) if torque_input and torque_per_lane else (),
+                    "structure": structure,
                     **options,
                 }
             else:
@@ -1084,7 +1122,7 @@ def closed_loop_batches(
     """The closed-loop runs packed for :meth:`LaneBatches.run` (arguments as :func:`simulate_lanes`);
     read the statistics with :func:`lane_stats` once every batch has run.
 
-    For the flight sample (an engine of :func:`lane_engine` with a ``noise`` stream):
+    For the flight sample (an engine of :func:`lane_engine` with a :attr:`~LaneEngine.structure`):
     ``memory0`` is (N, FLIGHT_MEMORY_SIZE) (:func:`mrpctl.simulation._engine.flight_memory`
     of each run), ``flight_options`` the shared run-time constants (u_max (3), u_norm, w (3),
     gyro bias (3); default none), ``sensor`` the shared noise (:meth:`SensorModel.noise_rows`
@@ -1095,6 +1133,10 @@ def closed_loop_batches(
     engine with a ``torque`` stream), its rows of each slice (:meth:`~mrpctl.flight.Disturbance.samples`)
     streamed beside the noise; or one per-sample torque per run (an engine with a per-lane ``torque``
     stream: :func:`lane_engine` with ``torque_per_lane``), each batch's lanes streamed their own rows.
+    The engine's structure must serve every run (:func:`~mrpctl.simulation._engine.flight_structure`
+    of ``flight_options`` and ``sensor``, the union over the rows): a run with a limit, a torque w,
+    a noisy sensor or a gyro bias on an engine specialised without it is refused
+    (SpecificationError), as its numbers would not be the scalar engine's.
     """
     runs = len(x0)
     crafts = (spacecraft,) * runs if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
@@ -1121,11 +1163,21 @@ def closed_loop_batches(
         constants["J"], constants["J_inv"] = inertia[:, 0], inertia[:, 1]
     stream: Callable[..., np.ndarray] | np.ndarray | None = None
     schedule: Callable[[int, int, int], np.ndarray] | None = None
-    if "noise" in engine.streamed:
+    structure = engine.structure
+    if structure is not None:
         options = NO_FLIGHT_OPTIONS if flight_options is None else np.asarray(flight_options, dtype=float)
         constants["flight"] = np.broadcast_to(options, (runs, options.shape[-1]))
-        stream = np.zeros(engine.stream_size)  # no noise: the zero row at every sample, as Engine.run
+        needed = flight_structure(options, sensor)  # the union over the rows
+        missing = [name for name, used in needed.items() if used and not structure[name]]
+        if missing:
+            raise SpecificationError(
+                f"flight_options, sensor: the runs need a lane engine with {', '.join(f'{m}=True' for m in missing)} "
+                f"(lane_engine's structure: the union of flight_structure over the runs), this one has {structure}"
+            )
+        # the zero row at every sample (no noise, as Engine.run); none without a sensor and a shared torque
+        stream = np.zeros(engine.stream_size) if engine.stream_size else None
         noisy = sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
+        noise_columns = NOISE_SIZE if structure["sensor"] else 0
         per_lane = "torque" in engine.lane_streamed
         if ("torque" in engine.streamed or per_lane) != (disturbance is not None):
             raise SpecificationError("disturbance: a per-sample torque needs a lane engine with a torque stream")
@@ -1133,9 +1185,11 @@ def closed_loop_batches(
             torques = tuple(disturbance) if isinstance(disturbance, Sequence) else ()
             if len(torques) != runs or not all(isinstance(w, Disturbance) for w in torques):
                 raise DimensionError(f"disturbance: this lane engine takes one Disturbance per run ({runs})")
-            stream = functools.partial(_lane_torques, sensor if noisy else None, torques, rate, engine.width)
+            stream = functools.partial(
+                _lane_torques, sensor if noisy else None, noise_columns, torques, rate, engine.width
+            )
         elif isinstance(disturbance, Disturbance):
-            stream = functools.partial(_noise_and_torque, sensor if noisy else None, disturbance, rate)
+            stream = functools.partial(_noise_and_torque, sensor if noisy else None, noise_columns, disturbance, rate)
         elif sensor is not None and noisy:
             stream = functools.partial(_noise_rows, sensor)
         if delay is not None:
@@ -1160,18 +1214,20 @@ def _noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
 
 
 def _noise_and_torque(
-    sensor: SensorModel | None, disturbance: Disturbance, rate: float, k0: int, k1: int
+    sensor: SensorModel | None, noise_columns: int, disturbance: Disturbance, rate: float, k0: int, k1: int
 ) -> np.ndarray:
-    """The stream rows of a slice: the noise (zero without a noisy sensor) and the torque w_k, side by side."""
-    rows = np.zeros((k1 - k0, NOISE_SIZE + 3))
+    """The stream rows of a slice: the noise (``noise_columns``: NOISE_SIZE, zero without a noisy sensor;
+    0 for a sample without a sensor) and the torque w_k, side by side."""
+    rows = np.zeros((k1 - k0, noise_columns + 3))
     if sensor is not None:
-        rows[:, :NOISE_SIZE] = noise_rows(sensor, k0, k1)  # drawn by _noise.c
-    rows[:, NOISE_SIZE:] = disturbance.samples(k0, k1, rate)
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by _noise.c
+    rows[:, noise_columns:] = disturbance.samples(k0, k1, rate)
     return rows
 
 
 def _lane_torques(
     sensor: SensorModel | None,
+    noise_columns: int,
     torques: Sequence[Disturbance],
     rate: float,
     width: int,
@@ -1179,15 +1235,15 @@ def _lane_torques(
     k1: int,
     runs: np.ndarray,
 ) -> np.ndarray:
-    """The stream rows of a slice for the W ``runs`` of a batch: the shared noise, then each lane's own
-    torque w_k (nonzero j of lane l at NOISE_SIZE + j W + l)."""
-    rows = np.zeros((k1 - k0, NOISE_SIZE + 3 * width))
+    """The stream rows of a slice for the W ``runs`` of a batch: the shared noise (``noise_columns``, as in
+    :func:`_noise_and_torque`), then each lane's own torque w_k (nonzero j of lane l at noise_columns + j W + l)."""
+    rows = np.zeros((k1 - k0, noise_columns + 3 * width))
     if sensor is not None:
-        rows[:, :NOISE_SIZE] = noise_rows(sensor, k0, k1)  # drawn by _noise.c
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by _noise.c
     lanes = np.empty((k1 - k0, 3, width))
     for lane, run in enumerate(runs):
         lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)
-    rows[:, NOISE_SIZE:] = lanes.reshape(k1 - k0, 3 * width)
+    rows[:, noise_columns:] = lanes.reshape(k1 - k0, 3 * width)
     return rows
 
 

@@ -708,14 +708,15 @@ def flight_structure(options: np.ndarray | None, sensor: SensorModel | None) -> 
 
     ``sensor``: noise or a gyro bias (an ideal sensor measures x_meas bit for bit); ``limited``:
     a finite u_max or u_norm; ``disturbed``: a non-zero torque w. ``options`` as
-    :data:`NO_FLIGHT_OPTIONS` (None: none).
+    :data:`NO_FLIGHT_OPTIONS` (None: none), or (N, 10), one row per run: the union over the runs
+    (the structure of a lane batch).
     """
     constants = NO_FLIGHT_OPTIONS if options is None else np.asarray(options, dtype=float)
     noisy = sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
     return {
-        "sensor": bool(noisy or np.any(constants[7:10] != 0.0)),
-        "limited": bool(np.any(np.isfinite(constants[0:4]))),
-        "disturbed": bool(np.any(constants[4:7] != 0.0)),
+        "sensor": bool(noisy or np.any(constants[..., 7:10] != 0.0)),
+        "limited": bool(np.any(np.isfinite(constants[..., 0:4]))),
+        "disturbed": bool(np.any(constants[..., 4:7] != 0.0)),
     }
 
 

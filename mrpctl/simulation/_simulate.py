@@ -856,7 +856,8 @@ def _run_lanes(
     torques: tuple[list[Disturbance | None], bool],
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
-    layout, rule expressions, d, a torque stream), W runs per C call, the batches on the thread
+    layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
+    runs' :func:`~mrpctl.simulation._engine.flight_structure`), W runs per C call, the batches on the thread
     pool; write the rows of ``stats`` (and of ``flight_rows``: the flight sample's memory).
     ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
@@ -887,6 +888,9 @@ def _run_lanes(
         torque: Any = streamed_by_run[first] if is_flight else None
         if own_torque:
             torque = [streamed_by_run[i] for i in members]
+        options = _lane_options(options_by_run, members) if is_flight else None
+        # the group's structure: the union over its runs (flight_structure of their rows), as the scalar engine's
+        structure = flight_structure(options, sensor) if is_flight else {}
         try:
             lanes = _vectorize.lane_engine(
                 crafts[first],
@@ -897,6 +901,7 @@ def _run_lanes(
                 saturation=saturation,
                 torque_input=torque is not None,
                 torque_per_lane=own_torque,
+                **structure,
             )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
@@ -924,7 +929,7 @@ def _run_lanes(
                     spacecraft=[crafts[i] for i in members],
                     threads=threads,
                     slice_samples=step,
-                    flight_options=_lane_options(options_by_run, members) if is_flight else None,
+                    flight_options=options,
                     sensor=sensor if is_flight else None,
                     delay=varying[first] if is_flight else None,
                     rate=rate,
@@ -966,7 +971,7 @@ def _run_lanes(
     _run_polled(jobs, progress, done_samples, total, stop_flag, workers)
     for members, packed in packs:
         stats[members] = _vectorize.lane_stats(packed)
-        if flight_rows is not None and packed.engine.streamed:
+        if flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
             flight_rows[members] = _vectorize.lane_memory(packed)
     return left
 
