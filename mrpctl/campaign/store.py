@@ -22,8 +22,8 @@ and renamed into place, so a store that exists always has all its arrays.
 
 **Per-sample files are stored, not referenced.** ``attrs["campaign"]`` holds the TOML as written,
 so ``flight.disturbance_file`` / ``flight.delay_file`` there are file names only. Their numbers are
-stored too (at most n x 3 float64, n = floor(t_final · rate) + 1: 1.4 MB for an hour at 1 kHz and
-small beside the per-run arrays of any real campaign), and :func:`spec_of` rebuilds the campaign
+stored too (n x 3 float64 at most, n = floor(t_final · rate) + 1: 1.4 MB for a minute at 1 kHz, as
+much as the file itself; counted in the size check), and :func:`spec_of` rebuilds the campaign
 from them: a replay reproduces a run bit for bit even when the file was moved, edited or deleted
 (storing only a SHA-256 would make every replay depend on the file and refuse to work without it).
 The hash is kept as well, to refuse a **resume** whose file now holds other numbers (the message
