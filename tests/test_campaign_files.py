@@ -217,6 +217,14 @@ def test_store_holds_the_numbers_so_replay_needs_no_file_and_resume_refuses_a_ch
     shipped = chunk_on_worker(spec.source, spec.base.name, 2, 6, spec.files)
     for name in METRICS:
         assert shipped[name].tobytes() == ds[name].values[2:6].tobytes(), name
+    assert "disturbance_file" in str(spec) and files["delay_file"].sha256[:12] in str(spec)
+    # stored numbers that no longer match their recorded hash are refused, not replayed
+    import zarr
+
+    rows = zarr.open_array(str(out / "campaign.zarr" / "flight_disturbance_rows"), mode="r+")
+    rows[0, 0] = ROWS[0, 0] + 1.0
+    with pytest.raises(SpecificationError, match=r"flight\.disturbance_file: the store's flight_disturbance_rows"):
+        replay(out, 0)
 
 
 def _bad(tmp_path: Path, flight: str, files: dict[str, np.ndarray], extra: str = "") -> Path:
@@ -325,3 +333,19 @@ def test_cli_prints_one_line_and_exits_2_on_a_bad_file(tmp_path: Path, capsys: p
     path = _bad(tmp_path, 'delay_file = "nowhere.npy"\n', {})
     assert main(["campaign", "run", str(path), "--out", str(tmp_path / "out")]) == 2
     one_line_error(capsys, "flight.delay_file", "nowhere.npy")
+
+
+@pytest.mark.slow
+def test_dask_workers_get_the_numbers_with_the_task(tmp_path: Path) -> None:
+    """The files deleted once the campaign is read: a LocalCluster stores what the local runner stores."""
+    pytest.importorskip("distributed")
+    torque, delays = _csv(tmp_path / "w.csv", ROWS), _csv(tmp_path / "d.csv", DELAYS)
+    spec = load_campaign(_campaign(tmp_path, 'disturbance_file = "w.csv"\ndelay_file = "d.csv"\n'))
+    torque.unlink()
+    delays.unlink()
+    run_campaign(spec, tmp_path / "local", chunk=3, threads=1)
+    assert run_campaign(spec, tmp_path / "dask", chunk=3, scheduler="local", workers=1).complete
+    local, dask = open_campaign(tmp_path / "local"), open_campaign(tmp_path / "dask")
+    for name in local.data_vars:
+        assert local[name].values.tobytes() == dask[name].values.tobytes(), name
+    assert "flight_delays" in dask.data_vars
