@@ -169,8 +169,6 @@ _FLIGHT_KEYS = {
     "disturbance_file",
     "delay_file",
 }
-#: The [flight] keys that name a per-sample file (their numbers are stored with the campaign).
-SAMPLE_FILE_KEYS = ("disturbance_file", "delay_file")
 #: The one parameter a rule string "name:value" sets, by rule name.
 _RULE_PARAMETER = {"boundary-layer": "eps", "delay-aware": "alpha", "hysteretic": "delta", "on-predicted": "alpha"}
 #: Largest count a specification accepts (the run index is a 64-bit spawn key; this is a sanity bound).
