@@ -287,22 +287,27 @@ class _Horizon:
     samples: int
 
 
+def sample_count(t_final: float, rate: float) -> int:
+    """n = floor(t_final · rate) + 1, the measurement samples of a run (as :func:`mrpctl.simulate` counts them):
+    the rows a per-sample file must hold."""
+    return math.floor(t_final * rate + 1e-9) + 1
+
+
 def samples_file(value: Any, key: str, *, base: Path | None = None) -> np.ndarray:
     """The numbers of a per-sample file (a disturbance torque, a delay sequence) as a finite float array.
 
     ``value`` is the file name: ``.npy`` (NumPy, no pickles) or ``.csv`` / ``.txt`` (comma-separated,
-    ``#`` comments), relative to ``base`` (the scenario file's folder; None: the working directory).
+    ``#`` comments), relative to ``base`` (the folder of the scenario or campaign TOML file; None: the
+    working directory).
     Errors (not a name, a missing file, an unknown suffix, unreadable or non-finite numbers) name ``key``.
     """
     if not isinstance(value, str | Path) or not str(value):
-        raise SpecificationError(
-            f"{key} must be a file name (.csv or .npy, relative to the scenario file), got {value!r}"
-        )
+        raise SpecificationError(f"{key} must be a file name (.csv or .npy, relative to the TOML file), got {value!r}")
     path = Path(value)
     if not path.is_absolute() and base is not None:
         path = base / path
     if not path.is_file():
-        where = "the scenario file's folder" if base is not None else "the working directory"
+        where = "the TOML file's folder" if base is not None else "the working directory"
         raise SpecificationError(f"{key}: no file {path} (a relative name is taken from {where})")
     suffix = path.suffix.lower()
     if suffix not in (".npy", ".csv", ".txt"):
@@ -623,7 +628,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         raise SpecificationError(f"history must be 'constant' or 'zero-input', got {history!r}")
     substeps = integer("substeps", data.get("substeps", 1), minimum=1)
     t_final = positive_scalar("t_final", data["t_final"])
-    samples = math.floor(t_final * rate + 1e-9) + 1  # as mrpctl.simulate counts them
+    samples = sample_count(t_final, rate)
     flight = _flight_tables(data, rule, tau, rate, _Horizon(None if base is None else Path(base), samples))
     predictor = _predictor_table(data, rule, spacecraft, history)
     return Scenario(

@@ -12,7 +12,7 @@ import numpy as np
 
 from mrpctl.campaign.sampling import RunInputs, run_inputs
 from mrpctl.campaign.simulation import simulate_runs
-from mrpctl.campaign.spec import CampaignSpec, FlightOptions, parse_campaign
+from mrpctl.campaign.spec import CampaignSpec, FlightOptions, SampleFile, parse_campaign
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
 from mrpctl.switching import SwitchingRule
 
@@ -33,8 +33,12 @@ FLIGHT_INPUTS = (
 
 
 def run_models(spec: CampaignSpec, inputs: RunInputs, j: int) -> tuple[SwitchingRule, dict[str, Any] | None]:
-    """Row j's rule object and flight models (``actuator``, ``disturbance``, ``sensor``, ``delay`` of
-    :func:`mrpctl.simulate_batch`; None without the flight loop), rebuilt from its stored inputs."""
+    """Row j's rule object and flight models (None without the flight loop), rebuilt from its stored inputs.
+
+    The models are ``actuator``, ``disturbance`` (the run's constant torque, (3,)), ``sensor``, ``delay``
+    and ``disturbance_rows`` (the (n, 3) rows of ``flight.disturbance_file`` shared by the runs, or None);
+    :func:`mrpctl.campaign.simulation.flight_keywords` makes them keywords of :func:`mrpctl.simulate_batch`.
+    """
     rule = spec.rule_list[int(inputs.rule[j])]
     if isinstance(rule, Hysteretic) and spec.flight_dispersion.delta is not None:
         rule = Hysteretic(float(inputs.delta[j]))
@@ -53,7 +57,7 @@ def run_models(spec: CampaignSpec, inputs: RunInputs, j: int) -> tuple[Switching
         np.array(inputs.gyro_bias[j]),
         seed=int(inputs.noise_seed[j]),
     )
-    delay = None
+    delay = options.delay_sequence  # the shared sequence of flight.delay_file (one object), or None
     if options.jitter is not None:
         delay = DelayModel.jitter(options.jitter[0], options.jitter[1], seed=int(inputs.jitter_seed[j]))
     models = {
@@ -61,6 +65,7 @@ def run_models(spec: CampaignSpec, inputs: RunInputs, j: int) -> tuple[Switching
         "disturbance": np.array(inputs.disturbance[j]),
         "sensor": sensor,
         "delay": delay,
+        "disturbance_rows": None if options.disturbance_file is None else options.disturbance_file.values,
     }
     return rule, models
 
@@ -109,6 +114,12 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
     }
 
 
-def chunk_on_worker(source: dict[str, Any], name: str, start: int, stop: int) -> dict[str, np.ndarray]:
-    """The Dask task: rebuild the spec from plain data (cheap to ship) and run the chunk on one thread."""
-    return simulate_chunk(parse_campaign(source, name=name), start, stop, threads=1)
+def chunk_on_worker(
+    source: dict[str, Any], name: str, start: int, stop: int, files: dict[str, SampleFile] | None = None
+) -> dict[str, np.ndarray]:
+    """The Dask task: rebuild the spec from plain data (cheap to ship) and run the chunk on one thread.
+
+    ``files``: the numbers of the campaign's per-sample files (:attr:`CampaignSpec.files`), shipped with
+    the task, so a worker never reads them (it may not see the campaign file's folder).
+    """
+    return simulate_chunk(parse_campaign(source, name=name, files=files), start, stop, threads=1)

@@ -19,7 +19,7 @@ import xarray as xr
 
 from mrpctl._validation import integer
 from mrpctl.campaign._task import run_models, simulate_chunk
-from mrpctl.campaign.simulation import METRICS
+from mrpctl.campaign.simulation import METRICS, flight_keywords
 from mrpctl.campaign.store import INPUTS, open_campaign, spec_of
 from mrpctl.errors import SpecificationError
 
@@ -480,7 +480,7 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
         rate=base.rate,
         history=base.history,
         substeps=base.substeps,
-        **(models or {}),
+        **({} if models is None else flight_keywords(models)),
         **({} if spec.predictor is None else {"predictor": spec.predictor}),
     )
 

@@ -108,7 +108,14 @@ def _dask(
             start, stop = store.bounds(index)
             futures.add(
                 client.submit(
-                    chunk_on_worker, spec.source, spec.base.name, start, stop, key=f"chunk-{index}", pure=False
+                    chunk_on_worker,
+                    spec.source,
+                    spec.base.name,
+                    start,
+                    stop,
+                    spec.files,
+                    key=f"chunk-{index}",
+                    pure=False,
                 )
             )
             if futures.count() >= slots:
@@ -121,7 +128,14 @@ def _dask(
                 start, stop = store.bounds(following)
                 futures.add(
                     client.submit(
-                        chunk_on_worker, spec.source, spec.base.name, start, stop, key=f"chunk-{following}", pure=False
+                        chunk_on_worker,
+                        spec.source,
+                        spec.base.name,
+                        start,
+                        stop,
+                        spec.files,
+                        key=f"chunk-{following}",
+                        pure=False,
                     )
                 )
     finally:

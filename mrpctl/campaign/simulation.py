@@ -17,7 +17,7 @@ from mrpctl.predictor import Predictor
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 
-__all__ = ["METRICS", "simulate_runs"]
+__all__ = ["METRICS", "flight_keywords", "simulate_runs"]
 
 #: Per-run metrics, in the order they are stored, with their dtype and "missing" value.
 METRICS: dict[str, tuple[Any, Any]] = {
@@ -30,6 +30,24 @@ METRICS: dict[str, tuple[Any, Any]] = {
     "max_sigma": (np.float64, np.nan),
     "peak_torque": (np.float64, np.nan),
 }
+
+
+def flight_keywords(models: dict[str, Any]) -> dict[str, Any]:
+    """A run's flight models (:func:`mrpctl.campaign._task.run_models`) as keywords of :func:`mrpctl.simulate_batch`
+    and :func:`mrpctl.simulate`: ``actuator``, ``sensor``, ``delay`` and ``disturbance``.
+
+    The torque is the run's constant w (3,) or, with ``flight.disturbance_file``, the (n, 3) rows
+    W_k + w: the file's rows themselves when w = 0 (so such a run equals a run given the file's rows),
+    else one new (n, 3) array (one per call, never one per run of a chunk).
+    """
+    rows, constant = models.get("disturbance_rows"), np.asarray(models["disturbance"])
+    if rows is None:
+        torque = constant
+    elif not np.any(constant):
+        torque = rows
+    else:
+        torque = rows + constant[None, :]
+    return {"actuator": models["actuator"], "sensor": models["sensor"], "delay": models["delay"], "disturbance": torque}
 
 
 def _batch(
@@ -68,11 +86,13 @@ def _flight_key(models: dict[str, Any] | None) -> Any:
     if models is None:
         return None
     actuator, sensor, delay = models["actuator"], models["sensor"], models["delay"]
+    rows = models.get("disturbance_rows")  # shared by the runs (one array): its identity names it
     return (
         None if actuator is None else (actuator.u_max.tobytes(), actuator.norm_limit, actuator.mode),
         np.asarray(models["disturbance"]).tobytes(),
+        None if rows is None else id(rows),
         (sensor.attitude_noise, sensor.rate_noise, sensor.gyro_bias.tobytes(), 0 if sensor.ideal else sensor.seed),
-        None if delay is None else (delay.tau_min, delay.tau_max, delay.seed),
+        None if delay is None else (delay.kind, delay.tau_min, delay.tau_max, delay.seed, id(delay.delays)),
     )
 
 
@@ -112,7 +132,8 @@ def simulate_runs(
         Also return the peak torque max_k |u_k|_∞ (N m) per run (NaN when False).
     flight : sequence of dict or None, optional
         Per run, None or the flight models (``actuator``, ``disturbance``, ``sensor``, ``delay``
-        of :func:`mrpctl.simulate_batch`). Runs with equal models share one call; the calls
+        of :func:`mrpctl.simulate_batch`, and ``disturbance_rows``: see :func:`flight_keywords`).
+        Runs with equal models share one call; the calls
         run on ``threads`` threads (one each), and every run's result is the same either way.
     predictor : Predictor or None, optional
         The predictor controller shared by every run (every rule an
@@ -138,7 +159,8 @@ def simulate_runs(
     out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()}
 
     def call(members: list[int], **extra: Any) -> None:
-        found = models[members[0]] or {}
+        given = models[members[0]]
+        found = {} if given is None else flight_keywords(given)
         batch = _batch(
             [crafts[i] for i in members],
             K[members],

@@ -41,6 +41,16 @@ The flight loop's options (``[flight]``; every rule must then be hysteretic)::
     rate_noise = 1e-5               # rad/s, 1 sigma per axis of the gyro noise
     gyro_bias = [0.0, 0.0, 0.0]     # rad/s
     jitter = [0.4, 0.5]             # s, delay uniform over the periods in [tau_min, tau_max = tau]
+    disturbance_file = "w.csv"      # N m, n rows of 3 (one per sample), added to every run's constant torque
+    delay_file = "d.csv"            # s, n delays (one per sample) in [1/rate, tau], whole periods (not with jitter)
+
+(n = floor(t_final · rate) + 1; ``.csv``/``.txt`` comma-separated with ``#`` comments, or ``.npy``;
+a relative name is taken from the campaign file's folder, as in a scenario file). Each run's torque
+is w_k = W_k + w with W_k the file's row k, shared by the runs, and w its constant torque
+(``disturbance`` plus its ``[dispersions.disturbance]`` draw); the delay sequence is shared by the
+runs (``[dispersions.tau]``, ``jitter`` and the predictor are refused with it; the predictor also
+refuses ``disturbance_file``). The file's numbers are kept with the campaign (:class:`SampleFile`):
+the store holds them, so a replay never reads the file again (see :mod:`mrpctl.campaign.store`).
 
 and their dispersions::
 
@@ -75,8 +85,10 @@ Unknown keys anywhere are errors naming the key.
 from __future__ import annotations
 
 import copy
+import hashlib
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -87,7 +99,19 @@ from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
 from mrpctl.predictor import OnPredicted, Predictor
-from mrpctl.scenario import RULE_NAMES, Scenario, parse_scenario, predictor_model, rule_from_name, rule_name
+from mrpctl.scenario import (
+    RULE_NAMES,
+    Scenario,
+    delay_sequence,
+    delay_values,
+    parse_scenario,
+    predictor_model,
+    rule_from_name,
+    rule_name,
+    sample_count,
+    samples_file,
+    torque_rows,
+)
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
 
 __all__ = [
@@ -99,6 +123,7 @@ __all__ = [
     "InertiaDispersion",
     "RateDispersion",
     "RuleDispersion",
+    "SampleFile",
     "TauDispersion",
     "load_campaign",
     "parse_campaign",
@@ -132,7 +157,18 @@ _KEYS = {
     "disturbance": {"magnitude"},
     "sensor": {"attitude_noise", "rate_noise", "gyro_bias"},
 }
-_FLIGHT_KEYS = {"u_max", "norm_max", "saturation", "disturbance", "attitude_noise", "rate_noise", "gyro_bias", "jitter"}
+_FLIGHT_KEYS = {
+    "u_max",
+    "norm_max",
+    "saturation",
+    "disturbance",
+    "attitude_noise",
+    "rate_noise",
+    "gyro_bias",
+    "jitter",
+    "disturbance_file",
+    "delay_file",
+}
 #: The one parameter a rule string "name:value" sets, by rule name.
 _RULE_PARAMETER = {"boundary-layer": "eps", "delay-aware": "alpha", "hysteretic": "delta", "on-predicted": "alpha"}
 #: Largest count a specification accepts (the run index is a 64-bit spawn key; this is a sanity bound).
@@ -295,6 +331,45 @@ class RuleDispersion:
         return f"crossed with the cases: {', '.join(self.labels)}"
 
 
+def _sha256(values: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(values, dtype=np.float64).tobytes()).hexdigest()
+
+
+@dataclass(frozen=True, eq=False)
+class SampleFile:
+    """The numbers of a per-sample file named in ``[flight]``, as read when the campaign was parsed.
+
+    The campaign keeps the numbers, not only the name: they are written into the store
+    (:mod:`mrpctl.campaign.store`) and shipped to the Dask workers with each chunk, so the runs, a
+    resume and a replay never depend on the file still being there. A resume re-reads the file and
+    refuses it if its numbers changed (the message names the file and both SHA-256 hashes).
+
+    Attributes
+    ----------
+    key : str
+        ``"disturbance_file"`` or ``"delay_file"``.
+    path : str
+        The file as named and resolved (relative names from the campaign file's folder); for a
+        campaign rebuilt from a store, the name the store recorded.
+    values : numpy.ndarray
+        Read-only: (n, 3) torques (N m) or (n,) delays (s), n = floor(t_final · rate) + 1.
+    sha256 : str
+        SHA-256 (hex) of ``values`` as C-ordered float64 bytes (the numbers, not the file's text).
+    """
+
+    key: str
+    path: str
+    values: np.ndarray = field(repr=False)
+    sha256: str = field(init=False, default="")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "values", readonly(self.values))
+        object.__setattr__(self, "sha256", _sha256(self.values))
+
+    def __str__(self) -> str:
+        return f"{self.key} {self.path} ({' x '.join(str(d) for d in self.values.shape)}, sha256 {self.sha256[:12]})"
+
+
 @dataclass(frozen=True, eq=False)
 class FlightOptions:
     """The flight loop's options shared by the runs (base values of the flight dispersions).
@@ -311,6 +386,12 @@ class FlightOptions:
         (3,) gyro bias (rad/s).
     jitter : tuple of float or None
         (tau_min, tau_max) of a jittered delay (s), tau_max = the scenario's tau.
+    disturbance_file : SampleFile or None
+        (n, 3) torque rows W_k (N m) shared by the runs, added to each run's constant torque.
+    delay_file : SampleFile or None
+        (n,) per-sample delays (s) shared by the runs (:attr:`delay_sequence`); exclusive with ``jitter``.
+    delay_sequence : DelayModel or None
+        The delay sequence of ``delay_file`` (tau_min = 1/rate, tau_max = tau), one object for every run.
     """
 
     actuator: ActuatorModel | None = None
@@ -319,6 +400,15 @@ class FlightOptions:
     rate_noise: float = 0.0
     gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     jitter: tuple[float, float] | None = None
+    disturbance_file: SampleFile | None = None
+    delay_file: SampleFile | None = None
+    delay_sequence: DelayModel | None = None
+
+    @property
+    def files(self) -> dict[str, SampleFile]:
+        """The per-sample files given, by key (``disturbance_file``, ``delay_file``)."""
+        found = {"disturbance_file": self.disturbance_file, "delay_file": self.delay_file}
+        return {key: value for key, value in found.items() if value is not None}
 
     def __str__(self) -> str:
         parts = [str(self.actuator) if self.actuator is not None else "no torque limit"]
@@ -327,6 +417,7 @@ class FlightOptions:
         parts.append("bias [" + ", ".join(f"{b:g}" for b in self.gyro_bias) + "] rad/s")
         if self.jitter is not None:
             parts.append(f"jitter [{self.jitter[0]:g}, {self.jitter[1]:g}] s")
+        parts.extend(str(each) for each in self.files.values())
         return "; ".join(parts)
 
 
@@ -410,6 +501,11 @@ class CampaignSpec:
         return (self.base.rule,) if self.rules is None else self.rules.rules
 
     @property
+    def files(self) -> dict[str, SampleFile]:
+        """The per-sample files of ``[flight]`` by key, with their numbers (empty without them)."""
+        return {} if self.flight is None else self.flight.files
+
+    @property
     def rule_labels(self) -> tuple[str, ...]:
         """:func:`rule_label` of each rule of :attr:`rule_list` (what the results store per rule index)."""
         return tuple(rule_label(rule) for rule in self.rule_list)
@@ -438,8 +534,27 @@ class CampaignSpec:
         return "\n".join(parts)
 
 
-def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignSpec:
+def parse_campaign(
+    data: dict[str, Any],
+    *,
+    name: str = "campaign",
+    base: str | Path | None = None,
+    files: Mapping[str, SampleFile] | None = None,
+) -> CampaignSpec:
     """Build a :class:`CampaignSpec` from the parsed contents of a campaign TOML file.
+
+    Parameters
+    ----------
+    data : dict
+        The parsed TOML.
+    name : str
+        The campaign's name when ``data`` has none.
+    base : path or None
+        The folder relative names of ``flight.disturbance_file`` / ``flight.delay_file`` are taken
+        from (:func:`load_campaign`: the campaign file's folder; None: the working directory).
+    files : mapping of str to SampleFile, optional
+        The numbers of those files as read before (:attr:`CampaignSpec.files`, from a store or shipped
+        to a Dask worker): used instead of reading the files, and checked as if read.
 
     Raises
     ------
@@ -448,6 +563,7 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
     """
     if not isinstance(data, dict):
         raise SpecificationError(f"campaign must be a table, got {type(data).__name__}")
+    folder = None if base is None else Path(base)
     source = copy.deepcopy(data)
     scenario_part = {k: v for k, v in data.items() if k not in _CAMPAIGN_KEYS}
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
@@ -460,8 +576,8 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
             "(see design/campaigns.md), not as scenario tables"
         )
     scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
-    base = parse_scenario(scenario_part, name=name)
-    base = base.with_rule(parse_rule("[rule]", data["rule"]))
+    nominal = parse_scenario(scenario_part, name=name)
+    nominal = nominal.with_rule(parse_rule("[rule]", data["rule"]))
     for key in ("count", "seed"):
         if key not in data:
             raise SpecificationError(f"campaign needs {key} (an integer)")
@@ -497,7 +613,7 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
         if "range" not in table:
             raise SpecificationError("[dispersions.tau] needs range = [low, high] (s)")
         low, high = _interval("tau.range", table["range"], low=0.0)
-        period = 1.0 / base.rate
+        period = 1.0 / nominal.rate
         step = finite_scalar("tau.step", table.get("step", period))
         multiple = step / period
         if step <= 0.0 or abs(multiple - round(multiple)) > 1e-9 * max(1.0, multiple):
@@ -522,10 +638,10 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
         repeated = sorted({label for label in labels if labels.count(label) > 1})
         if repeated:
             raise SpecificationError(f"dispersions.rule.rules: {repeated[0]!r} is listed twice")
-    flight = _flight_options(data["flight"], base) if "flight" in data else None
+    flight = _flight_options(data["flight"], nominal, folder, files or {}) if "flight" in data else None
     flight_dispersion = _flight_dispersion(tables)
     spec = CampaignSpec(
-        base=base,
+        base=nominal,
         count=count,
         seed=seed,
         attitude=attitude,
@@ -538,7 +654,7 @@ def parse_campaign(data: dict[str, Any], *, name: str = "campaign") -> CampaignS
         rules=rules,
         flight=flight,
         flight_dispersion=flight_dispersion,
-        predictor=_predictor(data, base, rules.rules if rules is not None else (base.rule,)),
+        predictor=_predictor(data, nominal, rules.rules if rules is not None else (nominal.rule,)),
     )
     _check_flight(spec)
     _check_predictor(spec)
@@ -585,10 +701,65 @@ def _check_predictor(spec: CampaignSpec) -> None:
             "flight.jitter does not apply with the predictor: it runs with the constant delay tau only "
             "(its correction needs the age of each measurement); remove flight.jitter"
         )
+    if spec.predictor is not None and spec.flight is not None and spec.flight.delay_file is not None:
+        raise SpecificationError(
+            "flight.delay_file does not apply with the predictor: it runs with the constant delay tau only "
+            "(its correction needs the age of each measurement); remove flight.delay_file"
+        )
+    if spec.predictor is not None and spec.flight is not None and spec.flight.disturbance_file is not None:
+        raise SpecificationError(
+            "flight.disturbance_file does not apply with the predictor: it takes one constant torque "
+            "(flight.disturbance), not one per sample; remove flight.disturbance_file"
+        )
 
 
-def _flight_options(table: Any, base: Scenario) -> FlightOptions:
+def _sample_file(
+    table: dict[str, Any], key: str, folder: Path | None, files: Mapping[str, SampleFile]
+) -> tuple[str, np.ndarray]:
+    """The name and numbers of the per-sample file ``flight.<key>``: as given in ``files``, or read
+    (relative to ``folder``) by the scenario files' reader :func:`mrpctl.scenario.samples_file`."""
+    where = f"flight.{key}"
+    given = files.get(key)
+    if given is not None:
+        return given.path, finite_array(f"{where} ({given.path})", given.values)
+    value = table[key]
+    path = value if not isinstance(value, str) or folder is None or Path(value).is_absolute() else folder / value
+    return str(path), samples_file(value, where, base=folder)
+
+
+def _flight_files(
+    table: dict[str, Any], base: Scenario, folder: Path | None, files: Mapping[str, SampleFile]
+) -> tuple[SampleFile | None, SampleFile | None, DelayModel | None]:
+    """``flight.disturbance_file`` (n x 3, N m) and ``flight.delay_file`` (n delays, s), checked as a
+    scenario's ``[disturbance] torque_file`` and ``[delay] sequence_file`` are (same readers, same rules)."""
+    n = sample_count(base.t_final, base.rate)
+    torque = delays = model = None
+    if "disturbance_file" in table:
+        path, values = _sample_file(table, "disturbance_file", folder, files)
+        torque = SampleFile("disturbance_file", path, torque_rows(values, "flight.disturbance_file", n))
+    if "delay_file" in table:
+        if "jitter" in table:
+            raise SpecificationError(
+                "flight.jitter and flight.delay_file: the delay is either seeded jitter or the given per-sample "
+                "sequence, not both; remove one of them"
+            )
+        path, values = _sample_file(table, "delay_file", folder, files)
+        values = delay_values(values, "flight.delay_file", n)
+        try:
+            model = delay_sequence(values, "flight.delay_file", tau=base.tau, rate=base.rate)
+        except (SpecificationError, DimensionError) as exc:
+            message = str(exc)
+            prefix = "" if message.startswith("flight.delay_file") else f"flight.delay_file ({path}): "
+            raise type(exc)(prefix + message) from exc
+        delays = SampleFile("delay_file", path, values)
+    return torque, delays, model
+
+
+def _flight_options(
+    table: Any, base: Scenario, folder: Path | None = None, files: Mapping[str, SampleFile] | None = None
+) -> FlightOptions:
     table = _check_keys("[flight]", table, _FLIGHT_KEYS)
+    disturbance_file, delay_file, sequence = _flight_files(table, base, folder, files or {})
     actuator = None
     if "u_max" in table:
         mode_name = table.get("saturation", "scale")
@@ -620,6 +791,9 @@ def _flight_options(table: Any, base: Scenario) -> FlightOptions:
         rate_noise=nonnegative_scalar("flight.rate_noise", table.get("rate_noise", 0.0)),
         gyro_bias=readonly(finite_array("flight.gyro_bias", table.get("gyro_bias", [0.0, 0.0, 0.0]), (3,))),
         jitter=jitter,
+        disturbance_file=disturbance_file,
+        delay_file=delay_file,
+        delay_sequence=sequence,
     )
 
 
@@ -663,10 +837,16 @@ def _check_flight(spec: CampaignSpec) -> None:
             )
     if spec.flight is not None and spec.flight.jitter is not None and spec.tau is not None:
         raise SpecificationError("flight.jitter fixes tau (= tau_max); remove [dispersions.tau]")
+    if spec.flight is not None and spec.flight.delay_file is not None and spec.tau is not None:
+        raise SpecificationError(
+            "flight.delay_file fixes tau (= the largest delay the sequence may hold, the history depth); "
+            "remove [dispersions.tau]"
+        )
 
 
 def load_campaign(path: str | Path) -> CampaignSpec:
-    """Read a campaign TOML file (see ``examples/campaigns/*.toml``)."""
+    """Read a campaign TOML file (see ``examples/campaigns/*.toml``); relative names of per-sample files
+    (``flight.disturbance_file``, ``flight.delay_file``) are taken from its folder."""
     path = Path(path)
     try:
         with path.open("rb") as handle:
@@ -675,4 +855,4 @@ def load_campaign(path: str | Path) -> CampaignSpec:
         raise SpecificationError(f"campaign file not found: {path}") from exc
     except tomllib.TOMLDecodeError as exc:
         raise SpecificationError(f"campaign file {path} is not valid TOML: {exc}") from exc
-    return parse_campaign(data, name=path.stem)
+    return parse_campaign(data, name=path.stem, base=path.parent)

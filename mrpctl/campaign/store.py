@@ -10,12 +10,24 @@ Layout of ``<out>/campaign.zarr`` (a Zarr group written by xarray):
   cases), ``case``, and the flight loop's ``delta``, ``u_max`` (run, axis; inf: none),
   ``disturbance`` (run, axis), ``attitude_noise``, ``rate_noise``, ``gyro_bias`` (run, axis),
   ``noise_seed``, ``jitter_seed``;
+* with per-sample files in ``[flight]``, their numbers, shared by the runs: ``flight_disturbance_rows``
+  (sample, axis) of ``disturbance_file`` (N m) and ``flight_delays`` (sample,) of ``delay_file`` (s),
+  with ``attrs["flight_files"]`` (JSON: per key the file name as read and the SHA-256 of its numbers);
 * ``chunk_complete`` (chunk,), one Zarr chunk per campaign chunk, set to True only after
   all of that chunk's arrays are written. A chunk whose flag is False (never started, or
   half-written when the campaign was interrupted) is simulated again on resume.
 
 The store is created complete (filled with the "missing" values) in a temporary folder
 and renamed into place, so a store that exists always has all its arrays.
+
+**Per-sample files are stored, not referenced.** ``attrs["campaign"]`` holds the TOML as written,
+so ``flight.disturbance_file`` / ``flight.delay_file`` there are file names only. Their numbers are
+stored too (n x 3 float64 at most, n = floor(t_final · rate) + 1: 1.4 MB for a minute at 1 kHz, as
+much as the file itself; counted in the size check), and :func:`spec_of` rebuilds the campaign
+from them: a replay reproduces a run bit for bit even when the file was moved, edited or deleted
+(storing only a SHA-256 would make every replay depend on the file and refuse to work without it).
+The hash is kept as well, to refuse a **resume** whose file now holds other numbers (the message
+names the file and both hashes): the runs already stored would then disagree with the new ones.
 """
 
 from __future__ import annotations
@@ -32,7 +44,7 @@ import xarray as xr
 import zarr
 
 from mrpctl.campaign.simulation import METRICS
-from mrpctl.campaign.spec import CampaignSpec, parse_campaign
+from mrpctl.campaign.spec import CampaignSpec, SampleFile, parse_campaign
 from mrpctl.errors import SpecificationError
 
 __all__ = ["INPUTS", "STORE_NAME", "CampaignStore", "open_campaign"]
@@ -94,8 +106,21 @@ def versions() -> dict[str, str]:
     return found
 
 
+#: The store's array of each per-sample file of ``[flight]``: (name, dims).
+FILE_ARRAYS = {
+    "disturbance_file": ("flight_disturbance_rows", ("sample", "axis")),
+    "delay_file": ("flight_delays", ("sample",)),
+}
+
+
+def _file_attrs(spec: CampaignSpec) -> dict[str, Any]:
+    files = {key: {"path": each.path, "sha256": each.sha256} for key, each in spec.files.items()}
+    return {"flight_files": json.dumps(files, sort_keys=True)} if files else {}
+
+
 def _attrs(spec: CampaignSpec) -> dict[str, Any]:
     return {
+        **_file_attrs(spec),
         "campaign": json.dumps(spec.source, sort_keys=True),
         "name": spec.base.name,
         "count": spec.count,
@@ -122,6 +147,9 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
         data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=(chunk, *shape[1:])))
     for name, (dtype, missing) in METRICS.items():
         data[name] = (("run",), da.full((n,), missing, dtype=dtype, chunks=(chunk,)))
+    for key, each in spec.files.items():
+        name, dims = FILE_ARRAYS[key]
+        data[name] = (dims, np.array(each.values), {"units": "N m" if key == "disturbance_file" else "s"})
     dataset = xr.Dataset(data, coords={"run": np.arange(n, dtype=np.int64)}, attrs=_attrs(spec))
     for name, unit in _UNITS.items():
         dataset[name].attrs["units"] = unit
@@ -159,6 +187,7 @@ class CampaignStore:
                 raise SpecificationError(
                     f"out: {self.path} holds another campaign ({attrs.get('name')!r}); choose a new --out folder"
                 )
+            _check_files(self.path, stored, spec)
             stored_chunk = int(str(stored["chunk_complete"].attrs["runs_per_chunk"]))
             if chunk is not None and chunk != stored_chunk:
                 raise SpecificationError(
@@ -178,7 +207,7 @@ class CampaignStore:
         temporary = self.out / (STORE_NAME + ".tmp")
         if temporary.exists():
             shutil.rmtree(temporary)
-        estimate = self.spec.count * bytes_per_run()
+        estimate = self.spec.count * bytes_per_run() + sum(each.values.nbytes for each in self.spec.files.values())
         free = shutil.disk_usage(self.out).free
         if estimate > free // 2:
             raise SpecificationError(
@@ -190,6 +219,9 @@ class CampaignStore:
         chunks = -(-self.spec.count // self.chunk)
         dataset["chunk_complete"] = (("chunk",), np.zeros(chunks, dtype=bool), {"runs_per_chunk": self.chunk})
         encoding = {name: {"chunks": (self.chunk, *dataset[name].shape[1:])} for name in dataset.data_vars}
+        for name, _ in FILE_ARRAYS.values():
+            if name in dataset:  # shared by the runs: one Zarr chunk
+                encoding[name] = {"chunks": dataset[name].shape}
         encoding["chunk_complete"] = {"chunks": (1,)}
         import dask
 
@@ -268,6 +300,39 @@ def _available_memory() -> int | None:
     return None
 
 
+def _check_files(path: Path, stored: Any, spec: CampaignSpec) -> None:
+    """Refuse to resume a store whose per-sample files held other numbers than the files read now."""
+    recorded = json.loads(str(stored.attrs.get("flight_files", "{}")))
+    for key, each in spec.files.items():
+        old = recorded.get(key, {}).get("sha256")
+        if old != each.sha256:
+            raise SpecificationError(
+                f"flight.{key}: {each.path} is not the file this campaign was started with: its numbers have "
+                f"SHA-256 {each.sha256}, the store at {path} holds {old}; restore the file or choose a new --out folder"
+            )
+
+
+def stored_files(dataset: xr.Dataset) -> dict[str, SampleFile]:
+    """The per-sample files' numbers a results dataset holds (by ``[flight]`` key; empty without them)."""
+    recorded = json.loads(str(dataset.attrs.get("flight_files", "{}")))
+    found = {}
+    for key, (name, _dims) in FILE_ARRAYS.items():
+        if name in dataset:
+            each = SampleFile(key, str(recorded.get(key, {}).get("path", key)), np.asarray(dataset[name].values))
+            expected = recorded.get(key, {}).get("sha256")
+            if each.sha256 != expected:
+                raise SpecificationError(
+                    f"flight.{key}: the store's {name} has SHA-256 {each.sha256}, but attrs['flight_files'] records "
+                    f"{expected}: the store was modified"
+                )
+            found[key] = each
+    return found
+
+
 def spec_of(dataset: xr.Dataset) -> CampaignSpec:
-    """The campaign specification stored in a results dataset."""
-    return parse_campaign(json.loads(dataset.attrs["campaign"]), name=str(dataset.attrs.get("name", "campaign")))
+    """The campaign specification stored in a results dataset (per-sample files from the store, never re-read)."""
+    return parse_campaign(
+        json.loads(dataset.attrs["campaign"]),
+        name=str(dataset.attrs.get("name", "campaign")),
+        files=stored_files(dataset),
+    )
