@@ -82,14 +82,19 @@ def _spacecraft(inertia: np.ndarray) -> list[Spacecraft]:
 
 
 def _flight_key(models: dict[str, Any] | None) -> Any:
-    """Runs with equal flight models share one simulate_batch call (the models are per call)."""
+    """Runs with equal flight models share one simulate_batch call (the models are per call).
+
+    A constant torque w is not part of the key: runs that differ only in w (``[dispersions.disturbance]``)
+    share one call with one w per run (simulate_batch's per-run constants, on the lanes). With a
+    ``disturbance_file`` the call's rows are W_k + w, so w is.
+    """
     if models is None:
         return None
     actuator, sensor, delay = models["actuator"], models["sensor"], models["delay"]
     rows = models.get("disturbance_rows")  # shared by the runs (one array): its identity names it
     return (
         None if actuator is None else (actuator.u_max.tobytes(), actuator.norm_limit, actuator.mode),
-        np.asarray(models["disturbance"]).tobytes(),
+        None if rows is None else np.asarray(models["disturbance"]).tobytes(),
         None if rows is None else id(rows),
         (sensor.attitude_noise, sensor.rate_noise, sensor.gyro_bias.tobytes(), 0 if sensor.ideal else sensor.seed),
         None if delay is None else (delay.kind, delay.tau_min, delay.tau_max, delay.seed, id(delay.delays)),
@@ -161,6 +166,10 @@ def simulate_runs(
     def call(members: list[int], **extra: Any) -> None:
         given = models[members[0]]
         found = {} if given is None else flight_keywords(given)
+        if given is not None and given.get("disturbance_rows") is None:
+            torques = [np.asarray((models[i] or given)["disturbance"], dtype=np.float64) for i in members]
+            if any(not np.array_equal(torque, torques[0]) for torque in torques[1:]):
+                found["disturbance"] = torques  # one constant w per run, each run as simulate with its own
         batch = _batch(
             [crafts[i] for i in members],
             K[members],
