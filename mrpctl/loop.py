@@ -778,8 +778,9 @@ def closed_loop_functions(
         a function of time, makes w_k an input ``torque`` of ``sample`` (3) and ``chunk`` (3 × max(d, 1))),
         :class:`~mrpctl.flight.SensorModel`, :class:`~mrpctl.flight.DelayModel`.
     predictor : mrpctl.Predictor, keyword-only
-        The predictor controller (with ``rule=OnPredicted(alpha)``; actuator, disturbance and sensor
-        allowed, no delay model): ``sample`` and ``chunk`` are the engine's predictor sample with K,
+        The predictor controller (with ``rule=OnPredicted(alpha)``; actuator, disturbance (constant, or
+        per sample: the ``torque`` input of ``sample`` and ``chunk``, plant only) and sensor allowed,
+        no delay model): ``sample`` and ``chunk`` are the engine's predictor sample with K,
         α, τ, J_m and the flight constants bound, and ``predictor_controller``, ``prediction``,
         ``model_step`` and ``sensor`` are the flight-software pieces (see :func:`_predictor_loop`).
 

@@ -374,7 +374,8 @@ def simulate(
         result's ``u`` is then the applied torque, ``saturated_fraction`` and
         ``peak_command`` report the limits.
     disturbance : mrpctl.flight.Disturbance or array_like (3,) or (n, 3), keyword-only
-        A body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)`` only):
+        A body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)``, or the
+        predictor: there on the plant only, never on the controller's model copy):
         constant (3,), one row per sample (n, 3), or ``Disturbance(function=w)`` with w(t) of the
         sample times (evaluated slice by slice); the per-sample forms are streamed per slice
         like the noise (compiled engine only; :func:`simulate_batch` takes them too, shared or per run).
@@ -391,7 +392,8 @@ def simulate(
         The predictor controller (``design/predictor.md``): u = K x̂ with x̂ the model copy's state
         corrected by the delayed measurement on the rotation group, with ``rule=OnPredicted(alpha)``
         (the switch is decided on the prediction). Runs with ``actuator`` (the copy is driven by
-        the applied torque), ``disturbance`` and ``sensor``; needs ``history="constant"``, no
+        the applied torque), ``disturbance`` (constant or per sample; the plant's only) and ``sensor``;
+        needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
 
     Returns
@@ -587,7 +589,8 @@ def simulate_batch(
     predictor : mrpctl.Predictor, keyword-only
         The predictor controller (as in :func:`simulate`), shared by every run; each rule must
         then be a :class:`mrpctl.OnPredicted`. Predictor runs take the scalar engine (on the thread
-        pool), also when ``trajectories`` is False.
+        pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
+        (shared or per run), each run streaming its own rows.
 
     Returns
     -------
