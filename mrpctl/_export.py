@@ -149,6 +149,12 @@ _PREDICTOR_DESCRIPTIONS = {
     "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's ring entries "
     "(m_{k-d}; z_{k-d}), ..., oldest first (12 x d), noise one column (theta_k; eta_k) per sample",
 }
+# With a per-sample disturbance the predictor's sample and chunk take w_k as a last input `torque` (plant only).
+_PREDICTOR_TORQUE_DESCRIPTIONS = {
+    "sample": _PREDICTOR_DESCRIPTIONS["sample"] + "; torque = w_k, the per-sample disturbance (N m, body frame), "
+    "added to u on the plant only (the model copy is driven by u alone)",
+    "chunk": _PREDICTOR_DESCRIPTIONS["chunk"] + ", torque one column w_k (N m) per sample",
+}
 
 
 # =============================================================================== result
@@ -264,7 +270,9 @@ def export(
         Export the predictor loop (with ``rule=OnPredicted(alpha)``; actuator, disturbance and sensor
         allowed): :data:`PREDICTOR_EXPORTED_FUNCTIONS`, with ``predictor_controller`` (and its pieces
         ``prediction`` and ``model_step``) for flight software, and a ``predictor`` section in the
-        manifest (model inertia, τ, α, the memory and delay-line layouts).
+        manifest (model inertia, τ, α, the memory and delay-line layouts). A per-sample disturbance
+        is the ``torque`` input of ``sample`` and ``chunk`` here too (plant only; named in
+        ``predictor.disturbance``).
     overwrite : bool, keyword-only
         Allow a non-empty ``out_dir``: the previous export in it (the names listed in the
         module docstring) is replaced as a whole, a library that is not rebuilt disappears,
@@ -587,6 +595,8 @@ def _manifest(
     descriptions = _DESCRIPTIONS if closed.flight is None else _FLIGHT_DESCRIPTIONS
     if closed.predictor is not None:
         descriptions = _PREDICTOR_DESCRIPTIONS
+        if "torque" in functions["sample"].name_in():
+            descriptions = {**_PREDICTOR_DESCRIPTIONS, **_PREDICTOR_TORQUE_DESCRIPTIONS}
     elif "torque" in functions["sample"].name_in():
         descriptions = {**_FLIGHT_DESCRIPTIONS, **_TORQUE_DESCRIPTIONS}
     manifest: dict[str, Any] = {

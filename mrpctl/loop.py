@@ -371,10 +371,11 @@ def predictor_core_function(
     saturation: Saturation = Saturation.SCALE,
     sensor: bool = False,
     limited: bool = True,
+    torque_input: bool = False,
 ) -> ca.Function:
     """One sample of the predictor loop (issue 13; ``design/predictor.md``, form (b)) (pure SX).
 
-    ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight[, noise]) ->
+    ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight[, noise][, torque]) ->
     (x_next, memory_next, x_meas, u, switched, ring)``: memory of :data:`PREDICTOR_MEMORY_SIZE`
     (1, 1, σ̂_prev, the flight sample's actuator accumulators, the model copy z); ``x_delayed`` and
     ``ring`` are entries of :data:`PREDICTOR_RING_WIDTH`: (m_k, z_k), read back as (y_k, z_{k−d}) =
@@ -382,7 +383,9 @@ def predictor_core_function(
     w (3), gyro bias (3), τ, J_m, J_m⁻¹) with the model's inertia in the layout ``model_inertia``;
     ``noise`` (with ``sensor``) as in :func:`flight_core_function`. Without ``limited`` the
     actuator is left out of the expressions (u = u_c; u_max, u_norm unused), which saves its
-    libm calls. At sample k:
+    libm calls. With ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the
+    sample (a per-sample disturbance streamed by the engine; the constant w in ``flight`` is then
+    unused); like the constant w it acts on the plant only. At sample k:
 
     1. plant bookkeeping (``OnCurrent``, no physical effect): x_meas, recorded in the result;
     2. the sensor (with ``sensor``): m_k, else m_k = x_meas;
@@ -394,7 +397,8 @@ def predictor_core_function(
        the sample's ``switched``;
     5. u_c = K [σ̂; ω̂/4]; the actuator gives the applied torque u; the plant is integrated with
        u + w (``substeps`` RK4 substeps), the model copy with u alone by one RK4 step of J_m, and
-       kept in the short set: z_{k+1} = short(RK4_m(z_k, u)).
+       kept in the short set: z_{k+1} = short(RK4_m(z_k, u)). The controller does not know w: the
+       copy never sees it, it enters the prediction only through the measurement y.
     """
     step = step_function(spacecraft, period, substeps, inertia=inertia)
     model_step = step_function(spacecraft, period, 1, inertia=model_inertia)
@@ -406,6 +410,8 @@ def predictor_core_function(
     extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
     flight = ca.SX.sym("flight", predictor_constants_size(model_inertia))
     noise = ca.SX.sym("noise", NOISE_SIZE)
+    torque = ca.SX.sym("torque", INPUT_SIZE)
+    w = torque if torque_input else flight[4:7]
     per_matrix = 3 if model_inertia is InertiaInput.DIAGONAL else 9
     start = FLIGHT_CONSTANTS_SIZE + 1
     model_j = flight[start : start + per_matrix]
@@ -423,9 +429,9 @@ def predictor_core_function(
 
     command = gain @ x_hat
     if limited:
-        u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], flight[4:7])
+        u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
     else:
-        u, u_plant, saturated = command, command + flight[4:7], ca.DM(0.0)
+        u, u_plant, saturated = command, command + w, ca.DM(0.0)
     x_next = step(x_meas, u_plant, *extra)
     z_next = model_step(z, u, model_j, model_j_inv)
     z_next = ca.vertcat(short_expr(z_next[0:3]), z_next[3:6])
@@ -443,11 +449,15 @@ def predictor_core_function(
     )
     inputs = [x, memory, x_delayed, gain, parameters, *extra, flight] + ([noise] if sensor else [])
     names = ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"]
+    names += ["noise"] if sensor else []
+    if torque_input:
+        inputs.append(torque)
+        names.append("torque")
     return ca.Function(
         "core",
         inputs,
         [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)],
-        names + (["noise"] if sensor else []),
+        names,
         ["x_next", "memory_next", "x_meas", "u", "switched", "ring"],
     )
 
@@ -768,8 +778,9 @@ def closed_loop_functions(
         a function of time, makes w_k an input ``torque`` of ``sample`` (3) and ``chunk`` (3 × max(d, 1))),
         :class:`~mrpctl.flight.SensorModel`, :class:`~mrpctl.flight.DelayModel`.
     predictor : mrpctl.Predictor, keyword-only
-        The predictor controller (with ``rule=OnPredicted(alpha)``; actuator, disturbance and sensor
-        allowed, no delay model): ``sample`` and ``chunk`` are the engine's predictor sample with K,
+        The predictor controller (with ``rule=OnPredicted(alpha)``; actuator, disturbance (constant, or
+        per sample: the ``torque`` input of ``sample`` and ``chunk``, plant only) and sensor allowed,
+        no delay model): ``sample`` and ``chunk`` are the engine's predictor sample with K,
         α, τ, J_m and the flight constants bound, and ``predictor_controller``, ``prediction``,
         ``model_step`` and ``sensor`` are the flight-software pieces (see :func:`_predictor_loop`).
 
@@ -796,7 +807,7 @@ def closed_loop_functions(
         return _predictor_loop(
             spacecraft, gain, rule, d, float(tau), rate, substeps, actuator, disturbance, sensor, delay, predictor
         )
-    options, saturation = _flight_options(rule, actuator, disturbance, sensor, per_sample=True)
+    options, saturation = _flight_options(rule, actuator, disturbance, sensor)
     sequence = getattr(delay, "delays", None)
     horizon = 1 if sequence is None else len(sequence)
     varying = _varying_delay(rule, delay, d, rate, horizon)
@@ -955,6 +966,9 @@ def _predictor_loop(
       the engine's sample (:func:`predictor_core_function`); memory of :data:`PREDICTOR_MEMORY_LAYOUT`,
       ``x_delayed`` = (m_{k−d}; z_{k−d}) (12), ``ring`` = (m_k; z_k), the next entry of the delay line;
     * ``chunk(x, memory, history, noise)``: max(d, 1) samples (``mapaccum``), ``history`` 12 × d;
+    * with a per-sample disturbance (rows or a function of time) both take w_k as a last input
+      ``torque`` (3 N m; chunk: 3 × max(d, 1), one column per sample), added to u on the plant only
+      (``step(x, u + w_k)``; the model copy and ``predictor_controller`` never see it);
     * ``predictor_controller(y, z_delayed, z, sigma_prev) -> (u, u_command, x_hat, switched, z_next)``:
       what flight software runs each sample, from the delayed measurement y and its own record of the
       model copy: :func:`prediction_expr`, u_c = K x̂, the actuator, z_{k+1} = short(RK4_m(z_k, u));
@@ -965,26 +979,37 @@ def _predictor_loop(
     The pieces are written from the same builders in the same order as ``sample``.
     """
     from mrpctl.simulation._engine import predictor_constants
-    from mrpctl.simulation._simulate import _check_predictor, _flight_constants
+    from mrpctl.simulation._simulate import _check_predictor, _flight_constants, _predictor_disturbance
 
     checked = _check_predictor(predictor, rule, "constant", delay, compiled=False)
     assert checked is not None
+    disturbance = _predictor_disturbance(disturbance, None)
+    per_sample = disturbance is not None and not disturbance.constant
     options, saturation = _flight_constants(actuator, disturbance, sensor)
     constants_array = predictor_constants(options, tau, checked.model)
     constants = ca.DM(constants_array)
     period = 1.0 / rate
     model_kind = inertia_input(checked.model)
     core = predictor_core_function(
-        spacecraft, d, period, substeps, model_inertia=model_kind, saturation=saturation, sensor=True
+        spacecraft,
+        d,
+        period,
+        substeps,
+        model_inertia=model_kind,
+        saturation=saturation,
+        sensor=True,
+        torque_input=per_sample,
     )
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", PREDICTOR_MEMORY_SIZE)
     x_delayed = ca.SX.sym("x_delayed", PREDICTOR_RING_WIDTH)
     noise = ca.SX.sym("noise", NOISE_SIZE)
+    torque = [ca.SX.sym("torque", INPUT_SIZE)] if per_sample else []  # w_k, the per-sample disturbance
     alpha = ca.DM(rule.parameters())
-    bound = list(core(x, memory, x_delayed, ca.DM(gain), alpha, constants, noise))
+    bound = list(core(x, memory, x_delayed, ca.DM(gain), alpha, constants, noise, *torque))
     outputs = ["x_next", "memory_next", "x_meas", "u", "switched", "ring"]
-    sample = ca.Function("sample", [x, memory, x_delayed, noise], bound, ["x", "memory", "x_delayed", "noise"], outputs)
+    names = ["x", "memory", "x_delayed", "noise"] + (["torque"] if per_sample else [])
+    sample = ca.Function("sample", [x, memory, x_delayed, noise, *torque], bound, names, outputs)
 
     length = max(d, 1)
     accumulated = sample.mapaccum("chunk_samples", length, 2)
@@ -992,12 +1017,13 @@ def _predictor_loop(
     mx_memory = ca.MX.sym("memory", PREDICTOR_MEMORY_SIZE)
     history = ca.MX.sym("history", PREDICTOR_RING_WIDTH, length)
     mx_noise = ca.MX.sym("noise", NOISE_SIZE, length)
-    xs, memories, states, u_all, switched_all, ring = accumulated(mx_x, mx_memory, history, mx_noise)
+    mx_torque = [ca.MX.sym("torque", INPUT_SIZE, length)] if per_sample else []  # one column w_k per sample
+    xs, memories, states, u_all, switched_all, ring = accumulated(mx_x, mx_memory, history, mx_noise, *mx_torque)
     chunk = ca.Function(
         "chunk",
-        [mx_x, mx_memory, history, mx_noise],
+        [mx_x, mx_memory, history, mx_noise, *mx_torque],
         [xs[:, length - 1], memories[:, length - 1], states, ring, u_all, switched_all],
-        ["x", "memory", "history", "noise"],
+        [*names[0:2], "history", *names[3:]],
         ["x_end", "memory_end", "states", "ring", "u", "switched"],
     )
 
@@ -1040,7 +1066,7 @@ def _predictor_loop(
     x_meas = ca.SX.sym("x_meas", STATE_SIZE)
     flight = FlightOptions(
         actuator=actuator,
-        disturbance=_as_disturbance(disturbance),
+        disturbance=disturbance,
         sensor=sensor,
         delay=None,
         constants=readonly(constants_array[0:FLIGHT_CONSTANTS_SIZE]),

@@ -18,8 +18,9 @@ Predictor forms (see design/predictor.md):
 * ``"smith"``: the same without the τ δω rotation (the textbook Smith correction x̂ = z_k + (y − z_{k−d})).
 
 Flight-loop options (for the compiled engine's predictor sample): ``u_max`` clips each torque axis (the
-torque actually applied drives both the plant and the model copy), ``disturbance`` is a constant torque
-added on the plant only, and ``noise`` = (θ (n, 3), η (n, 3), b (3,)) makes the measurement
+torque actually applied drives both the plant and the model copy), ``disturbance`` is a torque added on
+the plant only (never on the model copy: the controller does not know it), constant (3,) or one row w_k
+per sample (n, 3), held over [t_k, t_{k+1}) like u_k, and ``noise`` = (θ (n, 3), η (n, 3), b (3,)) makes the measurement
 [B̃N] = exp(−[θ_k×]) [BN] (short set), ω̃ = ω + b + η_k; the delayed measurement is then y_k = m̃_{k−d}.
 
 Switching on the predicted attitude: σ̂_k is taken in the set nearest σ̂_{k−1} (continuity); with
@@ -212,7 +213,10 @@ def run(
         if u_max is not None:
             u = np.clip(u, -u_max, u_max)
         us[k] = u
-        w = np.zeros(3) if disturbance is None else disturbance
+        if disturbance is None:
+            w = np.zeros(3)
+        else:
+            w = disturbance[k] if np.ndim(disturbance) == 2 else np.asarray(disturbance, float)
         x = to_short(rk4(inertia, inverse, x, u + w, h, plant_substeps))
         z = to_short(rk4(model, model_inverse, z, u, h, 1))
         if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > 1e6:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from flight_reference import _tumbles, reference_loop
 
-from mrpctl import OnPredicted, Predictor, paper, simulate, simulate_batch
+from mrpctl import paper, simulate
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
 from mrpctl.simulation import _engine
@@ -107,11 +107,8 @@ def test_per_sample_disturbance_refuses_bad_input() -> None:
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, disturbance=np.zeros((800, 3)), **common)
     with pytest.raises(DimensionError, match="torque"):
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, disturbance=np.zeros((N, 2)), **common)
-    # simulate_batch and export take it too (tests/test_flight_batch_disturbance.py, test_export_flight.py);
-    # the predictor does not
-    predicted = dict(common, rule=OnPredicted(1.0), predictor=Predictor(model=paper.SPACECRAFT))
-    with pytest.raises(DimensionError, match=r"the predictor\) a constant torque of shape \(3,\)"):
-        simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, disturbance=np.zeros((N, 3)), **predicted)
+    # simulate_batch and export take it too (tests/test_flight_batch_disturbance.py, test_export_flight.py),
+    # and so does the predictor (tests/test_predictor_torque.py)
 
 
 def _steps(t: np.ndarray) -> np.ndarray:
@@ -165,8 +162,4 @@ def test_function_of_time_refuses_bad_input() -> None:
             disturbance=Disturbance(function=lambda t: np.full((len(t), 3), np.nan)),
             **common,
         )
-    predicted = dict(common, rule=OnPredicted(1.0), predictor=Predictor(model=paper.SPACECRAFT))
-    with pytest.raises(DimensionError, match="function of time"):  # simulate_batch takes it; the predictor not
-        simulate_batch(
-            paper.SPACECRAFT, paper.GAIN, _tumbles(2, 1.0, 1), disturbance=Disturbance(function=_steps), **predicted
-        )
+    # simulate_batch and the predictor take a function too (tests/test_predictor_torque.py)

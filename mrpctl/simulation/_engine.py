@@ -327,7 +327,7 @@ class Engine:
         self.predictor = predictor is not None
         self.flight = isinstance(rule, Hysteretic) or self.predictor
         self._structure = (spacecraft, d, period, substeps, saturation, limited, disturbed)
-        self.torque_input = torque_input and self.flight and not self.predictor
+        self.torque_input = torque_input and self.flight
         self._sensor = sensor
         if predictor is not None:
             core = predictor_core_function(
@@ -340,6 +340,7 @@ class Engine:
                 saturation=saturation,
                 sensor=sensor,
                 limited=limited,
+                torque_input=self.torque_input,
             )
         elif self.flight:
             core = flight_core_function(
@@ -364,6 +365,7 @@ class Engine:
             label += f"_{saturation.value}"
         if predictor is not None:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
+            label += "_torque" if self.torque_input else ""
         elif self.flight:
             label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
             label += "_torque" if torque_input else ""
@@ -656,7 +658,8 @@ def engine(
     ``saturation`` (the actuator's mode) is part of the structure of the flight and predictor
     samples only. ``predictor``: the controller's model (its inertia layout is part of the
     structure, its values are run-time inputs) for the predictor sample, with a sensor port when
-    ``sensor`` and the actuator when ``limited``; the predictor needs a C compiler. The flight
+    ``sensor``, the actuator when ``limited`` and a per-sample ``torque`` input when ``torque_input``; the
+    predictor needs a C compiler. The flight
     sample (``rule`` a :class:`~mrpctl.flight.Hysteretic`) is specialised the same way, with a
     sensor port when ``sensor``, the actuator when ``limited`` and the disturbance add when
     ``disturbed`` (:func:`flight_structure` of a run's constants; one library per structure).
@@ -679,6 +682,7 @@ def engine(
         ) + ((sensor, limited, disturbed, torque_input) if flight else ())
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
+        key += ("torque",) if torque_input else ()  # without it the key (and the library) of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -693,7 +697,7 @@ def engine(
                 sensor=sensor,
                 limited=limited,
                 disturbed=disturbed,
-                torque_input=torque_input and model is None,
+                torque_input=torque_input,
             )
             if not found.compiled_code:
                 from mrpctl.simulation._vm import VirtualMachineEngine

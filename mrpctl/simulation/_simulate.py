@@ -138,7 +138,7 @@ def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: 
 
 
 def _flight_options(
-    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None, *, per_sample: bool = False
+    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None
 ) -> tuple[np.ndarray | None, Saturation]:
     """The flight sample's constants (u_max (3), u_norm, w (3), bias (3)) and the saturation mode."""
     if actuator is None and disturbance is None and sensor is None:
@@ -148,7 +148,7 @@ def _flight_options(
             "actuator, disturbance, sensor: the actuator, disturbance and sensor models run in the flight loop only; "
             f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
         )
-    return _flight_constants(actuator, disturbance, sensor, per_sample=per_sample)
+    return _flight_constants(actuator, disturbance, sensor)
 
 
 def _streamed_disturbance(disturbance: Any, n: int) -> Disturbance | None:
@@ -212,24 +212,17 @@ def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: 
     return flight_structure(options, sensor)
 
 
-def _flight_constants(
-    actuator: Any, disturbance: Any, sensor: Any, *, per_sample: bool = False
-) -> tuple[np.ndarray | None, Saturation]:
+def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.ndarray | None, Saturation]:
     """The checked actuator, disturbance and sensor models as the flight constants and the saturation mode.
 
-    ``per_sample``: an (n, 3) disturbance is accepted (streamed by the engine; w = 0 in the constants)."""
+    A per-sample disturbance ((n, 3) rows or a function of time; the flight loop and the predictor
+    stream it) leaves w = 0 in the constants."""
     if actuator is None and disturbance is None and sensor is None:
         return None, Saturation.SCALE
     if actuator is not None and not isinstance(actuator, ActuatorModel):
         raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel or None, got {actuator!r}")
     if disturbance is not None and not isinstance(disturbance, Disturbance):
         disturbance = Disturbance(disturbance)
-    if disturbance is not None and not disturbance.constant and not per_sample:
-        raise DimensionError(
-            "disturbance: a per-sample torque (n, 3) runs in the flight loop (rule=Hysteretic: simulate, "
-            "simulate_batch, export) only; here (the predictor) a constant torque of shape (3,) is needed, got "
-            f"{'a function of time' if disturbance.shape is None else disturbance.shape}"
-        )
     if sensor is not None and not isinstance(sensor, SensorModel):
         raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
     options = np.zeros(10)
@@ -242,6 +235,23 @@ def _flight_constants(
     if disturbance is not None and disturbance.constant:
         options[4:7] = disturbance.torque
     return options, Saturation.SCALE if actuator is None else actuator.mode
+
+
+def _predictor_disturbance(disturbance: Any, n: int | None, name: str = "disturbance") -> Disturbance | None:
+    """The predictor run's disturbance as a :class:`Disturbance` (None: none), per-sample rows checked
+    against the n samples of the run (None: an export, any number of rows); an error names ``name``
+    (the parameter, or ``disturbance[i]``)."""
+    if disturbance is None:
+        return None
+    try:
+        if not isinstance(disturbance, Disturbance):
+            disturbance = Disturbance(disturbance)
+        if n is not None:
+            disturbance.check_horizon(n)
+    except ValueError as error:
+        message = str(error)
+        raise type(error)(message if message.startswith(name) else f"{name}: {message}") from error
+    return disturbance
 
 
 def _check_predictor(predictor: Any, rule: Any, history: Any, delay: Any, *, compiled: bool = True) -> Predictor | None:
@@ -364,7 +374,8 @@ def simulate(
         result's ``u`` is then the applied torque, ``saturated_fraction`` and
         ``peak_command`` report the limits.
     disturbance : mrpctl.flight.Disturbance or array_like (3,) or (n, 3), keyword-only
-        A body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)`` only):
+        A body-frame torque w (N m) added to the applied torque (``rule=Hysteretic(...)``, or the
+        predictor: there on the plant only, never on the controller's model copy):
         constant (3,), one row per sample (n, 3), or ``Disturbance(function=w)`` with w(t) of the
         sample times (evaluated slice by slice); the per-sample forms are streamed per slice
         like the noise (compiled engine only; :func:`simulate_batch` takes them too, shared or per run).
@@ -381,7 +392,8 @@ def simulate(
         The predictor controller (``design/predictor.md``): u = K x̂ with x̂ the model copy's state
         corrected by the delayed measurement on the rotation group, with ``rule=OnPredicted(alpha)``
         (the switch is decided on the prediction). Runs with ``actuator`` (the copy is driven by
-        the applied torque), ``disturbance`` and ``sensor``; needs ``history="constant"``, no
+        the applied torque), ``disturbance`` (constant or per sample; the plant's only) and ``sensor``;
+        needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
 
     Returns
@@ -408,12 +420,14 @@ def simulate(
     limit = _memory_limit(memory_limit)
     checked = _check_predictor(predictor, rule, history, delay)
     if checked is None:
-        options, saturation = _flight_options(rule, actuator, disturbance, sensor, per_sample=True)
+        options, saturation = _flight_options(rule, actuator, disturbance, sensor)
         varying = _varying_delay(rule, delay, d, rate, n)
         streamed = _streamed_disturbance(disturbance, n)
     else:
+        disturbance = _predictor_disturbance(disturbance, n)
         options, saturation = _flight_constants(actuator, disturbance, sensor)
-        options, varying, streamed = predictor_constants(options, float(tau), checked.model), None, None
+        options, varying = predictor_constants(options, float(tau), checked.model), None
+        streamed = None if disturbance is None or disturbance.constant else disturbance
     width = 1 if checked is None else 2
     records = checked is None and isinstance(rule, Hysteretic)
     _check_memory(
@@ -575,7 +589,8 @@ def simulate_batch(
     predictor : mrpctl.Predictor, keyword-only
         The predictor controller (as in :func:`simulate`), shared by every run; each rule must
         then be a :class:`mrpctl.OnPredicted`. Predictor runs take the scalar engine (on the thread
-        pool), also when ``trajectories`` is False.
+        pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
+        (shared or per run), each run streaming its own rows.
 
     Returns
     -------
@@ -634,34 +649,38 @@ def simulate_batch(
         estimate += lane_bytes(n_runs, max(samples_by_run), workers)
     _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
 
-    options, saturation = None, Saturation.SCALE
+    saturation = Saturation.SCALE
     checked = None
     for one in rules:
         checked = _check_predictor(predictor, one, history, delay)
-    by_delay: dict[float, np.ndarray] = {}
     per_run = _per_run_disturbances(disturbance, n_runs, n)
-    if per_run is not None and checked is not None:
-        raise SpecificationError(
-            "disturbance: the predictor takes one constant torque (3,) shared by the runs, not one per run"
-        )
     shared = per_run is None
     if shared and disturbance is not None and not isinstance(disturbance, Disturbance) and checked is None:
         disturbance = Disturbance(disturbance)  # checked and copied once, shared by the runs
     items = [disturbance] * n_runs if per_run is None else per_run
     options_by_run: list[np.ndarray | None] = [None] * n_runs
     streamed_by_run: list[Disturbance | None] = [None] * n_runs
+    predictor_by_run: list[np.ndarray | None] = [None] * n_runs  # the predictor sample's constants per run
     if checked is None:
         for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
-            options_by_run[i], saturation = _flight_options(one, actuator, items[i], sensor, per_sample=True)
+            options_by_run[i], saturation = _flight_options(one, actuator, items[i], sensor)
             streamed_by_run[i] = _streamed_disturbance(items[i], n) if (i == 0 or not shared) else streamed_by_run[0]
-        options = options_by_run[0]
         varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
-    else:
-        options, saturation = _flight_constants(actuator, disturbance, sensor)
-        options_by_run = [options] * n_runs
+    else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
+        for i in range(n_runs):
+            if i == 0 or not shared:
+                item = _predictor_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]")
+                options_by_run[i], saturation = _flight_constants(actuator, item, sensor)
+                streamed_by_run[i] = None if item is None or item.constant else item
+            else:
+                options_by_run[i], streamed_by_run[i] = options_by_run[0], streamed_by_run[0]
         varying = [None] * n_runs
-        for value in set(float(v) for v in delays):
-            by_delay[value] = predictor_constants(options, value, checked.model)
+        made: dict[tuple[int, float], np.ndarray] = {}  # by (id of the run's constants, tau): alive during the call
+        for i in range(n_runs):
+            made_key = (id(options_by_run[i]), float(delays[i]))
+            if made_key not in made:
+                made[made_key] = predictor_constants(options_by_run[i], float(delays[i]), checked.model)
+            predictor_by_run[i] = made[made_key]
     if any(each is not None for each in streamed_by_run):
         if find_compiler() is None:
             raise CodegenError(
@@ -671,7 +690,7 @@ def simulate_batch(
         from mrpctl._vectorize import DEFAULT_WIDTH
 
         # each worker's torque rows of one slice (the lanes: W runs' rows side by side)
-        rows = INPUT_SIZE * (1 if trajectories else DEFAULT_WIDTH)
+        rows = INPUT_SIZE * (1 if trajectories or checked is not None else DEFAULT_WIDTH)
         _check_memory(
             estimate + workers * min(slice_samples(substeps), n) * rows * 8,
             limit,
@@ -760,7 +779,7 @@ def simulate_batch(
                 workspace=space,
                 switch_limit=n if keep == 1 else SWITCH_LIMIT,
                 stop=stop,
-                flight_options=options_by_run[i] if checked is None else by_delay[float(delays[i])],
+                flight_options=options_by_run[i] if checked is None else predictor_by_run[i],
                 sensor=sensor,
                 delay=varying[i],
                 rate=rate,
