@@ -606,7 +606,7 @@ class Disturbance:
         Instead of ``torque``: w(t) of a (m,) array of sample times t_k = k h (s) returning an
         (m, 3) array (N m), evaluated by the engine on each slice's times (so memory stays bounded
         by the slice; the function should be elementwise in t, e.g. NumPy ufuncs, so that the run
-        does not depend on how it is sliced). The flight loop only (:func:`mrpctl.simulate`,
+        does not depend on how it is sliced). The flight and predictor loops (:func:`mrpctl.simulate`,
         :func:`mrpctl.simulate_batch`, :func:`mrpctl.export`: there w_k is an input).
     """
 

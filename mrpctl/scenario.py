@@ -142,7 +142,7 @@ class Scenario:
         The loop as flown (``rule`` a :class:`~mrpctl.flight.Hysteretic`, or an
         :class:`~mrpctl.predictor.OnPredicted` without ``delay``):
         :class:`~mrpctl.flight.ActuatorModel`, :class:`~mrpctl.flight.SensorModel`,
-        :class:`~mrpctl.flight.Disturbance` (constant), :class:`~mrpctl.flight.DelayModel`
+        :class:`~mrpctl.flight.Disturbance` (constant or per sample), :class:`~mrpctl.flight.DelayModel`
         (seeded jitter with ``tau_max`` = ``tau``). None: not modelled.
     predictor : Predictor or None
         The predictor controller (``rule`` an :class:`~mrpctl.predictor.OnPredicted`, and then

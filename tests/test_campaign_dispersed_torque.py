@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mrpctl import Spacecraft, simulate
+from mrpctl import OnPredicted, Spacecraft, simulate
 from mrpctl.campaign import load_campaign, run_inputs
 from mrpctl.campaign import simulation as campaign_simulation
 from mrpctl.campaign._task import simulate_chunk
@@ -45,12 +45,17 @@ magnitude = [1.0, 2.0]
 """
 
 
+@pytest.mark.parametrize("predicted", [False, True], ids=["hysteretic", "predictor"])
 def test_runs_differing_only_in_torque_share_one_call_and_equal_simulate(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, predicted: bool
 ) -> None:
+    text = CAMPAIGN
+    if predicted:  # the predictor's runs: one constant torque each too (on the plant, not its model copy)
+        text = text.replace(f'type = "hysteretic"\ndelta = {DELTA}', 'type = "on-predicted"') + "[predictor]\n"
     path = tmp_path / "c.toml"
-    path.write_text(CAMPAIGN, encoding="utf-8")
+    path.write_text(text, encoding="utf-8")
     spec = load_campaign(path)
+    assert (spec.predictor is not None) == predicted
     calls: list[int] = []
     batch = campaign_simulation._batch
 
@@ -71,9 +76,10 @@ def test_runs_differing_only_in_torque_share_one_call_and_equal_simulate(
             inputs.gain_scale[i] * spec.base.K,
             inputs.x0[i],
             tau=TAU,
-            rule=Hysteretic(DELTA),
+            rule=OnPredicted(1.0) if predicted else Hysteretic(DELTA),
             t_final=T_FINAL,
             rate=RATE,
+            predictor=spec.predictor,
             disturbance=Disturbance(w[i]),
             actuator=spec.flight.actuator if spec.flight is not None else None,
             keep_every=None,

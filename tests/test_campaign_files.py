@@ -319,13 +319,40 @@ def test_bad_files_are_refused_naming_the_key(
         load_campaign(_bad(tmp_path, flight, files, extra))
 
 
-@pytest.mark.parametrize("key", ["delay_file", "disturbance_file"])
-def test_the_predictor_refuses_the_files(tmp_path: Path, key: str) -> None:
-    _csv(tmp_path / "f.csv", DELAYS if key == "delay_file" else ROWS)
-    path = _campaign(tmp_path, f'{key} = "f.csv"\n', "[predictor]\n")
+def test_the_predictor_refuses_the_delay_file(tmp_path: Path) -> None:
+    _csv(tmp_path / "f.csv", DELAYS)
+    path = _campaign(tmp_path, 'delay_file = "f.csv"\n', "[predictor]\n")
     path.write_text(path.read_text().replace('type = "hysteretic"\ndelta = 0.05', 'type = "on-predicted"'))
-    with pytest.raises(SpecificationError, match=rf"flight\.{key} does not apply with the predictor"):
+    with pytest.raises(SpecificationError, match=r"flight\.delay_file does not apply with the predictor"):
         load_campaign(path)
+
+
+def test_the_predictor_flies_the_disturbance_file(tmp_path: Path) -> None:
+    """The predictor takes a per-sample torque (on the plant): the campaign equals an independent
+    simulate_batch call with the predictor and the file's rows plus each run's constant torque."""
+    from mrpctl import OnPredicted
+
+    _csv(tmp_path / "w.csv", ROWS)
+    path = _campaign(tmp_path, 'disturbance = [0.5, 0.0, -0.25]\ndisturbance_file = "w.csv"\n', "[predictor]\n")
+    path.write_text(path.read_text().replace('type = "hysteretic"\ndelta = 0.05', 'type = "on-predicted"'))
+    spec = load_campaign(path)
+    chunk = simulate_chunk(spec, 0, spec.count)
+    inputs = run_inputs(spec, 0, spec.count)
+    batch = simulate_batch(
+        [Spacecraft(J) for J in inputs.inertia],
+        inputs.gain_scale[:, None, None] * spec.base.K[None],
+        inputs.x0,
+        tau=TAU,
+        rule=OnPredicted(1.0),
+        t_final=T_FINAL,
+        rate=RATE,
+        threads=1,
+        predictor=spec.predictor,
+        disturbance=ROWS + np.array([0.5, 0.0, -0.25]),
+    )
+    for name in METRICS:
+        assert np.asarray(getattr(batch, name)).tobytes() == chunk[name].tobytes(), name
+    assert (chunk["switch_count"] >= 1).sum() >= 1  # tumbles through 180 deg: switch metrics compared
 
 
 def test_cli_prints_one_line_and_exits_2_on_a_bad_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

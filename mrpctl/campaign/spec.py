@@ -48,9 +48,10 @@ The flight loop's options (``[flight]``; every rule must then be hysteretic)::
 a relative name is taken from the campaign file's folder, as in a scenario file). Each run's torque
 is w_k = W_k + w with W_k the file's row k, shared by the runs, and w its constant torque
 (``disturbance`` plus its ``[dispersions.disturbance]`` draw); the delay sequence is shared by the
-runs (``[dispersions.tau]``, ``jitter`` and the predictor are refused with it; the predictor also
-refuses ``disturbance_file``). The file's numbers are kept with the campaign (:class:`SampleFile`):
-the store holds them, so a replay never reads the file again (see :mod:`mrpctl.campaign.store`).
+runs (``[dispersions.tau]``, ``jitter`` and the predictor are refused with it; the predictor takes
+``disturbance_file``: the torque acts on the plant, not on its model copy). The file's numbers are
+kept with the campaign (:class:`SampleFile`): the store holds them, so a replay never reads the
+file again (see :mod:`mrpctl.campaign.store`).
 
 and their dispersions::
 
@@ -705,11 +706,6 @@ def _check_predictor(spec: CampaignSpec) -> None:
         raise SpecificationError(
             "flight.delay_file does not apply with the predictor: it runs with the constant delay tau only "
             "(its correction needs the age of each measurement); remove flight.delay_file"
-        )
-    if spec.predictor is not None and spec.flight is not None and spec.flight.disturbance_file is not None:
-        raise SpecificationError(
-            "flight.disturbance_file does not apply with the predictor: it takes one constant torque "
-            "(flight.disturbance), not one per sample; remove flight.disturbance_file"
         )
 
 
