@@ -104,20 +104,14 @@ def _dask(
         slots = 2 * max(1, len(client.scheduler_info().get("workers", {})) or 1)
         pending = iter(todo)
         futures = as_completed()
-        for index in pending:
+
+        def submit(index: int) -> None:  # the chunk's task: the spec's text and its files' numbers
             start, stop = store.bounds(index)
-            futures.add(
-                client.submit(
-                    chunk_on_worker,
-                    spec.source,
-                    spec.base.name,
-                    start,
-                    stop,
-                    spec.files,
-                    key=f"chunk-{index}",
-                    pure=False,
-                )
-            )
+            task = (spec.source, spec.base.name, start, stop, spec.files)
+            futures.add(client.submit(chunk_on_worker, *task, key=f"chunk-{index}", pure=False))
+
+        for index in pending:
+            submit(index)
             if futures.count() >= slots:
                 break
         for future in futures:
@@ -125,19 +119,7 @@ def _dask(
             del future
             following = next(pending, None)
             if following is not None:
-                start, stop = store.bounds(following)
-                futures.add(
-                    client.submit(
-                        chunk_on_worker,
-                        spec.source,
-                        spec.base.name,
-                        start,
-                        stop,
-                        spec.files,
-                        key=f"chunk-{following}",
-                        pure=False,
-                    )
-                )
+                submit(following)
     finally:
         client.close()
         if cluster is not None:
