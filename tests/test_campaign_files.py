@@ -382,19 +382,25 @@ def test_dask_workers_get_the_numbers_with_the_task(tmp_path: Path) -> None:
     assert "flight_delays" in dask.data_vars
 
 
-@pytest.mark.parametrize("predicted", [False, True], ids=["hysteretic", "predictor"])
+@pytest.mark.parametrize(
+    ("predicted", "file"), [(False, False), (True, False), (False, True)], ids=["hysteretic", "predictor", "file"]
+)
 def test_runs_differing_only_in_torque_share_one_call_and_equal_simulate(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, predicted: bool
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, predicted: bool, file: bool
 ) -> None:
     """Runs that differ only in their constant torque w ([dispersions.disturbance], no file) make one
     simulate_batch call with one w per run (before: one call per run, about 9x slower); each run still
     equals simulate of that run alone with its own w, bit for bit (the predictor's runs too: the torque
-    acts on the plant, not on its model copy)."""
+    acts on the plant, not on its model copy; with a disturbance_file each run flies W_k + w_i)."""
     from mrpctl import OnPredicted
     from mrpctl.campaign import simulation as campaign_simulation
 
     extra = "[dispersions.disturbance]\nmagnitude = [1.0, 2.0]\n" + ("[predictor]\n" if predicted else "")
-    path = _campaign(tmp_path, "disturbance = [0.5, 0.0, -0.25]\nu_max = [30.0, 30.0, 30.0]\n", extra)
+    flight = "disturbance = [0.5, 0.0, -0.25]\nu_max = [30.0, 30.0, 30.0]\n"
+    if file:
+        _csv(tmp_path / "w.csv", ROWS)
+        flight += 'disturbance_file = "w.csv"\n'
+    path = _campaign(tmp_path, flight, extra)
     if predicted:
         path.write_text(path.read_text().replace(f'type = "hysteretic"\ndelta = {DELTA}', 'type = "on-predicted"'))
     spec = load_campaign(path)
@@ -423,7 +429,7 @@ def test_runs_differing_only_in_torque_share_one_call_and_equal_simulate(
             t_final=T_FINAL,
             rate=RATE,
             predictor=spec.predictor,
-            disturbance=Disturbance(w[i]),
+            disturbance=Disturbance(ROWS + w[i] if file else w[i]),
             actuator=spec.flight.actuator,
             keep_every=None,
         )

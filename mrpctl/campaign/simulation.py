@@ -6,6 +6,7 @@ engine), so a campaign with dispersed inertia compiles one engine per delay, not
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -13,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl import simulate_batch
+from mrpctl.flight import Disturbance
 from mrpctl.predictor import Predictor
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
@@ -85,8 +87,9 @@ def _flight_key(models: dict[str, Any] | None) -> Any:
     """Runs with equal flight models share one simulate_batch call (the models are per call).
 
     A constant torque w is not part of the key: runs that differ only in w (``[dispersions.disturbance]``)
-    share one call with one w per run (simulate_batch's per-run constants, on the lanes). With a
-    ``disturbance_file`` the call's rows are W_k + w, so w is.
+    share one call with one w per run (simulate_batch's per-run constants, on the lanes; with a
+    ``disturbance_file`` each run's W_k + w as a function of the sample times, evaluated slice by
+    slice, so that no (runs, n, 3) array is made).
     """
     if models is None:
         return None
@@ -94,11 +97,15 @@ def _flight_key(models: dict[str, Any] | None) -> Any:
     rows = models.get("disturbance_rows")  # shared by the runs (one array): its identity names it
     return (
         None if actuator is None else (actuator.u_max.tobytes(), actuator.norm_limit, actuator.mode),
-        None if rows is None else np.asarray(models["disturbance"]).tobytes(),
         None if rows is None else id(rows),
         (sensor.attitude_noise, sensor.rate_noise, sensor.gyro_bias.tobytes(), 0 if sensor.ideal else sensor.seed),
         None if delay is None else (delay.kind, delay.tau_min, delay.tau_max, delay.seed, id(delay.delays)),
     )
+
+
+def _rows_plus(rows: np.ndarray, constant: np.ndarray, rate: float, times: np.ndarray) -> np.ndarray:
+    """W_k + w at the sample times t_k = k / rate of a slice (the same additions as ``rows + w``)."""
+    return rows[np.rint(times * rate).astype(np.int64)] + constant
 
 
 def simulate_runs(
@@ -166,10 +173,16 @@ def simulate_runs(
     def call(members: list[int], **extra: Any) -> None:
         given = models[members[0]]
         found = {} if given is None else flight_keywords(given)
-        if given is not None and given.get("disturbance_rows") is None:
+        if given is not None:
             torques = [np.asarray((models[i] or given)["disturbance"], dtype=np.float64) for i in members]
+            rows = given.get("disturbance_rows")
             if any(not np.array_equal(torque, torques[0]) for torque in torques[1:]):
-                found["disturbance"] = torques  # one constant w per run, each run as simulate with its own
+                # one w per run, each run as simulate with its own: a constant, or W_k + w of the slice's samples
+                found["disturbance"] = (
+                    torques
+                    if rows is None
+                    else [Disturbance(function=functools.partial(_rows_plus, rows, w, rate)) for w in torques]
+                )
         batch = _batch(
             [crafts[i] for i in members],
             K[members],
