@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from flight_reference import reference_loop
+from lane_cases import dispersed
 
-from mrpctl import OnCurrent, mrp, paper, simulate, simulate_batch
+from mrpctl import OnCurrent, paper, simulate, simulate_batch
 from mrpctl._compile import find_compiler
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
@@ -35,14 +36,7 @@ SENSOR = SensorModel(attitude_noise=0.02, rate_noise=1e-3, gyro_bias=[2e-3, 0.0,
 
 
 def _dispersed(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Tumbles up to 5 rad/s and gains: most 0.05 x the paper's, a few 1000 x (they diverge at 100 Hz)."""
-    rng = np.random.default_rng(seed)
-    sigma = mrp.short(rng.normal(size=(count, 3)))
-    direction = rng.normal(size=(count, 3))
-    omega = direction / np.linalg.norm(direction, axis=1, keepdims=True) * rng.uniform(0.5, 5.0, (count, 1))
-    gains = np.repeat(0.05 * paper.GAIN[None], count, axis=0)
-    gains[::5] *= 20000.0
-    return np.hstack((sigma, omega / 4)), gains
+    return dispersed(count, seed, diverging_every=5)
 
 
 def _both(*args, **kwargs) -> tuple[BatchResult, BatchResult]:

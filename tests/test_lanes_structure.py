@@ -14,8 +14,9 @@ import itertools
 
 import numpy as np
 import pytest
+from lane_cases import dispersed
 
-from mrpctl import _vectorize, mrp, paper, simulate_batch
+from mrpctl import _vectorize, paper, simulate_batch
 from mrpctl._compile import find_compiler
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE, ActuatorModel, Disturbance, Hysteretic, SensorModel
@@ -34,14 +35,7 @@ TORQUE = [0.01, 0.02, -0.01]
 
 
 def _dispersed(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Tumbles up to 5 rad/s, 0.05 x the paper's gain (one run in four 1000 x: it diverges at 100 Hz)."""
-    rng = np.random.default_rng(seed)
-    sigma = mrp.short(rng.normal(size=(count, 3)))
-    direction = rng.normal(size=(count, 3))
-    omega = direction / np.linalg.norm(direction, axis=1, keepdims=True) * rng.uniform(0.5, 5.0, (count, 1))
-    gains = np.repeat(0.05 * paper.GAIN[None], count, axis=0)
-    gains[::4] *= 20000.0
-    return np.hstack((sigma, omega / 4)), gains
+    return dispersed(count, seed, diverging_every=4)
 
 
 def _arrays(batch: BatchResult) -> dict[str, np.ndarray]:
