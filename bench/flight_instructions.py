@@ -11,9 +11,10 @@ random streams) and of libm (tan, sqrt, exp, log called from it), with the ratio
 plain run. On the development host the time per sample tracked the instructions (≈ 8.5 per ns), so the
 ratio of instructions is the CPU-time ratio without the host's noise.
 
-Run: ``.venv/bin/python bench/flight_instructions.py [T]`` (default 30 s of simulated time per run; about
-a minute per variant under valgrind). Needs ``valgrind`` and ``cg_annotate`` on the PATH (not a
-dependency of mrpctl; the script says so and exits 2 without them).
+Run: ``.venv/bin/python bench/flight_instructions.py [T] [word ...]`` (default 30 s of simulated time per
+run; about a minute per variant under valgrind; words: only the variants whose label has one, e.g.
+``all``). Needs ``valgrind`` and ``cg_annotate`` on the PATH (not a dependency of mrpctl; the script
+says so and exits 2 without them).
 """
 
 from __future__ import annotations
@@ -76,6 +77,8 @@ def main() -> int:
     import flight as bench
 
     labels = ["plain (OnCurrent)", *bench.FLIGHT]
+    if len(sys.argv) > 2:  # only the variants whose label contains one of these words (and the plain run)
+        labels = [labels[0], *(label for label in labels[1:] if any(word in label for word in sys.argv[2:]))]
     print(
         f"paper case, {t_final:g} s at 1000 Hz, keep_every=None; per sample, the engine library and libm (cachegrind)"
     )

@@ -188,11 +188,15 @@ def slice_samples(substeps: int) -> int:
     return max(1, SLICE_SAMPLES // substeps)
 
 
-def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.Function:
+def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, frozen_memory: bool = True) -> ca.Function:
     """The core sample plus the divergence guard and the metric accumulators (pure SX).
 
     ``sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv]) ->
     (x_next, memory_next, stats_next, x_meas, u, switched)``; J, J⁻¹ when ``core`` has them.
+    ``frozen_memory``: the memory stays as it was once a sample is not counted (past the horizon, after
+    the divergence), as the lanes and the virtual machine's padded chunks need; the scalar driver never
+    runs such a sample, so its flight samples (ten memory entries) leave the guard out: the same memory
+    on every sample it runs.
     """
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", core.size1_in(1))  # MEMORY_SIZE; FLIGHT_MEMORY_SIZE for the flight sample
@@ -212,7 +216,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample") -> ca.
     # NaN compares false, so a NaN or inf state is "not ok".
     ok = ca.logic_and(ca.dot(sigma_raw, sigma_raw) <= bound, ca.dot(omega_raw, omega_raw) <= bound)
     x_next = ca.if_else(ca.logic_and(counted, ok), x_raw, x_meas)
-    memory_next = ca.if_else(counted, memory_rule, memory)
+    memory_next = ca.if_else(counted, memory_rule, memory) if frozen_memory else memory_rule
     switch_counted = ca.logic_and(counted, switched > 0)
 
     sigma, omega = x_meas[0:3], 4 * x_meas[3:6]
@@ -369,7 +373,8 @@ class Engine:
         elif self.flight:
             label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
             label += "_torque" if torque_input else ""
-        self.sample = engine_sample(core, d, f"mrpctl_sample_{label}")
+        # the scalar driver runs counted samples only: the flight samples drop the memory guard
+        self.sample = engine_sample(core, d, f"mrpctl_sample_{label}", frozen_memory=not self.flight)
         from mrpctl._vectorize import inline_min_max  # (it imports this module)
 
         min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
