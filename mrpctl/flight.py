@@ -795,13 +795,13 @@ def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
 
 def short_expr(sigma: Any) -> Any:
     """The short set (|σ| <= 1) of σ (SX): σ unchanged when |σ|² <= 1, else −σ/|σ|²."""
-    long_set = ca.dot(sigma, sigma) > 1
-    return ca.if_else(long_set, _safe_shadow_expr(sigma), sigma)
-
-
-def _safe_shadow_expr(sigma: Any) -> Any:
-    # Both if_else branches are evaluated: keep the unused shadow of σ = 0 finite.
     squared = ca.dot(sigma, sigma)
+    return ca.if_else(squared > 1, _safe_shadow_expr(sigma, squared), sigma)
+
+
+def _safe_shadow_expr(sigma: Any, squared: Any) -> Any:
+    # −σ/|σ|² from |σ|² = ``squared`` (computed once by the caller: SX does not merge two dot products).
+    # Both if_else branches are evaluated: keep the unused shadow of σ = 0 finite.
     return sigma * (-1 / ca.if_else(squared > 0, squared, 1.0))  # one division, not three
 
 
@@ -880,7 +880,7 @@ def selection_function() -> ca.Function:
     effective = h * c_next
     switched = ca.if_else(ca.logic_and(effective < 0, (1 + delta) * s_now < 1 - delta), 1.0, 0.0)
     h_next = ca.if_else(switched, -h, h)
-    sigma_c = ca.if_else(h_next * c_next > 0, sigma, _safe_shadow_expr(sigma))
+    sigma_c = ca.if_else(h_next * c_next > 0, sigma, _safe_shadow_expr(sigma, s_now))
     return ca.Function(
         "selection",
         [h, c, sigma, previous, delta],
