@@ -48,6 +48,7 @@ __all__ = [
     "DelayModel",
     "Disturbance",
     "Hysteretic",
+    "NoiseForm",
     "Saturation",
     "SensorModel",
     "actuator_function",
@@ -57,6 +58,7 @@ __all__ = [
     "newest_arrived",
     "newest_arrived_slice",
     "quaternion_from_mrp_expr",
+    "rotation_mrp_function",
     "rotation_vector_to_mrp_expr",
     "selection_function",
     "short_expr",
@@ -811,27 +813,56 @@ def quaternion_from_mrp_expr(sigma: Any) -> Any:
     return ca.vertcat((1 - squared) / (1 + squared), 2 * sigma / (1 + squared))
 
 
+class NoiseForm(enum.Enum):
+    """How a sample receives the sensor's attitude noise.
+
+    ``ROTATION_VECTOR``: θ (rad), and the sample computes its MRP σ(θ) (:func:`rotation_vector_to_mrp_expr`):
+    the exported samples, the virtual machine and the lane engine. ``MRP``: σ(θ) itself, computed before the
+    sample by :func:`rotation_mrp_function` (the same expressions, so the same bits): the compiled scalar
+    engine, which turns a block of θ rows into their MRPs at once, so that tan's latency is not on the
+    sample's path.
+    """
+
+    ROTATION_VECTOR = "rotation_vector"
+    MRP = "mrp"
+
+
 @lru_cache(maxsize=1)
-def measurement_function() -> ca.Function:
+def rotation_mrp_function() -> ca.Function:
+    """``rotation_mrp(rotation_noise) -> rotation_noise_mrp``: σ(θ) of :func:`rotation_vector_to_mrp_expr` (pure SX)."""
+    theta = ca.SX.sym("rotation_noise", 3)
+    return ca.Function(
+        "rotation_mrp", [theta], [rotation_vector_to_mrp_expr(theta)], ["rotation_noise"], ["rotation_noise_mrp"]
+    )
+
+
+@lru_cache(maxsize=2)
+def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
     """``measurement(x, rotation_noise, rate_noise, bias) -> (x_meas, q_meas)`` (pure SX).
 
     x = [σ; ω/4] is the true state (σ in either set). The sensor reports the short set of
     the measured attitude, σ̃ = short(σ ⊕ σ(θ)) with [B̃N] = [B̃B](θ)[BN], the rate
     ω̃ = ω + b + η, and x_meas = [σ̃; ω̃/4]; q_meas is σ̃'s quaternion (β₀ >= 0). With zero
-    noise and bias and a short σ, x_meas is x bit for bit.
+    noise and bias and a short σ, x_meas is x bit for bit. With ``form`` = :attr:`NoiseForm.MRP` the
+    second input is σ(θ) (``rotation_noise_mrp``, from :func:`rotation_mrp_function`) instead of θ:
+    the same numbers, bit for bit.
     """
+    if not isinstance(form, NoiseForm):
+        raise SpecificationError(f"form must be a mrpctl.flight.NoiseForm, got {form!r}")
     x = ca.SX.sym("x", 6)
-    theta = ca.SX.sym("rotation_noise", 3)
+    noise_name = "rotation_noise" if form is NoiseForm.ROTATION_VECTOR else "rotation_noise_mrp"
+    noise = ca.SX.sym(noise_name, 3)
     eta = ca.SX.sym("rate_noise", 3)
     bias = ca.SX.sym("bias", 3)
-    sigma_meas = short_expr(compose_mrp_expr(x[0:3], rotation_vector_to_mrp_expr(theta)))
+    rotation = rotation_vector_to_mrp_expr(noise) if form is NoiseForm.ROTATION_VECTOR else noise
+    sigma_meas = short_expr(compose_mrp_expr(x[0:3], rotation))
     omega_meas = 4 * x[3:6] + bias + eta
     x_meas = ca.vertcat(sigma_meas, 0.25 * omega_meas)  # = omega_meas / 4 exactly (a power of two)
     return ca.Function(
         "measurement",
-        [x, theta, eta, bias],
+        [x, noise, eta, bias],
         [x_meas, quaternion_from_mrp_expr(sigma_meas)],
-        ["x", "rotation_noise", "rate_noise", "bias"],
+        ["x", noise_name, "rate_noise", "bias"],
         ["x_meas", "q_meas"],
     )
 

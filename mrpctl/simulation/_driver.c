@@ -37,6 +37,29 @@
 /* samples of noise drawn at a time (48 doubles on the stack per 8 samples) */
 #define MRPCTL_NOISE_BLOCK 64
 
+#if MRPCTL_ROTATION_INPUT
+/* theta -> sigma(theta) of the first three numbers of each of `rows` noise rows (6 wide), in place, by the generated
+   MRPCTL_ROTATION; nonzero when it failed */
+static int mrpctl_rotation_rows(casadi_real* rows_data, long long rows) {
+  const casadi_real* arg[1];
+  casadi_real* res[1];
+  casadi_int iw[MRPCTL_ROTATION_SZ_IW];
+  casadi_real w[MRPCTL_ROTATION_SZ_W];
+  casadi_real out[3];
+  long long j;
+  res[0] = out;
+  for (j = 0; j < rows; ++j) {
+    casadi_real* row = rows_data + 6 * j;
+    arg[0] = row;
+    if (MRPCTL_ROTATION(arg, res, iw, w, 0)) return 1;
+    row[0] = out[0];
+    row[1] = out[1];
+    row[2] = out[2];
+  }
+  return 0;
+}
+#endif
+
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
@@ -158,6 +181,11 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
       const long long rows = k1 - k < MRPCTL_NOISE_BLOCK ? k1 - k : MRPCTL_NOISE_BLOCK;
       mrpctl_normal_rows(noise_key[0], (uint64_t)(3 * k), rows, noise[0], noise_block, 6);
       mrpctl_normal_rows(noise_key[1], (uint64_t)(3 * k), rows, noise[1], noise_block + 3, 6);
+#if MRPCTL_ROTATION_INPUT
+      /* the sample takes the attitude noise's MRP sigma(theta): computed here for the block by the sensor's own
+         generated function (a zero 1 sigma leaves the exact zeros it gives for theta = 0) */
+      if (noise[0] > 0.0 && mrpctl_rotation_rows(noise_block, rows)) return -1;
+#endif
       noise_k0 = k;
       noise_k1 = k + rows;
     }
