@@ -58,6 +58,7 @@ __all__ = [
     "newest_arrived",
     "newest_arrived_slice",
     "quaternion_from_mrp_expr",
+    "raw_measurement_function",
     "rotation_mrp_function",
     "rotation_vector_to_mrp_expr",
     "selection_function",
@@ -836,6 +837,21 @@ def rotation_mrp_function() -> ca.Function:
     )
 
 
+def _sensor_expressions(form: NoiseForm) -> tuple[list[Any], list[str], Any, Any]:
+    """The sensor's inputs (x, rotation noise, rate noise, bias), their names, σ ⊕ σ(θ) (either set) and ω̃."""
+    if not isinstance(form, NoiseForm):
+        raise SpecificationError(f"form must be a mrpctl.flight.NoiseForm, got {form!r}")
+    x = ca.SX.sym("x", 6)
+    noise_name = "rotation_noise" if form is NoiseForm.ROTATION_VECTOR else "rotation_noise_mrp"
+    noise = ca.SX.sym(noise_name, 3)
+    eta = ca.SX.sym("rate_noise", 3)
+    bias = ca.SX.sym("bias", 3)
+    rotation = rotation_vector_to_mrp_expr(noise) if form is NoiseForm.ROTATION_VECTOR else noise
+    omega_meas = 4 * x[3:6] + bias + eta
+    names = ["x", noise_name, "rate_noise", "bias"]
+    return [x, noise, eta, bias], names, compose_mrp_expr(x[0:3], rotation), omega_meas
+
+
 @lru_cache(maxsize=2)
 def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
     """``measurement(x, rotation_noise, rate_noise, bias) -> (x_meas, q_meas)`` (pure SX).
@@ -845,26 +861,27 @@ def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Func
     ω̃ = ω + b + η, and x_meas = [σ̃; ω̃/4]; q_meas is σ̃'s quaternion (β₀ >= 0). With zero
     noise and bias and a short σ, x_meas is x bit for bit. With ``form`` = :attr:`NoiseForm.MRP` the
     second input is σ(θ) (``rotation_noise_mrp``, from :func:`rotation_mrp_function`) instead of θ:
-    the same numbers, bit for bit.
+    the same numbers, bit for bit. :func:`raw_measurement_function` is the same before the short set.
     """
-    if not isinstance(form, NoiseForm):
-        raise SpecificationError(f"form must be a mrpctl.flight.NoiseForm, got {form!r}")
-    x = ca.SX.sym("x", 6)
-    noise_name = "rotation_noise" if form is NoiseForm.ROTATION_VECTOR else "rotation_noise_mrp"
-    noise = ca.SX.sym(noise_name, 3)
-    eta = ca.SX.sym("rate_noise", 3)
-    bias = ca.SX.sym("bias", 3)
-    rotation = rotation_vector_to_mrp_expr(noise) if form is NoiseForm.ROTATION_VECTOR else noise
-    sigma_meas = short_expr(compose_mrp_expr(x[0:3], rotation))
-    omega_meas = 4 * x[3:6] + bias + eta
+    inputs, names, composed, omega_meas = _sensor_expressions(form)
+    sigma_meas = short_expr(composed)
     x_meas = ca.vertcat(sigma_meas, 0.25 * omega_meas)  # = omega_meas / 4 exactly (a power of two)
     return ca.Function(
-        "measurement",
-        [x, noise, eta, bias],
-        [x_meas, quaternion_from_mrp_expr(sigma_meas)],
-        ["x", noise_name, "rate_noise", "bias"],
-        ["x_meas", "q_meas"],
+        "measurement", inputs, [x_meas, quaternion_from_mrp_expr(sigma_meas)], names, ["x_meas", "q_meas"]
     )
+
+
+@lru_cache(maxsize=2)
+def raw_measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
+    """``raw_measurement(x, rotation_noise, rate_noise, bias) -> x_raw`` (pure SX): [σ ⊕ σ(θ); ω̃/4].
+
+    :func:`measurement_function` before its short set: the attitude in either set, so that
+    x_meas = [short(x_raw[0:3]); x_raw[3:6]] bit for bit. The flight sample puts x_raw in its ring
+    and takes the short set of the delayed entry, which it needs for the history anyway: one short
+    set a sample, not two.
+    """
+    inputs, names, composed, omega_meas = _sensor_expressions(form)
+    return ca.Function("raw_measurement", inputs, [ca.vertcat(composed, 0.25 * omega_meas)], names, ["x_raw"])
 
 
 @lru_cache(maxsize=1)

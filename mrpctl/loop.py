@@ -41,6 +41,7 @@ from mrpctl.flight import (
     actuator_function,
     measurement_function,
     quaternion_from_mrp_expr,
+    raw_measurement_function,
     selection_function,
     short_expr,
 )
@@ -258,8 +259,8 @@ def flight_core_function(
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
-    2. the sensor (:func:`~mrpctl.flight.measurement_function`): m_k = [σ̃_k; ω̃_k/4] (the
-       ring's entry; x_meas bit for bit without noise and bias);
+    2. the sensor (:func:`~mrpctl.flight.raw_measurement_function`): m_k = [σ_k ⊕ σ(θ_k); ω̃_k/4]
+       (the ring's entry, the attitude in either set; x_meas bit for bit without noise and bias);
     3. the controller reads the delayed measurement m_{k−d} (m_k when d = 0), takes its short
        set σ̃ and applies :func:`~mrpctl.flight.selection_function` with its memory
        (h, c, σ̃_prev) and δ: σ_c, and ``switched`` = 1.0 when h flipped (the run's switches);
@@ -283,8 +284,10 @@ def flight_core_function(
     w = torque if torque_input else flight[4:7]
     disturbed = disturbed or torque_input
     x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
-    measure = measurement_function(noise_form)
-    measured = measure(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
+    # the ring holds the sensor's raw measurement (either set); the short set of the entry read is taken here,
+    # as for the history's entries: the same σ̃ as measurement_function's, bit for bit
+    measure = raw_measurement_function(noise_form)
+    measured = measure.call([x_meas, noise[0:3], noise[3:6], flight[7:10]])[0] if sensor else x_meas
     seen = x_delayed if d > 0 else measured
     sigma_seen = short_expr(seen[0:3])
     h_next, c_next, sigma_c, switched = selection_function()(

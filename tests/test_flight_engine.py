@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 
+import casadi as ca
 import numpy as np
 import pytest
 from flight_reference import reference_loop
@@ -21,7 +22,9 @@ from mrpctl.flight import (
     measurement_function,
     newest_arrived,
     newest_arrived_slice,
+    raw_measurement_function,
     rotation_mrp_function,
+    short_expr,
 )
 from mrpctl.simulation import _engine
 from mrpctl.spacecraft import Spacecraft
@@ -522,3 +525,20 @@ def test_the_scalar_engine_draws_the_noise_rotation_in_its_driver_and_equals_the
     assert driver.switch_count >= 1
     assert np.array_equal(driver.sigma, sample.sigma) and np.array_equal(driver.u, sample.u)
     assert np.array_equal(driver.switch_indices, sample.switch_indices)
+
+
+def test_the_raw_measurement_is_the_measurement_before_its_short_set_bit_for_bit():
+    """x_meas = [short(x_raw[0:3]); x_raw[3:6]] exactly (the flight ring holds x_raw, the controller shortens it)."""
+    rng = np.random.default_rng(12)
+    n = 4000
+    x = rng.normal(0.0, 0.7, (6, n))
+    theta = rng.standard_normal((3, n)) * np.repeat([1e-6, 1e-2, 0.5, 2.0], n // 4)
+    eta, bias = rng.normal(0, 1e-3, (3, n)), rng.normal(0, 1e-3, (3, n))
+    x_meas, _ = measurement_function().map(n)(x, theta, eta, bias)
+    x_raw = np.asarray(raw_measurement_function().map(n)(x, theta, eta, bias))
+    sigma = ca.SX.sym("sigma", 3)
+    shortened = np.asarray(ca.Function("short", [sigma], [short_expr(sigma)]).map(n)(x_raw[0:3]))
+    long_set = np.sum(x_raw[0:3] ** 2, axis=0) > 1
+    assert 100 < long_set.sum() < n - 100  # both sets occur
+    assert np.array_equal(np.asarray(x_meas)[0:3].view(np.uint64), shortened.view(np.uint64))
+    assert np.array_equal(np.asarray(x_meas)[3:6].view(np.uint64), x_raw[3:6].view(np.uint64))
