@@ -39,6 +39,7 @@ from mrpctl.switching import SwitchingRule
 __all__ = [
     "FLIGHT_CONSTANTS_SIZE",
     "FLIGHT_MEMORY_SIZE",
+    "NOISE_REVISION",
     "NOISE_SIZE",
     "STREAM_ATTITUDE",
     "STREAM_JITTER",
@@ -74,6 +75,10 @@ FLIGHT_MEMORY_SIZE = 10
 FLIGHT_CONSTANTS_SIZE = 10
 #: The flight sample's per-sample input ``noise``: (θ_k (3), η_k (3)).
 NOISE_SIZE = 6
+#: Revision of the numbers of the sensor's attitude noise (σ(θ) of the noise rotation): runs with attitude noise
+#: of two revisions differ in their last bits. 1: libm's tan (until 2026-12-01); a campaign store records it
+#: (``attrs["noise_revision"]``; a store without it is revision 1) and is not resumed across revisions.
+NOISE_REVISION = 1
 #: The stream numbers of the attitude noise, the rate noise and the delay jitter (:func:`stream_key`).
 STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
