@@ -155,7 +155,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
       if (latest[s] > newest) newest = latest[s];
       if (k - d > newest) newest = k - d; /* the history sample k - d arrives at k */
       latest[s] = LLONG_MIN;
-      if (k > latest[arrival]) latest[arrival] = k;
+      latest[arrival] = k; /* = max(latest[arrival], k): every measurement registered before is older than k */
       j_used = newest;
       if (++jitter_slot > d) jitter_slot = 0;
     } else if (used) {
