@@ -915,12 +915,15 @@ def actuator_function(mode: Saturation = Saturation.SCALE) -> ca.Function:
     if mode is Saturation.SCALE:
         ratio = ca.fmax(ca.mmax(ca.fabs(u) / u_max), ca.norm_2(u) / norm_max)
         saturated = ratio > 1
-        scaled = ca.if_else(saturated, u / ratio, u)
+        # u / r when r > 1, else u: one divisor selected, not three quotients (u / 1 is u exactly); the
+        # if_else added +0 to the chosen branch (−0 → +0), and so does saturated² − saturated (= +0)
+        scaled = u / ca.if_else(saturated, ratio, 1.0) + (saturated * saturated - saturated)
         applied = ca.fmin(ca.fmax(scaled, -u_max), u_max)
     else:
         clipped = ca.fmin(ca.fmax(u, -u_max), u_max)
         ratio = ca.norm_2(clipped) / norm_max
-        applied = ca.if_else(ratio > 1, clipped / ratio, clipped)
+        scaled = ratio > 1
+        applied = clipped / ca.if_else(scaled, ratio, 1.0) + (scaled * scaled - scaled)  # as in SCALE
         saturated = ca.logic_or(ca.mmax(ca.fabs(u) - u_max) > 0, ratio > 1)
     return ca.Function(
         "actuator",

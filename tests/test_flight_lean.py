@@ -14,7 +14,15 @@ import numpy as np
 import pytest
 
 from mrpctl import OnCurrent, paper, simulate
-from mrpctl.flight import ActuatorModel, Hysteretic, measurement_function, selection_function, short_expr
+from mrpctl.flight import (
+    ActuatorModel,
+    Hysteretic,
+    Saturation,
+    actuator_function,
+    measurement_function,
+    selection_function,
+    short_expr,
+)
 from mrpctl.simulation import _engine
 from mrpctl.simulation._stats import S_K
 from mrpctl.simulation._vm import VirtualMachineEngine
@@ -87,6 +95,43 @@ def test_the_selection_function_gives_the_former_bits_for_every_h_and_c():
     ours = selection_function().map(n)(*inputs)
     former = _former_selection().map(n)(*inputs)
     assert np.sum(np.asarray(former[3])) > 500 and np.sum(np.asarray(former[1]) != c) > 500  # flips of h and c
+    for new, old in zip(ours, former, strict=True):
+        assert np.array_equal(_bits(np.asarray(new)), _bits(np.asarray(old)))
+
+
+def _former_actuator(mode: Saturation) -> ca.Function:
+    """actuator_function as written before phase 8b (three selected quotients): the reference."""
+    u, u_max, norm_max, w = ca.SX.sym("u", 3), ca.SX.sym("u_max", 3), ca.SX.sym("norm_max"), ca.SX.sym("w", 3)
+    if mode is Saturation.SCALE:
+        ratio = ca.fmax(ca.mmax(ca.fabs(u) / u_max), ca.norm_2(u) / norm_max)
+        saturated = ratio > 1
+        applied = ca.fmin(ca.fmax(ca.if_else(saturated, u / ratio, u), -u_max), u_max)
+    else:
+        clipped = ca.fmin(ca.fmax(u, -u_max), u_max)
+        ratio = ca.norm_2(clipped) / norm_max
+        applied = ca.if_else(ratio > 1, clipped / ratio, clipped)
+        saturated = ca.logic_or(ca.mmax(ca.fabs(u) - u_max) > 0, ratio > 1)
+    return ca.Function("former", [u, u_max, norm_max, w], [applied, applied + w, ca.if_else(saturated, 1.0, 0.0)])
+
+
+@pytest.mark.parametrize("mode", list(Saturation))
+def test_the_actuator_function_gives_the_former_bits(mode):
+    rng = np.random.default_rng(7)
+    n = 20_000
+    u = rng.normal(size=(n, 3)) * rng.choice([0.1, 1.0, 10.0, 1e200], (n, 1))
+    u[::5, rng.integers(0, 3)] = -0.0
+    u[::9, :] = -0.0
+    u[::17, 0] = np.inf
+    u[::19, 1] = -np.inf
+    u_max = rng.uniform(0.5, 3.0, (n, 3))
+    u_max[::3, :] = np.inf  # no per-axis limit
+    norm_max = rng.choice([1.5, 4.0, np.inf], n)
+    w = rng.normal(size=(n, 3)) * 0.1
+    w[::4] = 0.0
+    inputs = (u.T, u_max.T, norm_max, w.T)
+    ours = actuator_function(mode).map(n)(*inputs)
+    former = _former_actuator(mode).map(n)(*inputs)
+    assert 1_000 < np.sum(np.asarray(former[2])) < n - 1_000  # limited and free samples
     for new, old in zip(ours, former, strict=True):
         assert np.array_equal(_bits(np.asarray(new)), _bits(np.asarray(old)))
 

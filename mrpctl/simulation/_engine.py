@@ -352,6 +352,7 @@ class Engine:
         self.flight = isinstance(rule, Hysteretic) or self.predictor
         self._structure = (spacecraft, d, period, substeps, saturation, limited, disturbed)
         self.torque_input = torque_input and self.flight
+        self._squared_peak = self.flight and not self.predictor and limited  # squared_peak of the flight sample
         self._sensor = sensor
         if predictor is not None:
             core = predictor_core_function(
@@ -380,7 +381,9 @@ class Engine:
                 records=True,
                 torque_input=torque_input,
                 short_measurements=True,  # run() hands the driver a short history (short_history)
-                squared_peak=True,  # run() takes the square root of the peak |u_c|² at the end
+                # run() takes the square root of the peak |u_c|² at the end; with limits only, where the
+                # actuator's |u_c| is a root too (measured: 15 instructions fewer with limits, 5-10 more without)
+                squared_peak=limited,
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -619,7 +622,7 @@ class Engine:
                 break  # the driver stopped after the diverging sample
         switch_indices = np.concatenate(indices) if indices else np.zeros(0, np.int64)
         memory = state[STATE_SIZE:memory_end].copy()
-        if self.flight and not self.predictor:  # the sample kept the peak |u_c|² (squared_peak)
+        if self._squared_peak:  # the sample kept the peak |u_c|²
             memory[FLIGHT_MEMORY_SIZE - 1] = np.sqrt(memory[FLIGHT_MEMORY_SIZE - 1])
         return RunOutput(
             stats=state[memory_end:].copy(),
