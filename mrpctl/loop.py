@@ -252,14 +252,15 @@ def flight_core_function(
     commanded torque before the actuator limits, N m): the result's per-sample records. With
     ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the sample (a
     per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
-    With ``short_measurements`` the controller reads ``x_delayed`` (and, for d = 0, m_k) as it
-    is, without taking its short set: the same numbers bit for bit for a caller whose history
-    rows are in the short set already (the compiled engine maps them through the same SX,
-    ``mrpctl.simulation._engine.short_history``), as every m_k the sample writes is a fixed point
-    of the short-set map (design/flight.md, phase 8b). With ``squared_peak`` the memory's last
-    entry is the peak |u_c|² (N² m²): one square root at the end gives the peak |u_c| bit for bit
-    (the correctly rounded square root is monotone: the max of the roots is the root of the max),
-    instead of one a sample (the compiled engine's, ``Engine.run``).
+    With ``short_measurements`` (only without ``sensor``) the controller reads ``x_delayed`` (and,
+    for d = 0, m_k) as it is, without taking its short set: the same numbers bit for bit for a
+    caller whose history rows are in the short set already (the compiled engine maps them through
+    the same SX, ``mrpctl.simulation._engine.short_history``), as every m_k the sample writes is then
+    x_meas, bookkept by ``OnCurrent``, a fixed point of the short-set map (design/flight.md, phase
+    8b); a sensor's entries are its measurements, whose short set the controller takes. With
+    ``squared_peak`` the memory's last entry is the peak |u_c|² (N² m²): one square root at the end
+    gives the peak |u_c| bit for bit (the correctly rounded square root is monotone: the max of the
+    roots is the root of the max), instead of one a sample (the compiled engine's, ``Engine.run``).
     At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
@@ -276,6 +277,8 @@ def flight_core_function(
     With δ = 0, no limit (inf) and w = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s
     K m_{k−d} bit for bit.
     """
+    if short_measurements and sensor:
+        raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
     step = step_function(spacecraft, period, substeps, inertia=inertia)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
@@ -291,7 +294,7 @@ def flight_core_function(
     x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
     measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
     seen = x_delayed if d > 0 else measured
-    # m_k is short (the sensor's σ̃, or x_meas bookkept by OnCurrent): only a history row may be long
+    # without a sensor m_k is x_meas, bookkept short by OnCurrent: only a history row may be long
     sigma_seen = seen[0:3] if short_measurements else short_expr(seen[0:3])
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]

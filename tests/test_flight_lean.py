@@ -18,8 +18,8 @@ from mrpctl.flight import (
     ActuatorModel,
     Hysteretic,
     Saturation,
+    SensorModel,
     actuator_function,
-    measurement_function,
     selection_function,
     short_expr,
 )
@@ -44,26 +44,23 @@ def _bits(array: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(array, dtype=float).view(np.uint64)
 
 
-def test_every_measurement_the_sample_writes_is_its_own_short_set():
+def test_every_measurement_the_ideal_sample_writes_is_its_own_short_set():
     sigma = _near_the_sphere(200_000, 8)
     squared = (sigma[:, 0] * sigma[:, 0] + sigma[:, 1] * sigma[:, 1]) + sigma[:, 2] * sigma[:, 2]
     assert np.sum(squared > 1.0) > 100_000 and np.sum(squared == 1.0) > 1_000  # the edge is covered
     x = ca.SX.sym("x", 6)
-    zero = ca.DM.zeros(3)
-    bookkept = OnCurrent().expressions(x, x, ca.SX.zeros(1), delay_samples=0)[0]  # the ideal sensor's m_k
-    sensed = measurement_function()(x, zero, zero, zero)[0]  # the sensor's short σ̃ (no noise: σ ⊕ 0 = σ)
+    # without a sensor m_k is x_meas, bookkept by OnCurrent (−σ/|σ|² when |σ|² >= 1)
+    bookkept = OnCurrent().expressions(x, x, ca.SX.zeros(1), delay_samples=0)[0]
     states = np.hstack((sigma, np.zeros_like(sigma)))
-    for written in (bookkept, sensed):
-        measured = ca.Function("m", [x], [written]).map(len(states))
-        reread = ca.Function("r", [x], [short_expr(written[0:3])]).map(len(states))
-        m = np.asarray(measured(states.T))[0:3]
-        assert np.max(np.sum(m**2, axis=0)) <= 1.0 + 4 * _ULP  # short (what the test is about)
-        assert np.array_equal(_bits(np.asarray(reread(states.T))), _bits(m))  # a fixed point, bit for bit
+    measured = ca.Function("m", [x], [bookkept]).map(len(states))
+    reread = ca.Function("r", [x], [short_expr(bookkept[0:3])]).map(len(states))
+    m = np.asarray(measured(states.T))[0:3]
+    assert np.max(np.sum(m**2, axis=0)) <= 1.0 + 4 * _ULP  # short (what the test is about)
+    assert np.array_equal(_bits(np.asarray(reread(states.T))), _bits(m))  # a fixed point, bit for bit
     # and never a −0 (the short-set map makes it +0): if_else(c, a, b) is (c ? a : 0) + (!c ? b : 0)
     negative_zero = np.array([[-0.0, -0.0, -0.0, 0.0, 0.0, 0.0], [2.0, -0.0, -0.0, 0.0, 0.0, 0.0]])
-    for written in (bookkept, sensed):
-        m = np.asarray(ca.Function("m", [x], [written]).map(2)(negative_zero.T))[0:3]
-        assert not np.any(np.signbit(m) & (m == 0.0))
+    m = np.asarray(ca.Function("m", [x], [bookkept]).map(2)(negative_zero.T))[0:3]
+    assert not np.any(np.signbit(m) & (m == 0.0))
 
 
 def _former_selection() -> ca.Function:
@@ -146,8 +143,8 @@ def test_short_history_is_the_controllers_short_set_and_keeps_the_rates():
     assert short is not rows and rows[0, 0] == 2.0  # a copy
 
 
-@pytest.mark.parametrize("delta", [0.0, 0.15])
-def test_a_long_history_gives_the_virtual_machines_numbers_bit_for_bit(delta):
+@pytest.mark.parametrize(("delta", "noisy"), [(0.0, False), (0.15, False), (0.15, True)])
+def test_a_long_history_gives_the_virtual_machines_numbers_bit_for_bit(delta, noisy):
     # The virtual machine runs the flight sample as before: the controller takes the short set of every
     # measurement it reads, here the history as given (rows in the long set, a −0, a row on the sphere).
     d, n = 5, 300
@@ -160,7 +157,11 @@ def test_a_long_history_gives_the_virtual_machines_numbers_bit_for_bit(delta):
     x0 = np.array([1.5, -0.7, 0.9, 0.4, -0.3, 0.2])  # long: the plant bookkeeping swaps it at k = 0
     gains = 0.05 * paper.GAIN
     rule = Hysteretic(delta)
-    compiled = _engine.engine(paper.SPACECRAFT, rule, d, 0.01, 1)
+    bias = [1e-3, -2e-3, 5e-4]
+    sensor = SensorModel(attitude_noise=0.01, rate_noise=1e-3, gyro_bias=bias, seed=4) if noisy else None
+    options = _engine.NO_FLIGHT_OPTIONS.copy()
+    options[7:10] = bias if noisy else 0.0
+    compiled = _engine.engine(paper.SPACECRAFT, rule, d, 0.01, 1, sensor=noisy)  # with limits (inf): squared_peak
     assert compiled.compiled_code
     machine = VirtualMachineEngine(compiled.virtual_machine_sample(), d, compiled.inertia, flight=True)
     outputs = []
@@ -178,6 +179,8 @@ def test_a_long_history_gives_the_virtual_machines_numbers_bit_for_bit(delta):
                 keep_every=1,
                 workspace=found.workspace(n, switches=True),
                 switch_limit=n,
+                flight_options=options,
+                sensor=sensor,
             )
         )
         assert np.array_equal(_bits(given), _bits(before))  # the caller's history is not touched

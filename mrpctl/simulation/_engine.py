@@ -125,8 +125,8 @@ def _short_function() -> ca.Function:
 def short_history(history: np.ndarray) -> np.ndarray:
     """The history rows (columns, 6) with σ in the short set, through the flight sample's own SX (same bits).
 
-    The compiled flight sample reads its delayed measurement as it is (``short_measurements`` of
-    :func:`~mrpctl.loop.flight_core_function`); this is the short set its controller took of a history
+    The compiled flight sample without a sensor reads its delayed measurement as it is (``short_measurements``
+    of :func:`~mrpctl.loop.flight_core_function`); this is the short set its controller took of a history
     row before: :func:`~mrpctl.flight.short_expr` evaluated by CasADi's SX machine, operation by
     operation the IEEE operations of the generated C (-0 becomes +0 there too).
     """
@@ -380,7 +380,7 @@ class Engine:
                 disturbed=disturbed,
                 records=True,
                 torque_input=torque_input,
-                short_measurements=True,  # run() hands the driver a short history (short_history)
+                short_measurements=not sensor,  # run() hands the driver a short history (short_history)
                 # run() takes the square root of the peak |u_c|² at the end; with limits only, where the
                 # actuator's |u_c| is a root too (measured: 15 instructions fewer with limits, 5-10 more without)
                 squared_peak=limited,
@@ -525,7 +525,7 @@ class Engine:
             history = np.ascontiguousarray(np.hstack((history, history)))  # (m, z) with z = m before t = 0
         else:
             state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
-            if self.flight:  # the compiled sample reads m_{k-d} as it is: a history row must be short
+            if self.flight and not self._sensor:  # the sample reads m_{k-d} as it is: a history row must be short
                 history = np.ascontiguousarray(short_history(history))
         state[memory_end:] = initial_stats(n)
         history_stride = self.ring_width if history.shape[0] > 1 else 0
