@@ -919,7 +919,7 @@ def selection_function() -> ca.Function:
     Then the rule of :func:`hysteresis_function` on q̂: with e = h c, h flips when
     e β̃₀ < −δ ⇔ e < 0 and (1 + δ)|σ̃|² < 1 − δ. σ_c = σ̃ when h_next c_next = +1 (bit for
     bit) and its shadow −σ̃/|σ̃|² otherwise. Identical to :func:`hysteresis_function` on q̂ up
-    to rounding; with δ = 0 σ_c is σ̃ at every sample.
+    to rounding; with δ = 0 σ_c is σ̃ at every sample. h and c are ±1 (flips are products by ±1).
     """
     h = ca.SX.sym("h")
     c = ca.SX.sym("c")
@@ -929,11 +929,17 @@ def selection_function() -> ca.Function:
     s_now = ca.dot(sigma, sigma)
     s_prev = ca.dot(previous, previous)
     flipped = (1 - s_now) * (1 - s_prev) + 4 * ca.dot(sigma, previous) < 0
-    c_next = ca.if_else(flipped, -c, c)
+    # h, c = ±1: a flip is a product by ±1 (exact), not an if_else (two selects and an add)
+    c_next = c * (1 - 2 * flipped)
     effective = h * c_next
     switched = ca.if_else(ca.logic_and(effective < 0, (1 + delta) * s_now < 1 - delta), 1.0, 0.0)
-    h_next = ca.if_else(switched, -h, h)
-    sigma_c = ca.if_else(h_next * c_next > 0, sigma, _safe_shadow_expr(sigma, s_now))
+    h_next = h * (1 - 2 * switched)
+    # σ_c = σ (e = h_next c_next = +1) or its shadow −σ/|σ|²: σ times one selected factor, not three
+    # selected components. if_else(e > 0, σ, shadow) was (e > 0 ? σ : 0) + (e <= 0 ? shadow : 0), which
+    # turns a −0 into +0: so does the + (e² − 1) = +0 here (an exact zero that CasADi does not fold away).
+    e = h_next * c_next
+    factor = ca.if_else(e > 0, 1.0, -1 / ca.if_else(s_now > 0, s_now, 1.0))
+    sigma_c = sigma * factor + (e * e - 1)
     return ca.Function(
         "selection",
         [h, c, sigma, previous, delta],
@@ -962,17 +968,20 @@ def actuator_function(mode: Saturation = Saturation.SCALE) -> ca.Function:
     if mode is Saturation.SCALE:
         ratio = ca.fmax(ca.mmax(ca.fabs(u) / u_max), ca.norm_2(u) / norm_max)
         saturated = ratio > 1
-        scaled = ca.if_else(saturated, u / ratio, u)
+        # u / r when r > 1, else u: one divisor selected, not three quotients (u / 1 is u exactly); the
+        # if_else added +0 to the chosen branch (−0 → +0), and so does saturated² − saturated (= +0)
+        scaled = u / ca.if_else(saturated, ratio, 1.0) + (saturated * saturated - saturated)
         applied = ca.fmin(ca.fmax(scaled, -u_max), u_max)
     else:
         clipped = ca.fmin(ca.fmax(u, -u_max), u_max)
         ratio = ca.norm_2(clipped) / norm_max
-        applied = ca.if_else(ratio > 1, clipped / ratio, clipped)
+        scaled = ratio > 1
+        applied = clipped / ca.if_else(scaled, ratio, 1.0) + (scaled * scaled - scaled)  # as in SCALE
         saturated = ca.logic_or(ca.mmax(ca.fabs(u) - u_max) > 0, ratio > 1)
     return ca.Function(
         "actuator",
         [u, u_max, norm_max, w],
-        [applied, applied + w, ca.if_else(saturated, 1.0, 0.0)],
+        [applied, applied + w, saturated],  # a comparison: 1.0 or 0.0
         ["u", "u_max", "norm_max", "w"],
         ["u_applied", "u_plant", "saturated"],
     )

@@ -234,6 +234,8 @@ def flight_core_function(
     records: bool = False,
     torque_input: bool = False,
     noise_form: NoiseForm = NoiseForm.ROTATION_VECTOR,
+    short_measurements: bool = False,
+    squared_peak: bool = False,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
 
@@ -255,7 +257,17 @@ def flight_core_function(
     per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
     ``noise_form`` (:class:`~mrpctl.flight.NoiseForm`): with ``MRP`` the first half of ``noise`` is the
     attitude noise's MRP σ(θ_k) (:func:`~mrpctl.flight.rotation_mrp_function`, computed by the engine
-    before the sample) instead of θ_k: the same numbers bit for bit. At sample k:
+    before the sample) instead of θ_k: the same numbers bit for bit.
+    With ``short_measurements`` (only without ``sensor``) the controller reads ``x_delayed`` (and,
+    for d = 0, m_k) as it is, without taking its short set: the same numbers bit for bit for a
+    caller whose history rows are in the short set already (the compiled engine maps them through
+    the same SX, ``mrpctl.simulation._engine.short_history``), as every m_k the sample writes is then
+    x_meas, bookkept by ``OnCurrent``, a fixed point of the short-set map (design/flight.md, phase
+    8b); a sensor's entries are its measurements, whose short set the controller takes. With
+    ``squared_peak`` the memory's last entry is the peak |u_c|² (N² m²): one square root at the end
+    gives the peak |u_c| bit for bit (the correctly rounded square root is monotone: the max of the
+    roots is the root of the max), instead of one a sample (the compiled engine's, ``Engine.run``).
+    At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
@@ -271,6 +283,8 @@ def flight_core_function(
     With δ = 0, no limit (inf) and w = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s
     K m_{k−d} bit for bit.
     """
+    if short_measurements and sensor:
+        raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
     step = step_function(spacecraft, period, substeps, inertia=inertia)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
@@ -289,7 +303,8 @@ def flight_core_function(
     measure = raw_measurement_function(noise_form)
     measured = measure.call([x_meas, noise[0:3], noise[3:6], flight[7:10]])[0] if sensor else x_meas
     seen = x_delayed if d > 0 else measured
-    sigma_seen = short_expr(seen[0:3])
+    # without a sensor m_k is x_meas, bookkept short by OnCurrent: only a history row may be long
+    sigma_seen = seen[0:3] if short_measurements else short_expr(seen[0:3])
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
@@ -312,7 +327,7 @@ def flight_core_function(
         sigma_seen,
         count,
         ca.fmax(memory[6:9], size),
-        ca.fmax(memory[9], ca.norm_2(command)),
+        ca.fmax(memory[9], ca.sumsqr(command) if squared_peak else ca.norm_2(command)),
     )
     names = ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"]
     inputs = [x, memory, x_delayed, gain, parameters, *extra, flight] + ([noise] if sensor else [])

@@ -72,7 +72,6 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   casadi_int iw[MRPCTL_SZ_IW];
   casadi_real w[MRPCTL_SZ_W];
   casadi_real buffers[2][MRPCTL_STATE];
-  casadi_real u_scratch[3], switched_scratch[1], x_scratch[6];
   const long long width = MRPCTL_RING_WIDTH;
   long long k, slot, delayed_slot = 0, phase = 1, kept_column = 0;
   int i, now_index = 0;
@@ -126,12 +125,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   (void)torque;
   (void)torque_stride;
 #endif
-#if !MRPCTL_RING_OUTPUT
-  (void)x_scratch;
-#endif
-#if MRPCTL_RECORD_OUTPUT
-  casadi_real record_scratch[MRPCTL_RECORD_WIDTH];
-#else
+#if !MRPCTL_RECORD_OUTPUT
   (void)kept_records;
 #endif
   for (k = k0; k < k1; ++k) {
@@ -198,16 +192,16 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #if MRPCTL_RING_OUTPUT
     /* the flight and predictor samples: the sensor's measurement (and the model state) go to the ring,
        the true state to the kept array */
-    res[3] = kept ? kept_measurements + 6 * kept_column : x_scratch;
+    res[3] = kept ? kept_measurements + 6 * kept_column : 0; /* NULL: CasADi's code skips the output */
     res[6] = ring + width * slot;
 #else
     res[3] = ring + 6 * slot;
 #endif
-    res[4] = kept ? kept_u + 3 * kept_column : u_scratch;
-    res[5] = switched ? switched + (k - k0) : switched_scratch;
+    res[4] = kept ? kept_u + 3 * kept_column : 0;
+    res[5] = switched ? switched + (k - k0) : 0;
 #if MRPCTL_RECORD_OUTPUT
     /* the flight sample's per-sample record (h, sigma_c), kept like u */
-    res[MRPCTL_RECORD_OUTPUT] = kept && kept_records ? kept_records + MRPCTL_RECORD_WIDTH * kept_column : record_scratch;
+    res[MRPCTL_RECORD_OUTPUT] = kept && kept_records ? kept_records + MRPCTL_RECORD_WIDTH * kept_column : 0;
 #endif
     if (MRPCTL_SAMPLE(arg, res, iw, w, 0)) return -1;
     if (kept) {
