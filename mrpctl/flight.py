@@ -816,6 +816,24 @@ def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
     return numerator * (1 / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second)))  # one division, not three
 
 
+def _short_composition_expr(sigma_first: Any, sigma_second: Any) -> Any:
+    """short(compose(σ₁, σ₂)) with one division (SX): the sensor's σ̃ (:func:`measurement_function`).
+
+    The composition n/d of :func:`compose_mrp_expr` (the same numerator n and denominator d, d >= 0)
+    is long when |n|² > d², and its short set is then −n d/|n|²: σ̃ = n · (1/d or −d/|n|²), one
+    division instead of compose's and the shadow's two. With σ₂ = ±0 (d = 1) it has the bits of
+    short(compose(σ₁, σ₂)), the shadow −σ₁/|σ₁|² of a long σ₁ included, but for the sign of a zero
+    component (short's if_else adds +0: −0 becomes +0 there; the controller's short set does so anyway).
+    """
+    s1 = ca.dot(sigma_first, sigma_first)
+    s2 = ca.dot(sigma_second, sigma_second)
+    numerator = (1 - s1) * sigma_second + (1 - s2) * sigma_first - 2 * (skew_expr(sigma_second) @ sigma_first)
+    denominator = 1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second)
+    squared = ca.dot(numerator, numerator)
+    long = squared > denominator * denominator
+    return numerator * (ca.if_else(long, -denominator, 1.0) / ca.if_else(long, squared, denominator))
+
+
 def short_expr(sigma: Any) -> Any:
     """The short set (|σ| <= 1) of σ (SX): σ unchanged when |σ|² <= 1, else −σ/|σ|²."""
     squared = ca.dot(sigma, sigma)
@@ -847,7 +865,7 @@ def measurement_function() -> ca.Function:
     theta = ca.SX.sym("rotation_noise", 3)
     eta = ca.SX.sym("rate_noise", 3)
     bias = ca.SX.sym("bias", 3)
-    sigma_meas = short_expr(compose_mrp_expr(x[0:3], rotation_vector_to_mrp_expr(theta)))
+    sigma_meas = _short_composition_expr(x[0:3], rotation_vector_to_mrp_expr(theta))
     omega_meas = 4 * x[3:6] + bias + eta
     x_meas = ca.vertcat(sigma_meas, 0.25 * omega_meas)  # = omega_meas / 4 exactly (a power of two)
     return ca.Function(
