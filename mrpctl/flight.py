@@ -816,19 +816,24 @@ def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
     return numerator * (1 / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second)))  # one division, not three
 
 
-def _short_composition_expr(sigma_first: Any, sigma_second: Any) -> Any:
-    """short(compose(σ₁, σ₂)) with one division (SX): the sensor's σ̃ (:func:`measurement_function`).
+def _measured_attitude_expr(sigma: Any, theta: Any) -> Any:
+    """σ̃ = short(σ ⊕ σ(θ)) (SX), the sensor's attitude, with σ(θ) = k θ of :func:`rotation_vector_to_mrp_expr`.
 
-    The composition n/d of :func:`compose_mrp_expr` (the same numerator n and denominator d, d >= 0)
+    The composition n/d of :func:`compose_mrp_expr` (the same numerator n and denominator d >= 0)
     is long when |n|² > d², and its short set is then −n d/|n|²: σ̃ = n · (1/d or −d/|n|²), one
-    division instead of compose's and the shadow's two. With σ₂ = ±0 (d = 1) it has the bits of
-    short(compose(σ₁, σ₂)), the shadow −σ₁/|σ₁|² of a long σ₁ included, but for the sign of a zero
-    component (short's if_else adds +0: −0 becomes +0 there; the controller's short set does so anyway).
+    division instead of compose's and the shadow's two. σ₂ = k θ is never formed: |σ₂|² = k² Φ²
+    (Φ² is k's input), (1 − |σ|²) σ₂ = ((1 − |σ|²) k) θ, 2 σ₂ × σ = (2k)(θ × σ),
+    2 σ·σ₂ = (2k)(σ·θ). With θ = ±0 (d = 1) it has the bits of short(compose(σ, 0)), the shadow
+    −σ/|σ|² of a long σ included, but for the sign of a zero component (short's if_else adds +0,
+    turning −0 into +0; the controller's short set of the measurement does so anyway).
     """
-    s1 = ca.dot(sigma_first, sigma_first)
-    s2 = ca.dot(sigma_second, sigma_second)
-    numerator = (1 - s1) * sigma_second + (1 - s2) * sigma_first - 2 * (skew_expr(sigma_second) @ sigma_first)
-    denominator = 1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second)
+    angle_squared = ca.dot(theta, theta)
+    k = _tan_quarter_ratio_expr(angle_squared)
+    s1 = ca.dot(sigma, sigma)
+    s2 = k * k * angle_squared
+    twice = 2 * k
+    numerator = ((1 - s1) * k) * theta + (1 - s2) * sigma - twice * (skew_expr(theta) @ sigma)
+    denominator = 1 + s1 * s2 - twice * ca.dot(sigma, theta)
     squared = ca.dot(numerator, numerator)
     long = squared > denominator * denominator
     return numerator * (ca.if_else(long, -denominator, 1.0) / ca.if_else(long, squared, denominator))
@@ -865,7 +870,7 @@ def measurement_function() -> ca.Function:
     theta = ca.SX.sym("rotation_noise", 3)
     eta = ca.SX.sym("rate_noise", 3)
     bias = ca.SX.sym("bias", 3)
-    sigma_meas = _short_composition_expr(x[0:3], rotation_vector_to_mrp_expr(theta))
+    sigma_meas = _measured_attitude_expr(x[0:3], theta)
     omega_meas = 4 * x[3:6] + bias + eta
     x_meas = ca.vertcat(sigma_meas, 0.25 * omega_meas)  # = omega_meas / 4 exactly (a power of two)
     return ca.Function(
