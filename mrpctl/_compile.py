@@ -328,10 +328,11 @@ def _flags(flags: object) -> tuple[str, ...]:
 
 
 # ======================================================================== the cache
-def generate_code(function: ca.Function) -> str:
-    """The C source of ``function`` (and everything it calls) as one string."""
+def generate_code(function: ca.Function, *others: ca.Function) -> str:
+    """The C source of ``function`` and ``others`` (and everything they call) as one string."""
     generator = ca.CodeGenerator(function.name() + ".c", _CODEGEN_OPTIONS)
-    generator.add(function)
+    for each in (function, *others):
+        generator.add(each)
     return generator.dump()
 
 
@@ -390,6 +391,7 @@ def compile_function(
     directory: str | os.PathLike[str] | None = None,
     appendix: str = "",
     timeout: float | None = None,
+    others: tuple[ca.Function, ...] = (),
 ) -> CompiledFunction:
     """Compile ``function`` to a shared library (or reuse the cached one) and load it.
 
@@ -407,6 +409,8 @@ def compile_function(
         :attr:`CompiledFunction.library` with ctypes.
     timeout : float, optional, keyword-only
         Limit of the compiler call (s); default :func:`compile_timeout`.
+    others : tuple of casadi.Function, keyword-only
+        More Functions generated into the same library (for the ``appendix`` to call, under their names).
 
     Returns
     -------
@@ -434,7 +438,8 @@ def compile_function(
             stacklevel=2,
         )
         return CompiledFunction(function=function, compiled=False, library=None, compile_seconds=0.0)
-    library, seconds = _cached_library(generate_code(function) + appendix, name, compiler, flags, directory, timeout)
+    code = generate_code(function, *others) + appendix
+    library, seconds = _cached_library(code, name, compiler, flags, directory, timeout)
     try:
         loaded = ca.external(name, str(library))
     except RuntimeError as exc:

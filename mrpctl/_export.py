@@ -119,7 +119,9 @@ _FLIGHT_DESCRIPTIONS = {
     "step": _DESCRIPTIONS["step"],
     "sample": "one measurement period of the flown loop: sensor, flight_controller on x_delayed = the delayed "
     "measurement (m_{k-d}; the sample's own measurement when d = 0), step with u + w; x_meas is the true "
-    "(bookkept) state, u the applied torque, switched = 1 when h flipped; memory as in flight.memory_layout",
+    "(bookkept) state, u the applied torque, switched = 1 when h flipped, measurement the ring entry "
+    "[sigma (+) sigma(theta); omega~/4] (the attitude in either set: the controller takes the short set of "
+    "x_delayed); memory as in flight.memory_layout",
     "chunk": "max(d, 1) samples (mapaccum of sample); history holds the previous chunk's measurements "
     "m_{k-d}, ..., m_{k-1} (oldest first), noise one column (theta_k; eta_k) per sample",
 }

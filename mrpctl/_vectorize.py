@@ -1080,7 +1080,9 @@ def lane_engine(
                     inertia=layout,
                     saturation=saturation,
                     torque_input=torque_input,
-                    **structure,
+                    sensor=structure["sensor"],
+                    limited=structure["limited"],
+                    disturbed=structure["disturbed"],
                 )
                 label += f"_{saturation.value}" + ("" if structure["sensor"] else "_ideal")
                 label += ("" if structure["limited"] else "_unlimited") + ("" if structure["disturbed"] else "_free")

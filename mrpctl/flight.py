@@ -39,6 +39,7 @@ from mrpctl.switching import SwitchingRule
 __all__ = [
     "FLIGHT_CONSTANTS_SIZE",
     "FLIGHT_MEMORY_SIZE",
+    "NOISE_REVISION",
     "NOISE_SIZE",
     "STREAM_ATTITUDE",
     "STREAM_JITTER",
@@ -48,6 +49,7 @@ __all__ = [
     "DelayModel",
     "Disturbance",
     "Hysteretic",
+    "NoiseForm",
     "Saturation",
     "SensorModel",
     "actuator_function",
@@ -57,6 +59,8 @@ __all__ = [
     "newest_arrived",
     "newest_arrived_slice",
     "quaternion_from_mrp_expr",
+    "raw_measurement_function",
+    "rotation_mrp_function",
     "rotation_vector_to_mrp_expr",
     "selection_function",
     "short_expr",
@@ -71,6 +75,11 @@ FLIGHT_MEMORY_SIZE = 10
 FLIGHT_CONSTANTS_SIZE = 10
 #: The flight sample's per-sample input ``noise``: (θ_k (3), η_k (3)).
 NOISE_SIZE = 6
+#: Revision of the numbers of the sensor's attitude noise (σ(θ) of the noise rotation): runs with attitude noise
+#: of two revisions differ in their last bits. 1: libm's tan (until 2026-12-01); 2: Cephes' rational tan for
+#: |θ| <= π (design/flight.md, phase 8a). A campaign store records it (``attrs["noise_revision"]``; a store
+#: without it is revision 1) and is not resumed across revisions.
+NOISE_REVISION = 2
 #: The stream numbers of the attitude noise, the rate noise and the delay jitter (:func:`stream_key`).
 STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
@@ -775,8 +784,9 @@ def rotation_vector_to_mrp_expr(theta: Any) -> Any:
     tan(Φ/4)/Φ (``tests/test_sensor_rotation.py``). For Φ > π, k = tan(Φ/4)/Φ by libm (its exact
     argument reduction keeps every angle, the largest accepted noise included, the NumPy
     reference's rotation); σ may then be the long set. CasADi's if_else computes both branches
-    (the virtual machine runs tan(0) on the main path); in the compiled sample gcc makes the libm
-    call a branch, so that the main path runs neither sqrt nor tan. Both share the one division.
+    (the virtual machine and the lanes run tan(0) on the main path); in CasADi's generated C gcc
+    makes the libm call a branch, so that the main path runs neither sqrt nor tan. Both share the
+    one division.
     """
     angle_squared = ca.dot(theta, theta)
     return _tan_quarter_ratio_expr(angle_squared) * theta
@@ -816,29 +826,6 @@ def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
     return numerator * (1 / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second)))  # one division, not three
 
 
-def _measured_attitude_expr(sigma: Any, theta: Any) -> Any:
-    """σ̃ = short(σ ⊕ σ(θ)) (SX), the sensor's attitude, with σ(θ) = k θ of :func:`rotation_vector_to_mrp_expr`.
-
-    The composition n/d of :func:`compose_mrp_expr` (the same numerator n and denominator d >= 0)
-    is long when |n|² > d², and its short set is then −n d/|n|²: σ̃ = n · (1/d or −d/|n|²), one
-    division instead of compose's and the shadow's two. σ₂ = k θ is never formed: |σ₂|² = k² Φ²
-    (Φ² is k's input), (1 − |σ|²) σ₂ = ((1 − |σ|²) k) θ, 2 σ₂ × σ = (2k)(θ × σ),
-    2 σ·σ₂ = (2k)(σ·θ). With θ = ±0 (d = 1) it has the bits of short(compose(σ, 0)), the shadow
-    −σ/|σ|² of a long σ included, but for the sign of a zero component (short's if_else adds +0,
-    turning −0 into +0; the controller's short set of the measurement does so anyway).
-    """
-    angle_squared = ca.dot(theta, theta)
-    k = _tan_quarter_ratio_expr(angle_squared)
-    s1 = ca.dot(sigma, sigma)
-    s2 = k * k * angle_squared
-    twice = 2 * k
-    numerator = ((1 - s1) * k) * theta + (1 - s2) * sigma - twice * (skew_expr(theta) @ sigma)
-    denominator = 1 + s1 * s2 - twice * ca.dot(sigma, theta)
-    squared = ca.dot(numerator, numerator)
-    long = squared > denominator * denominator
-    return numerator * (ca.if_else(long, -denominator, 1.0) / ca.if_else(long, squared, denominator))
-
-
 def short_expr(sigma: Any) -> Any:
     """The short set (|σ| <= 1) of σ (SX): σ unchanged when |σ|² <= 1, else −σ/|σ|²."""
     squared = ca.dot(sigma, sigma)
@@ -857,29 +844,74 @@ def quaternion_from_mrp_expr(sigma: Any) -> Any:
     return ca.vertcat((1 - squared) / (1 + squared), 2 * sigma / (1 + squared))
 
 
+class NoiseForm(enum.Enum):
+    """How a sample receives the sensor's attitude noise.
+
+    ``ROTATION_VECTOR``: θ (rad), and the sample computes its MRP σ(θ) (:func:`rotation_vector_to_mrp_expr`):
+    the exported samples, the virtual machine and the lane engine. ``MRP``: σ(θ) itself, computed before the
+    sample by :func:`rotation_mrp_function` (the same expressions, so the same bits): the compiled scalar
+    engine, which turns a block of θ rows into their MRPs at once, so that tan's latency is not on the
+    sample's path.
+    """
+
+    ROTATION_VECTOR = "rotation_vector"
+    MRP = "mrp"
+
+
 @lru_cache(maxsize=1)
-def measurement_function() -> ca.Function:
+def rotation_mrp_function() -> ca.Function:
+    """``rotation_mrp(rotation_noise) -> rotation_noise_mrp``: σ(θ) of :func:`rotation_vector_to_mrp_expr` (pure SX)."""
+    theta = ca.SX.sym("rotation_noise", 3)
+    return ca.Function(
+        "rotation_mrp", [theta], [rotation_vector_to_mrp_expr(theta)], ["rotation_noise"], ["rotation_noise_mrp"]
+    )
+
+
+def _sensor_expressions(form: NoiseForm) -> tuple[list[Any], list[str], Any, Any]:
+    """The sensor's inputs (x, rotation noise, rate noise, bias), their names, σ ⊕ σ(θ) (either set) and ω̃."""
+    if not isinstance(form, NoiseForm):
+        raise SpecificationError(f"form must be a mrpctl.flight.NoiseForm, got {form!r}")
+    x = ca.SX.sym("x", 6)
+    noise_name = "rotation_noise" if form is NoiseForm.ROTATION_VECTOR else "rotation_noise_mrp"
+    noise = ca.SX.sym(noise_name, 3)
+    eta = ca.SX.sym("rate_noise", 3)
+    bias = ca.SX.sym("bias", 3)
+    rotation = rotation_vector_to_mrp_expr(noise) if form is NoiseForm.ROTATION_VECTOR else noise
+    omega_meas = 4 * x[3:6] + bias + eta
+    names = ["x", noise_name, "rate_noise", "bias"]
+    return [x, noise, eta, bias], names, compose_mrp_expr(x[0:3], rotation), omega_meas
+
+
+@lru_cache(maxsize=2)
+def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
     """``measurement(x, rotation_noise, rate_noise, bias) -> (x_meas, q_meas)`` (pure SX).
 
     x = [σ; ω/4] is the true state (σ in either set). The sensor reports the short set of
     the measured attitude, σ̃ = short(σ ⊕ σ(θ)) with [B̃N] = [B̃B](θ)[BN], the rate
     ω̃ = ω + b + η, and x_meas = [σ̃; ω̃/4]; q_meas is σ̃'s quaternion (β₀ >= 0). With zero
-    noise and bias and a short σ, x_meas is x bit for bit.
+    noise and bias and a short σ, x_meas is x bit for bit. With ``form`` = :attr:`NoiseForm.MRP` the
+    second input is σ(θ) (``rotation_noise_mrp``, from :func:`rotation_mrp_function`) instead of θ:
+    the same numbers, bit for bit. :func:`raw_measurement_function` is the same before the short set.
     """
-    x = ca.SX.sym("x", 6)
-    theta = ca.SX.sym("rotation_noise", 3)
-    eta = ca.SX.sym("rate_noise", 3)
-    bias = ca.SX.sym("bias", 3)
-    sigma_meas = _measured_attitude_expr(x[0:3], theta)
-    omega_meas = 4 * x[3:6] + bias + eta
+    inputs, names, composed, omega_meas = _sensor_expressions(form)
+    sigma_meas = short_expr(composed)
     x_meas = ca.vertcat(sigma_meas, 0.25 * omega_meas)  # = omega_meas / 4 exactly (a power of two)
     return ca.Function(
-        "measurement",
-        [x, theta, eta, bias],
-        [x_meas, quaternion_from_mrp_expr(sigma_meas)],
-        ["x", "rotation_noise", "rate_noise", "bias"],
-        ["x_meas", "q_meas"],
+        "measurement", inputs, [x_meas, quaternion_from_mrp_expr(sigma_meas)], names, ["x_meas", "q_meas"]
     )
+
+
+@lru_cache(maxsize=2)
+def raw_measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
+    """``raw_measurement(x, rotation_noise, rate_noise, bias) -> x_raw`` (pure SX): [σ ⊕ σ(θ); ω̃/4].
+
+    :func:`measurement_function` before its short set: the attitude in either set, so that
+    x_meas = [short(x_raw[0:3]); x_raw[3:6]] bit for bit. The flight sample puts x_raw in its ring
+    and takes the short set of the delayed entry, which it needs for the history anyway: one short
+    set a sample, not two.
+    """
+    inputs, names, composed, omega_meas = _sensor_expressions(form)
+    return ca.Function("raw_measurement", inputs, [ca.vertcat(composed, 0.25 * omega_meas)], names, ["x_raw"])
 
 
 @lru_cache(maxsize=1)

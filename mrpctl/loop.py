@@ -35,11 +35,13 @@ from mrpctl.flight import (
     DelayModel,
     Disturbance,
     Hysteretic,
+    NoiseForm,
     Saturation,
     SensorModel,
     actuator_function,
     measurement_function,
     quaternion_from_mrp_expr,
+    raw_measurement_function,
     selection_function,
     short_expr,
 )
@@ -231,6 +233,7 @@ def flight_core_function(
     disturbed: bool = True,
     records: bool = False,
     torque_input: bool = False,
+    noise_form: NoiseForm = NoiseForm.ROTATION_VECTOR,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
 
@@ -250,12 +253,14 @@ def flight_core_function(
     commanded torque before the actuator limits, N m): the result's per-sample records. With
     ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the sample (a
     per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
-    At sample k:
+    ``noise_form`` (:class:`~mrpctl.flight.NoiseForm`): with ``MRP`` the first half of ``noise`` is the
+    attitude noise's MRP σ(θ_k) (:func:`~mrpctl.flight.rotation_mrp_function`, computed by the engine
+    before the sample) instead of θ_k: the same numbers bit for bit. At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
-    2. the sensor (:func:`~mrpctl.flight.measurement_function`): m_k = [σ̃_k; ω̃_k/4] (the
-       ring's entry; x_meas bit for bit without noise and bias);
+    2. the sensor (:func:`~mrpctl.flight.raw_measurement_function`): m_k = [σ_k ⊕ σ(θ_k); ω̃_k/4]
+       (the ring's entry, the attitude in either set; x_meas bit for bit without noise and bias);
     3. the controller reads the delayed measurement m_{k−d} (m_k when d = 0), takes its short
        set σ̃ and applies :func:`~mrpctl.flight.selection_function` with its memory
        (h, c, σ̃_prev) and δ: σ_c, and ``switched`` = 1.0 when h flipped (the run's switches);
@@ -279,7 +284,10 @@ def flight_core_function(
     w = torque if torque_input else flight[4:7]
     disturbed = disturbed or torque_input
     x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
-    measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
+    # the ring holds the sensor's raw measurement (either set); the short set of the entry read is taken here,
+    # as for the history's entries: the same σ̃ as measurement_function's, bit for bit
+    measure = raw_measurement_function(noise_form)
+    measured = measure.call([x_meas, noise[0:3], noise[3:6], flight[7:10]])[0] if sensor else x_meas
     seen = x_delayed if d > 0 else measured
     sigma_seen = short_expr(seen[0:3])
     h_next, c_next, sigma_c, switched = selection_function()(

@@ -474,3 +474,32 @@ def test_flight_runs_sharing_their_models_run_in_one_call_with_the_same_results(
         for name, values in alone.items():
             assert values[0].tobytes() == together[name][i].tobytes(), (i, name)
     assert (together["u_max"] == 40.0).all() and (together["disturbance"] == [0.2, 0.0, -0.1]).all()
+
+
+def test_a_store_of_another_noise_revision_is_not_resumed_and_its_replay_says_why(spec, tmp_path):
+    """Runs with attitude noise depend on mrpctl.flight.NOISE_REVISION: a store written with another revision is
+    not resumed (it would mix the two), and its replay names both revisions; a campaign without attitude noise is
+    not concerned."""
+    import zarr
+
+    from mrpctl.campaign.store import STORE_NAME
+    from mrpctl.flight import NOISE_REVISION
+
+    noisy = parse_campaign(copy.deepcopy(FLIGHT_SPEC))
+    assert noisy.attitude_noisy and not spec.attitude_noisy
+    run_campaign(noisy, tmp_path / "noisy", chunk=3, threads=1)
+    group = zarr.open_group(str(tmp_path / "noisy" / STORE_NAME), mode="r+")
+    assert int(group.attrs["noise_revision"]) == NOISE_REVISION
+    assert replay(tmp_path / "noisy", 1).noise_revisions is None
+    group.attrs["noise_revision"] = NOISE_REVISION + 1
+    with pytest.raises(SpecificationError, match=f"noise revision {NOISE_REVISION + 1}.*revision {NOISE_REVISION}"):
+        run_campaign(noisy, tmp_path / "noisy", threads=1)
+    result = replay(tmp_path / "noisy", 1)
+    assert result.noise_revisions == (NOISE_REVISION + 1, NOISE_REVISION)
+    assert f"noise revision {NOISE_REVISION + 1}" in str(result)
+    # a campaign without attitude noise resumes whatever the revision (a store without the attribute is revision 1)
+    run_campaign(spec, tmp_path / "plain", chunk=12, threads=1)
+    group = zarr.open_group(str(tmp_path / "plain" / STORE_NAME), mode="r+")
+    del group.attrs["noise_revision"]
+    assert str(run_campaign(spec, tmp_path / "plain", threads=1)).startswith("campaign")
+    assert replay(tmp_path / "plain", 0).noise_revisions is None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 
+import casadi as ca
 import numpy as np
 import pytest
 from flight_reference import reference_loop
@@ -15,10 +16,15 @@ from mrpctl.flight import (
     DelayModel,
     Disturbance,
     Hysteretic,
+    NoiseForm,
     Saturation,
     SensorModel,
+    measurement_function,
     newest_arrived,
     newest_arrived_slice,
+    raw_measurement_function,
+    rotation_mrp_function,
+    short_expr,
 )
 from mrpctl.simulation import _engine
 from mrpctl.spacecraft import Spacecraft
@@ -481,3 +487,58 @@ def test_varying_delay_refuses_bad_input():
             t_final=1.0,
             rule=OnCurrent(),
         )
+
+
+# ============================================================================ the noise rotation in the driver
+def test_the_noise_mrp_form_is_the_rotation_vector_form_bit_for_bit():
+    """measurement(x, σ(θ)) of NoiseForm.MRP, with σ(θ) from rotation_mrp_function, is measurement(x, θ) exactly."""
+    rng = np.random.default_rng(11)
+    n = 4000
+    x = rng.normal(0.0, 0.7, (6, n))  # σ in either set (|σ| up to ~2), ω/4
+    # small, moderate and large rotations (|θ| up to ~2π), and exact zeros
+    theta = rng.standard_normal((3, n)) * np.repeat([1e-6, 1e-2, 0.5, 2.0], n // 4)
+    theta[:, :7] = 0.0
+    eta, bias = rng.normal(0, 1e-3, (3, n)), rng.normal(0, 1e-3, (3, n))
+    direct = measurement_function(NoiseForm.ROTATION_VECTOR).map(n)(x, theta, eta, bias)
+    rotation = rotation_mrp_function().map(n)(theta)
+    staged = measurement_function(NoiseForm.MRP).map(n)(x, rotation, eta, bias)
+    for a, b in zip(direct, staged, strict=True):
+        assert np.array_equal(np.asarray(a).view(np.uint64), np.asarray(b).view(np.uint64))
+    assert measurement_function(NoiseForm.MRP).name_in(1) == "rotation_noise_mrp"
+    with pytest.raises(SpecificationError, match="NoiseForm"):
+        measurement_function("mrp")  # type: ignore[arg-type]
+
+
+def test_the_scalar_engine_draws_the_noise_rotation_in_its_driver_and_equals_the_sample_form(monkeypatch):
+    """The scalar engine (σ(θ) per block in the driver) = the same engine with θ into the sample, bit for bit."""
+    gains = 0.05 * paper.GAIN
+    x0 = _tumbles(1, 5.0, 4)[0]
+    sensor = SensorModel(attitude_noise=0.3, rate_noise=1e-3, gyro_bias=[1e-3, 0.0, -2e-3], seed=5)
+    common = dict(tau=0.05, rate=100.0, rule=Hysteretic(0.05), t_final=8.0, sensor=sensor)
+    driver = simulate(paper.SPACECRAFT, gains, x0, **common)
+    monkeypatch.setattr(_engine, "_ROTATION_IN_DRIVER", False)
+    _engine.clear_engines()
+    try:
+        sample = simulate(paper.SPACECRAFT, gains, x0, **common)
+    finally:
+        _engine.clear_engines()
+    assert driver.switch_count >= 1
+    assert np.array_equal(driver.sigma, sample.sigma) and np.array_equal(driver.u, sample.u)
+    assert np.array_equal(driver.switch_indices, sample.switch_indices)
+
+
+def test_the_raw_measurement_is_the_measurement_before_its_short_set_bit_for_bit():
+    """x_meas = [short(x_raw[0:3]); x_raw[3:6]] exactly (the flight ring holds x_raw, the controller shortens it)."""
+    rng = np.random.default_rng(12)
+    n = 4000
+    x = rng.normal(0.0, 0.7, (6, n))
+    theta = rng.standard_normal((3, n)) * np.repeat([1e-6, 1e-2, 0.5, 2.0], n // 4)
+    eta, bias = rng.normal(0, 1e-3, (3, n)), rng.normal(0, 1e-3, (3, n))
+    x_meas, _ = measurement_function().map(n)(x, theta, eta, bias)
+    x_raw = np.asarray(raw_measurement_function().map(n)(x, theta, eta, bias))
+    sigma = ca.SX.sym("sigma", 3)
+    shortened = np.asarray(ca.Function("short", [sigma], [short_expr(sigma)]).map(n)(x_raw[0:3]))
+    long_set = np.sum(x_raw[0:3] ** 2, axis=0) > 1
+    assert 100 < long_set.sum() < n - 100  # both sets occur
+    assert np.array_equal(np.asarray(x_meas)[0:3].view(np.uint64), shortened.view(np.uint64))
+    assert np.array_equal(np.asarray(x_meas)[3:6].view(np.uint64), x_raw[3:6].view(np.uint64))

@@ -68,6 +68,22 @@ def test_the_tables_in_the_c_source_are_the_documented_recursion_bit_for_bit():
     assert np.allclose(areas, table_x[0] * table_f[1], rtol=1e-12)
 
 
+def test_the_prescaled_table_is_x_times_two_to_the_minus_53_exactly():
+    """mrpctl_zig_xs[i] = X[i] 2^-53 (the driver's one product (h >> 11) X[i] 2^-53 gives the documented bits)."""
+    from importlib import resources
+
+    text = resources.files("mrpctl").joinpath("simulation", "_noise.c").read_text(encoding="utf-8")
+    body = text.split("mrpctl_zig_xs[256] = {", 1)[1].split("}", 1)[0]
+    scaled = np.array([float.fromhex(item) for item in body.replace("\n", " ").split(",") if item.strip()])
+    table_x, _ = flight._c_tables()
+    assert scaled.shape == (256,)
+    assert np.array_equal(_bits(scaled), _bits(np.ldexp(table_x[:256], -53)))
+    # the product is the same real number as the documented ((h >> 11) 2^-53) X[i]: the same rounding
+    m = np.array([1, 3, 2**52 + 12345, 2**53 - 1], dtype=np.float64)
+    for i in (0, 1, 128, 255):
+        assert np.array_equal(_bits(m * scaled[i]), _bits(m * 2.0**-53 * table_x[i]))
+
+
 def test_mix64_is_splitmix64():
     """The first outputs of SplitMix64 seeded with 0 (the reference sequence of Vigna's splitmix64.c)."""
     assert [flight._value(0, i) for i in range(3)] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F]

@@ -20,8 +20,9 @@ import xarray as xr
 from mrpctl._validation import integer
 from mrpctl.campaign._task import run_models, simulate_chunk
 from mrpctl.campaign.simulation import METRICS, flight_keywords
-from mrpctl.campaign.store import INPUTS, open_campaign, spec_of
+from mrpctl.campaign.store import INPUTS, open_campaign, spec_of, stored_noise_revision
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import NOISE_REVISION
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -404,6 +405,9 @@ class ReplayResult:
         Names whose values differ (bit for bit; NaN equals NaN).
     trajectory : SimulationResult or None
         The full run, when asked for.
+    noise_revisions : tuple of int or None
+        (stored, current) :data:`~mrpctl.flight.NOISE_REVISION` when they differ and the campaign has attitude
+        noise: its runs then differ in their last bits by design; None otherwise.
     """
 
     run: int
@@ -411,6 +415,7 @@ class ReplayResult:
     replayed: dict[str, np.ndarray] = field(repr=False)
     mismatches: tuple[str, ...]
     trajectory: SimulationResult | None = field(default=None, repr=False)
+    noise_revisions: tuple[int, int] | None = None
 
     @property
     def matches(self) -> bool:
@@ -422,6 +427,11 @@ class ReplayResult:
             f"replay of run {self.run}: "
             + ("identical to the stored run" if self.matches else "DIFFERS in " + ", ".join(self.mismatches))
         ]
+        if self.noise_revisions is not None:
+            lines.append(
+                f"  the store was written with noise revision {self.noise_revisions[0]}, this mrpctl computes revision "
+                f"{self.noise_revisions[1]}: runs with attitude noise differ in their last bits (see CHANGELOG.md)"
+            )
         for name in METRICS:
             lines.append(f"  {name:<18} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
         return "\n".join(lines)
@@ -459,7 +469,16 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
     result = None
     if trajectory:
         result = _trajectory(spec, run, values)
-    return ReplayResult(run=run, stored=stored, replayed=replayed, mismatches=mismatches, trajectory=result)
+    revision = stored_noise_revision(dataset.attrs)
+    revisions = (revision, NOISE_REVISION) if spec.attitude_noisy and revision != NOISE_REVISION else None
+    return ReplayResult(
+        run=run,
+        stored=stored,
+        replayed=replayed,
+        mismatches=mismatches,
+        trajectory=result,
+        noise_revisions=revisions,
+    )
 
 
 def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> SimulationResult:

@@ -517,6 +517,14 @@ class CampaignSpec:
         return -(-self.count // len(self.rule_list))
 
     @property
+    def attitude_noisy(self) -> bool:
+        """True when a run has sensor attitude noise (its numbers depend on :data:`~mrpctl.flight.NOISE_REVISION`)."""
+        dispersed = self.flight_dispersion.attitude_noise
+        return (self.flight is not None and self.flight.attitude_noise > 0) or (
+            dispersed is not None and dispersed[1] > 0
+        )
+
+    @property
     def uses_flight(self) -> bool:
         """True when the runs go through the flight loop's models (sensor, actuator, disturbance, jitter)."""
         return self.flight is not None or self.flight_dispersion.models

@@ -46,6 +46,7 @@ import zarr
 from mrpctl.campaign.simulation import METRICS
 from mrpctl.campaign.spec import CampaignSpec, SampleFile, parse_campaign
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import NOISE_REVISION
 
 __all__ = ["INPUTS", "STORE_NAME", "CampaignStore", "open_campaign"]
 
@@ -132,6 +133,7 @@ def _attrs(spec: CampaignSpec) -> dict[str, Any]:
             None if spec.predictor is None else np.asarray(spec.predictor.model.inertia, dtype=float).tolist()
         ),
         "versions": json.dumps(versions(), sort_keys=True),
+        "noise_revision": NOISE_REVISION,
     }
 
 
@@ -188,6 +190,13 @@ class CampaignStore:
                     f"out: {self.path} holds another campaign ({attrs.get('name')!r}); choose a new --out folder"
                 )
             _check_files(self.path, stored, spec)
+            revision = stored_noise_revision(attrs)
+            if spec.attitude_noisy and revision != NOISE_REVISION:
+                raise SpecificationError(
+                    f"out: the store at {self.path} was written with noise revision {revision}, this mrpctl computes "
+                    f"revision {NOISE_REVISION} (mrpctl.flight.NOISE_REVISION): runs with attitude noise differ in "
+                    "their last bits, and resuming would mix the two; choose a new --out folder"
+                )
             stored_chunk = int(str(stored["chunk_complete"].attrs["runs_per_chunk"]))
             if chunk is not None and chunk != stored_chunk:
                 raise SpecificationError(
@@ -298,6 +307,11 @@ def _available_memory() -> int | None:
     except OSError:
         return None
     return None
+
+
+def stored_noise_revision(attrs: Any) -> int:
+    """The :data:`~mrpctl.flight.NOISE_REVISION` a store was written with (1 for a store without the attribute)."""
+    return int(str(attrs.get("noise_revision", 1)))
 
 
 def _check_files(path: Path, stored: Any, spec: CampaignSpec) -> None:

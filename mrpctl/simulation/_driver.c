@@ -11,7 +11,7 @@
  * entry, apart from x_meas (the flight and predictor samples), and with MRPCTL_SENSOR a per-sample
  * noise input, generated here: row k is (sigma[0] n_a(3k + c), sigma[1] n_r(3k + c)), c = 0, 1, 2, with the
  * normals of _noise.c (included in front of this file) of the streams noise_key[0] (attitude) and
- * noise_key[1] (rate); a zero sigma gives exact zeros (the NumPy mirror: mrpctl.flight.SensorModel.noise_rows). With MRPCTL_RECORD_OUTPUT (its output index) the flight sample's record of
+ * noise_key[1] (rate), drawn MRPCTL_NOISE_BLOCK samples at a time by mrpctl_normal_rows; a zero sigma gives exact zeros (the NumPy mirror: mrpctl.flight.SensorModel.noise_rows). With MRPCTL_RECORD_OUTPUT (its output index) the flight sample's record of
  * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept); with
  * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque.
  *
@@ -34,6 +34,32 @@
  * one done is the diverging sample, whose measurement is still a good state); -1 when the
  * sample function failed. state (x, memory, stats) holds the state after the last sample.
  */
+/* samples of noise drawn at a time (48 doubles on the stack per 8 samples) */
+#define MRPCTL_NOISE_BLOCK 64
+
+#if MRPCTL_ROTATION_INPUT
+/* theta -> sigma(theta) of the first three numbers of each of `rows` noise rows (6 wide), in place, by the generated
+   MRPCTL_ROTATION; nonzero when it failed */
+static int mrpctl_rotation_rows(casadi_real* rows_data, long long rows) {
+  const casadi_real* arg[1];
+  casadi_real* res[1];
+  casadi_int iw[MRPCTL_ROTATION_SZ_IW];
+  casadi_real w[MRPCTL_ROTATION_SZ_W];
+  casadi_real out[3];
+  long long j;
+  res[0] = out;
+  for (j = 0; j < rows; ++j) {
+    casadi_real* row = rows_data + 6 * j;
+    arg[0] = row;
+    if (MRPCTL_ROTATION(arg, res, iw, w, 0)) return 1;
+    row[0] = out[0];
+    row[1] = out[1];
+    row[2] = out[2];
+  }
+  return 0;
+}
+#endif
+
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
@@ -88,7 +114,10 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   (void)flight;
 #endif
 #if MRPCTL_SENSOR
-  casadi_real noise_row[6];
+  /* the noise rows of MRPCTL_NOISE_BLOCK samples at a time, drawn in mrpctl_normal_rows' own loop:
+     rows k in [noise_k0, noise_k1) are in noise_block */
+  casadi_real noise_block[MRPCTL_NOISE_BLOCK * 6];
+  long long noise_k0 = k0, noise_k1 = k0;
 #else
   (void)noise;
   (void)noise_key;
@@ -126,7 +155,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
       if (latest[s] > newest) newest = latest[s];
       if (k - d > newest) newest = k - d; /* the history sample k - d arrives at k */
       latest[s] = LLONG_MIN;
-      if (k > latest[arrival]) latest[arrival] = k;
+      latest[arrival] = k; /* = max(latest[arrival], k): every measurement registered before is older than k */
       j_used = newest;
       if (++jitter_slot > d) jitter_slot = 0;
     } else if (used) {
@@ -148,11 +177,19 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     res[1] = next + MRPCTL_X;
     res[2] = next + MRPCTL_X_MEMORY;
 #if MRPCTL_SENSOR
-    for (i = 0; i < 3; ++i) {
-      noise_row[i] = noise[0] > 0.0 ? noise[0] * mrpctl_stream_normal(noise_key[0], (uint64_t)(3 * k + i)) : 0.0;
-      noise_row[3 + i] = noise[1] > 0.0 ? noise[1] * mrpctl_stream_normal(noise_key[1], (uint64_t)(3 * k + i)) : 0.0;
+    if (k == noise_k1) {
+      const long long rows = k1 - k < MRPCTL_NOISE_BLOCK ? k1 - k : MRPCTL_NOISE_BLOCK;
+      mrpctl_normal_rows(noise_key[0], (uint64_t)(3 * k), rows, noise[0], noise_block, 6);
+      mrpctl_normal_rows(noise_key[1], (uint64_t)(3 * k), rows, noise[1], noise_block + 3, 6);
+#if MRPCTL_ROTATION_INPUT
+      /* the sample takes the attitude noise's MRP sigma(theta): computed here for the block by the sensor's own
+         generated function (a zero 1 sigma leaves the exact zeros it gives for theta = 0) */
+      if (noise[0] > 0.0 && mrpctl_rotation_rows(noise_block, rows)) return -1;
+#endif
+      noise_k0 = k;
+      noise_k1 = k + rows;
     }
-    arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise_row;
+    arg[7 + 2 * MRPCTL_INERTIA_INPUT] = noise_block + 6 * (k - noise_k0);
 #endif
 #if MRPCTL_TORQUE_INPUT
     /* a per-sample disturbance w_k (the flight sample's last input) */

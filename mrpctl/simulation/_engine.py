@@ -48,9 +48,11 @@ from mrpctl.flight import (
     DelayModel,
     Disturbance,
     Hysteretic,
+    NoiseForm,
     Saturation,
     SensorModel,
     newest_arrived_slice,
+    rotation_mrp_function,
     stream_key,
 )
 from mrpctl.loop import (
@@ -142,6 +144,9 @@ def predictor_constants(options: np.ndarray | None, tau: float, model: Spacecraf
 #: The flight sample's constants without actuator limits or disturbance: u_max = u_norm = inf, w = 0.
 NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 _NO_NOISE = np.zeros(NOISE_SIZE)
+#: The scalar flight engine with a sensor computes the attitude noise's MRP in the driver (NoiseForm.MRP); False:
+#: in the sample (the A/B of bench/flight.py)
+_ROTATION_IN_DRIVER = True
 
 
 _NOISE_FILL: list[Any] = []  # mrpctl_stream_fill of _noise.c compiled alone (loaded once), or None
@@ -251,10 +256,11 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     )
 
 
-def _driver_source(sample: ca.Function) -> str:
-    """``_driver.c`` with the #defines that bind it to ``sample``."""
+def _driver_source(sample: ca.Function, rotation: ca.Function | None = None) -> str:
+    """``_driver.c`` with the #defines that bind it to ``sample`` (and to ``rotation``, the attitude noise's
+    θ -> σ(θ) for a sample of :attr:`~mrpctl.flight.NoiseForm.MRP`)."""
     memory_size = sample.size1_in(1)
-    defines = {
+    defines: dict[str, Any] = {
         "MRPCTL_SAMPLE": sample.name(),
         "MRPCTL_RUN": sample.name() + "_run",
         "MRPCTL_SZ_ARG": max(sample.sz_arg(), 8),
@@ -273,7 +279,12 @@ def _driver_source(sample: ca.Function) -> str:
         "MRPCTL_TORQUE_INPUT": sample.name_in().index("torque") if "torque" in sample.name_in() else 0,
         "MRPCTL_RECORD_WIDTH": sample.size1_out("record") if "record" in sample.name_out() else 1,
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
+        "MRPCTL_ROTATION_INPUT": int(rotation is not None),
     }
+    if rotation is not None:
+        defines["MRPCTL_ROTATION"] = rotation.name()
+        defines["MRPCTL_ROTATION_SZ_IW"] = max(rotation.sz_iw(), 1)
+        defines["MRPCTL_ROTATION_SZ_W"] = max(rotation.sz_w(), 1)
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
     folder = resources.files("mrpctl.simulation")
     noise = folder.joinpath("_noise.c").read_text(encoding="utf-8")  # the random streams the driver draws
@@ -359,6 +370,9 @@ class Engine:
                 disturbed=disturbed,
                 records=True,
                 torque_input=torque_input,
+                # with a sensor the driver turns each block of theta rows into their MRPs (the same SX, compiled
+                # into this library), so that tan's latency is not on the sample's path
+                noise_form=NoiseForm.MRP if sensor and _ROTATION_IN_DRIVER else NoiseForm.ROTATION_VECTOR,
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -378,10 +392,15 @@ class Engine:
         from mrpctl._vectorize import inline_min_max  # (it imports this module)
 
         min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
+        rotation = None
+        if self.flight and not self.predictor and sensor and _ROTATION_IN_DRIVER:
+            theta = ca.SX.sym("rotation_noise", 3)
+            rotation = ca.Function(self.sample.name() + "_rotation", [theta], [rotation_mrp_function()(theta)])
         self.compiled: CompiledFunction = compile_function(
             self.sample,
             flags=(*SIMULATION_FLAGS, *min_max_flags),
-            appendix=_driver_source(self.sample) + min_max_source,
+            appendix=_driver_source(self.sample, rotation) + min_max_source,
+            others=() if rotation is None else (rotation,),
         )
         self._run_c: Any = None
         if self.compiled.compiled:

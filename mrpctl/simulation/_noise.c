@@ -169,6 +169,74 @@ static const double mrpctl_zig_f[257] = {
     0x1.dd36fa704de9fp-1, 0x1.e3f11e027f082p-1, 0x1.eb7545b6ca922p-1, 0x1.f446ac979f097p-1,
     0x1.0000000000000p+0,
 };
+/* mrpctl_zig_x[i] 2^-53 (i < 256; exact: a power-of-two scaling), so that x = (h >> 11) X[i] 2^-53 is one
+ * product: the same real number as ((h >> 11) 2^-53) X[i], hence the same rounding, the same bits. */
+static const double mrpctl_zig_xs[256] = {
+    0x1.f493b7815d984p-52, 0x1.d3bb48209ad33p-52, 0x1.b981f3878fdb0p-52, 0x1.a8fdc78947758p-52,
+    0x1.9cbee014057a9p-52, 0x1.92ee0946f4494p-52, 0x1.8ab0fbfaa7c12p-52, 0x1.839030529f232p-52,
+    0x1.7d42df4d6ce8ap-52, 0x1.7799556090671p-52, 0x1.72728f05f7a33p-52, 0x1.6db6b8d09e230p-52,
+    0x1.69540be9fe5c1p-52, 0x1.653ce7b006ae9p-52, 0x1.61669cf861e4ap-52, 0x1.5dc8a243ad0fdp-52,
+    0x1.5a5c08b718dd8p-52, 0x1.571b1a94ae41ap-52, 0x1.54011523a7e41p-52, 0x1.5109f53e9ac40p-52,
+    0x1.4e3250dcd8901p-52, 0x1.4b7739d6b5a26p-52, 0x1.48d62759c43bap-52, 0x1.464ce44a73a13p-52,
+    0x1.43d9815545e91p-52, 0x1.417a49cb9e5d7p-52, 0x1.3f2dbaa60f472p-52, 0x1.3cf27b31704a3p-52,
+    0x1.3ac7570ae88f7p-52, 0x1.38ab392564107p-52, 0x1.369d27a33a83dp-52, 0x1.349c405ae12a0p-52,
+    0x1.32a7b5e68a4a0p-52, 0x1.30becd256aeebp-52, 0x1.2ee0db1a978f3p-52, 0x1.2d0d43196db96p-52,
+    0x1.2b437532a0a51p-52, 0x1.2982ecd770e77p-52, 0x1.27cb2faa8592dp-52, 0x1.261bcc77658dfp-52,
+    0x1.24745a4ac9c23p-52, 0x1.22d477a6fd3eep-52, 0x1.213bc9d04cc81p-52, 0x1.1fa9fc2e2d900p-52,
+    0x1.1e1ebfbe4ae38p-52, 0x1.1c99ca971a693p-52, 0x1.1b1ad777f2f8dp-52, 0x1.19a1a564eebabp-52,
+    0x1.182df74d21260p-52, 0x1.16bf93b9deef2p-52, 0x1.1556448602e3ap-52, 0x1.13f1d69c4096cp-52,
+    0x1.129219bbb5d34p-52, 0x1.1136e04207040p-52, 0x1.0fdffefa69fb5p-52, 0x1.0e8d4cf116591p-52,
+    0x1.0d3ea34aa3d2ep-52, 0x1.0bf3dd1eed445p-52, 0x1.0aacd7571c0c1p-52, 0x1.0969708e8a251p-52,
+    0x1.082988f632e14p-52, 0x1.06ed023a72665p-52, 0x1.05b3bf6adb37bp-52, 0x1.047da4e3ef5c4p-52,
+    0x1.034a983a902a8p-52, 0x1.021a8028fc944p-52, 0x1.00ed447d3a072p-52, 0x1.ff859c118f605p-53,
+    0x1.fd360d22fe77fp-53, 0x1.faebb187122b9p-53, 0x1.f8a660489977cp-53, 0x1.f665f20c90162p-53,
+    0x1.f42a40fb74d67p-53, 0x1.f1f328ac2531ap-53, 0x1.efc086101eca2p-53, 0x1.ed9237610a732p-53,
+    0x1.eb681c0f76f00p-53, 0x1.e94214b2abf01p-53, 0x1.e72002f97fe1bp-53, 0x1.e501c99c1d17ep-53,
+    0x1.e2e74c4ea46ebp-53, 0x1.e0d06fb49d211p-53, 0x1.debd195522e2cp-53, 0x1.dcad2f8fc4904p-53,
+    0x1.daa0999206e67p-53, 0x1.d8973f4d7fb9dp-53, 0x1.d691096e7f11bp-53, 0x1.d48de1533c640p-53,
+    0x1.d28db1037ef1ap-53, 0x1.d0906328b8f68p-53, 0x1.ce95e3068e031p-53, 0x1.cc9e1c73bd689p-53,
+    0x1.caa8fbd36a2a4p-53, 0x1.c8b66e0eba610p-53, 0x1.c6c6608ec86ffp-53, 0x1.c4d8c136e0d17p-53,
+    0x1.c2ed7e5f07a28p-53, 0x1.c10486cec169bp-53, 0x1.bf1dc9b81ae7ep-53, 0x1.bd3936b2ec09ep-53,
+    0x1.bb56bdb85256ap-53, 0x1.b9764f1e5f739p-53, 0x1.b797db93f8925p-53, 0x1.b5bb541ce3d01p-53,
+    0x1.b3e0aa0e00bfdp-53, 0x1.b207cf09a9858p-53, 0x1.b030b4fc3a117p-53, 0x1.ae5b4e18bb334p-53,
+    0x1.ac878cd5af5ccp-53, 0x1.aab563e9ff107p-53, 0x1.a8e4c64a0313cp-53, 0x1.a715a724aa9a4p-53,
+    0x1.a547f9e0bbb88p-53, 0x1.a37bb21a2c85bp-53, 0x1.a1b0c39f93692p-53, 0x1.9fe7226fad24ap-53,
+    0x1.9e1ec2b6f7411p-53, 0x1.9c5798cd5d92cp-53, 0x1.9a919933f99bfp-53, 0x1.98ccb892e2a31p-53,
+    0x1.9708ebb70d5eep-53, 0x1.954627903a28ap-53, 0x1.9384612ef0afcp-53, 0x1.91c38dc288347p-53,
+    0x1.9003a2973b58fp-53, 0x1.8e44951446a27p-53, 0x1.8c865aba10c9cp-53, 0x1.8ac8e9205c043p-53,
+    0x1.890c35f47f72dp-53, 0x1.875036f7a7ec5p-53, 0x1.8594e1fd1f5bdp-53, 0x1.83da2ce899f15p-53,
+    0x1.82200dac88676p-53, 0x1.80667a486ea1fp-53, 0x1.7ead68c73dee7p-53, 0x1.7cf4cf3db22fbp-53,
+    0x1.7b3ca3c8b1409p-53, 0x1.7984dc8babd93p-53, 0x1.77cd6faeff449p-53, 0x1.7616535e5731fp-53,
+    0x1.745f7dc70eedcp-53, 0x1.72a8e516914c6p-53, 0x1.70f27f78b68ebp-53, 0x1.6f3c43161f854p-53,
+    0x1.6d8626128d352p-53, 0x1.6bd01e8b343bbp-53, 0x1.6a1a22950b2b1p-53, 0x1.6864283b13136p-53,
+    0x1.66ae257c99671p-53, 0x1.64f8104b7260ap-53, 0x1.6341de8a2b0a1p-53, 0x1.618b860a31fc2p-53,
+    0x1.5fd4fc89f5e36p-53, 0x1.5e1e37b2f8cd1p-53, 0x1.5c672d17d733bp-53, 0x1.5aafd23241b56p-53,
+    0x1.58f81c60e8511p-53, 0x1.574000e555f75p-53, 0x1.558774e1bb2c4p-53, 0x1.53ce6d56a664bp-53,
+    0x1.5214df20a8b57p-53, 0x1.505abef5e555ep-53, 0x1.4ea001638a601p-53, 0x1.4ce49acb311d8p-53,
+    0x1.4b287f6024159p-53, 0x1.496ba32488f2bp-53, 0x1.47adf9e66c333p-53, 0x1.45ef773cac75ap-53,
+    0x1.44300e83c30a1p-53, 0x1.426fb2da6745ap-53, 0x1.40ae571e09e71p-53, 0x1.3eebede725a80p-53,
+    0x1.3d28698561ddep-53, 0x1.3b63bbfb83d01p-53, 0x1.399dd6fb2b262p-53, 0x1.37d6abe055868p-53,
+    0x1.360e2baca52d3p-53, 0x1.3444470265e9fp-53, 0x1.3278ee1f4b92ep-53, 0x1.30ac10d6e48d5p-53,
+    0x1.2edd9e8cba98bp-53, 0x1.2d0d862e1b850p-53, 0x1.2b3bb62b82ed7p-53, 0x1.29681c719d719p-53,
+    0x1.2792a661dd37dp-53, 0x1.25bb40ca96bfap-53, 0x1.23e1d7de9c31ep-53, 0x1.2206572c4c6e8p-53,
+    0x1.2028a9940a09ep-53, 0x1.1e48b93e0d42bp-53, 0x1.1c666f8f82ac8p-53, 0x1.1a81b51ee6d84p-53,
+    0x1.189a71a78da30p-53, 0x1.16b08bfc42019p-53, 0x1.14c3e9f8e913cp-53, 0x1.12d4707310fb9p-53,
+    0x1.10e20329515e9p-53, 0x1.0eec84b160867p-53, 0x1.0cf3d664bcc7bp-53, 0x1.0af7d84bc610fp-53,
+    0x1.08f869071f408p-53, 0x1.06f565b72a00ep-53, 0x1.04eea9e16a5fap-53, 0x1.02e40f5398f98p-53,
+    0x1.00d56e04234eap-53, 0x1.fd8537dfa2ea9p-54, 0x1.f956d9e87d7aap-54, 0x1.f51f654d8f684p-54,
+    0x1.f0de784f06222p-54, 0x1.ec93abdf982cap-54, 0x1.e83e9337a6efdp-54, 0x1.e3debb5d2edfap-54,
+    0x1.df73aa9f1764ep-54, 0x1.dafce0023b8bfp-54, 0x1.d679d29e41f0bp-54, 0x1.d1e9f0e80b743p-54,
+    0x1.cd4c9fe722686p-54, 0x1.c8a13a5323b5cp-54, 0x1.c3e70f9594eefp-54, 0x1.bf1d62abf822fp-54,
+    0x1.ba4368e529f37p-54, 0x1.b558487427a26p-54, 0x1.b05b16d136c99p-54, 0x1.ab4ad6e10162cp-54,
+    0x1.a62676d77cd56p-54, 0x1.a0eccdca4a728p-54, 0x1.9b9c98e38c543p-54, 0x1.96347822c1ee7p-54,
+    0x1.90b2ea94ecf94p-54, 0x1.8b1649e7b7694p-54, 0x1.855cc53430a72p-54, 0x1.7f845ad46f53ep-54,
+    0x1.798ad10b32a73p-54, 0x1.736dad346f8a3p-54, 0x1.6d2a29200056cp-54, 0x1.66bd261a37c39p-54,
+    0x1.60231cfd97ee5p-54, 0x1.59580a707ce90p-54, 0x1.52575621ad36cp-54, 0x1.4b1bb363dfe9fp-54,
+    0x1.439ef8dff9b4bp-54, 0x1.3bd9ec1a2b123p-54, 0x1.33c3fc05791e9p-54, 0x1.2b52e3863d874p-54,
+    0x1.227a28f7a1ae8p-54, 0x1.192a69741366ap-54, 0x1.0f5053b025d36p-54, 0x1.04d32278ebba0p-54,
+    0x1.f32482d4cd5a3p-55, 0x1.dac2f5a74724ep-55, 0x1.c004d2f3861cfp-55, 0x1.a230c2e4cd08cp-55,
+    0x1.801fce82fa6d3p-55, 0x1.57cb938443b1bp-55, 0x1.250af3c2c5b55p-55, 0x1.b8d0be3fdf595p-56,
+};
 
 static inline uint64_t mrpctl_stream_value(uint64_t key, uint64_t idx) {
   uint64_t z = key + (idx + 1u) * UINT64_C(0x9E3779B97F4A7C15);
@@ -207,20 +275,51 @@ static __attribute__((noinline)) double mrpctl_stream_normal_slow(uint64_t key, 
   }
 }
 
+/* The sign of x from bit 8 of h, as a sign-bit flip (the same bits as the negation; no 50 % branch). */
+static inline double mrpctl_signed(double x, uint64_t h) {
+  uint64_t bits;
+  memcpy(&bits, &x, sizeof bits);
+  bits ^= (h & 256u) << 55;
+  memcpy(&x, &bits, sizeof bits);
+  return x;
+}
+
 /* The standard normal number n of the stream with key `key` (the accepted first attempt inline). */
 static inline double mrpctl_stream_normal(uint64_t key, uint64_t n) {
   const uint64_t h = mrpctl_stream_value(key, n << 12);
   const int i = (int)(h & 255u);
-  double x = (double)(int64_t)(h >> 11) * 0x1p-53 * mrpctl_zig_x[i];
-  if (__builtin_expect(x < mrpctl_zig_x[i + 1], 1)) {
-    /* -x when bit 8 is set, as a sign-bit flip (the same bits as the negation; no 50 % branch) */
-    uint64_t bits;
-    memcpy(&bits, &x, sizeof bits);
-    bits ^= (h & 256u) << 55;
-    memcpy(&x, &bits, sizeof bits);
-    return x;
-  }
+  const double x = (double)(int64_t)(h >> 11) * mrpctl_zig_xs[i]; /* = (h >> 11) 2^-53 X[i], bit for bit */
+  if (__builtin_expect(x < mrpctl_zig_x[i + 1], 1)) return mrpctl_signed(x, h);
   return mrpctl_stream_normal_slow(key, n);
+}
+
+/* Rows j < rows of scale times the normal numbers n0 + 3 j + c (c = 0, 1, 2) to out[j * row_stride + c] (scale 0:
+ * exact zeros): the numbers of mrpctl_stream_normal in a loop of its own, with the counter z of value
+ * (n << 12) advanced by 0x9E3779B97F4A7C15 << 12 (mod 2^64) from one n to the next instead of multiplied. */
+static __attribute__((noinline)) void mrpctl_normal_rows(uint64_t key, uint64_t n0, long long rows, double scale,
+                                                          double* out, long long row_stride) {
+  const uint64_t step = UINT64_C(0x9E3779B97F4A7C15) << 12;
+  uint64_t z = key + ((n0 << 12) + 1u) * UINT64_C(0x9E3779B97F4A7C15);
+  uint64_t n = n0;
+  long long j;
+  int c;
+  /* scale (-x) = (-scale) x exactly: the sign of bit 8 picks the signed scale */
+  const double signed_scale[2] = {scale, -scale};
+  if (!(scale > 0.0)) {
+    for (j = 0; j < rows; ++j, out += row_stride) out[0] = out[1] = out[2] = 0.0;
+    return;
+  }
+  for (j = 0; j < rows; ++j, out += row_stride) {
+    for (c = 0; c < 3; ++c, ++n, z += step) {
+      uint64_t h = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
+      h = (h ^ (h >> 27)) * UINT64_C(0x94D049BB133111EB);
+      h ^= h >> 31;
+      const int i = (int)(h & 255u);
+      const double x = (double)(int64_t)(h >> 11) * mrpctl_zig_xs[i];
+      if (__builtin_expect(x < mrpctl_zig_x[i + 1], 1)) out[c] = signed_scale[(h >> 8) & 1u] * x;
+      else out[c] = scale * mrpctl_stream_normal_slow(key, n);
+    }
+  }
 }
 
 /* The delay (samples) of measurement k in [lo, hi] of the jitter stream with key `key`. */
@@ -236,6 +335,10 @@ __attribute__((visibility("default"))) void mrpctl_stream_fill(unsigned long lon
                                                                double scale, int integers, long long lo, long long hi,
                                                                double* out, long long row_stride) {
   long long i;
+  if (!integers && count % 3 == 0) { /* whole rows (the lane engine's noise rows): the loop of mrpctl_normal_rows */
+    mrpctl_normal_rows(key, (uint64_t)n0, count / 3, scale, out, row_stride);
+    return;
+  }
   for (i = 0; i < count; ++i) {
     double* target = out + (i / 3) * row_stride + i % 3;
     if (integers) *target = (double)mrpctl_stream_integer(key, (uint64_t)(n0 + i), lo, hi);
