@@ -127,7 +127,9 @@ def flight_hash(verbose: bool = False) -> str:
     bias only, ideal) for two rules, two jitter runs, a full inertia and three ``simulate_batch``
     calls; the bytes (sign of zero included) of t, σ, ω, u, the switch times and the flight summaries.
     It must not move when the flight sample is reorganised (``2257a7a2…2457f9`` from phase 2 to 4, with
-    NumPy's Philox noise; see design/flight.md, phase 5, for the value with the noise of ``_noise.c``).
+    NumPy's Philox noise; ``eed1013f…d675dd900f`` from phase 5, the noise of ``_noise.c``, to 7). It is
+    ``7fb55ddd…a843baca57`` since phase 8a (design/flight.md): the sensor's rotation without tan changed the
+    last bits of the runs with attitude noise (1, 5, …, 69 and 72 of ``hash -v``, and the noisy batch) only.
     """
     import hashlib
 

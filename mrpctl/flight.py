@@ -76,13 +76,13 @@ FLIGHT_CONSTANTS_SIZE = 10
 #: The flight sample's per-sample input ``noise``: (θ_k (3), η_k (3)).
 NOISE_SIZE = 6
 #: Revision of the numbers of the sensor's attitude noise (σ(θ) of the noise rotation): runs with attitude noise
-#: of two revisions differ in their last bits. 1: libm's tan (until 2026-12-01); a campaign store records it
-#: (``attrs["noise_revision"]``; a store without it is revision 1) and is not resumed across revisions.
-NOISE_REVISION = 1
+#: of two revisions differ in their last bits. 1: libm's tan (until 2026-12-01); 2: Cephes' rational tan for
+#: |θ| <= π (design/flight.md, phase 8a). A campaign store records it (``attrs["noise_revision"]``; a store
+#: without it is revision 1) and is not resumed across revisions.
+NOISE_REVISION = 2
 #: The stream numbers of the attitude noise, the rate noise and the delay jitter (:func:`stream_key`).
 STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
-_SMALL_ANGLE = 1e-4
 #: Largest attitude 1σ (rad): |θ|² of σ_θ·N(0, I₃) must stay finite (overflow from |θ| ≈ 1.3e154).
 _MAX_ATTITUDE_NOISE = 1e150
 
@@ -776,16 +776,41 @@ class Hysteretic(SwitchingRule):
 
 # ================================================================== CasADi expressions
 def rotation_vector_to_mrp_expr(theta: Any) -> Any:
-    """σ = tan(|θ|/4) θ/|θ| of a rotation vector θ (rad, |θ| < 2π), exactly 0 at θ = 0 (SX)."""
+    """σ = tan(|θ|/4) θ/|θ| of a rotation vector θ (rad, any angle), exactly 0 at θ = 0 (SX).
+
+    σ = k(Φ²) θ with Φ = |θ|. For Φ <= π (|σ| <= 1), k is Cephes' rational tan (Moshier, Cephes
+    2.8, ``double/tan.c``: tan x = x + x³ P(x²)/Q(x²) for |x| <= π/4, x = Φ/4), written in
+    y = Φ²/16 = x² as k = 1/4 + y P(y) / (4 Q(y)): no sqrt, no tan, one division, within 1 ulp of
+    tan(Φ/4)/Φ (``tests/test_sensor_rotation.py``). For Φ > π, k = tan(Φ/4)/Φ by libm (its exact
+    argument reduction keeps every angle, the largest accepted noise included, the NumPy
+    reference's rotation); σ may then be the long set. CasADi's if_else computes both branches
+    (the virtual machine and the lanes run tan(0) on the main path); in CasADi's generated C gcc
+    makes the libm call a branch, so that the main path runs neither sqrt nor tan. Both share the
+    one division.
+    """
     angle_squared = ca.dot(theta, theta)
-    angle = ca.sqrt(angle_squared)
-    small = angle < _SMALL_ANGLE
-    safe = ca.if_else(small, 1.0, angle)
-    # tan(Φ/4)/Φ and its series 1/4 + Φ²/192 + Φ⁴/7680 near 0 (both branches are evaluated: the
-    # series by multiplications, x/4 as the exact 0.25 x; no division but the one of tan(Φ/4)/Φ)
-    series = 0.25 + angle_squared * (1.0 / 192.0) + angle_squared**2 * (1.0 / 7680.0)
-    factor = ca.if_else(small, series, ca.tan(0.25 * safe) / safe)
-    return factor * theta
+    return _tan_quarter_ratio_expr(angle_squared) * theta
+
+
+#: Cephes tan.c (release 2.8, June 2000, S. L. Moshier), the IEEE coefficients of P and Q (Q monic,
+#: its leading 1 left out) of tan x = x + x³ P(x²)/Q(x²), |x| <= π/4; highest power first.
+_TAN_P = (-1.30936939181383777646e4, 1.15351664838587416140e6, -1.79565251976484877988e7)
+_TAN_Q = (1.36812963470692954678e4, -1.32089234440210967447e6, 2.50083801823357915839e7, -5.38695755929454629881e7)
+#: Φ² beyond which Cephes' interval |Φ/4| <= π/4 is left (π² in float64, within an ulp of π²).
+_PI_SQUARED = math.pi * math.pi
+
+
+def _tan_quarter_ratio_expr(angle_squared: Any) -> Any:
+    """k = tan(Φ/4)/Φ from Φ² = ``angle_squared`` (SX): 1/4 at 0; see :func:`rotation_vector_to_mrp_expr`."""
+    y = 0.0625 * angle_squared  # x² = Φ²/16 exactly (a power of two)
+    p = (_TAN_P[0] * y + _TAN_P[1]) * y + _TAN_P[2]
+    q = (((y + _TAN_Q[0]) * y + _TAN_Q[1]) * y + _TAN_Q[2]) * y + _TAN_Q[3]
+    wide = angle_squared > _PI_SQUARED
+    # Φ > π: tan(Φ/4)/Φ as before (sqrt(0) and tan(0) where both branches are computed)
+    angle = ca.sqrt(ca.if_else(wide, angle_squared, 0.0))
+    numerator = ca.if_else(wide, ca.tan(0.25 * angle), y * p)
+    denominator = ca.if_else(wide, angle, 4.0 * q)  # 4 Q exactly: k = 1/4 + yP/(4Q) = (1 + yP/Q)/4
+    return ca.if_else(wide, 0.0, 0.25) + numerator / denominator
 
 
 def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
