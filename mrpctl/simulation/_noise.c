@@ -238,11 +238,15 @@ static const double mrpctl_zig_xs[256] = {
     0x1.801fce82fa6d3p-55, 0x1.57cb938443b1bp-55, 0x1.250af3c2c5b55p-55, 0x1.b8d0be3fdf595p-56,
 };
 
-static inline uint64_t mrpctl_stream_value(uint64_t key, uint64_t idx) {
-  uint64_t z = key + (idx + 1u) * UINT64_C(0x9E3779B97F4A7C15);
+/* Stafford's Mix13, SplitMix64's finaliser. */
+static inline uint64_t mrpctl_mix13(uint64_t z) {
   z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
   z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
   return z ^ (z >> 31);
+}
+
+static inline uint64_t mrpctl_stream_value(uint64_t key, uint64_t idx) {
+  return mrpctl_mix13(key + (idx + 1u) * UINT64_C(0x9E3779B97F4A7C15));
 }
 
 /* The rejected values (about 1.5 %: a wedge or the tail): the whole loop from attempt 0, out of line. */
@@ -311,9 +315,7 @@ static __attribute__((noinline)) void mrpctl_normal_rows(uint64_t key, uint64_t 
   }
   for (j = 0; j < rows; ++j, out += row_stride) {
     for (c = 0; c < 3; ++c, ++n, z += step) {
-      uint64_t h = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
-      h = (h ^ (h >> 27)) * UINT64_C(0x94D049BB133111EB);
-      h ^= h >> 31;
+      const uint64_t h = mrpctl_mix13(z);
       const int i = (int)(h & 255u);
       const double x = (double)(int64_t)(h >> 11) * mrpctl_zig_xs[i];
       if (__builtin_expect(x < mrpctl_zig_x[i + 1], 1)) out[c] = signed_scale[(h >> 8) & 1u] * x;
