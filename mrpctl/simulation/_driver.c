@@ -34,7 +34,7 @@
  * one done is the diverging sample, whose measurement is still a good state); -1 when the
  * sample function failed. state (x, memory, stats) holds the state after the last sample.
  */
-/* samples of noise drawn at a time (48 doubles on the stack per 8 samples) */
+/* samples of noise drawn at a time (6 doubles each: 3 KB on the stack) */
 #define MRPCTL_NOISE_BLOCK 64
 
 #if MRPCTL_ROTATION_INPUT
