@@ -9,6 +9,7 @@ The 60 s paper case (the paper's spacecraft, gain and initial state, tau = 0.5 s
   disturbance, sensor noise (0.01 rad, 1e-4 rad/s, a gyro bias), a 0.4–0.5 s jitter,
 * ``all``: every option at once;
 
+the sensor in parts (``SENSOR_PARTS``: the gyro bias alone, the rate noise alone, the attitude noise alone),
 plus the NumPy side of the streams alone: the noise (``SensorModel.noise(0, n)``, the NumPy
 mirror of ``_noise.c`` that the virtual machine and the reference loop use; the scalar engine
 draws the noise in C, the lane engine gets C-drawn rows) and the newest-arrived schedule of a
@@ -108,6 +109,15 @@ FLIGHT: dict[str, tuple[object, dict[str, Any]]] = {
     "all options": (RULE, {"actuator": ACTUATOR, "disturbance": DISTURBANCE, "sensor": SENSOR, "delay": JITTER}),
 }
 
+#: The sensor of SENSOR in parts (each with the rule RULE, no other option): the gyro bias alone (the sensor's
+#: structure, the composition with σ(0) = 0, no random numbers), the rate noise alone (three normals a sample),
+#: the attitude noise alone (three normals and σ(θ) a sample).
+SENSOR_PARTS: dict[str, SensorModel] = {
+    "  sensor part: gyro bias only": SensorModel(gyro_bias=[1e-4, -2e-4, 5e-5], seed=1),
+    "  sensor part: rate noise only": SensorModel(rate_noise=1e-4, seed=1),
+    "  sensor part: attitude noise only": SensorModel(attitude_noise=0.01, seed=1),
+}
+
 
 def variants() -> dict[str, Callable[[], object]]:
     """The measured calls, in table order; each flight variant also with the full sample ("[full]", A/B)."""
@@ -115,6 +125,8 @@ def variants() -> dict[str, Callable[[], object]]:
     for label, (rule, options) in FLIGHT.items():
         calls[label] = _run(rule, **options)
         calls[label + " [full]"] = _run(rule, full=True, **options)
+    for label, sensor in SENSOR_PARTS.items():  # where the sensor's time goes (design/flight.md, phase 9)
+        calls[label] = _run(RULE, sensor=sensor)
     calls["  (noise alone, NumPy mirror)"] = lambda: SENSOR.noise(0, N)
     calls["  (jitter schedule alone, NumPy)"] = lambda: newest_arrived_slice(JITTER, RATE, 500, 0, N, -501)
     return calls
