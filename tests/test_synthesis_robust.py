@@ -98,8 +98,10 @@ def test_zero_tolerance_and_tau_min_equal_to_tau_reproduce_the_nominal_lmi_desig
 @pytest.mark.parametrize("order", [0, pytest.param(1, marks=pytest.mark.slow)])
 def test_jitter_design_is_stable_at_every_constant_delay_of_the_interval(order: int) -> None:
     alpha = 0.3
+    # two ε of the search, as a user's search tries several: Clarabel fails numerically at ε = 0.5 on some hosts
+    # (measured on a Zen 4 host: "solver failed" at 0.4 and 0.5, synthesized at 0.6) and not on others
     res = synthesize_lmi(
-        paper.SPACECRAFT, TAU, decay_rate=alpha, order=order, tau_min=0.4, tolerance=0.05, epsilons=[0.5]
+        paper.SPACECRAFT, TAU, decay_rate=alpha, order=order, tau_min=0.4, tolerance=0.05, epsilons=[0.5, 0.6]
     )
     assert res.status is SynthesisStatus.SYNTHESIZED, str(res)
     assert res.model is DelayModel.INTERVAL and (res.tau_min, res.tau_max) == (0.4, TAU)

@@ -484,7 +484,9 @@ def test_simulate_batch_lanes_stop_between_slices(rng: np.random.Generator, monk
         if done > 0:
             raise KeyboardInterrupt
 
-    t_final = 3000.0  # 3e6 samples of 8 lanes: seconds of work, stopped after the first slices
+    # 3e7 samples of 3 runs: 10 % of them is 0.3 s of work even on a host whose lanes do 3e7 run-samples a second
+    # (AVX-512, measured), far more than the 50 ms before the first progress poll; stopped after the first slices
+    t_final = 30000.0
     with pytest.raises(KeyboardInterrupt):
         simulate_batch(paper.SPACECRAFT, gains, x0, tau=0.15, rule=rules, t_final=t_final, rate=RATE, progress=progress)
     assert 0 < seen[-1] < 3 * (t_final * RATE) / 10
