@@ -23,12 +23,18 @@ def finite_array(name: str, value: Any, shape: tuple[int | None, ...] | None = N
     ``shape`` may hold ``None`` as its first entry for "any leading axes"
     (for example ``(None, 3)`` accepts (3,), (n, 3), (n, m, 3)).
     """
+    if value is None:
+        raise SpecificationError(f"{name} must be numeric, got None")
     try:
         raw = np.asarray(value)
         if np.iscomplexobj(raw):
             raise SpecificationError(f"{name} must be real: found complex entries (dtype {raw.dtype})")
-        if raw.dtype == bool or (raw.dtype == object and _has_bool(raw)):
+        # a boolean or a string among numbers (NumPy would read [20, 20, True] as [20, 20, 1] and "0.5" as 0.5)
+        odd = _odd_entry(value) if isinstance(value, list | tuple) else None
+        if raw.dtype == bool or odd == "booleans" or (raw.dtype == object and _has_bool(raw)):
             raise SpecificationError(f"{name} must be numeric, got booleans {value!r}")
+        if raw.dtype.kind in "USa" or odd == "strings" or (raw.dtype == object and _has_str(raw)):
+            raise SpecificationError(f"{name} must be numeric, got strings {value!r}")
         array = np.asarray(raw, dtype=float)
     except (TypeError, ValueError) as exc:
         if isinstance(exc, SpecificationError):
@@ -53,10 +59,35 @@ def _has_bool(array: np.ndarray) -> bool:
     return any(isinstance(item, bool | np.bool_) for item in array.ravel().tolist())
 
 
+def _has_str(array: np.ndarray) -> bool:
+    return any(isinstance(item, str | bytes) for item in array.ravel().tolist())
+
+
+def _odd_entry(value: Any) -> str | None:
+    """ "booleans" or "strings" when a (nested) list or tuple holds one, else None."""
+    for item in value:
+        if isinstance(item, bool | np.bool_):
+            return "booleans"
+        if isinstance(item, str | bytes):
+            return "strings"
+        if isinstance(item, np.ndarray):
+            if item.dtype == bool:
+                return "booleans"
+            if item.dtype.kind in "USa":
+                return "strings"
+        elif isinstance(item, list | tuple):
+            found = _odd_entry(item)
+            if found is not None:
+                return found
+    return None
+
+
 def finite_scalar(name: str, value: Any) -> float:
     """Return ``value`` as a finite real float (booleans and complex numbers are refused)."""
     if isinstance(value, bool | np.bool_):
         raise SpecificationError(f"{name} must be a real number, got the boolean {value!r}")
+    if isinstance(value, str | bytes) or (isinstance(value, np.ndarray) and value.dtype.kind in "USa"):
+        raise SpecificationError(f"{name} must be a real number, got the string {value!r}")
     if isinstance(value, complex | np.complexfloating) or (isinstance(value, np.ndarray) and np.iscomplexobj(value)):
         raise SpecificationError(f"{name} must be a real number, got the complex value {value!r}")
     try:

@@ -19,7 +19,7 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any, TextIO
+from typing import IO, TYPE_CHECKING, Any, NoReturn, TextIO
 
 import numpy as np
 
@@ -344,11 +344,19 @@ def _apply_overrides(scenario: Scenario, args: argparse.Namespace) -> Scenario:
     return replace(scenario, **changes) if changes else scenario
 
 
-def _option_value(option: str, build: Callable[[], Any]) -> Any:
-    """``build()``, with a refusal re-raised naming the command-line ``option``."""
+def _option_value(option: str, build: Callable[[], Any], fields: dict[str, str] | None = None) -> Any:
+    """``build()``, with a refusal re-raised naming the command-line ``option``, or, when the message starts with
+    one of ``fields`` (a model's parameter name -> its option), that parameter's option."""
     try:
         return build()
     except (SpecificationError, DimensionError) as exc:
+        text = str(exc)
+        for field, flag in (fields or {}).items():
+            if text.startswith(field + " ") or text.startswith(field + ":"):
+                option = flag
+                break
+        if text.startswith(option + ":"):
+            raise
         raise type(exc)(f"{option}: {exc}") from exc
 
 
@@ -401,6 +409,7 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
         changes["actuator"] = _option_value(
             actuator_given[0],
             lambda: ActuatorModel(u_max=limit[0] if len(limit) == 1 else limit, norm_max=norm, mode=mode),
+            {"u_max": "--torque-limit", "norm_max": "--torque-norm", "mode": "--saturation"},
         )
     sensor_options = (
         ("--attitude-noise", "attitude_noise", args.attitude_noise),
@@ -415,7 +424,9 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
         fields = {"attitude_noise": base.attitude_noise, "rate_noise": base.rate_noise, "gyro_bias": base.gyro_bias}
         fields["seed"] = base.seed
         fields.update(sensor_given)
-        changes["sensor"] = _option_value(first, lambda: SensorModel(**fields))
+        changes["sensor"] = _option_value(
+            first, lambda: SensorModel(**fields), {key: option for option, key, _ in sensor_options}
+        )
     from mrpctl.flight import Disturbance
     from mrpctl.scenario import delay_sequence, delay_values, samples_file, torque_rows
 
@@ -467,9 +478,11 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
                 "give --jitter TMIN TMAX instead of --tau"
             )
         positive_scalar("rate", updated.rate)  # a bad --rate is the rate's error, not the jitter's
-        low_samples, _ = _option_value("--jitter", lambda: updated.delay.bounds(updated.rate))  # type: ignore[union-attr]
+        # the delay of --jitter, or the scenario's own [delay] at the rate of --rate (or of the file)
+        where = "--jitter" if args.jitter is not None else f"the scenario's [delay] at rate = {updated.rate:g} Hz"
+        low_samples, _ = _option_value(where, lambda: updated.delay.bounds(updated.rate))  # type: ignore[union-attr]
         if low_samples < 1:
-            raise SpecificationError(f"--jitter: TMIN must be >= 1/rate = {1.0 / updated.rate:g} s")
+            raise SpecificationError(f"{where}: TMIN must be >= 1/rate = {1.0 / updated.rate:g} s")
     return updated
 
 
@@ -1912,9 +1925,18 @@ SUBCOMMANDS: tuple[Callable[[Any], None], ...] = (
 )
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line (the command, the problem, where the help is) and exit 2,
+    like every other bad input of the command line; argparse itself prints the whole usage first."""
+
+    def error(self, message: str) -> NoReturn:
+        text = " ".join(message.split())
+        self.exit(USER_ERROR, f"{self.prog}: error: {text} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``mrpctl`` command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="mrpctl",
         description="Delayed-feedback attitude control with MRP shadow-set switching.",
         formatter_class=_Formatter,

@@ -85,6 +85,8 @@ STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 #: Largest attitude 1σ (rad): |θ|² of σ_θ·N(0, I₃) must stay finite (overflow from |θ| ≈ 1.3e154).
 _MAX_ATTITUDE_NOISE = 1e150
+#: Largest rate 1σ and gyro bias (rad/s): the divergence bound of the true rate (mrpctl.simulation._stats).
+_MAX_RATE_ERROR = 1e6
 
 
 # ================================================================== random streams
@@ -266,9 +268,10 @@ class SensorModel:
     attitude_noise : float
         σ_θ in [0, 1e150], 1σ per body axis of the attitude error rotation vector (rad). Default 0.
     rate_noise : float
-        σ_ω >= 0, 1σ per axis of the white rate noise (rad/s). Default 0.
+        σ_ω >= 0, 1σ per axis of the white rate noise (rad/s), at most 10⁶ (the divergence bound of
+        the rate). Default 0.
     gyro_bias : array_like
-        Constant gyro bias b (3,) (rad/s). Default zero.
+        Constant gyro bias b (3,) (rad/s), each |b_i| at most 10⁶. Default zero.
     seed : int
         Seed (>= 0) of the noise streams. Default 0.
     """
@@ -287,8 +290,17 @@ class SensorModel:
                 "a 1 sigma of a few rad already gives an error rotation spread over every angle"
             )
         object.__setattr__(self, "attitude_noise", attitude_noise)
-        object.__setattr__(self, "rate_noise", nonnegative_scalar("rate_noise", self.rate_noise))
-        object.__setattr__(self, "gyro_bias", readonly(finite_array("gyro_bias", self.gyro_bias, (3,))))
+        rate_noise = nonnegative_scalar("rate_noise", self.rate_noise)
+        bias = finite_array("gyro_bias", self.gyro_bias, (3,))
+        for name, size in (("rate_noise", rate_noise), ("gyro_bias", float(np.max(np.abs(bias))))):
+            if size > _MAX_RATE_ERROR:
+                raise SpecificationError(
+                    f"{name} must be <= {_MAX_RATE_ERROR:g} rad/s (per axis), got {size:g}: a run stops as diverged "
+                    f"when |omega| exceeds {_MAX_RATE_ERROR:g} rad/s, and beyond it the commanded torque can overflow "
+                    "the actuator's norm limit (|u_c|^2 above 1e308)"
+                )
+        object.__setattr__(self, "rate_noise", rate_noise)
+        object.__setattr__(self, "gyro_bias", readonly(bias))
         object.__setattr__(self, "seed", _seed(self.seed))
 
     @property
@@ -412,7 +424,7 @@ class DelayKind(enum.Enum):
 def _to_samples(name: str, seconds: np.ndarray, rate: float) -> np.ndarray:
     samples = seconds * rate
     rounded = np.rint(samples)
-    bad = np.abs(samples - rounded) > _DELAY_TOLERANCE
+    bad = np.abs(samples - rounded) > _DELAY_TOLERANCE * np.maximum(1.0, np.abs(samples))  # relative, as delay_samples
     if np.any(bad):
         first = float(np.asarray(seconds).ravel()[np.flatnonzero(bad.ravel())[0]])
         raise SpecificationError(
@@ -667,12 +679,12 @@ class Disturbance:
         """The torque array's shape (None for a function of time)."""
         return None if self.function is not None else tuple(self.torque.shape)
 
-    def check_horizon(self, n: int) -> None:
-        """Raise :class:`DimensionError` if a per-sample torque does not have n rows."""
+    def check_horizon(self, n: int, name: str = "torque") -> None:
+        """Raise :class:`DimensionError` (naming ``name``) if a per-sample torque does not have n rows."""
         n = integer("n", n, minimum=1)
         if self.function is None and not self.constant and self.torque.shape != (n, 3):
             raise DimensionError(
-                f"torque: expected shape (n, 3) = ({n}, 3) (one row per measurement sample) but found "
+                f"{name}: expected shape (n, 3) = ({n}, 3) (one row per measurement sample) but found "
                 f"{self.torque.shape}"
             )
 
@@ -735,7 +747,7 @@ class Hysteretic(SwitchingRule):
         delta = finite_scalar("delta", self.delta)
         if not 0.0 <= delta < 1.0:
             raise SpecificationError(f"delta (hysteresis on the quaternion scalar q0) must be in [0, 1), got {delta}")
-        object.__setattr__(self, "delta", delta)
+        object.__setattr__(self, "delta", delta + 0.0)  # -0.0 -> +0.0 (the same rule; its text shows "0")
 
     @classmethod
     def from_alpha(cls, alpha: float) -> Hysteretic:

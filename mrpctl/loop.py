@@ -19,6 +19,7 @@ number of substeps.
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -85,13 +86,18 @@ def delay_samples(tau: Any, rate: Any) -> int:
     Raises
     ------
     SpecificationError
-        If τ < 0, rate <= 0, or τ · rate is not an integer to 1e-9.
+        If τ < 0, rate <= 0, or τ · rate is not an integer to 1e-9 (relative, at least 1e-9 absolute).
     """
     tau = nonnegative_scalar("tau", tau)
     rate = positive_scalar("rate", rate)
     samples = tau * rate
+    if not math.isfinite(samples) or samples > 2.0**53:
+        raise SpecificationError(
+            f"tau * rate must be a whole number of measurement periods below 2^53: tau = {tau!r} s and "
+            f"rate = {rate!r} Hz give tau * rate = {samples!r}"
+        )
     d = round(samples)
-    if abs(samples - d) > _DELAY_TOLERANCE:
+    if abs(samples - d) > _DELAY_TOLERANCE * max(1.0, abs(samples)):  # relative: tau * rate is rounded
         raise SpecificationError(
             f"tau * rate must be a whole number of measurement periods: tau = {tau!r} s and "
             f"rate = {rate!r} Hz give tau * rate = {samples!r}; choose tau as a multiple of 1/rate"

@@ -177,6 +177,41 @@ BAD_API = [
         SpecificationError,
         r"delay: the predictor runs with the constant delay",
     ),
+    # a second audit (this session): NumPy reads [20, 20, True] as [20, 20, 1] and "0.5" as 0.5
+    ("a boolean among u_max", lambda: ActuatorModel([20, 20, True]), SpecificationError, r"u_max .* booleans"),
+    ("a boolean among a torque", lambda: Disturbance([1e-3, 0, True]), SpecificationError, r"torque .* booleans"),
+    (
+        "a boolean in x0",
+        lambda: simulate(SC, K, [*X0[:5], True], tau=0.01, rule=Hysteretic(0.0), t_final=0.1),
+        SpecificationError,
+        r"x0 must be numeric, got booleans",
+    ),
+    ("a string noise", lambda: SensorModel(attitude_noise="0.01"), SpecificationError, r"attitude_noise .* string"),
+    ("a string u_max", lambda: ActuatorModel("20"), SpecificationError, r"u_max must be numeric, got strings"),
+    ("a string in gyro_bias", lambda: SensorModel(gyro_bias=[0, "1", 0]), SpecificationError, r"gyro_bias .* str"),
+    ("a string delta", lambda: Hysteretic("0.5"), SpecificationError, r"delta must be a real number"),
+    ("a string rate", lambda: _run(rate="1000"), SpecificationError, r"rate must be a real number"),
+    ("rate noise 1e7", lambda: SensorModel(rate_noise=1e7), SpecificationError, r"rate_noise must be <= 1e\+06"),
+    ("gyro bias 1e153", lambda: SensorModel(gyro_bias=[1e153, 0, 0]), SpecificationError, r"gyro_bias must be <="),
+    (
+        "t_final 1e300",
+        lambda: _run(t_final=1e300, keep_every=None),
+        SpecificationError,
+        r"t_final: .*\(limit 1e\+12 samples",
+    ),
+    (
+        "a long horizon, metrics only",
+        lambda: _run(t_final=1e17, keep_every=10**18),
+        SpecificationError,
+        r"t_final \* rate = 1e\+20 samples",
+    ),
+    ("tau * rate = inf", lambda: _run(tau=1e300, rate=1e10), SpecificationError, r"below 2\^53"),
+    (
+        "jitter's arrival ring beyond memory",
+        lambda: _run(tau=5000.0, rate=1e6, t_final=1e-3, delay=DelayModel.jitter(1e-6, 5000.0), memory_limit=1e9),
+        SpecificationError,
+        r"needs about 40 GB .* the delay's buffers",
+    ),
 ]
 
 
@@ -184,6 +219,17 @@ BAD_API = [
 def test_bad_input_is_a_clear_error_naming_the_parameter(case, build, error, match):
     with pytest.raises(error, match=match):
         build()
+
+
+def test_a_delay_of_millions_of_samples_is_a_whole_number_to_a_relative_tolerance():
+    """16.3441 s at 1 MHz is 16 344 100 periods; the product's rounding (16344100.000000002) is 2e-9 absolute, far
+    below one ulp's relative size: accepted, as the scenario loader accepts it (both relative, 1e-9)."""
+    from mrpctl.loop import delay_samples
+
+    assert delay_samples(16.3441, 1e6) == 16_344_100
+    assert tuple(DelayModel.jitter(16.3441, 16.3441).bounds(1e6)) == (16_344_100, 16_344_100)
+    with pytest.raises(SpecificationError, match=r"tau \* rate must be a whole number"):
+        delay_samples(16.3441 + 1e-7, 1e6)
 
 
 def test_the_largest_alpha_that_is_accepted_keeps_its_bound():
@@ -295,6 +341,10 @@ BAD_CLI = [
     (["--tau", "0.3"], "tau_max = 0.5 s must equal tau = 0.3 s"),
     (["--rate", "0"], "rate must be > 0"),  # was "--jitter: rate must be > 0": the scenario's jitter was blamed
     (["--t-final", "1e9"], "more than the"),  # refused up front with the estimate
+    # the flag that is wrong, not the first one of its model (a second audit)
+    (["--torque-limit", "1", "2", "3", "--torque-norm", "nan"], "--torque-norm: norm_max must be finite"),
+    (["--attitude-noise", "0.01", "--rate-noise", "nan"], "--rate-noise: rate_noise must be finite"),
+    (["--rate", "999"], "the scenario's [delay] at rate = 999 Hz: tau_min, tau_max must be whole numbers"),
 ]
 
 
@@ -306,8 +356,29 @@ def test_cli_bad_flight_options_print_one_line_and_exit_2(options, message, caps
     assert message in err
     if options[0] == "--rate":
         assert "--jitter" not in err
+    if options[0] == "--torque-limit" and "--torque-norm" in options:
+        assert "--torque-limit" not in err
     if options[0] == "--t-final":
         assert "TB" in err and "--t-final" in err  # the estimate and the way out
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--attitude-noise", "abc"], "argument --attitude-noise: invalid float value: 'abc'"),
+        (["--noise-seed", "1.5"], "argument --noise-seed: invalid int value: '1.5'"),
+        (["--gyro-bias", "0", "0"], "argument --gyro-bias: expected 3 arguments"),
+        (["--saturation", "foo"], "argument --saturation: invalid choice: 'foo'"),
+    ],
+)
+def test_cli_usage_errors_are_one_line_too(options, message, capsys):
+    """argparse's own refusals (a value of the wrong type, too few values) printed the whole usage first."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(["simulate", "flight-paper", "--t-final", "0.5", *options])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2
+    assert err.startswith("mrpctl simulate: error: ") and err.count("\n") == 1, err
+    assert message in err and "(see mrpctl simulate --help)" in err
 
 
 @pytest.mark.parametrize(

@@ -166,5 +166,10 @@ def test_bad_batch_torques_are_refused_naming_the_parameter() -> None:
         simulate_batch(paper.SPACECRAFT, GAINS, X0, disturbance=bad, **COMMON)
     with pytest.raises(DimensionError, match=r"disturbance\[2\]: torque: expected shape"):
         simulate_batch(paper.SPACECRAFT, GAINS, X0, disturbance=[None, None, np.array([1.0, 2.0])], **COMMON)
-    with pytest.raises(DimensionError, match=r"torque: expected shape \(n, 3\) = \(401, 3\)"):
+    with pytest.raises(DimensionError, match=r"disturbance: expected shape \(n, 3\) = \(401, 3\)"):
         simulate_batch(paper.SPACECRAFT, GAINS, X0, disturbance=np.zeros((N + 1, 3)), **COMMON)
+    # one run's rows of the wrong length name that run; a list of lists is one shared series, and says so
+    with pytest.raises(DimensionError, match=r"disturbance\[1\]: expected shape \(n, 3\) = \(401, 3\)"):
+        simulate_batch(paper.SPACECRAFT, GAINS, X0, disturbance=[None, np.zeros((N - 1, 3)), None], **COMMON)
+    with pytest.raises(DimensionError, match=r"a list of lists is one torque series shared by the runs"):
+        simulate_batch(paper.SPACECRAFT, GAINS, X0, disturbance=[[1e-3, 0, 0], [0, 1e-3, 0], [0, 0, 1e-3]], **COMMON)

@@ -103,7 +103,7 @@ def test_constant_rows_equal_the_constant_disturbance_bit_for_bit() -> None:
 
 def test_per_sample_disturbance_refuses_bad_input() -> None:
     common = dict(tau=0.5, rate=RATE, t_final=T_FINAL, rule=Hysteretic(0.0))
-    with pytest.raises(DimensionError, match=r"torque: expected shape \(n, 3\) = \(801, 3\)"):
+    with pytest.raises(DimensionError, match=r"disturbance: expected shape \(n, 3\) = \(801, 3\)"):
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, disturbance=np.zeros((800, 3)), **common)
     with pytest.raises(DimensionError, match="torque"):
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, disturbance=np.zeros((N, 2)), **common)

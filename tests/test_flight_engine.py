@@ -255,7 +255,7 @@ def test_flight_options_refuse_bad_input():
         )
     with pytest.raises(SpecificationError, match="actuator"):
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(), actuator=1.0, **common)
-    with pytest.raises(DimensionError, match=r"torque: expected shape \(n, 3\) = \(101, 3\)"):  # 101 samples
+    with pytest.raises(DimensionError, match=r"disturbance: expected shape \(n, 3\) = \(101, 3\)"):  # 101 samples
         simulate(
             paper.SPACECRAFT,
             paper.GAIN,

@@ -82,9 +82,22 @@ def _history(history: Any, x0: np.ndarray, d: int) -> tuple[np.ndarray, Any]:
     return np.ascontiguousarray(array), readonly(array)
 
 
+#: The most samples one run integrates: about 28 h of one core at the compiled engine's 10^7 samples a second
+#: (the CLI's sweep has the same limit); beyond it a run is refused up front instead of running for days (or
+#: for ever: t_final * rate beyond 2^63 has no sample count).
+MAX_RUN_SAMPLES = 1.0e12
+
+
 def _samples(t_final: Any, rate: float) -> tuple[float, int]:
     t_final = positive_scalar("t_final", t_final)
-    n = math.floor(t_final * rate + 1e-9) + 1
+    total = t_final * rate
+    if not total + 1 <= MAX_RUN_SAMPLES:
+        raise SpecificationError(
+            f"t_final: t_final * rate = {total:.3g} samples, more than one run integrates (limit "
+            f"{MAX_RUN_SAMPLES:.0e} samples, about {MAX_RUN_SAMPLES / 1e7 / 3600:.0f} h of one core); "
+            "choose a shorter t_final or a lower rate"
+        )
+    n = math.floor(total + 1e-9) + 1
     return t_final, n
 
 
@@ -124,16 +137,22 @@ def workspace_bytes(n: int, d: int, substeps: int, width: int = 1) -> int:
     return (min(d, n) + 1) * width * STATE_SIZE * 8 + min(slice_samples(substeps), n) * 8
 
 
+def jitter_bytes(delay: DelayModel | None, d: int) -> int:
+    """Bytes of the driver's arrival ring of a seeded jitter (d_max + 1 slots and 3 numbers, whatever n is)."""
+    return (d + 4) * 8 if delay is not None and delay.kind is DelayKind.JITTER else 0
+
+
 def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: int | None, runs: int = 1) -> None:
     if estimate <= limit:
         return
     what = f"{runs} runs of " if runs > 1 else ""
     keeping = "metrics only" if keep_every is None else f"keep_every = {keep_every}"
     raise SpecificationError(
-        f"t_final = {t_final:g} s with {keeping} needs about {estimate / 1e9:.3g} GB for {what}the kept samples, "
+        f"t_final = {t_final:g} s with {keeping} needs about {estimate / 1e9:.3g} GB for {what}the kept samples "
+        "and the delay's buffers, "
         f"more than the limit of {limit / 1e9:.3g} GB (memory_limit; default half the available memory): "
         "keep fewer samples (keep_every=k keeps every k-th, keep_every=None only the metrics and switch instants), "
-        "shorten t_final, or raise memory_limit"
+        "shorten t_final or tau (the ring holds tau * rate measurements), or raise memory_limit"
     )
 
 
@@ -151,16 +170,29 @@ def _flight_options(
     return _flight_constants(actuator, disturbance, sensor)
 
 
-def _streamed_disturbance(disturbance: Any, n: int) -> Disturbance | None:
-    """The per-sample disturbance of a run of n samples (its rows checked), or None (none or constant)."""
+def _streamed_disturbance(disturbance: Any, n: int, name: str = "disturbance", hint: str = "") -> Disturbance | None:
+    """The per-sample disturbance of a run of n samples (its rows checked, errors naming ``name``, ``hint``
+    appended), or None (none or constant)."""
     if disturbance is None:
         return None
     if not isinstance(disturbance, Disturbance):
         disturbance = Disturbance(disturbance)
     if disturbance.constant:
         return None
-    disturbance.check_horizon(n)
+    try:
+        disturbance.check_horizon(n, name)
+    except DimensionError as error:
+        if hint:
+            raise DimensionError(f"{error}{hint}") from error
+        raise
     return disturbance
+
+
+#: Appended to a shared torque series' row-count error in simulate_batch (a list of lists is one (n, 3) series).
+_SHARED_HINT = (
+    "; a list of lists is one torque series shared by the runs: for one constant torque per run give a list of "
+    "(3,) arrays or Disturbance objects (or a (runs, n, 3) array for per-run series)"
+)
 
 
 def _per_run_disturbances(disturbance: Any, n_runs: int, n: int) -> list[Disturbance | None] | None:
@@ -431,7 +463,7 @@ def simulate(
     width = 1 if checked is None else 2
     records = checked is None and isinstance(rule, Hysteretic)
     _check_memory(
-        run_bytes(n, keep, flight=records) + workspace_bytes(n, d, substeps, width),
+        run_bytes(n, keep, flight=records) + workspace_bytes(n, d, substeps, width) + jitter_bytes(varying, d),
         limit,
         t_final=t_final,
         keep_every=keep,
@@ -496,7 +528,8 @@ def simulate(
 # ======================================================================= batches
 def _broadcast(name: str, count: int, n: int) -> None:
     if count not in (1, n):
-        raise DimensionError(f"{name}: expected 1 or {n} entries (one per run) but found {count}")
+        expected = "1 entry" if n == 1 else f"1 or {n} entries (one per run)"
+        raise DimensionError(f"{name}: expected {expected} but found {count}")
 
 
 def _threads(threads: Any) -> int:
@@ -616,6 +649,8 @@ def simulate_batch(
     for one in rules:
         check_rule(one)
     n_runs = max(len(states), len(gains), len(delays), len(rules), len(crafts))
+    if len(states) == 0:
+        raise DimensionError("x0: expected at least one initial state (shape (6,) or (N, 6)) but found none")
     for name, count in (
         ("spacecraft", len(crafts)),
         ("x0", len(states)),
@@ -655,6 +690,7 @@ def simulate_batch(
         checked = _check_predictor(predictor, one, history, delay)
     per_run = _per_run_disturbances(disturbance, n_runs, n)
     shared = per_run is None
+    hint = _SHARED_HINT if shared and isinstance(disturbance, list | tuple) else ""
     if shared and disturbance is not None and not isinstance(disturbance, Disturbance) and checked is None:
         disturbance = Disturbance(disturbance)  # checked and copied once, shared by the runs
     items = [disturbance] * n_runs if per_run is None else per_run
@@ -664,8 +700,14 @@ def simulate_batch(
     if checked is None:
         for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
             options_by_run[i], saturation = _flight_options(one, actuator, items[i], sensor)
-            streamed_by_run[i] = _streamed_disturbance(items[i], n) if (i == 0 or not shared) else streamed_by_run[0]
+            streamed_by_run[i] = (
+                _streamed_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]", hint)
+                if (i == 0 or not shared)
+                else streamed_by_run[0]
+            )
         varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
+        jitter = max(jitter_bytes(varying[i], samples_by_run[i]) for i in range(n_runs))
+        _check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
         for i in range(n_runs):
             if i == 0 or not shared:
