@@ -552,11 +552,13 @@ def _verify(library: Path) -> str | None:
         return ""  # not built yet (a lone checksum file is removed before the build)
     try:
         record = json.loads(checksum.read_text())
-        size, expected = int(record["size"]), str(record["sha256"])
+        size, expected, named = int(record["size"]), str(record["sha256"]), str(record["library"])
     except FileNotFoundError:
         return f"no checksum file {checksum.name}"
     except (OSError, ValueError, TypeError, KeyError) as exc:
         return f"unreadable checksum file {checksum.name}: {exc}"
+    if named != library.name:  # another library's checksum beside it (both swapped: each matches its own record)
+        return f"its checksum file records the library {named}"
     try:
         found = library.stat().st_size
         if found != size:

@@ -204,6 +204,24 @@ def test_library_without_checksum_is_rebuilt(tmp_path: Path) -> None:
     assert again.compile_seconds == 0.0
 
 
+def test_two_libraries_swapped_with_their_checksum_files_are_rebuilt(tmp_path: Path) -> None:
+    """A second audit: each swapped library matched the checksum file swapped with it, so the wrong code loaded
+    (for ever); the checksum file also names its library."""
+    first, second = _function(23.0), _function(29.0)
+    one, two = _plant(first, tmp_path), _plant(second, tmp_path)
+    assert one != two
+    for suffix in ("", ".sha256"):
+        a, b = one.with_name(one.name + suffix), two.with_name(two.name + suffix)
+        data = a.read_bytes()
+        a.write_bytes(b.read_bytes())
+        b.write_bytes(data)
+    with pytest.warns(CacheWarning, match="records the library"):
+        compiled = compile_function(first, directory=tmp_path)
+    assert compiled.library == one and compiled.compile_seconds > 0 and _checksum_matches(one)
+    x = np.array([0.3, 0.2, -0.1])
+    np.testing.assert_array_equal(np.asarray(compiled.function(x, np.eye(2))[0]).ravel(), 23.0 * np.sin(x))
+
+
 def test_compile_source_builds_plain_c_in_the_same_cache(tmp_path: Path) -> None:
     code = "double mrpctl_axpy(double a, double x, double y) { return a * x + y; }\n"
     library = compile_source(code, "axpy", directory=tmp_path)

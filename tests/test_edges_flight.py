@@ -730,6 +730,25 @@ def test_runs_that_would_not_fit_are_refused_up_front_with_the_estimate(options)
         simulate(SC, K, X0, tau=0.5, t_final=100.0, memory_limit=1e6, **options)
 
 
+def test_batches_of_millions_of_runs_are_refused_before_their_per_run_objects_are_made(monkeypatch):
+    """A second audit: 3e7 metrics-only runs took 9 GB and 109 s of per-run objects before the refusal, and a
+    trajectory batch's per-run results (≈ 5 KB each, measured) were not counted (4e5 runs: 0.52 GB estimated,
+    2.45 GB used)."""
+    from mrpctl.simulation import _simulate
+
+    converted: list[float] = []
+    original = _simulate.delay_samples
+    monkeypatch.setattr(_simulate, "delay_samples", lambda tau, rate: converted.append(tau) or original(tau, rate))
+    with pytest.raises(SpecificationError, match=r"for 3000000 runs .*give fewer runs per call"):
+        simulate_batch(SC, K, X0, tau=np.full(3_000_000, 0.01), rule=Hysteretic(0.1), t_final=0.02, memory_limit=1e8)
+    assert converted == []  # refused before the first run's delay was converted
+    with pytest.raises(SpecificationError, match=r"needs about 3\.\d+ GB for 400000 runs"):
+        simulate_batch(
+            SC, K, np.broadcast_to(X0, (400_000, 6)), tau=0.01, rule=Hysteretic(0.1), t_final=0.05,
+            trajectories=True, keep_every=None, memory_limit=2e9,
+        )  # fmt: skip
+
+
 # ===================================================================== export
 def _export_folder(path: Path) -> dict[str, bytes]:
     return {p.relative_to(path).as_posix(): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}

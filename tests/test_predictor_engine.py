@@ -272,3 +272,19 @@ def test_bad_input_names_the_parameter() -> None:
         simulate(SC, paper.GAIN, X0, rule=OnPredicted(), tau=0.505, t_final=1.0, rate=100.0, predictor=Predictor(SC))
     with pytest.raises(SpecificationError, match="rule"):
         simulate_batch(SC, paper.GAIN, X0, rule=[OnPredicted(), OnCurrent()], **common, predictor=Predictor(SC))
+
+
+@pytest.mark.parametrize("trajectories", [False, True])
+def test_a_predictor_batch_reports_the_actuator_summaries_of_its_runs(trajectories: bool) -> None:
+    """saturated_fraction and peak_command of a predictor batch are the runs' (they were None: a second audit)."""
+    options = dict(tau=0.5, rule=OnPredicted(1.2), predictor=Predictor(model=SC), t_final=5.0)
+    states = np.array([X0, TUMBLE])
+    for actuator in (ActuatorModel(u_max=20.0), None):
+        batch = simulate_batch(SC, paper.GAIN, states, actuator=actuator, trajectories=trajectories, **options)
+        assert batch.saturated_fraction is not None and batch.peak_command is not None
+        for i, x0 in enumerate(states):
+            run = simulate(SC, paper.GAIN, x0, actuator=actuator, **options)
+            assert batch.saturated_fraction[i] == run.saturated_fraction
+            np.testing.assert_array_equal(batch.peak_command[i], run.peak_command)
+        if actuator is not None:
+            assert np.all(batch.saturated_fraction > 0.1)
