@@ -33,7 +33,7 @@ def finite_array(name: str, value: Any, shape: tuple[int | None, ...] | None = N
         odd = _odd_entry(value) if isinstance(value, list | tuple) else None
         if raw.dtype == bool or odd == "booleans" or (raw.dtype == object and _has_bool(raw)):
             raise SpecificationError(f"{name} must be numeric, got booleans {value!r}")
-        if raw.dtype.kind in "USa" or odd == "strings" or (raw.dtype == object and _has_str(raw)):
+        if raw.dtype.kind in "US" or odd == "strings" or (raw.dtype == object and _has_str(raw)):
             raise SpecificationError(f"{name} must be numeric, got strings {value!r}")
         array = np.asarray(raw, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -64,7 +64,7 @@ def _has_str(array: np.ndarray) -> bool:
 
 
 def _odd_entry(value: Any) -> str | None:
-    """ "booleans" or "strings" when a (nested) list or tuple holds one, else None."""
+    """What a (nested) list or tuple holds that is not a number: "booleans", "strings" or None."""
     for item in value:
         if isinstance(item, bool | np.bool_):
             return "booleans"
@@ -73,7 +73,7 @@ def _odd_entry(value: Any) -> str | None:
         if isinstance(item, np.ndarray):
             if item.dtype == bool:
                 return "booleans"
-            if item.dtype.kind in "USa":
+            if item.dtype.kind in "US":
                 return "strings"
         elif isinstance(item, list | tuple):
             found = _odd_entry(item)
@@ -86,7 +86,7 @@ def finite_scalar(name: str, value: Any) -> float:
     """Return ``value`` as a finite real float (booleans and complex numbers are refused)."""
     if isinstance(value, bool | np.bool_):
         raise SpecificationError(f"{name} must be a real number, got the boolean {value!r}")
-    if isinstance(value, str | bytes) or (isinstance(value, np.ndarray) and value.dtype.kind in "USa"):
+    if isinstance(value, str | bytes) or (isinstance(value, np.ndarray) and value.dtype.kind in "US"):
         raise SpecificationError(f"{name} must be a real number, got the string {value!r}")
     if isinstance(value, complex | np.complexfloating) or (isinstance(value, np.ndarray) and np.iscomplexobj(value)):
         raise SpecificationError(f"{name} must be a real number, got the complex value {value!r}")
