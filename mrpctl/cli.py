@@ -366,7 +366,7 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
     ``--hysteresis DELTA`` selects the controller-side rule; the model options change the
     scenario's own models field by field (or add them); every model needs that rule.
     """
-    from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
+    from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Hysteretic, Saturation, SensorModel
     from mrpctl.predictor import OnPredicted
 
     changes: dict[str, Any] = {}
@@ -431,6 +431,7 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
     from mrpctl.scenario import delay_sequence, delay_values, samples_file, torque_rows
 
     samples = math.floor(scenario.t_final * scenario.rate + 1e-9) + 1  # n, as mrpctl.simulate counts them
+    _check_file_horizons(scenario, args, samples, DelayKind)
     if args.disturbance is not None and args.disturbance_file is not None:
         raise SpecificationError(
             "--disturbance (a constant torque) and --disturbance-file (one torque row per sample) both give the "
@@ -484,6 +485,44 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
         if low_samples < 1:
             raise SpecificationError(f"{where}: TMIN must be >= 1/rate = {1.0 / updated.rate:g} s")
     return updated
+
+
+def _check_file_horizons(scenario: Scenario, args: argparse.Namespace, samples: int, kinds: Any) -> None:
+    """The scenario file's per-sample rows ([disturbance] torque_file, [delay] sequence_file) against the n of
+    --t-final / --rate: a clear refusal naming both (the run would refuse the rows without naming the file)."""
+    overrides = [
+        f"{flag} {value:g}"
+        for flag, value in (("--t-final", getattr(args, "t_final", None)), ("--rate", getattr(args, "rate", None)))
+        if value is not None
+    ]
+    if not overrides:
+        return
+    found: list[tuple[str, int]] = []
+    torque = scenario.disturbance
+    if (
+        torque is not None
+        and getattr(args, "disturbance", None) is None
+        and getattr(args, "disturbance_file", None) is None
+        and torque.shape is not None
+        and len(torque.shape) == 2
+    ):
+        found.append(("[disturbance] torque_file", torque.shape[0]))
+    delay = scenario.delay
+    if (
+        delay is not None
+        and delay.kind is kinds.SEQUENCE
+        and delay.delays is not None
+        and getattr(args, "delay_file", None) is None
+        and getattr(args, "jitter", None) is None
+    ):
+        found.append(("[delay] sequence_file", len(delay.delays)))
+    for where, rows in found:
+        if rows != samples:
+            raise SpecificationError(
+                f"{' '.join(overrides)} gives n = {samples} samples, but the scenario's {where} has {rows} rows (one "
+                f"per sample of the file's own t_final and rate): give a file of {samples} rows, or leave out "
+                f"{' and '.join(flag.split()[0] for flag in overrides)}"
+            )
 
 
 def _apply_predictor_options(scenario: Scenario, args: argparse.Namespace) -> Scenario:

@@ -412,6 +412,26 @@ def test_cli_bad_scenario_file_values_print_one_line(tmp_path, capsys):
         assert code == 2 and err.count("\n") == 1 and message in err, err
 
 
+def test_cli_overrides_that_change_n_name_the_scenario_s_per_sample_file(tmp_path, capsys):
+    """A second audit: --t-final / --rate against a scenario's torque_file or sequence_file was refused as
+    "torque: expected shape (n, 3) = (2001, 3) ..." without naming the file or the override."""
+    text = shipped_scenarios()["flight-paper"].read_text().replace("t_final = 60.0", "t_final = 1.0")
+    np.save(tmp_path / "rows.npy", np.zeros((1001, 3)))
+    np.save(tmp_path / "d.npy", np.full(1001, 0.5))
+    files = {
+        "[disturbance] torque_file": text.replace("torque = [1e-3, 0.0, 0.0]", 'torque_file = "rows.npy"'),
+        "[delay] sequence_file": text.replace("seed = 2\n", 'sequence_file = "d.npy"\n'),
+    }
+    for where, scenario in files.items():
+        assert scenario != text
+        path = tmp_path / "scenario.toml"
+        path.write_text(scenario)
+        for option in (["--t-final", "2"], ["--rate", "2000"]):
+            code, err = _cli(["simulate", str(path), *option], capsys)
+            assert code == 2 and err.count("\n") == 1, err
+            assert f"{option[0]} {option[1]} gives n = 2001 samples, but the scenario's {where} has 1001 rows" in err
+
+
 # ======================================================== scale: against the reference loops
 @needs_compiler
 def test_one_sample_delay_at_1khz_with_noise_equals_the_reference():
