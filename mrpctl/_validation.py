@@ -29,11 +29,12 @@ def finite_array(name: str, value: Any, shape: tuple[int | None, ...] | None = N
         raw = np.asarray(value)
         if np.iscomplexobj(raw):
             raise SpecificationError(f"{name} must be real: found complex entries (dtype {raw.dtype})")
-        # a boolean or a string among numbers (NumPy would read [20, 20, True] as [20, 20, 1] and "0.5" as 0.5)
-        odd = _odd_entry(value) if isinstance(value, list | tuple) else None
-        if raw.dtype == bool or odd == "booleans" or (raw.dtype == object and _has_bool(raw)):
+        # a boolean or a string among numbers (NumPy would read [20, 20, True] as [20, 20, 1] and "0.5" as 0.5;
+        # a string makes the whole array one of strings, or of objects when ragged)
+        listed_bool = isinstance(value, list | tuple) and _lists_a_bool(value)
+        if raw.dtype == bool or listed_bool or (raw.dtype == object and _has_bool(raw)):
             raise SpecificationError(f"{name} must be numeric, got booleans {value!r}")
-        if raw.dtype.kind in "US" or odd == "strings" or (raw.dtype == object and _has_str(raw)):
+        if raw.dtype.kind in "US" or (raw.dtype == object and _has_str(raw)):
             raise SpecificationError(f"{name} must be numeric, got strings {value!r}")
         array = np.asarray(raw, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -63,23 +64,14 @@ def _has_str(array: np.ndarray) -> bool:
     return any(isinstance(item, str | bytes) for item in array.ravel().tolist())
 
 
-def _odd_entry(value: Any) -> str | None:
-    """What a (nested) list or tuple holds that is not a number: "booleans", "strings" or None."""
+def _lists_a_bool(value: Any) -> bool:
+    """True when a (nested) list or tuple holds a boolean (NumPy reads [20, 20, True] as integers, no object)."""
     for item in value:
-        if isinstance(item, bool | np.bool_):
-            return "booleans"
-        if isinstance(item, str | bytes):
-            return "strings"
-        if isinstance(item, np.ndarray):
-            if item.dtype == bool:
-                return "booleans"
-            if item.dtype.kind in "US":
-                return "strings"
-        elif isinstance(item, list | tuple):
-            found = _odd_entry(item)
-            if found is not None:
-                return found
-    return None
+        if isinstance(item, bool | np.bool_) or (isinstance(item, np.ndarray) and item.dtype == bool):
+            return True
+        if isinstance(item, list | tuple) and _lists_a_bool(item):
+            return True
+    return False
 
 
 def finite_scalar(name: str, value: Any) -> float:

@@ -366,7 +366,7 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
     ``--hysteresis DELTA`` selects the controller-side rule; the model options change the
     scenario's own models field by field (or add them); every model needs that rule.
     """
-    from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Hysteretic, Saturation, SensorModel
+    from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
     from mrpctl.predictor import OnPredicted
 
     changes: dict[str, Any] = {}
@@ -431,7 +431,7 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
     from mrpctl.scenario import delay_sequence, delay_values, samples_file, torque_rows
 
     samples = math.floor(scenario.t_final * scenario.rate + 1e-9) + 1  # n, as mrpctl.simulate counts them
-    _check_file_horizons(scenario, args, samples, DelayKind)
+    _check_file_horizons(scenario, args, samples)
     if args.disturbance is not None and args.disturbance_file is not None:
         raise SpecificationError(
             "--disturbance (a constant torque) and --disturbance-file (one torque row per sample) both give the "
@@ -487,9 +487,11 @@ def _apply_flight_options(scenario: Scenario, args: argparse.Namespace) -> Scena
     return updated
 
 
-def _check_file_horizons(scenario: Scenario, args: argparse.Namespace, samples: int, kinds: Any) -> None:
+def _check_file_horizons(scenario: Scenario, args: argparse.Namespace, samples: int) -> None:
     """The scenario file's per-sample rows ([disturbance] torque_file, [delay] sequence_file) against the n of
     --t-final / --rate: a clear refusal naming both (the run would refuse the rows without naming the file)."""
+    from mrpctl.flight import DelayKind
+
     overrides = [
         f"{flag} {value:g}"
         for flag, value in (("--t-final", getattr(args, "t_final", None)), ("--rate", getattr(args, "rate", None)))
@@ -510,7 +512,7 @@ def _check_file_horizons(scenario: Scenario, args: argparse.Namespace, samples: 
     delay = scenario.delay
     if (
         delay is not None
-        and delay.kind is kinds.SEQUENCE
+        and delay.kind is DelayKind.SEQUENCE
         and delay.delays is not None
         and getattr(args, "delay_file", None) is None
         and getattr(args, "jitter", None) is None

@@ -143,6 +143,15 @@ def workspace_bytes(n: int, d: int, substeps: int, width: int = 1) -> int:
     return (min(d, n) + 1) * width * STATE_SIZE * 8 + min(slice_samples(substeps), n) * 8
 
 
+def _batch_run_bytes(n: int, keep_every: int | None, trajectories: bool, *, records: bool) -> int:
+    """Bytes of each run of a simulate_batch call: its objects and statistics, and with ``trajectories`` its
+    result (the kept samples, with ``records`` the flight records)."""
+    size = _BYTES_PER_RUN + STATS_SIZE * 8 * 4
+    if trajectories:
+        size += _BYTES_PER_RESULT + run_bytes(n, keep_every, flight=records)
+    return size
+
+
 def jitter_bytes(delay: DelayModel | None, d: int) -> int:
     """Bytes of the driver's arrival ring of a seeded jitter (d_max + 1 slots and 3 numbers, whatever n is)."""
     return (d + 4) * 8 if delay is not None and delay.kind is DelayKind.JITTER else 0
@@ -683,22 +692,20 @@ def simulate_batch(
     limit = _memory_limit(memory_limit)
     # what the runs need whatever their delays, checked before any per-run object is made (30 million runs took
     # 9 GB and 109 s of those before the refusal)
-    per_run_bytes = _BYTES_PER_RUN + STATS_SIZE * 8 * 4
-    if trajectories:
-        per_run_bytes += _BYTES_PER_RESULT + run_bytes(n, keep, flight=False)
-    _check_memory(n_runs * per_run_bytes, limit, t_final=t_final, keep_every=keep, runs=n_runs)
+    _check_memory(
+        n_runs * _batch_run_bytes(n, keep, trajectories, records=False), limit, t_final=t_final, keep_every=keep,
+        runs=n_runs,
+    )  # fmt: skip
     samples_by_run = [delay_samples(value, rate) for value in delays]
     if not isinstance(history, str) and len(set(samples_by_run)) > 1:
         raise SpecificationError("history: an array history needs all runs to have the same tau")
     histories = [_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
     workers = min(threads, n_runs)
     width = 1 if predictor is None else 2
+    records = trajectories and predictor is None and any(isinstance(one, Hysteretic) for one in rules)
     estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width)
-    estimate += n_runs * (_BYTES_PER_RUN + STATS_SIZE * 8 * 4)
-    if trajectories:
-        records = predictor is None and any(isinstance(one, Hysteretic) for one in rules)
-        estimate += n_runs * (_BYTES_PER_RESULT + run_bytes(n, keep, flight=records))
-    elif _LANES:
+    estimate += n_runs * _batch_run_bytes(n, keep, trajectories, records=records)
+    if not trajectories and _LANES:
         estimate += lane_bytes(n_runs, max(samples_by_run), workers)
     _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
 
@@ -724,7 +731,7 @@ def simulate_batch(
                 else streamed_by_run[0]
             )
         varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
-        jitter = max(jitter_bytes(varying[i], samples_by_run[i]) for i in range(n_runs))
+        jitter = jitter_bytes(varying[0], max(samples_by_run))  # one delay model for every run
         _check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
         for i in range(n_runs):
