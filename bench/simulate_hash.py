@@ -1,13 +1,21 @@
-"""A SHA-256 over the result arrays of ~30 representative simulations (for refactoring without changing a bit).
+"""SHA-256 digests over the result arrays of representative runs (for refactoring without changing a bit).
 
-Run before and after a change to the simulator: the printed hash must not move unless a
-documented fix changes results.  ``python bench/simulate_hash.py [-v]``.
+Run before and after a change to the simulator: no printed hash may move unless a documented fix
+changes results.  ``python bench/simulate_hash.py [-v]`` prints one line per part:
+
+* ``simulate``: ~30 runs of the paper's loop (every rule, substeps, histories, batches; the scalar engine);
+* ``flight``: the 75 flight-loop runs of ``bench/flight.py hash`` (hysteresis, actuator, disturbance,
+  sensor, jitter, a full inertia, three batches);
+* ``predictor``: the predictor controller (exact and wrong model, actuator limits, a batch);
+* ``lanes``: metrics-only ``simulate_batch`` calls that go to the lane engine (rules, flight options);
+* ``campaign``: one chunk of each shipped example campaign (``examples/campaigns/*.toml``).
 """
 
 from __future__ import annotations
 
 import hashlib
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -89,10 +97,88 @@ def digest_run(run: object) -> list[bytes]:
     return parts
 
 
-def main() -> None:
-    verbose = "-v" in sys.argv
+def predictor_cases() -> list[tuple[str, object]]:
+    from mrpctl.design import pd_gains
+    from mrpctl.flight import ActuatorModel
+    from mrpctl.predictor import OnPredicted, Predictor, perturbed_spacecraft
+
+    fast = pd_gains(SC, zeta=1.0, omega_n=12.85).K
+    heavy = perturbed_spacecraft(SC, 0.05)
+    out: list[tuple[str, object]] = []
+    for name, plant, options in (
+        ("exact", SC, {}),
+        ("heavy plant", heavy, {}),
+        ("limits", heavy, {"actuator": ActuatorModel([200.0, 200.0, 200.0])}),
+    ):
+        run = simulate(
+            plant,
+            fast,
+            X0,
+            tau=0.5,
+            t_final=5.0,
+            rate=200.0,
+            rule=OnPredicted(1.0),
+            predictor=Predictor(model=SC),
+            **options,
+        )
+        out.append((f"predictor {name}", run))
+    states = X0 + 0.01 * np.random.default_rng(7).standard_normal((6, 6))
+    batch = simulate_batch(
+        heavy, fast, states, tau=0.5, t_final=5.0, rate=200.0, rule=OnPredicted(1.0), predictor=Predictor(model=SC)
+    )
+    out.append(("predictor batch", batch))
+    return out
+
+
+def lane_cases() -> list[tuple[str, object]]:
+    from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
+
+    rng = np.random.default_rng(11)
+    states = np.hstack((0.55 * rng.uniform(-1, 1, (40, 3)), 0.4 * rng.standard_normal((40, 3))))
+    out: list[tuple[str, object]] = []
+    for rule in (OnDelayed(), DelayAware(), BoundaryLayer(0.05), Hysteretic(0.1)):
+        batch = simulate_batch(SC, paper.GAIN, states, tau=0.05, t_final=8.0, rate=200.0, rule=rule)
+        out.append((f"lanes {rule}", batch))
+    flown = simulate_batch(
+        SC,
+        paper.GAIN,
+        states,
+        tau=0.5,
+        t_final=8.0,
+        rate=200.0,
+        rule=Hysteretic(0.05),
+        actuator=ActuatorModel([20.0, 25.0, 30.0]),
+        disturbance=Disturbance([1e-2, -2e-2, 5e-3]),
+        sensor=SensorModel(attitude_noise=0.01, rate_noise=1e-4, seed=3),
+        delay=DelayModel.jitter(0.4, 0.5, seed=2),
+    )
+    out.append(("lanes flown", flown))
+    return out
+
+
+def campaign_digest(verbose: bool) -> str:
+    from mrpctl.campaign._task import simulate_chunk
+    from mrpctl.campaign.spec import load_campaign
+
     total = hashlib.sha256()
-    for name, result in cases():
+    folder = Path(__file__).resolve().parent.parent / "examples" / "campaigns"
+    for path in sorted(folder.glob("*.toml")):
+        spec = load_campaign(path)
+        chunk = simulate_chunk(spec, 0, min(8, spec.count), threads=2)
+        part = hashlib.sha256()
+        for key in sorted(chunk):
+            part.update(key.encode())
+            part.update(np.ascontiguousarray(chunk[key]).tobytes())
+        one = part.hexdigest()[:16]
+        total.update(one.encode())
+        if verbose:
+            print(f"{one}  campaign {path.stem}")
+    return total.hexdigest()
+
+
+def digest(results: list[tuple[str, object]], verbose: bool) -> str:
+    total = hashlib.sha256()
+    for name, result in results:
         parts: list[bytes] = []
         if hasattr(result, "runs"):
             parts += [np.ascontiguousarray(getattr(result, f)).tobytes() for f in BATCH_FIELDS]
@@ -104,7 +190,19 @@ def main() -> None:
         total.update(one.encode())
         if verbose:
             print(f"{one}  {name}")
-    print(total.hexdigest())
+    return total.hexdigest()
+
+
+def main() -> None:
+    verbose = "-v" in sys.argv
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from flight import flight_hash  # bench/flight.py
+
+    print("simulate ", digest(cases(), verbose))
+    print("flight   ", flight_hash())
+    print("predictor", digest(predictor_cases(), verbose))
+    print("lanes    ", digest(lane_cases(), verbose))
+    print("campaign ", campaign_digest(verbose))
 
 
 if __name__ == "__main__":
