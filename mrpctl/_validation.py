@@ -120,17 +120,6 @@ def sealed(array: np.ndarray) -> np.ndarray:
     return array
 
 
-def check_spacecraft(value: Any, name: str = "spacecraft") -> Spacecraft:
-    """Return ``value`` if it is a :class:`mrpctl.Spacecraft`, else raise SpecificationError naming ``name``."""
-    from mrpctl.spacecraft import Spacecraft
-
-    if not isinstance(value, Spacecraft):
-        raise SpecificationError(
-            f"{name} must be a mrpctl.Spacecraft (e.g. Spacecraft([140, 100, 80])), got {type(value).__name__}"
-        )
-    return value
-
-
 def integer(name: str, value: Any, *, minimum: int | None = None, maximum: int | None = None) -> int:
     """Return ``value`` as an int (booleans refused) within [minimum, maximum]."""
     if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer):

@@ -22,10 +22,10 @@ from typing import TYPE_CHECKING, Any
 import control
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, finite_array, finite_scalar, integer, nonnegative_scalar, readonly
+from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.model import gain_matrix, pd_from_gain, plant_model
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 if TYPE_CHECKING:
     from mrpctl.simulation import SimulationResult

@@ -26,7 +26,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, integer, nonnegative_scalar, positive_scalar, readonly
+from mrpctl._validation import integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import (
     FLIGHT_CONSTANTS_SIZE,
@@ -47,7 +47,7 @@ from mrpctl.flight import (
     short_expr,
 )
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, gain_matrix, plant_model
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
 
 __all__ = [

@@ -24,9 +24,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, finite_array, readonly
+from mrpctl._validation import finite_array, readonly
 from mrpctl.mrp import b_matrix_expr, skew_expr
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = [
     "INPUT_SIZE",

@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mrpctl._validation import (
-    check_spacecraft,
     finite_array,
     finite_scalar,
     integer,
@@ -24,7 +23,7 @@ from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
 from mrpctl.predictor import OnPredicted, Predictor
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 if TYPE_CHECKING:

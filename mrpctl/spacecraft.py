@@ -110,3 +110,12 @@ class Spacecraft:
         if self.is_diagonal:
             return "Spacecraft J = diag(" + ", ".join(f"{v:g}" for v in np.diag(self.inertia)) + ") kg m^2"
         return f"Spacecraft J = {self.inertia.tolist()} kg m^2"
+
+
+def check_spacecraft(value: Any, name: str = "spacecraft") -> Spacecraft:
+    """Return ``value`` if it is a :class:`mrpctl.Spacecraft`, else raise SpecificationError naming ``name``."""
+    if not isinstance(value, Spacecraft):
+        raise SpecificationError(
+            f"{name} must be a mrpctl.Spacecraft (e.g. Spacecraft([140, 100, 80])), got {type(value).__name__}"
+        )
+    return value

@@ -8,11 +8,11 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, finite_array, readonly
+from mrpctl._validation import finite_array, readonly
 from mrpctl.design._common import is_diagonal
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, plant_model
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = ["AxisDamping", "GainAnalysis", "PDGains", "analyze_gains", "pd_gains"]
 

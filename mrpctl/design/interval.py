@@ -26,6 +26,7 @@ import numpy as np
 from mrpctl._validation import finite_scalar, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.design._common import OPTIMAL, SolveOutcome, order_value, solve, system_matrices
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, SearchStatus, criterion_name
+from mrpctl.design.margin import delay_margin
 from mrpctl.errors import SpecificationError
 
 __all__ = [
@@ -757,7 +758,6 @@ def max_certified_interval_delay(
         Search limit (s) for systems stable at every constant delay; default 1e3 / max(‖A‖, ‖A_d‖).
     margin_tol : float, optional
     """
-    from mrpctl.design.margin import delay_margin
 
     (a, a_d) = _plants(A, A_d)[0]
     lo = nonnegative_scalar("tau_min", tau_min)

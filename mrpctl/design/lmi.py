@@ -14,6 +14,7 @@ import numpy as np
 
 from mrpctl._validation import positive_scalar, readonly
 from mrpctl.design._common import OPTIMAL, balancing, order_value, similarity, solve, system_matrices
+from mrpctl.design.margin import delay_margin
 from mrpctl.errors import SpecificationError
 
 __all__ = [
@@ -699,7 +700,6 @@ def max_certified_delay(
     DimensionError, SpecificationError
         On malformed A, A_d or options.
     """
-    from mrpctl.design.margin import delay_margin
 
     a, a_d = system_matrices(A, A_d)
     order = order_value(order)

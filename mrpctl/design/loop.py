@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, positive_scalar, readonly
+from mrpctl._validation import positive_scalar, readonly
 from mrpctl.design._common import is_diagonal, order_value
 from mrpctl.design.lmi import (
     DEFAULT_MARGIN_TOL,
@@ -24,7 +24,7 @@ from mrpctl.design.lmi import (
 )
 from mrpctl.design.margin import DelayMargin, delay_margin
 from mrpctl.model import gain_matrix, pd_from_gain, plant_model
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = ["LinearizedLoop", "linearized_loop"]
 

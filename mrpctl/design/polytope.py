@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar, readonly
-from mrpctl.design._common import OPTIMAL, SolveOutcome, balancing, order_value, similarity, solve
+from mrpctl._validation import nonnegative_scalar, positive_scalar, readonly
+from mrpctl.design._common import OPTIMAL, SolveOutcome, balancing, order_value, similarity, solve, system_matrices
 from mrpctl.design.interval import (
     DelayRate,
     IntervalCertificate,
@@ -46,9 +46,10 @@ from mrpctl.design.interval import (
     solve_lmi,
 )
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, lmi_blocks, lmi_structure
+from mrpctl.design.margin import delay_margin
 from mrpctl.errors import SpecificationError
 from mrpctl.model import gain_matrix
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = [
     "Functional",
@@ -675,7 +676,6 @@ def certify_vertices(
         VERTEX: vertex-dependent functional with a common Finsler slack; COMMON: one functional for
         all vertices; None (default): VERTEX up to :data:`VERTEX_LIMIT` vertices, else COMMON.
     """
-    from mrpctl.design._common import system_matrices
 
     checked = [system_matrices(a, a_d) for a, a_d in plants]
     if not checked:
@@ -709,7 +709,6 @@ def exact_polytope_margin(polytope: InertiaPolytope, K: Any, *, points: int = 41
     min(points, 3) values per each of the 6 entries (3⁶ = 729 full 6×6 margins); grid points that
     are not physical inertias are skipped.
     """
-    from mrpctl.design.margin import delay_margin
 
     k = gain_matrix(K)
     j0 = np.diag(polytope.nominal.inertia)

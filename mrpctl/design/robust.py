@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from mrpctl._validation import check_spacecraft, integer, nonnegative_scalar, positive_scalar
+from mrpctl._validation import integer, nonnegative_scalar, positive_scalar
 from mrpctl.design._common import order_value
 from mrpctl.design.gains import PDGains, pd_gains
 from mrpctl.design.interval import DelayRate, rate_value
@@ -27,7 +27,7 @@ from mrpctl.design.margin import delay_margin
 from mrpctl.design.polytope import PolytopeCertificate, certify_polytope, exact_polytope_margin, inertia_polytope
 from mrpctl.design.sampled import sampled_stability, spacecraft_axes
 from mrpctl.errors import SpecificationError
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = [
     "DelayModel",

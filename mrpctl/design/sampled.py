@@ -29,7 +29,8 @@ from mrpctl.design._common import order_value
 from mrpctl.design.interval import DelayRate, IntervalCertificate, solve_interval, solve_interval_preconditioned
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, CertificateStatus, SearchStatus, criterion_name
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.model import gain_matrix, plant_model
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = [
     "MAX_LIFTED_SIZE",
@@ -465,9 +466,6 @@ def spacecraft_axes(spacecraft: Spacecraft, K: Any) -> tuple[tuple[np.ndarray, n
     Per axis i on (σᵢ, ωᵢ/4): A = [[0, 1], [0, 0]], B = [0; 1/(4 Jᵢ)], K = [K_σ,ii, K_ω,ii]; the split
     needs a diagonal J and diagonal gain blocks.
     """
-    from mrpctl._validation import check_spacecraft
-    from mrpctl.model import gain_matrix, plant_model
-
     sc = check_spacecraft(spacecraft)
     k = gain_matrix(K)
     plant = plant_model(sc)

@@ -10,7 +10,7 @@ from typing import Any, overload
 
 import numpy as np
 
-from mrpctl._validation import check_spacecraft, nonnegative_scalar, positive_scalar, readonly
+from mrpctl._validation import nonnegative_scalar, positive_scalar, readonly
 from mrpctl.design._common import OPTIMAL, order_value, solve
 from mrpctl.design.gains import PDGains, damping_kind, pd_gains
 from mrpctl.design.interval import (
@@ -54,7 +54,7 @@ from mrpctl.design.robust import (
 )
 from mrpctl.errors import SpecificationError
 from mrpctl.model import gain_from_pd, plant_model
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = [
     "LMISynthesis",

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._compile import find_compiler
-from mrpctl._validation import check_spacecraft, finite_array, integer, positive_scalar, readonly
+from mrpctl._validation import finite_array, integer, positive_scalar, readonly
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
@@ -43,7 +43,7 @@ from mrpctl.simulation._engine import (
 )
 from mrpctl.simulation._stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
 
 #: At most this many switch instants are kept per run when ``keep_every != 1`` (16 MB);
