@@ -18,6 +18,8 @@ import numpy as np
 
 from mrpctl import paper
 from mrpctl._validation import finite_array, positive_scalar, readonly
+from mrpctl.claims import Claim, Verdict
+from mrpctl.design import linearized_loop, pd_gains, synthesize_pd
 from mrpctl.errors import SpecificationError
 from mrpctl.predictor import (
     MarginInterval,
@@ -129,8 +131,6 @@ class PredictorStudy:
 
     def claims(self) -> list[Any]:
         """The rows as :class:`mrpctl.reproduction.Claim` values (verdict: mrpctl only), for ``claims.md``."""
-        from mrpctl.reproduction import Claim, Verdict
-
         claims = []
         for row in self.rows:
             settled = "not settled" if row.settling_time is None else f"settling {row.settling_time:.3f} s"
@@ -228,7 +228,6 @@ def _row(controller: str, omega_n: float | None, e: float, result: SimulationRes
 
 def _pd_margin(gain: np.ndarray, rtol: float) -> MarginInterval:
     """The inertia errors e for which the delayed PD loop's exact delay margin still exceeds τ."""
-    from mrpctl.design import linearized_loop
 
     def stable(e: float) -> bool:
         return bool(linearized_loop(perturbed_spacecraft(paper.SPACECRAFT, e), gain).delay_margin().margin > TAU)
@@ -259,7 +258,6 @@ def predictor_study(
     -------
     PredictorStudy
     """
-    from mrpctl.design import pd_gains, synthesize_pd
 
     t_final = positive_scalar("t_final", t_final)
     sweep = finite_array("errors", errors).ravel()

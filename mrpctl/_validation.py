@@ -10,7 +10,7 @@ import numpy as np
 from mrpctl.errors import DimensionError, SpecificationError
 
 if TYPE_CHECKING:
-    from mrpctl.spacecraft import Spacecraft
+    pass
 
 
 def _shape_text(shape: tuple[int | None, ...] | tuple[Any, ...]) -> str:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import enum
 import json
 import math
 import os
@@ -15,11 +14,15 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl import paper
+from mrpctl import mrp, paper
+from mrpctl._predictor_study import predictor_study
 from mrpctl._validation import integer, nonnegative_scalar, positive_scalar
+from mrpctl.claims import Claim, Verdict
+from mrpctl.design import analyze_gains, linearized_loop
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
 from mrpctl.scenario import Scenario
-from mrpctl.simulation import SimulationResult
+from mrpctl.simulation import SimulationResult, simulate_batch
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
 __all__ = [
@@ -62,27 +65,6 @@ FIGURE_FILES = (
 STUDY_FIGURE_FILES = ("noise_delta_study.png", "distributions.png", "predictor_study.png")
 #: Every file :func:`write_reproduction` writes into its folder (nothing else is touched there).
 OUTPUT_FILES = (*FIGURE_FILES, *STUDY_FIGURE_FILES, "claims.md", "summary.json")
-
-
-class Verdict(enum.Enum):
-    """How a measurement compares with a paper claim."""
-
-    AGREES = "agrees"
-    DIFFERS = "differs"
-    EXTENDS = "mrpctl only"
-
-
-@dataclass(frozen=True)
-class Claim:
-    """One row of the claims table: what the paper says and what mrpctl measures."""
-
-    source: str
-    claim: str
-    measurement: str
-    verdict: Verdict
-
-    def __str__(self) -> str:
-        return f"[{self.verdict.value}] {self.source}: {self.claim} -> {self.measurement}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -214,7 +196,6 @@ def flight_scenarios(*, t_final: float = 60.0) -> dict[str, Scenario]:
     a 20 N m per-axis torque limit, a 1e-3 N m disturbance about x and a delay jittering in
     [0.45, 0.5] s (seed 2).
     """
-    from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
 
     t_final = positive_scalar("t_final", t_final)
     base = _paper_scenario(
@@ -274,7 +255,6 @@ def _run_summary(result: SimulationResult) -> dict[str, Any]:
 
 # ------------------------------------------------------------------------------ claims
 def _design_claims() -> tuple[list[Claim], dict[str, Any]]:
-    from mrpctl.design import analyze_gains, linearized_loop
 
     analysis = analyze_gains(paper.SPACECRAFT, paper.GAIN)
     zetas = ", ".join(f"{a.zeta:.3f}" for a in analysis.axes)
@@ -433,7 +413,6 @@ def perturbed_states(
     ±``angle_deg``), σ = σ0 ⊕ σ(θ) in the set of σ0 (|σ| near 0.93, the long set is never
     taken); ω = ω0 + δω with δω uniform in ±``rate`` rad/s per axis.
     """
-    from mrpctl import mrp
 
     count = integer("count", count, minimum=1)
     generator = np.random.default_rng(integer("seed", seed, minimum=0))
@@ -447,7 +426,6 @@ def perturbed_states(
 
 def _flight_runs(t_final: float) -> dict[str, SimulationResult]:
     """The controller-side rule on the paper case: δ = 0, α = 1.2 (ideal loop) and the shipped flight-paper."""
-    from mrpctl.flight import Hysteretic
 
     base = _paper_scenario("flight_hysteretic_alpha_1", "", paper.TAU, Hysteretic(0.0), t_final)
     return {
@@ -459,8 +437,6 @@ def _flight_runs(t_final: float) -> dict[str, SimulationResult]:
 
 def _noise_study(t_final: float) -> list[dict[str, Any]]:
     """Logic switches and settling of the controller-side rule for every (σ_n, α): one batch per noise level."""
-    from mrpctl.flight import Hysteretic, SensorModel
-    from mrpctl.simulation import simulate_batch
 
     rows = []
     rules = [Hysteretic.from_alpha(alpha) for alpha in ALPHA_STUDY]
@@ -497,7 +473,6 @@ def _or_none(value: float) -> float | None:
 
 
 def _distribution_rules() -> dict[str, SwitchingRule]:
-    from mrpctl.flight import Hysteretic
 
     return {
         "on-delayed": OnDelayed(),
@@ -509,7 +484,6 @@ def _distribution_rules() -> dict[str, SwitchingRule]:
 
 def _distribution_study(t_final: float) -> list[dict[str, Any]]:
     """Each switching claim over :func:`perturbed_states` at the rates of :data:`RATE_STUDY` (metrics only)."""
-    from mrpctl.simulation import simulate_batch
 
     states = perturbed_states()
     rows = []
@@ -644,6 +618,7 @@ def _claims_markdown(claims: tuple[Claim, ...], runs: dict[str, dict[str, Any]])
 
 
 def _figures(results: dict[str, SimulationResult], out: Path) -> list[Path]:
+    # deferred: matplotlib (through mrpctl.plots), only when figures are written
     from mrpctl import plots
 
     makers: list[tuple[str, Callable[[], Any]]] = [
@@ -687,6 +662,7 @@ def _figures(results: dict[str, SimulationResult], out: Path) -> list[Path]:
 
 def _study_figures(studies: dict[str, Any], out: Path) -> list[Path]:
     """The noise × δ heat maps and the distributions over initial states and rates."""
+    # deferred: matplotlib (through mrpctl.plots), only when figures are written
     from mrpctl import plots
 
     written = []
@@ -798,7 +774,6 @@ def run_reproduction(*, t_final: float = 60.0) -> Reproduction:
         results[f"eps_{eps:g}"] = fig7.with_rule(BoundaryLayer(eps=eps)).simulate()
     results.update(_flight_runs(t_final))
     studies = {"noise_delta": _noise_study(t_final), "distributions": _distribution_study(t_final)}
-    from mrpctl._predictor_study import predictor_study
 
     study = predictor_study(t_final=t_final)
     design_claims, design_summary = _design_claims()
@@ -855,6 +830,7 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
         _figures(reproduction.results, staging)
         _study_figures(reproduction.studies, staging)
         if reproduction.predictor is not None:
+            # deferred: matplotlib (through mrpctl.plots), only when figures are written
             from mrpctl import plots
 
             plots.save_figure(reproduction.predictor.figure(), staging / "predictor_study.png")
