@@ -3,7 +3,7 @@
 The 60 s DelayAware tumbling batch of ``bench/vector.py`` (the paper's spacecraft and gain,
 tau = 0.5 s, 1 kHz, attitudes uniform on SO(3), |omega| <= 5 rad/s). For W in (4, 8, 16) and the
 ISA flags ``-mavx2`` (explicit) or ``-march=native`` resolved by the compiler
-(:func:`mrpctl._vectorize.native_isa_flags`: the flags that key the compile cache), the lane
+(:func:`mrpctl.engines.lanes.native_isa_flags`: the flags that key the compile cache), the lane
 engine alone (``simulate_lanes``), each variant checked bit for bit against the scalar engine on
 16 runs; the hand-written structure-of-arrays loop of ``bench/vector.py`` (W = 8, the same
 flags) as the yardstick. Table 1: CPU time on one thread (the least disturbed by other jobs);
@@ -28,9 +28,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import vector
 
-from mrpctl import _vectorize, paper
+from mrpctl import paper
+from mrpctl.engines import lanes as _vectorize
+from mrpctl.engines import scalar as _engine
 from mrpctl.loop import core_function, delay_samples, inertia_input
-from mrpctl.simulation import _engine, _simulate
+from mrpctl.simulation import _simulate
 from mrpctl.switching import DelayAware
 
 

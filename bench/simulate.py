@@ -28,9 +28,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from mrpctl import _compile, paper
+from mrpctl.engines.scalar import clear_engines, engine
 from mrpctl.model import state
 from mrpctl.simulation import simulate, simulate_batch
-from mrpctl.simulation._engine import clear_engines, engine
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed
 
 T_FINAL = 60.0

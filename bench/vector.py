@@ -1,4 +1,4 @@
-"""Benchmark of the vectorised lane engine (mrpctl._vectorize); prints one table.
+"""Benchmark of the vectorised lane engine (mrpctl.engines.lanes); prints one table.
 
 The 60 s DelayAware tumbling batch: the paper's spacecraft and gain, tau = 0.5 s, 1 kHz,
 attitudes uniform on SO(3) (scipy ``Rotation.random``), body rates uniform in a ball of
@@ -40,10 +40,12 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mrpctl import _compile, _vectorize, paper
+from mrpctl import _compile, paper
+from mrpctl.engines import lanes as _vectorize
+from mrpctl.engines import scalar as _engine
 from mrpctl.loop import core_function, delay_samples, inertia_input
 from mrpctl.model import state
-from mrpctl.simulation import BatchResult, _engine, _simulate, simulate_batch
+from mrpctl.simulation import BatchResult, _simulate, simulate_batch
 from mrpctl.switching import DelayAware
 
 T_FINAL = 60.0

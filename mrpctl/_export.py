@@ -690,7 +690,7 @@ def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:
         "delay_line": "entries (m_k; z_k) of 12: the sensor's measurement and the model copy at sample k; "
         "x_delayed of sample k is entry k - d",
         "initial_memory": "unused = 1, sigma_hat_prev = z_0 = x0 with sigma in the short set, accumulators 0 "
-        "(mrpctl.simulation._engine.predictor_memory)",
+        "(mrpctl.engines.scalar.predictor_memory)",
         "history": "entries for k < d: (x0; x0) (the constant history, the only one with a predictor): x_hat = z_k",
     }
 
@@ -745,7 +745,7 @@ def _flight_manifest(closed: ClosedLoopFunctions, flight: FlightOptions) -> dict
             sensor,
             noise="the noise input of sample/chunk: (theta_k; eta_k) = mrpctl.flight.SensorModel(...).noise(k0, k1) "
             "(counter-based: SplitMix64 values of (seed, stream, 3k + component) and a 256-layer ziggurat, "
-            "mrpctl/simulation/_noise.c)",
+            "mrpctl/engines/noise.c)",
         ),
         "delay": None
         if delay is None

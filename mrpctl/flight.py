@@ -85,12 +85,12 @@ STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 #: Largest attitude 1σ (rad): |θ|² of σ_θ·N(0, I₃) must stay finite (overflow from |θ| ≈ 1.3e154).
 _MAX_ATTITUDE_NOISE = 1e150
-#: Largest rate 1σ and gyro bias (rad/s): the divergence bound of the true rate (mrpctl.simulation._stats).
+#: Largest rate 1σ and gyro bias (rad/s): the divergence bound of the true rate (mrpctl.engines.stats).
 _MAX_RATE_ERROR = 1e6
 
 
 # ================================================================== random streams
-# The NumPy mirror of mrpctl/simulation/_noise.c (read that file's header: SplitMix64 values of
+# The NumPy mirror of mrpctl/engines/noise.c (read that file's header: SplitMix64 values of
 # (key, idx), a 256-layer ziggurat on them); the C driver generates the same bits per sample.
 _MASK64 = (1 << 64) - 1
 _GAMMA = 0x9E3779B97F4A7C15
@@ -126,7 +126,7 @@ def _values(key: int, idx: np.ndarray) -> np.ndarray:
 
 
 def _ziggurat_tables() -> tuple[list[float], list[float]]:
-    """X (257) and F = exp(−X²/2) of the 256-layer ziggurat, computed in float64 as documented in _noise.c."""
+    """X (257) and F = exp(−X²/2) of the 256-layer ziggurat, computed in float64 as documented in noise.c."""
     r = _ZIG_R
     v = r * math.exp(-0.5 * r * r) + math.sqrt(math.pi / 2.0) * math.erfc(r / math.sqrt(2.0))
     x = [0.0] * (_ZIG_LAYERS + 1)
@@ -140,16 +140,16 @@ def _ziggurat_tables() -> tuple[list[float], list[float]]:
 
 @lru_cache(maxsize=1)
 def _c_tables() -> tuple[np.ndarray, np.ndarray]:
-    """The tables as written in mrpctl/simulation/_noise.c (hex-float literals): the bits both sides use."""
+    """The tables as written in mrpctl/engines/noise.c (hex-float literals): the bits both sides use."""
     from importlib import resources
 
-    text = resources.files("mrpctl").joinpath("simulation", "_noise.c").read_text(encoding="utf-8")
+    text = resources.files("mrpctl").joinpath("engines", "noise.c").read_text(encoding="utf-8")
     tables = []
     for name in ("mrpctl_zig_x", "mrpctl_zig_f"):
         body = text.split(f"{name}[{_ZIG_LAYERS + 1}] = {{", 1)[1].split("}", 1)[0]
         values = [float.fromhex(item) for item in body.replace("\n", " ").split(",") if item.strip()]
         if len(values) != _ZIG_LAYERS + 1:
-            raise RuntimeError(f"_noise.c: {name} has {len(values)} entries, expected {_ZIG_LAYERS + 1}")
+            raise RuntimeError(f"noise.c: {name} has {len(values)} entries, expected {_ZIG_LAYERS + 1}")
         tables.append(np.array(values))
     return tables[0], tables[1]
 
@@ -234,7 +234,7 @@ def _stream_normals(
 
 
 def _stream_integers(seed: int, stream: int, k0: int, k1: int, low: int, high: int) -> np.ndarray:
-    """(k1 − k0,) integers uniform in [low, high] of samples k0 … k1 − 1 of one stream (_noise.c's map)."""
+    """(k1 − k0,) integers uniform in [low, high] of samples k0 … k1 − 1 of one stream (noise.c's map)."""
     count = high - low + 1
     if not 0 < count <= 2**32:
         raise SpecificationError(f"the jitter range [{low}, {high}] must hold 1 to 2^32 whole periods")

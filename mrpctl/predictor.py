@@ -33,8 +33,8 @@ import casadi as ca
 import numpy as np
 
 from mrpctl._validation import finite_scalar, integer, positive_scalar, readonly
+from mrpctl.clock import delay_samples
 from mrpctl.errors import InertiaWarning, SpecificationError
-from mrpctl.loop import delay_samples
 from mrpctl.model import STATE_SIZE, gain_matrix, pd_from_gain, plant_model
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule

@@ -32,8 +32,8 @@ from mrpctl._compile import (
     find_compiler,
     generate_code,
 )
+from mrpctl.engines.scalar import clear_engines
 from mrpctl.errors import CacheWarning, CodegenError, SpecificationError
-from mrpctl.simulation._engine import clear_engines
 from mrpctl.switching import OnDelayed
 
 

@@ -33,10 +33,10 @@ from flight_reference import reference_loop
 from mrpctl import OnPredicted, Predictor, Spacecraft, data, mrp, paper, simulate, simulate_batch
 from mrpctl._compile import find_compiler
 from mrpctl.cli import main
+from mrpctl.engines import scalar as _engine
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.scenario import parse_scenario, shipped_scenarios
-from mrpctl.simulation import _engine
 
 needs_compiler = pytest.mark.skipif(find_compiler() is None, reason="no C compiler on this machine")
 

@@ -9,9 +9,10 @@ import pytest
 from flight_reference import _tumbles, reference_loop
 
 from mrpctl import paper, simulate, simulate_batch
+from mrpctl.engines import scalar as _engine
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, SensorModel
-from mrpctl.simulation import _engine, _simulate
+from mrpctl.simulation import _simulate
 
 GAINS = 0.05 * paper.GAIN
 RATE, T_FINAL, TAU = 100.0, 4.0, 0.05

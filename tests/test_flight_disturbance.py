@@ -7,9 +7,9 @@ import pytest
 from flight_reference import _tumbles, reference_loop
 
 from mrpctl import paper, simulate
+from mrpctl.engines import scalar as _engine
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
-from mrpctl.simulation import _engine
 
 GAINS = 0.05 * paper.GAIN
 RATE, T_FINAL, N = 100.0, 8.0, 801

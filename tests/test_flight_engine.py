@@ -10,6 +10,7 @@ import pytest
 from flight_reference import reference_loop
 
 from mrpctl import OnCurrent, closed_loop_functions, mrp, paper, simulate, simulate_batch
+from mrpctl.engines import scalar as _engine
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import (
     ActuatorModel,
@@ -26,7 +27,6 @@ from mrpctl.flight import (
     rotation_mrp_function,
     short_expr,
 )
-from mrpctl.simulation import _engine
 from mrpctl.spacecraft import Spacecraft
 
 PAPER_D = 500
@@ -148,7 +148,7 @@ def test_closed_loop_functions_of_the_flight_rule_and_the_refused_options():
 
 
 def test_the_virtual_machine_fallback_equals_the_compiled_engine():
-    from mrpctl.simulation._vm import VirtualMachineEngine
+    from mrpctl.engines.vm import VirtualMachineEngine
 
     gains = 0.05 * paper.GAIN
     x0 = _tumbles(1, 5.0, 1)[0]

@@ -14,6 +14,9 @@ import numpy as np
 import pytest
 
 from mrpctl import OnCurrent, paper, simulate
+from mrpctl.engines import scalar as _engine
+from mrpctl.engines.stats import S_K
+from mrpctl.engines.vm import VirtualMachineEngine
 from mrpctl.flight import (
     ActuatorModel,
     Hysteretic,
@@ -23,9 +26,7 @@ from mrpctl.flight import (
     selection_function,
     short_expr,
 )
-from mrpctl.simulation import _engine
-from mrpctl.simulation._stats import S_K
-from mrpctl.simulation._vm import VirtualMachineEngine
+from mrpctl.loop.options import NO_FLIGHT_OPTIONS
 
 _ULP = 2.0**-52  # the spacing of doubles in [1, 2)
 
@@ -159,7 +160,7 @@ def test_a_long_history_gives_the_virtual_machines_numbers_bit_for_bit(delta, no
     rule = Hysteretic(delta)
     bias = [1e-3, -2e-3, 5e-4]
     sensor = SensorModel(attitude_noise=0.01, rate_noise=1e-3, gyro_bias=bias, seed=4) if noisy else None
-    options = _engine.NO_FLIGHT_OPTIONS.copy()
+    options = NO_FLIGHT_OPTIONS.copy()
     options[7:10] = bias if noisy else 0.0
     compiled = _engine.engine(paper.SPACECRAFT, rule, d, 0.01, 1, sensor=noisy)  # with limits (inf): squared_peak
     assert compiled.compiled_code

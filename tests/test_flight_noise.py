@@ -1,4 +1,4 @@
-"""The counter-based random streams (mrpctl/simulation/_noise.c and its NumPy mirror in mrpctl.flight).
+"""The counter-based random streams (mrpctl/engines/noise.c and its NumPy mirror in mrpctl.flight).
 
 The C generator and the NumPy mirror must give the same bits for every value (compared on >= 10^6
 normals over several seeds and slicings); the normals must be standard normal (Kolmogorov-Smirnov
@@ -30,7 +30,7 @@ def c_fill(tmp_path_factory):
         pytest.skip("no C compiler")
     folder = tmp_path_factory.mktemp("noise")
     source = folder / "noise.c"
-    source.write_text(resources.files("mrpctl.simulation").joinpath("_noise.c").read_text(encoding="utf-8"))
+    source.write_text(resources.files("mrpctl.engines").joinpath("noise.c").read_text(encoding="utf-8"))
     assert "-ffp-contract=off" in _compile.SIMULATION_FLAGS
     _compile.build_library(source, folder / "noise.so", flags=_compile.SIMULATION_FLAGS)
     library = ctypes.CDLL(str(folder / "noise.so"))
@@ -72,7 +72,7 @@ def test_the_prescaled_table_is_x_times_two_to_the_minus_53_exactly():
     """mrpctl_zig_xs[i] = X[i] 2^-53 (the driver's one product (h >> 11) X[i] 2^-53 gives the documented bits)."""
     from importlib import resources
 
-    text = resources.files("mrpctl").joinpath("simulation", "_noise.c").read_text(encoding="utf-8")
+    text = resources.files("mrpctl").joinpath("engines", "noise.c").read_text(encoding="utf-8")
     body = text.split("mrpctl_zig_xs[256] = {", 1)[1].split("}", 1)[0]
     scaled = np.array([float.fromhex(item) for item in body.replace("\n", " ").split(",") if item.strip()])
     table_x, _ = flight._c_tables()
@@ -128,7 +128,7 @@ def test_sensor_noise_rows_are_the_streams_in_any_slicing(c_fill):
 
 
 def test_the_compiled_noise_rows_of_the_lane_engine_are_the_numpy_mirror_s():
-    from mrpctl.simulation._engine import noise_rows
+    from mrpctl.engines.scalar import noise_rows
 
     if _compile.find_compiler() is None:
         pytest.skip("no C compiler")
@@ -196,8 +196,8 @@ def test_seeds_outside_64_bits_are_refused():
 def test_the_driver_s_jitter_schedule_is_newest_arrived_in_any_slicing(slice_samples, monkeypatch):
     """d_min = 1 period (the engine's smallest), slices shorter and longer than d_max: j* as newest_arrived says."""
     from mrpctl import paper, simulate
+    from mrpctl.engines import scalar as _engine
     from mrpctl.flight import Hysteretic, newest_arrived
-    from mrpctl.simulation import _engine
 
     if _compile.find_compiler() is None:
         pytest.skip("no C compiler")

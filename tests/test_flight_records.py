@@ -7,8 +7,8 @@ import pytest
 from flight_reference import _tumbles, reference_loop
 
 from mrpctl import OnCurrent, paper, simulate, simulate_batch
+from mrpctl.engines import scalar as _engine
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, SensorModel
-from mrpctl.simulation import _engine
 
 GAINS = 0.05 * paper.GAIN
 

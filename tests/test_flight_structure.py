@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from mrpctl import paper, simulate, simulate_batch
+from mrpctl.engines import scalar as _engine
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
-from mrpctl.simulation import _engine, _simulate
+from mrpctl.loop.options import flight_constants, flight_structure
+from mrpctl.simulation import _simulate
 
 X0 = np.array(paper.INITIAL_STATE, dtype=float)
 LIMITS = ActuatorModel([20.0, 25.0, 30.0], norm_max=35.0)
@@ -67,15 +69,15 @@ def test_batch_of_specialised_samples_equals_the_full_sample(monkeypatch: pytest
 
 
 def test_structure_of_the_constants() -> None:
-    none = _engine.flight_structure(None, None)
+    none = flight_structure(None, None)
     assert none == {"sensor": False, "limited": False, "disturbed": False}
-    options, _ = _simulate._flight_constants(LIMITS, TORQUE, SensorModel())
-    assert _engine.flight_structure(options, SensorModel()) == {"sensor": False, "limited": True, "disturbed": True}
-    options, _ = _simulate._flight_constants(ActuatorModel([1e300] * 3), None, None)
-    assert _engine.flight_structure(options, None)["limited"]  # a finite limit, however large
+    options, _ = flight_constants(LIMITS, TORQUE, SensorModel())
+    assert flight_structure(options, SensorModel()) == {"sensor": False, "limited": True, "disturbed": True}
+    options, _ = flight_constants(ActuatorModel([1e300] * 3), None, None)
+    assert flight_structure(options, None)["limited"]  # a finite limit, however large
     noisy = SensorModel(rate_noise=1e-4)
-    options, _ = _simulate._flight_constants(None, None, noisy)
-    assert _engine.flight_structure(options, noisy) == {"sensor": True, "limited": False, "disturbed": False}
+    options, _ = flight_constants(None, None, noisy)
+    assert flight_structure(options, noisy) == {"sensor": True, "limited": False, "disturbed": False}
 
 
 def test_specialised_sample_is_smaller() -> None:

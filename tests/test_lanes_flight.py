@@ -160,7 +160,7 @@ def test_batches_without_flight_runs_have_no_flight_summaries_and_concatenation_
 
 
 def test_the_lane_engine_refuses_flight_inputs_it_does_not_run():
-    from mrpctl import _vectorize
+    from mrpctl.engines import lanes as _vectorize
 
     engine = _vectorize.lane_engine(paper.SPACECRAFT, OnCurrent(), 5, 0.01, 1)
     x0, gains = _dispersed(2, 12)

@@ -1,7 +1,7 @@
 """The lane engine specialised by structure, as the scalar engine is (issue 10 leftover).
 
 A lane batch compiles the flight sample of the union of its runs' structures
-(:func:`mrpctl.simulation._engine.flight_structure`: sensor / limited / disturbed); each lane must
+(:func:`mrpctl.engines.scalar.flight_structure`: sensor / limited / disturbed); each lane must
 give the scalar engine's bits, and the scalar engine of each run is specialised to that run alone
 (so a union engine is checked against narrower ones). The scalar engine is itself checked against
 the NumPy reference loop in tests/test_flight_engine.py.
@@ -16,12 +16,14 @@ import numpy as np
 import pytest
 from lane_cases import dispersed
 
-from mrpctl import _vectorize, paper, simulate_batch
+from mrpctl import paper, simulate_batch
 from mrpctl._compile import find_compiler
+from mrpctl.engines import lanes as _vectorize
+from mrpctl.engines.scalar import engine
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE, ActuatorModel, Disturbance, Hysteretic, SensorModel
+from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, flight_structure
 from mrpctl.simulation import BatchResult, _simulate
-from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine, flight_memory, flight_structure
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="the lane engine needs a C compiler")
 

@@ -23,8 +23,8 @@ from mrpctl.design import pd_gains
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, SensorModel
 from mrpctl.loop import PREDICTOR_MEMORY_LAYOUT, closed_loop_functions
+from mrpctl.loop.options import predictor_memory
 from mrpctl.predictor import perturbed_spacecraft
-from mrpctl.simulation._engine import predictor_memory
 from mrpctl.switching import OnDelayed
 
 needs_compiler = pytest.mark.skipif(find_compiler() is None, reason="no C compiler on this machine")

@@ -23,12 +23,12 @@ from mrpctl._compile import find_compiler
 from mrpctl._export import C_PREFIX, MANIFEST_NAME, PREDICTOR_EXPORTED_FUNCTIONS, ExportResult, export
 from mrpctl.cli import main
 from mrpctl.design import pd_gains
+from mrpctl.engines import scalar as _engine
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, Disturbance, Saturation, SensorModel
+from mrpctl.loop.options import predictor_memory
 from mrpctl.predictor import perturbed_spacecraft
 from mrpctl.scenario import load_scenario
-from mrpctl.simulation import _engine
-from mrpctl.simulation._engine import predictor_memory
 
 sys.path.insert(0, str(Path(__file__).parent))
 import predictor_reference as ref

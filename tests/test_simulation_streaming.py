@@ -20,8 +20,9 @@ import pytest
 
 import mrpctl
 from mrpctl import paper, plots
+from mrpctl.engines import scalar as _engine
 from mrpctl.errors import SpecificationError
-from mrpctl.simulation import MAX_SUBSTEPS, SimulationResult, _engine, _simulate, simulate, simulate_batch
+from mrpctl.simulation import MAX_SUBSTEPS, SimulationResult, _simulate, simulate, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, OnDelayed, SwitchingRule
 

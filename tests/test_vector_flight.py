@@ -9,7 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from mrpctl import _compile, _vectorize, flight
+from mrpctl import _compile, flight
+from mrpctl.engines import lanes as _vectorize
+from mrpctl.engines.libm import inline_min_max
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import DelayModel, SensorModel
 
@@ -54,7 +56,7 @@ def test_jitter_is_the_multiply_shift_of_the_stream_values_in_any_slicing():
 
 # ============================================================================ fmax/fmin inlined
 def test_inlined_fmax_fmin_return_what_the_libm_returns_on_ties_nans_and_infinities(tmp_path):
-    flags, source = _vectorize.inline_min_max()
+    flags, source = inline_min_max()
     if not flags:
         pytest.skip("this libm's fmax/fmin match no known tie rule: the calls stay")
     if _compile.find_compiler() is None:
@@ -92,9 +94,10 @@ def test_the_virtual_machine_runs_noise_and_bias_bit_for_bit_and_refuses_jitter_
     import warnings
 
     from mrpctl import paper, simulate
+    from mrpctl.engines import scalar as _engine
     from mrpctl.errors import CodegenError
     from mrpctl.flight import ActuatorModel, Hysteretic
-    from mrpctl.simulation import _engine, _simulate
+    from mrpctl.simulation import _simulate
 
     noisy = SensorModel(attitude_noise=0.01, rate_noise=1e-4, gyro_bias=[1e-4, -2e-4, 5e-5], seed=3)
     cases = [

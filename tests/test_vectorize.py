@@ -1,4 +1,4 @@
-"""The vectorised lane engine (mrpctl._vectorize) against CasADi and the scalar engine.
+"""The vectorised lane engine (mrpctl.engines.lanes) against CasADi and the scalar engine.
 
 Independent references: CasADi's own generated C of the same Function compiled with the
 simulator's flags (bit for bit), CasADi's virtual machine (to an ulp), and the scalar engine
@@ -18,12 +18,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mrpctl import _compile, _vectorize, paper
+from mrpctl import _compile, paper
+from mrpctl.engines import lanes as _vectorize
+from mrpctl.engines import scalar as _engine
+from mrpctl.engines.stats import STATS_SIZE, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.loop import InertiaInput, core_function
 from mrpctl.model import state
-from mrpctl.simulation import _engine, _simulate, simulate_batch
-from mrpctl.simulation._stats import STATS_SIZE, initial_stats
+from mrpctl.simulation import _simulate, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 

@@ -2,16 +2,16 @@
 
 :func:`simulate` runs one case, :func:`simulate_batch` many on a thread pool; both
 return frozen results (:mod:`mrpctl.simulation.results`). The closed loop's CasADi
-Functions are built by :mod:`mrpctl.loop`; here they get the metric accumulators and a C
-horizon driver (``_engine.py``, ``_driver.c``), or, without a C compiler, CasADi's
-virtual machine (``_vm.py``). The model and the engine: ``design/switching.md``.
+Functions are built by :mod:`mrpctl.loop` and run by the engines of :mod:`mrpctl.engines` (the
+scalar engine with its C horizon driver, the lanes, or CasADi's virtual machine without a C
+compiler). The model and the engine: ``design/switching.md``.
 """
 
 from __future__ import annotations
 
+from mrpctl.engines.stats import DIVERGENCE_BOUND, HISTORY_KINDS, SETTLING_OMEGA, SETTLING_SIGMA
 from mrpctl.loop import MAX_SUBSTEPS, ClosedLoopFunctions, closed_loop_functions, delay_samples
 from mrpctl.simulation._simulate import SWITCH_LIMIT, simulate, simulate_batch
-from mrpctl.simulation._stats import DIVERGENCE_BOUND, HISTORY_KINDS, SETTLING_OMEGA, SETTLING_SIGMA
 from mrpctl.simulation.results import BatchResult, SimulationResult
 
 __all__ = [

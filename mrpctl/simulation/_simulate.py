@@ -16,6 +16,11 @@ import numpy as np
 
 from mrpctl._compile import find_compiler
 from mrpctl._validation import finite_array, integer, positive_scalar, readonly
+from mrpctl.engines import lanes as lane_engines
+from mrpctl.engines.common import RunOutput
+from mrpctl.engines.lanes import DEFAULT_WIDTH
+from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples
+from mrpctl.engines.stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
@@ -28,20 +33,19 @@ from mrpctl.flight import (
     SensorModel,
 )
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
-from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
-from mrpctl.predictor import OnPredicted, Predictor
-from mrpctl.simulation._engine import (
+from mrpctl.loop.options import (
     NO_FLIGHT_OPTIONS,
-    STATE_BLOCK,
-    RunOutput,
-    engine,
+    check_predictor,
+    flight_constants,
     flight_memory,
+    flight_options,
     flight_structure,
     predictor_constants,
-    rule_key,
-    slice_samples,
+    predictor_disturbance,
+    varying_delay,
 )
-from mrpctl.simulation._stats import HISTORY_KINDS, STATS_SIZE
+from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
+from mrpctl.predictor import Predictor
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
@@ -62,7 +66,7 @@ _BYTES_PER_RUN = 400
 #: 4.6-5.3 KB measured (RSS of 2e5 and 4e5 runs, keep_every None and 1), rounded up
 _BYTES_PER_RESULT = 6000
 #: Metrics-only batches (``trajectories=False``) of compiled code run on the lane engine
-#: (:mod:`mrpctl._vectorize`); False runs them on the scalar engine (tests, benchmarks).
+#: (:mod:`mrpctl.engines.lanes`); False runs them on the scalar engine (tests, benchmarks).
 _LANES = True
 _LOGGER = logging.getLogger(__name__)
 
@@ -176,20 +180,6 @@ def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: 
     )
 
 
-def _flight_options(
-    rule: Any, actuator: Any, disturbance: Any, sensor: Any = None
-) -> tuple[np.ndarray | None, Saturation]:
-    """The flight sample's constants (u_max (3), u_norm, w (3), bias (3)) and the saturation mode."""
-    if actuator is None and disturbance is None and sensor is None:
-        return None, Saturation.SCALE
-    if not isinstance(rule, Hysteretic):
-        raise SpecificationError(
-            "actuator, disturbance, sensor: the actuator, disturbance and sensor models run in the flight loop only; "
-            f"use rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
-        )
-    return _flight_constants(actuator, disturbance, sensor)
-
-
 def _streamed_disturbance(disturbance: Any, n: int, name: str = "disturbance", hint: str = "") -> Disturbance | None:
     """The per-sample disturbance of a run of n samples (its rows checked, errors naming ``name``, ``hint``
     appended), or None (none or constant)."""
@@ -258,109 +248,10 @@ def _one_disturbance(item: Any, name: str) -> Disturbance | None:
 
 def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
     """The engine's structure keywords: the predictor's (sensor given, actuator given), or the
-    flight sample's specialisation to the run's constants (:func:`~mrpctl.simulation._engine.flight_structure`)."""
+    flight sample's specialisation to the run's constants (:func:`~mrpctl.engines.scalar.flight_structure`)."""
     if checked is not None:
         return {"sensor": sensor is not None, "limited": actuator is not None}
     return flight_structure(options, sensor)
-
-
-def _flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.ndarray | None, Saturation]:
-    """The checked actuator, disturbance and sensor models as the flight constants and the saturation mode.
-
-    A per-sample disturbance ((n, 3) rows or a function of time; the flight loop and the predictor
-    stream it) leaves w = 0 in the constants."""
-    if actuator is None and disturbance is None and sensor is None:
-        return None, Saturation.SCALE
-    if actuator is not None and not isinstance(actuator, ActuatorModel):
-        raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel or None, got {actuator!r}")
-    if disturbance is not None and not isinstance(disturbance, Disturbance):
-        disturbance = Disturbance(disturbance)
-    if sensor is not None and not isinstance(sensor, SensorModel):
-        raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
-    options = np.zeros(10)
-    options[0:4] = np.inf
-    if sensor is not None:
-        options[7:10] = sensor.gyro_bias
-    if actuator is not None:
-        options[0:3] = actuator.u_max
-        options[3] = actuator.norm_limit
-    if disturbance is not None and disturbance.constant:
-        options[4:7] = disturbance.torque
-    return options, Saturation.SCALE if actuator is None else actuator.mode
-
-
-def _predictor_disturbance(disturbance: Any, n: int | None, name: str = "disturbance") -> Disturbance | None:
-    """The predictor run's disturbance as a :class:`Disturbance` (None: none), per-sample rows checked
-    against the n samples of the run (None: an export, any number of rows); an error names ``name``
-    (the parameter, or ``disturbance[i]``)."""
-    if disturbance is None:
-        return None
-    try:
-        if not isinstance(disturbance, Disturbance):
-            disturbance = Disturbance(disturbance)
-        if n is not None:
-            disturbance.check_horizon(n)
-    except ValueError as error:
-        message = str(error)
-        raise type(error)(message if message.startswith(name) else f"{name}: {message}") from error
-    return disturbance
-
-
-def _check_predictor(predictor: Any, rule: Any, history: Any, delay: Any, *, compiled: bool = True) -> Predictor | None:
-    """The predictor option, checked against the rule, the history and the delay model (and, with
-    ``compiled``, that a C compiler is there to run it)."""
-    if predictor is None:
-        if isinstance(rule, OnPredicted):
-            raise SpecificationError(
-                "rule: OnPredicted switches on the predicted attitude; give predictor=mrpctl.Predictor(model=...)"
-            )
-        return None
-    if not isinstance(predictor, Predictor):
-        raise SpecificationError(f"predictor must be a mrpctl.Predictor or None, got {predictor!r}")
-    if not isinstance(rule, OnPredicted):
-        raise SpecificationError(
-            "rule: with a predictor the controller chooses its MRP set on the predicted attitude; use "
-            f"rule=mrpctl.OnPredicted(alpha) (alpha=1: short set, > 1: hysteresis, None: never switch), got {rule}"
-        )
-    if not (isinstance(history, str) and history == "constant"):
-        raise SpecificationError(
-            "history: the predictor's model copy starts at x0, the constant history; only history='constant' is "
-            f"supported with a predictor, got {history if isinstance(history, str) else 'an array'}"
-        )
-    if delay is not None:
-        raise SpecificationError(
-            "delay: the predictor runs with the constant delay tau only (its correction needs the age of each "
-            "measurement; a DelayModel, jitter included, is not supported with a predictor): drop delay="
-        )
-    if compiled and find_compiler() is None:
-        raise CodegenError("predictor: the predictor loop needs the compiled engine (a C compiler); none was found")
-    return predictor
-
-
-def _varying_delay(rule: Any, delay: Any, d: int, rate: float, n: int) -> DelayModel | None:
-    """The delay model the engine schedules (None: the constant delay d)."""
-    if delay is None:
-        return None
-    if not isinstance(delay, DelayModel):
-        raise SpecificationError(f"delay must be a mrpctl.flight.DelayModel or None, got {delay!r}")
-    if not isinstance(rule, Hysteretic):
-        raise SpecificationError(
-            f"delay: a time-varying delay runs in the flight loop only (rule=Hysteretic), got {rule}"
-        )
-    low, high = delay.bounds(rate)
-    if high != d:
-        raise SpecificationError(
-            f"delay: tau must equal delay.tau_max (the history depth): tau is {d} periods, tau_max {high} periods"
-        )
-    if delay.kind is DelayKind.CONSTANT:
-        return None
-    if low < 1:
-        raise SpecificationError(
-            f"delay: tau_min must be >= 1/rate = {1.0 / rate:g} s in the engine (a measurement is used one period "
-            f"after it is taken at the earliest), got {delay.tau_min:g} s"
-        )
-    delay.check_horizon(n)
-    return delay
 
 
 # ======================================================================= simulate
@@ -470,14 +361,14 @@ def simulate(
     keep = _keep_every(keep_every)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
-    checked = _check_predictor(predictor, rule, history, delay)
+    checked = check_predictor(predictor, rule, history, delay)
     if checked is None:
-        options, saturation = _flight_options(rule, actuator, disturbance, sensor)
-        varying = _varying_delay(rule, delay, d, rate, n)
+        options, saturation = flight_options(rule, actuator, disturbance, sensor)
+        varying = varying_delay(rule, delay, d, rate, n)
         streamed = _streamed_disturbance(disturbance, n)
     else:
-        disturbance = _predictor_disturbance(disturbance, n)
-        options, saturation = _flight_constants(actuator, disturbance, sensor)
+        disturbance = predictor_disturbance(disturbance, n)
+        options, saturation = flight_constants(actuator, disturbance, sensor)
         options, varying = predictor_constants(options, float(tau), checked.model), None
         streamed = None if disturbance is None or disturbance.constant else disturbance
     width = 1 if checked is None else 2
@@ -585,7 +476,7 @@ def simulate_batch(
     Compiled runs are spread over a pool of worker threads, each with its own buffers
     (reused from run to run), calling the generated library slice by slice; Ctrl-C (or an
     exception from ``progress``) sets a stop flag that the workers check between slices.
-    Without ``trajectories`` the runs go to the lane engine (:mod:`mrpctl._vectorize`): the
+    Without ``trajectories`` the runs go to the lane engine (:mod:`mrpctl.engines.lanes`): the
     same sample vectorised across runs, W = 8 runs per C call, each run's metrics bit for bit
     those of the scalar engine (about 5x its runs/s per core; ``design/campaigns.md``).
     Without a C compiler the runs are evaluated one after the other in CasADi's virtual
@@ -712,7 +603,7 @@ def simulate_batch(
     saturation = Saturation.SCALE
     checked = None
     for one in rules:
-        checked = _check_predictor(predictor, one, history, delay)
+        checked = check_predictor(predictor, one, history, delay)
     per_run = _per_run_disturbances(disturbance, n_runs, n)
     shared = per_run is None
     hint = _SHARED_HINT if shared and isinstance(disturbance, list | tuple) else ""
@@ -724,20 +615,20 @@ def simulate_batch(
     predictor_by_run: list[np.ndarray | None] = [None] * n_runs  # the predictor sample's constants per run
     if checked is None:
         for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
-            options_by_run[i], saturation = _flight_options(one, actuator, items[i], sensor)
+            options_by_run[i], saturation = flight_options(one, actuator, items[i], sensor)
             streamed_by_run[i] = (
                 _streamed_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]", hint)
                 if (i == 0 or not shared)
                 else streamed_by_run[0]
             )
-        varying = [_varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
+        varying = [varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
         jitter = jitter_bytes(varying[0], max(samples_by_run))  # one delay model for every run
         _check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
         for i in range(n_runs):
             if i == 0 or not shared:
-                item = _predictor_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]")
-                options_by_run[i], saturation = _flight_constants(actuator, item, sensor)
+                item = predictor_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]")
+                options_by_run[i], saturation = flight_constants(actuator, item, sensor)
                 streamed_by_run[i] = None if item is None or item.constant else item
             else:
                 options_by_run[i], streamed_by_run[i] = options_by_run[0], streamed_by_run[0]
@@ -754,7 +645,6 @@ def simulate_batch(
                 "disturbance: a per-sample torque needs the compiled engine "
                 "(install a C compiler: gcc or cc, or set CC)"
             )
-        from mrpctl._vectorize import DEFAULT_WIDTH
 
         # each worker's torque rows of one slice (the lanes: W runs' rows side by side)
         rows = INPUT_SIZE * (1 if trajectories or checked is not None else DEFAULT_WIDTH)
@@ -917,7 +807,6 @@ def lane_bytes(runs: int, d: int, workers: int) -> int:
     """Bytes of the lane engine's buffers: every run's packed inputs and state (the inputs
     with a full inertia: x, memory, stats twice, K, parameters, J, J⁻¹) and, per worker,
     one batch of W lanes with its d + 1-sample ring and its d-sample history."""
-    from mrpctl._vectorize import DEFAULT_WIDTH
 
     per_run = 2 * STATE_BLOCK + INPUT_SIZE * STATE_SIZE + 1 + 18
     per_batch = DEFAULT_WIDTH * (2 * STATE_BLOCK + INPUT_SIZE * STATE_SIZE + 1 + 18 + STATE_SIZE * (2 * d + 2))
@@ -945,7 +834,7 @@ def _run_lanes(
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
-    runs' :func:`~mrpctl.simulation._engine.flight_structure`), W runs per C call, the batches on the thread
+    runs' :func:`~mrpctl.engines.scalar.flight_structure`), W runs per C call, the batches on the thread
     pool; write the rows of ``stats`` (and of ``flight_rows``: the flight sample's memory).
     ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
@@ -953,7 +842,6 @@ def _run_lanes(
     to the scalar engine (a rule without lane form)."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
-    from mrpctl import _vectorize
 
     groups: dict[Any, list[int]] = {}
     keys: dict[tuple[int, int, int, bool], Any] = {}  # objects alive during the call: id() is safe
@@ -966,7 +854,7 @@ def _run_lanes(
             d = samples_by_run[i]
             key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d, own_torque)
         groups.setdefault(key, []).append(i)
-    packs: list[tuple[list[int], _vectorize.LaneBatches]] = []
+    packs: list[tuple[list[int], lane_engines.LaneBatches]] = []
     step = slice_samples(substeps)
     for members in groups.values():
         first = members[0]
@@ -980,7 +868,7 @@ def _run_lanes(
         # the group's structure: the union over its runs (flight_structure of their rows), as the scalar engine's
         structure = flight_structure(options, sensor) if is_flight else {}
         try:
-            lanes = _vectorize.lane_engine(
+            lanes = lane_engines.lane_engine(
                 crafts[first],
                 rules[first],
                 d,
@@ -1006,7 +894,7 @@ def _run_lanes(
         packs.append(
             (
                 members,
-                _vectorize.closed_loop_batches(
+                lane_engines.closed_loop_batches(
                     lanes,
                     states[members],
                     memory0,
@@ -1058,9 +946,9 @@ def _run_lanes(
     jobs: list[Callable[[], None]] = [functools.partial(worker, slot) for slot in range(workers)]
     _run_polled(jobs, progress, done_samples, total, stop_flag, workers)
     for members, packed in packs:
-        stats[members] = _vectorize.lane_stats(packed)
+        stats[members] = lane_engines.lane_stats(packed)
         if flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
-            flight_rows[members] = _vectorize.lane_memory(packed)
+            flight_rows[members] = lane_engines.lane_memory(packed)
     return left
 
 

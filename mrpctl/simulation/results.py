@@ -10,11 +10,11 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import readonly, sealed
+from mrpctl.engines.common import RunOutput
+from mrpctl.engines.stats import DIVERGENCE_BOUND, Metrics
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE
 from mrpctl.loop import PREDICTOR_MEMORY_SIZE
-from mrpctl.simulation._engine import RunOutput
-from mrpctl.simulation._stats import DIVERGENCE_BOUND, Metrics
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 

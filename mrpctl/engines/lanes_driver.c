@@ -1,4 +1,4 @@
-/* mrpctl: the W-lane horizon driver (appended to the code that mrpctl._vectorize emits).
+/* mrpctl: the W-lane horizon driver (appended to the code that mrpctl.engines.lanes emits).
  *
  * W runs advance in lockstep, one lane each, through n samples of the same sample Function.
  * Every buffer is structure-of-arrays: the nonzero j of a port for lane l is at [j * W + l].
@@ -15,11 +15,11 @@
  *                                              of a carried input), MRPCTL_ROLE_MEASUREMENT or
  *                                              MRPCTL_ROLE_DROPPED (not computed)
  *   mrpctl_lanes_sample(arg, res)              one sample for all W lanes
- * The loop is the scalar driver's (mrpctl/simulation/_driver.c without kept samples): the carried
+ * The loop is the scalar driver's (mrpctl/engines/scalar_driver.c without kept samples): the carried
  * block alternates between two buffers, the measurement m_k goes to a ring of d + 1 columns and
  * m_{k-d} is read back from it (from the history for k < d). Lanes that diverged or reached the
  * horizon are masked by the sample itself (every statistic freezes; only the sample
- * counter moves on), where the scalar driver stops such a run: mrpctl._vectorize.lane_stats sets
+ * counter moves on), where the scalar driver stops such a run: mrpctl.engines.lanes.lane_stats sets
  * the counter of a diverged lane to the scalar driver's.
  */
 #include <string.h>

@@ -3,7 +3,7 @@
 One sample (:func:`engine_sample`) is the loop's core sample (:func:`mrpctl.loop.core_function`)
 plus the divergence guard and the metric accumulators, a pure SX Function with K, the rule
 parameters (and, for a run-time inertia, J and J⁻¹) as inputs. CasADi generates its C
-code; ``_driver.c`` (package data) is appended and the whole is compiled by
+code; ``scalar_driver.c`` (package data) is appended and the whole is compiled by
 :mod:`mrpctl._compile`, cached on disk. A run is a few C calls, one per slice of
 :data:`SLICE_SAMPLES` samples, so that Ctrl-C is seen between slices; the driver stops at
 the first divergence.
@@ -22,7 +22,6 @@ import functools
 import hashlib
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
@@ -37,6 +36,27 @@ from mrpctl._compile import (
     compile_source,
     find_compiler,
 )
+from mrpctl.engines.common import RunOutput, Workspace
+from mrpctl.engines.libm import inline_min_max
+from mrpctl.engines.stats import (
+    DIVERGENCE_BOUND,
+    S_COUNT,
+    S_DIVERGED,
+    S_FIRST,
+    S_FLIPS,
+    S_K,
+    S_LAST,
+    S_MAX_SIGMA,
+    S_N,
+    S_PEAK_TORQUE,
+    S_UNSETTLED,
+    S_UPREV,
+    SETTLING_OMEGA,
+    SETTLING_SIGMA,
+    STATS_SIZE,
+    initial_stats,
+)
+from mrpctl.engines.vm import VirtualMachineEngine
 from mrpctl.errors import CodegenError
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
@@ -57,7 +77,6 @@ from mrpctl.flight import (
     stream_key,
 )
 from mrpctl.loop import (
-    PREDICTOR_MEMORY_SIZE,
     InertiaInput,
     core_function,
     flight_core_function,
@@ -65,25 +84,8 @@ from mrpctl.loop import (
     inertia_values,
     predictor_core_function,
 )
+from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, predictor_memory
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
-from mrpctl.simulation._stats import (
-    DIVERGENCE_BOUND,
-    S_COUNT,
-    S_DIVERGED,
-    S_FIRST,
-    S_FLIPS,
-    S_K,
-    S_LAST,
-    S_MAX_SIGMA,
-    S_N,
-    S_PEAK_TORQUE,
-    S_UNSETTLED,
-    S_UPREV,
-    SETTLING_OMEGA,
-    SETTLING_SIGMA,
-    STATS_SIZE,
-    initial_stats,
-)
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import (
     MEMORY_SIZE,
@@ -100,22 +102,6 @@ from mrpctl.switching import (
 #: 10 ms of the paper's loop per slice at one substep; divided by the substeps).
 SLICE_SAMPLES = 2**16
 STATE_BLOCK = STATE_SIZE + MEMORY_SIZE + STATS_SIZE  # x, memory, stats: the driver's carried state
-
-
-def flight_memory(x0: np.ndarray, history: np.ndarray, d: int) -> np.ndarray:
-    """The flight sample's memory at k = 0: h = c = +1 and σ̃_prev the σ̃ the controller sees at k = 0.
-
-    That is short(σ) of the first history row for d > 0, the bookkept σ0 (shadow when
-    |σ0|² >= 1) for d = 0, so that the continuity test makes no flip at k = 0.
-    """
-    sigma = np.array(history[0][0:3] if d > 0 else x0[0:3], dtype=float)
-    squared = float(sigma @ sigma)
-    if squared > 1.0 or (d == 0 and squared >= 1.0):
-        sigma = -sigma / squared
-    memory = np.zeros(FLIGHT_MEMORY_SIZE)  # the actuator accumulators start at 0
-    memory[0:2] = 1.0
-    memory[2:5] = sigma
-    return memory
 
 
 @functools.lru_cache(maxsize=1)
@@ -137,49 +123,23 @@ def short_history(history: np.ndarray) -> np.ndarray:
     return rows
 
 
-def predictor_memory(x0: np.ndarray) -> np.ndarray:
-    """The predictor sample's memory at k = 0: σ̂_prev = z_0 = short(x0) (|σ|² > 1: shadow), accumulators 0.
-
-    The model copy starts at the initial state, the latest value of the constant history: for
-    k < d the measurement and the model state at t_{k−d} are both that state, so x̂_k = z_k.
-    """
-    z = np.array(x0, dtype=float)
-    squared = float(z[0:3] @ z[0:3])
-    if squared > 1.0:
-        z[0:3] = -z[0:3] / squared
-    memory = np.zeros(PREDICTOR_MEMORY_SIZE)
-    memory[0:2] = 1.0
-    memory[2:5] = z[0:3]
-    memory[FLIGHT_MEMORY_SIZE:] = z
-    return memory
-
-
-def predictor_constants(options: np.ndarray | None, tau: float, model: Spacecraft) -> np.ndarray:
-    """The predictor sample's ``flight`` input: the flight constants (default none), τ (s), J_m, J_m⁻¹."""
-    flight = NO_FLIGHT_OPTIONS if options is None else options
-    inertia, inertia_inverse = inertia_values(model, inertia_input(model))
-    return np.ascontiguousarray(np.concatenate((flight, [tau], inertia.ravel(), inertia_inverse.ravel())))
-
-
-#: The flight sample's constants without actuator limits or disturbance: u_max = u_norm = inf, w = 0.
-NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 _NO_NOISE = np.zeros(NOISE_SIZE)
 #: The scalar flight engine with a sensor computes the attitude noise's MRP in the driver (NoiseForm.MRP); False:
 #: in the sample (the A/B of bench/flight.py)
 _ROTATION_IN_DRIVER = True
 
 
-_NOISE_FILL: list[Any] = []  # mrpctl_stream_fill of _noise.c compiled alone (loaded once), or None
+_NOISE_FILL: list[Any] = []  # mrpctl_stream_fill of noise.c compiled alone (loaded once), or None
 _NOISE_FILL_LOCK = threading.Lock()
 
 
 def _noise_fill() -> Any:
-    """``mrpctl_stream_fill`` of ``_noise.c`` (compiled once, cached on disk), or None without a compiler."""
+    """``mrpctl_stream_fill`` of ``noise.c`` (compiled once, cached on disk), or None without a compiler."""
     with _NOISE_FILL_LOCK:
         if not _NOISE_FILL:
             fill = None
             if find_compiler() is not None:
-                code = resources.files("mrpctl.simulation").joinpath("_noise.c").read_text(encoding="utf-8")
+                code = resources.files("mrpctl.engines").joinpath("noise.c").read_text(encoding="utf-8")
                 library = ctypes.CDLL(str(compile_source(code, "mrpctl_noise", flags=SIMULATION_FLAGS)))
                 fill = library.mrpctl_stream_fill
                 fill.restype = None
@@ -196,7 +156,7 @@ def _noise_fill() -> Any:
 
 
 def noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
-    """:meth:`SensorModel.noise_rows` (k1 − k0, 6) drawn by the C code of ``_noise.c`` (the same bits, ≈ 15×
+    """:meth:`SensorModel.noise_rows` (k1 − k0, 6) drawn by the C code of ``noise.c`` (the same bits, ≈ 15×
     faster than its NumPy mirror); the NumPy mirror when there is no C compiler."""
     fill = _noise_fill()
     if fill is None:
@@ -277,7 +237,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
 
 
 def _driver_source(sample: ca.Function, rotation: ca.Function | None = None) -> str:
-    """``_driver.c`` with the #defines that bind it to ``sample`` (and to ``rotation``, the attitude noise's
+    """``scalar_driver.c`` with the #defines that bind it to ``sample`` (and to ``rotation``, the attitude noise's
     θ -> σ(θ) for a sample of :attr:`~mrpctl.flight.NoiseForm.MRP`)."""
     memory_size = sample.size1_in(1)
     defines: dict[str, Any] = {
@@ -306,33 +266,10 @@ def _driver_source(sample: ca.Function, rotation: ca.Function | None = None) -> 
         defines["MRPCTL_ROTATION_SZ_IW"] = max(rotation.sz_iw(), 1)
         defines["MRPCTL_ROTATION_SZ_W"] = max(rotation.sz_w(), 1)
     header = "".join(f"#define {key} {value}\n" for key, value in defines.items())
-    folder = resources.files("mrpctl.simulation")
-    noise = folder.joinpath("_noise.c").read_text(encoding="utf-8")  # the random streams the driver draws
-    body = folder.joinpath("_driver.c").read_text(encoding="utf-8")
+    folder = resources.files("mrpctl.engines")
+    noise = folder.joinpath("noise.c").read_text(encoding="utf-8")  # the random streams the driver draws
+    body = folder.joinpath("scalar_driver.c").read_text(encoding="utf-8")
     return "\n" + noise + header + body
-
-
-@dataclass
-class Workspace:
-    """The buffers one thread reuses across the runs of one engine (no allocation per run)."""
-
-    state: np.ndarray
-    ring: np.ndarray
-    switched: np.ndarray | None
-
-
-@dataclass
-class RunOutput:
-    """What one run produced: the final statistics, kept arrays, switch indices."""
-
-    stats: np.ndarray
-    samples: int
-    measurements: np.ndarray | None
-    u: np.ndarray | None
-    switch_indices: np.ndarray | None
-    memory: np.ndarray | None = None  # the rule memory after the run (the flight accumulators)
-    records: np.ndarray | None = None  # flight: the kept (h, sigma_c, u_c) rows
-    delay_used: np.ndarray | None = None  # flight: the kept delays used (samples)
 
 
 class Engine:
@@ -414,8 +351,6 @@ class Engine:
             label += "_torque" if torque_input else ""
         # the scalar driver runs counted samples only: the flight samples drop the memory guard
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}", frozen_memory=not self.flight)
-        from mrpctl._vectorize import inline_min_max  # (it imports this module)
-
         min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
         rotation = None
         if self.flight and not self.predictor and sensor and _ROTATION_IN_DRIVER:
@@ -522,7 +457,7 @@ class Engine:
             :data:`NO_FLIGHT_OPTIONS`. Ignored by the other engines.
         sensor : SensorModel, optional
             The flight sample's noise: the driver draws θ_k, η_k of every sample itself
-            (``_noise.c``, from the seed's stream keys and the two 1σ; the bits of
+            (``noise.c``, from the seed's stream keys and the two 1σ; the bits of
             :meth:`SensorModel.noise`); its gyro bias is in ``flight_options``. None: no noise.
         delay, rate : DelayModel, float, optional
             A time-varying delay (d_max = this engine's d, d_min >= 1) at ``rate`` (Hz): seeded
@@ -753,29 +688,10 @@ def engine(
                 disturbed=disturbed,
                 torque_input=torque_input,
             )
-            if not found.compiled_code:
-                from mrpctl.simulation._vm import VirtualMachineEngine
-
+            if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)
             _ENGINES[key] = found
         return found
-
-
-def flight_structure(options: np.ndarray | None, sensor: SensorModel | None) -> dict[str, bool]:
-    """The flight sample's structure for a run's constants and sensor (keywords of :func:`engine`).
-
-    ``sensor``: noise or a gyro bias (an ideal sensor measures x_meas bit for bit); ``limited``:
-    a finite u_max or u_norm; ``disturbed``: a non-zero torque w. ``options`` as
-    :data:`NO_FLIGHT_OPTIONS` (None: none), or (N, 10), one row per run: the union over the runs
-    (the structure of a lane batch).
-    """
-    constants = NO_FLIGHT_OPTIONS if options is None else np.asarray(options, dtype=float)
-    noisy = sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
-    return {
-        "sensor": bool(noisy or np.any(constants[..., 7:10] != 0.0)),
-        "limited": bool(np.any(np.isfinite(constants[..., 0:4]))),
-        "disturbed": bool(np.any(constants[..., 4:7] != 0.0)),
-    }
 
 
 def clear_engines() -> None:

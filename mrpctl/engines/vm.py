@@ -16,11 +16,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from mrpctl.engines.common import RunOutput, Workspace
+from mrpctl.engines.stats import S_DIVERGED, STATS_SIZE, initial_stats
 from mrpctl.errors import CodegenError
 from mrpctl.loop import InertiaInput, inertia_values
+from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory
 from mrpctl.model import STATE_SIZE
-from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, RunOutput, Workspace, flight_memory
-from mrpctl.simulation._stats import S_DIVERGED, STATS_SIZE, initial_stats
 from mrpctl.spacecraft import Spacecraft
 
 _BLOCK_TARGET = 500  # samples per block (a whole number of chunks)
@@ -149,7 +150,7 @@ class VirtualMachineEngine:
         delay: Any = None,
         rate: float = 1.0,
     ) -> RunOutput:
-        """As :meth:`mrpctl.simulation._engine.Engine.run`, the whole horizon at once."""
+        """As :meth:`mrpctl.engines.scalar.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
         inertia = inertia_values(spacecraft, self.inertia)
         constants = list(inertia)

@@ -4,13 +4,13 @@
  *   sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv][, flight])
  *     -> (x_next, memory_next, stats_next, x_meas, u, switched)
  * and MRPCTL_RUN the exported driver; both, and the sizes below, are #defined by
- * mrpctl/simulation/_engine.py in front of this file.
+ * mrpctl/engines/scalar.py in front of this file.
  *
  * MRPCTL_RING_WIDTH is the width of one ring entry (6: m_k; 12 for the predictor sample: m_k and the
  * controller's model state z_k); with MRPCTL_RING_OUTPUT the sample has a seventh output, the ring
  * entry, apart from x_meas (the flight and predictor samples), and with MRPCTL_SENSOR a per-sample
  * noise input, generated here: row k is (sigma[0] n_a(3k + c), sigma[1] n_r(3k + c)), c = 0, 1, 2, with the
- * normals of _noise.c (included in front of this file) of the streams noise_key[0] (attitude) and
+ * normals of noise.c (included in front of this file) of the streams noise_key[0] (attitude) and
  * noise_key[1] (rate), drawn MRPCTL_NOISE_BLOCK samples at a time by mrpctl_normal_rows; a zero sigma gives exact zeros (the NumPy mirror: mrpctl.flight.SensorModel.noise_rows). With MRPCTL_RECORD_OUTPUT (its output index) the flight sample's record of
  * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept); with
  * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque.
@@ -22,7 +22,7 @@
  * with keep_every = 1 the caller may pass the kept array itself as a ring of n columns),
  * the switch flags of the slice go to switched[k - k0]. A time-varying delay: either `used` (j*(k) of
  * each sample of the slice, a given delay sequence, from NumPy) or `jitter` (in-out: key bits, d_min, j*(k0 - 1),
- * then d + 1 ring entries), whose delays d_j = integer(key, j) in [d_min, d] come from _noise.c and whose
+ * then d + 1 ring entries), whose delays d_j = integer(key, j) in [d_min, d] come from noise.c and whose
  * schedule is computed here, O(1) per sample: measurement j is registered at its arrival slot
  * latest[(j + d_j) mod (d + 1)] = max(., j), and j*(k) = max(j*(k - 1), latest[k mod (d + 1)], min(k - d, -1));
  * the slot is then cleared. The pending measurements j in [k0 - d, k0) are registered again at the start of a

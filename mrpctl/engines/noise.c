@@ -1,6 +1,6 @@
 /* mrpctl: the counter-based random streams of the flight loop (sensor noise, delay jitter).
  *
- * Included (as text, in front of the horizon driver) by mrpctl/simulation/_driver.c's engine and
+ * Included (as text, in front of the horizon driver) by mrpctl/engines/scalar_driver.c's engine and
  * mirrored exactly, bit for bit, in NumPy by mrpctl/flight.py (_stream_normals, _stream_integers);
  * the two are tested against each other on >= 1e6 values (tests/test_flight_noise.py).
  *

@@ -24,20 +24,20 @@ Two layouts (``fuse``):
   vector registers (the shape of a hand-written structure-of-arrays loop); only values used
   across a libm call go through W-wide arrays.
 
-:class:`LaneEngine` compiles the emitted sample with the horizon driver ``_lanes_driver.c``
+:class:`LaneEngine` compiles the emitted sample with the horizon driver ``lanes_driver.c``
 and runs N runs in batches of W on a thread pool (ctypes releases the GIL); the ports are read
 from the Function: an input ``p`` with an output ``p_next`` is carried from sample to sample,
 the input ``x_delayed`` is fed m_{k-d} from a ring of the output ``x_meas``, every other input
 is a per-lane constant (K, rule parameters, ...), every other output is not computed.
 
-The closed loop comes from :mod:`mrpctl.simulation._engine` (``engine_sample`` of
+The closed loop comes from :mod:`mrpctl.engines.scalar` (``engine_sample`` of
 ``mrpctl.loop.core_function`` with the run-time inertia: J and J⁻¹ are per-lane constants, so
 one library serves every spacecraft of an inertia layout); :func:`simulate_lanes` gives the
-statistics rows of :mod:`mrpctl.simulation._stats`, bit for bit those of the scalar ``Engine.run``,
+statistics rows of :mod:`mrpctl.engines.stats`, bit for bit those of the scalar ``Engine.run``,
 and ``simulate_batch`` uses it for metrics-only batches. The flight loop
 (``mrpctl.loop.flight_core_function``) runs the same way, specialised by structure as the scalar
 engine is (:func:`lane_engine` with ``sensor``, ``limited``, ``disturbed``: the union over a
-batch's runs of :func:`mrpctl.simulation._engine.flight_structure`): with a sensor its delayed
+batch's runs of :func:`mrpctl.engines.scalar.flight_structure`): with a sensor its delayed
 input is fed from its ``measurement`` output and its per-sample ``noise`` is a stream shared by
 the lanes (one :meth:`~mrpctl.flight.SensorModel.noise_rows` per slice and batch), without one
 from ``x_meas`` with no stream; a time-varying delay's newest-arrived schedule is shared per
@@ -66,11 +66,13 @@ import numpy as np
 
 from mrpctl import _compile
 from mrpctl._validation import integer
+from mrpctl.engines.libm import min_max_forms
+from mrpctl.engines.scalar import engine_sample, noise_rows, rule_key
+from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
-from mrpctl.simulation._engine import NO_FLIGHT_OPTIONS, engine_sample, flight_structure, noise_rows, rule_key
-from mrpctl.simulation._stats import S_DIVERGED, S_K, initial_stats
+from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_structure
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 
@@ -99,10 +101,10 @@ DEFAULT_WIDTH = 8
 SLICE_SAMPLES = 2**16
 
 
-_DRIVER_FILE = "_lanes_driver.c"
+_DRIVER_FILE = "lanes_driver.c"
 _ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT, _ROLE_STREAMED = 0, 1, 2, 3
 _ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
-#: The keywords of the flight sample's structure (:func:`mrpctl.simulation._engine.flight_structure`).
+#: The keywords of the flight sample's structure (:func:`mrpctl.engines.scalar.flight_structure`).
 _STRUCTURE = ("sensor", "limited", "disturbed")
 
 # ------------------------------------------------------------------ the operations
@@ -183,70 +185,6 @@ _CALL_OPS: dict[int, str] = {
 }
 _CASADI_VERSION: str = getattr(ca, "__version__", "unknown")
 _OP_NAMES = {getattr(ca, name): name for name in dir(ca) if name.startswith("OP_")}
-
-
-@functools.lru_cache(maxsize=1)
-def _libm_ties() -> dict[str, str]:
-    """How this host's libm fmax/fmin break a (+0, -0) tie: {"fmax": "first" or "second", ...}.
-
-    C99 leaves fmax(+0, -0) to the library: glibc's generic code returns the first argument
-    on ties, its old x86-64 assembly (maxsd) the second. Both return the non-NaN argument
-    when one is NaN and the first when both are. Probed from the libm that the scalar code
-    links; a function matching neither rule is left out.
-    """
-    name = ctypes.util.find_library("m")
-    libm = ctypes.CDLL(name) if name else ctypes.CDLL(None)
-    ties: dict[str, str] = {}
-    for c_name in ("fmax", "fmin"):
-        function = getattr(libm, c_name)
-        function.restype = ctypes.c_double
-        function.argtypes = [ctypes.c_double, ctypes.c_double]
-        first_on_tie = math.copysign(1.0, function(0.0, -0.0)) > 0 and math.copysign(1.0, function(-0.0, 0.0)) < 0
-        second_on_tie = math.copysign(1.0, function(0.0, -0.0)) < 0 and math.copysign(1.0, function(-0.0, 0.0)) > 0
-        nan_ok = function(math.nan, 1.0) == 1.0 and function(1.0, math.nan) == 1.0
-        if nan_ok and (first_on_tie or second_on_tie):
-            ties[c_name] = "first" if first_on_tie else "second"
-    return ties
-
-
-@functools.lru_cache(maxsize=1)
-def _min_max_forms() -> dict[int, str]:
-    """Lane forms of fmin/fmax that reproduce this host's libm on ties (+0, -0) and NaNs
-    (:func:`_libm_ties`); a libm matching neither rule refuses fmin/fmax."""
-    forms: dict[int, str] = {}
-    for op, c_name, compare in ((ca.OP_FMAX, "fmax", ">"), (ca.OP_FMIN, "fmin", "<")):
-        tie = _libm_ties().get(c_name)
-        if tie is not None:
-            test = compare + "=" if tie == "first" else compare
-            forms[op] = f"L_SELECT(L_MASK(({{0}}{test}{{1}})|({{1}}!={{1}})), {{0}}, {{1}})"
-    return forms
-
-
-@functools.lru_cache(maxsize=1)
-def inline_min_max() -> tuple[tuple[str, ...], str]:
-    """Compiler flags and C source that replace the libm calls fmax/fmin by inline code, same results.
-
-    gcc calls fmax/fmin through the PLT under IEEE flags (no ``-ffinite-math-only``); CasADi's
-    ``casadi_fmax``/``casadi_fmin`` call them (the flight sample: 22 calls per sample). The flags
-    ``-Dfmax(x,y)=mrpctl_fmax_(x,y)`` (and fmin) rename them, <math.h>'s declarations included,
-    and the source (to append to the translation unit) defines ``mrpctl_fmax_``/``mrpctl_fmin_``
-    to return what this host's libm returns (:func:`_libm_ties`: the non-NaN argument, the
-    library's tie rule), which gcc then inlines. Both are part of the compile cache key (flags
-    and code). ``((), "")`` when the libm matches neither tie rule (the calls stay).
-    """
-    flags: list[str] = []
-    source = "/* fmax/fmin as this host's libm computes them, inlined (mrpctl._vectorize.inline_min_max) */\n"
-    for c_name, compare in (("fmax", ">"), ("fmin", "<")):
-        tie = _libm_ties().get(c_name)
-        if tie is None:
-            return (), ""
-        test = compare + "=" if tie == "first" else compare
-        flags.append(f"-D{c_name}(x,y)=mrpctl_{c_name}_(x,y)")
-        source += (
-            f'__attribute__((visibility("hidden"))) double mrpctl_{c_name}_(double x, double y) {{\n'
-            f"  return (x {test} y || y != y) ? x : y;\n}}\n"
-        )
-    return tuple(flags), source
 
 
 def _constant(value: float) -> str:
@@ -352,7 +290,7 @@ def emit_lanes(
         raise SpecificationError(f"shared: {unknown_shared} are not inputs of {function.name()}")
     shared_index = {i for i, port in enumerate(inputs) if port.name in shared}
     vector_ops = dict(_VECTOR_OPS)
-    vector_ops.update(_min_max_forms())
+    vector_ops.update(min_max_forms())
     vector_ops.update(_MASK_OPS)
 
     # Decode the instruction list: (op, output slot or None, input slots, text template).
@@ -469,7 +407,7 @@ def emit_lanes(
     call_args = [f"arg[{i}]" for i in range(len(inputs))] + [f"res[{i}]" for i in range(len(outputs))]
     signature = ", ".join(in_params + out_params) or "void"
     code = (
-        f"/* {name}: {function.name()} on W = {width} lanes, emitted by mrpctl._vectorize from "
+        f"/* {name}: {function.name()} on W = {width} lanes, emitted by mrpctl.engines.lanes from "
         f"{count} CasADi {_CASADI_VERSION} instructions */\n"
         "#include <math.h>\n" + _LANE_HELPERS + f"#undef W\n#define W {width}\n"
         f"static void __attribute__((noinline)) {name}({signature}) {{\n"
@@ -579,7 +517,7 @@ def _build_library(code: str, name: str, flags: tuple[str, ...]) -> Path:
 
 
 def _driver_source() -> str:
-    return importlib.resources.files("mrpctl").joinpath(_DRIVER_FILE).read_text(encoding="utf-8")
+    return importlib.resources.files("mrpctl.engines").joinpath(_DRIVER_FILE).read_text(encoding="utf-8")
 
 
 # ------------------------------------------------------------------ the lane engine
@@ -1024,13 +962,13 @@ def lane_engine(
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
 
-    The structure is the scalar engine's (:func:`mrpctl.simulation._engine.engine`): the
+    The structure is the scalar engine's (:func:`mrpctl.engines.scalar.engine`): the
     inertia layout of ``spacecraft`` (J and J⁻¹ are run-time inputs, one per lane), the
     rule's expressions, d, h, substeps (and, for the flight rule
     :class:`~mrpctl.flight.Hysteretic`, the actuator's ``saturation`` mode and the sample's
     specialisation ``sensor``, ``limited``, ``disturbed`` of
     :func:`mrpctl.loop.flight_core_function`: for a batch, the union over its runs of
-    :func:`~mrpctl.simulation._engine.flight_structure`; default the full sample, which serves
+    :func:`~mrpctl.engines.scalar.flight_structure`; default the full sample, which serves
     every run); plus W and the emitter options. The flight sample with a ``sensor`` feeds its
     delayed input from its ``measurement`` output (the sensor's, as the scalar driver's ring
     does) and takes its ``noise`` as a stream shared by the lanes; without one (an ideal sensor)
@@ -1125,7 +1063,7 @@ def closed_loop_batches(
     read the statistics with :func:`lane_stats` once every batch has run.
 
     For the flight sample (an engine of :func:`lane_engine` with a :attr:`~LaneEngine.structure`):
-    ``memory0`` is (N, FLIGHT_MEMORY_SIZE) (:func:`mrpctl.simulation._engine.flight_memory`
+    ``memory0`` is (N, FLIGHT_MEMORY_SIZE) (:func:`mrpctl.engines.scalar.flight_memory`
     of each run), ``flight_options`` the shared run-time constants (u_max (3), u_norm, w (3),
     gyro bias (3); default none), ``sensor`` the shared noise (:meth:`SensorModel.noise_rows`
     of each slice, the numbers the scalar engine gets) and ``delay`` a shared time-varying
@@ -1135,7 +1073,7 @@ def closed_loop_batches(
     engine with a ``torque`` stream), its rows of each slice (:meth:`~mrpctl.flight.Disturbance.samples`)
     streamed beside the noise; or one per-sample torque per run (an engine with a per-lane ``torque``
     stream: :func:`lane_engine` with ``torque_per_lane``), each batch's lanes streamed their own rows.
-    The engine's structure must serve every run (:func:`~mrpctl.simulation._engine.flight_structure`
+    The engine's structure must serve every run (:func:`~mrpctl.engines.scalar.flight_structure`
     of ``flight_options`` and ``sensor``, the union over the rows): a run with a limit, a torque w,
     a noisy sensor or a gyro bias on an engine specialised without it is refused
     (SpecificationError), as its numbers would not be the scalar engine's.
@@ -1222,7 +1160,7 @@ def _noise_and_torque(
     0 for a sample without a sensor) and the torque w_k, side by side."""
     rows = np.zeros((k1 - k0, noise_columns + 3))
     if sensor is not None:
-        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by _noise.c
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
     rows[:, noise_columns:] = disturbance.samples(k0, k1, rate)
     return rows
 
@@ -1241,7 +1179,7 @@ def _lane_torques(
     :func:`_noise_and_torque`), then each lane's own torque w_k (nonzero j of lane l at noise_columns + j W + l)."""
     rows = np.zeros((k1 - k0, noise_columns + 3 * width))
     if sensor is not None:
-        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by _noise.c
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
     lanes = np.empty((k1 - k0, 3, width))
     for lane, run in enumerate(runs):
         lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)

@@ -1,0 +1,496 @@
+"""The closed loop's symbolic building blocks: the RK4 step, the sample cores (paper rules, flight loop,
+predictor) and their d-sample chunks, as CasADi Functions built from the one plant model.
+
+J enters either as a constant or as a run-time input (:class:`InertiaInput`), so one compiled engine
+serves every spacecraft of a campaign.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from mrpctl.errors import SpecificationError
+from mrpctl.flight import (
+    FLIGHT_CONSTANTS_SIZE,
+    FLIGHT_MEMORY_SIZE,
+    NOISE_SIZE,
+    Hysteretic,
+    NoiseForm,
+    Saturation,
+    actuator_function,
+    measurement_function,
+    quaternion_from_mrp_expr,
+    raw_measurement_function,
+    selection_function,
+    short_expr,
+)
+from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, plant_model
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
+
+
+class InertiaInput(enum.Enum):
+    """How a run-time inertia enters a compiled Function (see :func:`inertia_input`)."""
+
+    #: J and J⁻¹ diagonal: two 3-vectors (the diagonals), the same operations as constants.
+    DIAGONAL = "diagonal"
+    #: Full 3 × 3 J and J⁻¹ (column-major).
+    FULL = "full"
+
+
+def inertia_input(spacecraft: Spacecraft) -> InertiaInput:
+    """DIAGONAL when both J and J⁻¹ of ``spacecraft`` are exactly diagonal, else FULL."""
+    for matrix in (spacecraft.inertia, spacecraft.inertia_inverse):
+        if np.any(matrix != np.diag(np.diag(matrix))):
+            return InertiaInput.FULL
+    return InertiaInput.DIAGONAL
+
+
+def inertia_values(spacecraft: Spacecraft, kind: InertiaInput) -> tuple[np.ndarray, np.ndarray]:
+    """The run-time inputs J, J⁻¹ of ``spacecraft`` for a Function built with ``kind`` (contiguous)."""
+    if kind is InertiaInput.DIAGONAL:
+        return np.diag(spacecraft.inertia).copy(), np.diag(spacecraft.inertia_inverse).copy()
+    return np.ascontiguousarray(spacecraft.inertia.T), np.ascontiguousarray(spacecraft.inertia_inverse.T)
+
+
+def _inertia_symbols(kind: InertiaInput) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """(J input, J⁻¹ input, J as 3 × 3, J⁻¹ as 3 × 3); diagonal matrices are structurally diagonal."""
+    if kind is InertiaInput.DIAGONAL:
+        j, j_inv = ca.SX.sym("J", 3), ca.SX.sym("J_inv", 3)
+        return j, j_inv, ca.diag(j), ca.diag(j_inv)
+    j, j_inv = ca.SX.sym("J", 3, 3), ca.SX.sym("J_inv", 3, 3)
+    return j, j_inv, j, j_inv
+
+
+def step_function(
+    spacecraft: Spacecraft, period: float, substeps: int, *, inertia: InertiaInput | None = None
+) -> ca.Function:
+    """``step(x, u) -> x_next``: RK4 over one period h with ``substeps`` equal substeps.
+
+    With ``inertia`` the spacecraft's J and J⁻¹ are inputs instead of constants:
+    ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see :class:`InertiaInput`).
+    """
+    x = ca.SX.sym("x", STATE_SIZE)
+    u = ca.SX.sym("u", INPUT_SIZE)
+    extra: list[ca.SX] = []
+    if inertia is None:
+        dynamics = plant_model(spacecraft).dynamics
+    else:
+        j_in, j_inv_in, j, j_inv = _inertia_symbols(inertia)
+        extra = [j_in, j_inv_in]
+        xdot = dynamics_expr(None, x, u, inertia=j, inertia_inverse=j_inv)
+        dynamics = ca.Function("dynamics", [x, u, j_in, j_inv_in], [xdot])
+    dt = period / substeps
+    z = x
+    for _ in range(substeps):
+        k1 = dynamics(z, u, *extra)
+        k2 = dynamics(z + (dt / 2) * k1, u, *extra)
+        k3 = dynamics(z + (dt / 2) * k2, u, *extra)
+        k4 = dynamics(z + dt * k3, u, *extra)
+        z = z + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+    names = ["x", "u"] + (["J", "J_inv"] if extra else [])
+    return ca.Function("step", [x, u, *extra], [z], names, ["x_next"])
+
+
+def core_function(
+    spacecraft: Spacecraft,
+    rule: SwitchingRule,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+) -> ca.Function:
+    """One sample with K and the rule parameters as inputs (pure SX).
+
+    ``core(x, memory, x_delayed, K, parameters) -> (x_next, memory_next, x_meas, u, switched)``;
+    with ``inertia``, J and J⁻¹ are two more inputs (``..., parameters, J, J_inv``).
+    """
+    if isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            "rule: Hysteretic is a controller-side rule; build its sample with flight_core_function"
+        )
+    step = step_function(spacecraft, period, substeps, inertia=inertia)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    seen_by_rule = x_delayed if d > 0 else x
+    x_meas, memory_next, switched = rule.expressions(x, seen_by_rule, memory, delay_samples=d, parameters=parameters)
+    u = gain @ (x_delayed if d > 0 else x_meas)
+    x_next = step(x_meas, u, *extra)
+    return ca.Function(
+        "core",
+        [x, memory, x_delayed, gain, parameters, *extra],
+        [x_next, memory_next, x_meas, u, switched],
+        ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []),
+        ["x_next", "memory_next", "x_meas", "u", "switched"],
+    )
+
+
+def flight_core_function(
+    spacecraft: Spacecraft,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+    saturation: Saturation = Saturation.SCALE,
+    sensor: bool = True,
+    limited: bool = True,
+    disturbed: bool = True,
+    records: bool = False,
+    torque_input: bool = False,
+    noise_form: NoiseForm = NoiseForm.ROTATION_VECTOR,
+    short_measurements: bool = False,
+    squared_peak: bool = False,
+) -> ca.Function:
+    """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
+
+    ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight, noise) ->
+    (x_next, memory_next, x_meas, u, switched, measurement)``:
+    the ports of :func:`core_function` with memory (h, c, σ̃_prev, n_sat, peak |u_c,i| (3), peak |u_c|)
+    of :data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`, parameters (δ,), the run-time constants
+    ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) (N m, rad/s; inf: no limit), and per
+    sample ``noise`` = (θ_k, η_k) (rad, rad/s). Without ``sensor`` the ``noise`` input and the
+    ``measurement`` output are left out and the measurement is the bookkept state (the
+    virtual machine's form). The sample is specialised by structure, each form giving the full
+    sample's numbers bit for bit on the runs it serves: without ``sensor`` for an ideal sensor
+    (no noise, no bias: m_k = x_meas exactly), without ``limited`` for no actuator limit
+    (u_max = u_norm = inf: u = u_c, the saturated count stays 0; u_max, u_norm unused), without
+    ``disturbed`` for w = 0 (u + w = u; w unused). With ``records`` a last output ``record`` =
+    (h_{k+1}, σ_c,k, u_c,k) (the logic variable after the rule, the MRP the control law used, the
+    commanded torque before the actuator limits, N m): the result's per-sample records. With
+    ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the sample (a
+    per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
+    ``noise_form`` (:class:`~mrpctl.flight.NoiseForm`): with ``MRP`` the first half of ``noise`` is the
+    attitude noise's MRP σ(θ_k) (:func:`~mrpctl.flight.rotation_mrp_function`, computed by the engine
+    before the sample) instead of θ_k: the same numbers bit for bit.
+    With ``short_measurements`` (only without ``sensor``) the controller reads ``x_delayed`` (and,
+    for d = 0, m_k) as it is, without taking its short set: the same numbers bit for bit for a
+    caller whose history rows are in the short set already (the compiled engine maps them through
+    the same SX, ``mrpctl.engines.scalar.short_history``), as every m_k the sample writes is then
+    x_meas, bookkept by ``OnCurrent``, a fixed point of the short-set map (design/flight.md, phase
+    8b); a sensor's entries are its measurements, whose short set the controller takes. With
+    ``squared_peak`` the memory's last entry is the peak |u_c|² (N² m²): one square root at the end
+    gives the peak |u_c| bit for bit (the correctly rounded square root is monotone: the max of the
+    roots is the root of the max), instead of one a sample (the compiled engine's, ``Engine.run``).
+    At sample k:
+
+    1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
+       no physical effect): x_meas, the true state recorded in the result;
+    2. the sensor (:func:`~mrpctl.flight.raw_measurement_function`): m_k = [σ_k ⊕ σ(θ_k); ω̃_k/4]
+       (the ring's entry, the attitude in either set; x_meas bit for bit without noise and bias);
+    3. the controller reads the delayed measurement m_{k−d} (m_k when d = 0), takes its short
+       set σ̃ and applies :func:`~mrpctl.flight.selection_function` with its memory
+       (h, c, σ̃_prev) and δ: σ_c, and ``switched`` = 1.0 when h flipped (the run's switches);
+    4. u_c = K [σ_c; ω̃_{k−d}/4]; the actuator (:func:`~mrpctl.flight.actuator_function` of
+       ``saturation``) gives the applied torque u (the ``u`` output), and u + w is held over
+       the period while the plant is integrated by RK4.
+
+    With δ = 0, no limit (inf) and w = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s
+    K m_{k−d} bit for bit.
+    """
+    if short_measurements and sensor:
+        raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
+    step = step_function(spacecraft, period, substeps, inertia=inertia)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
+    noise = ca.SX.sym("noise", NOISE_SIZE)
+    torque = ca.SX.sym("torque", INPUT_SIZE)
+    w = torque if torque_input else flight[4:7]
+    disturbed = disturbed or torque_input
+    x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
+    # the ring holds the sensor's raw measurement (either set); the short set of the entry read is taken here,
+    # as for the history's entries: the same σ̃ as measurement_function's, bit for bit
+    measure = raw_measurement_function(noise_form)
+    measured = measure.call([x_meas, noise[0:3], noise[3:6], flight[7:10]])[0] if sensor else x_meas
+    seen = x_delayed if d > 0 else measured
+    # without a sensor m_k is x_meas, bookkept short by OnCurrent: only a history row may be long
+    sigma_seen = seen[0:3] if short_measurements else short_expr(seen[0:3])
+    h_next, c_next, sigma_c, switched = selection_function()(
+        memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
+    )
+    command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    if limited:
+        u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
+        count = memory[5] + saturated
+        if not disturbed:
+            u_plant = u
+    else:
+        # + the saturated count (0 in a run without a limit): −0 becomes +0, as the full sample's
+        # if_else in the actuator does (the recorded u keeps its bits, sign of zero included)
+        u, count = command + memory[5], memory[5]
+        u_plant = u + w if disturbed else u
+    x_next = step(x_meas, u_plant, *extra)
+    size = ca.fabs(command)
+    memory_next = ca.vertcat(
+        h_next,
+        c_next,
+        sigma_seen,
+        count,
+        ca.fmax(memory[6:9], size),
+        ca.fmax(memory[9], ca.sumsqr(command) if squared_peak else ca.norm_2(command)),
+    )
+    names = ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"]
+    inputs = [x, memory, x_delayed, gain, parameters, *extra, flight] + ([noise] if sensor else [])
+    names += ["noise"] if sensor else []
+    if torque_input:
+        inputs.append(torque)
+        names.append("torque")
+    output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
+    outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
+    if records:
+        output_names.append("record")
+        outputs.append(ca.vertcat(h_next, sigma_c, command))
+    return ca.Function("core", inputs, outputs, names, output_names)
+
+
+#: The predictor sample's memory: (1, 1, σ̂_prev (3), the actuator accumulators of the flight sample (5),
+#: the model copy z (6)); entries 2..9 mean what they mean in the flight sample's memory.
+PREDICTOR_MEMORY_SIZE = FLIGHT_MEMORY_SIZE + STATE_SIZE
+#: One ring entry of the predictor sample: the measurement m_k and the model copy z_k.
+PREDICTOR_RING_WIDTH = 2 * STATE_SIZE
+#: Below this |σ̂|² the continuity test of the predicted MRP is skipped (its shadow is far away).
+_CONTINUITY_FLOOR = 1e-8
+_SMALL_ROTATION = 1e-4
+
+
+def predictor_constants_size(model_inertia: InertiaInput) -> int:
+    """Length of the predictor sample's ``flight`` input: the flight constants, τ, J_m and J_m⁻¹."""
+    per_matrix = 3 if model_inertia is InertiaInput.DIAGONAL else 9
+    return FLIGHT_CONSTANTS_SIZE + 1 + 2 * per_matrix
+
+
+def _quaternion_product(a: Any, b: Any) -> Any:
+    """β of [FN] = C(a) C(b) with a = β(F/B), b = β(B/N) (scalar first; Schaub & Junkins Eq. 3.105)."""
+    scalar = a[0] * b[0] - ca.dot(a[1:4], b[1:4])
+    vector = a[0] * b[1:4] + b[0] * a[1:4] - ca.cross(a[1:4], b[1:4])
+    return ca.vertcat(scalar, vector)
+
+
+def _rotation_quaternion(theta: Any) -> Any:
+    """β of [BN] = exp(−[θ×]) (a rotation by the vector θ, rad): (cos(φ/2), sin(φ/2) θ/φ), φ = |θ|."""
+    squared = ca.dot(theta, theta)
+    angle = ca.sqrt(squared)
+    small = angle < _SMALL_ROTATION
+    safe = ca.if_else(small, 1.0, angle)
+    # sin(φ/2)/φ and its series 1/2 − φ²/48 + φ⁴/3840 near 0 (both if_else branches are evaluated).
+    factor = ca.if_else(small, 0.5 - squared / 48.0 + squared**2 / 3840.0, ca.sin(safe / 2.0) / safe)
+    return ca.vertcat(ca.cos(angle / 2.0), factor * theta)
+
+
+def _short_mrp_from_quaternion(q: Any) -> Any:
+    """The short-set MRP of a unit quaternion (either sign): q_v/(1 + q₀) for q₀ >= 0, else −q_v/(1 − q₀)."""
+    positive = q[0] >= 0
+    return ca.if_else(positive, q[1:4] / (1 + q[0]), -q[1:4] / (1 - q[0]))
+
+
+def predictor_core_function(
+    spacecraft: Spacecraft,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+    model_inertia: InertiaInput = InertiaInput.DIAGONAL,
+    saturation: Saturation = Saturation.SCALE,
+    sensor: bool = False,
+    limited: bool = True,
+    torque_input: bool = False,
+) -> ca.Function:
+    """One sample of the predictor loop (issue 13; ``design/predictor.md``, form (b)) (pure SX).
+
+    ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight[, noise][, torque]) ->
+    (x_next, memory_next, x_meas, u, switched, ring)``: memory of :data:`PREDICTOR_MEMORY_SIZE`
+    (1, 1, σ̂_prev, the flight sample's actuator accumulators, the model copy z); ``x_delayed`` and
+    ``ring`` are entries of :data:`PREDICTOR_RING_WIDTH`: (m_k, z_k), read back as (y_k, z_{k−d}) =
+    (m_{k−d}, z_{k−d}); parameters (α,) (inf: never switch); ``flight`` = (u_max (3), u_norm,
+    w (3), gyro bias (3), τ, J_m, J_m⁻¹) with the model's inertia in the layout ``model_inertia``;
+    ``noise`` (with ``sensor``) as in :func:`flight_core_function`. Without ``limited`` the
+    actuator is left out of the expressions (u = u_c; u_max, u_norm unused), which saves its
+    libm calls. With ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the
+    sample (a per-sample disturbance streamed by the engine; the constant w in ``flight`` is then
+    unused); like the constant w it acts on the plant only. At sample k:
+
+    1. plant bookkeeping (``OnCurrent``, no physical effect): x_meas, recorded in the result;
+    2. the sensor (with ``sensor``): m_k, else m_k = x_meas;
+    3. the prediction from y = m_{k−d} (m_k when d = 0) and the model copy: the inertial attitude
+       error C_E = C(z_{k−d})ᵀ C(y) and the body-rate error δω = ω_y − ω_z(k−d) are carried to now,
+       Ĉ = C(τ δω) C(z_k) C_E and ω̂ = ω_z(k) + δω (quaternion products, no DCM);
+    4. the rule on the prediction: σ̂ is the short MRP of Ĉ, replaced by its shadow when that is
+       nearer σ̂_{k−1} (continuity, when |σ̂|² > 1e-8), then by its shadow when |σ̂| >= α, which is
+       the sample's ``switched``;
+    5. u_c = K [σ̂; ω̂/4]; the actuator gives the applied torque u; the plant is integrated with
+       u + w (``substeps`` RK4 substeps), the model copy with u alone by one RK4 step of J_m, and
+       kept in the short set: z_{k+1} = short(RK4_m(z_k, u)). The controller does not know w: the
+       copy never sees it, it enters the prediction only through the measurement y.
+    """
+    step = step_function(spacecraft, period, substeps, inertia=inertia)
+    model_step = step_function(spacecraft, period, 1, inertia=model_inertia)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", PREDICTOR_MEMORY_SIZE)
+    x_delayed = ca.SX.sym("x_delayed", PREDICTOR_RING_WIDTH)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    flight = ca.SX.sym("flight", predictor_constants_size(model_inertia))
+    noise = ca.SX.sym("noise", NOISE_SIZE)
+    torque = ca.SX.sym("torque", INPUT_SIZE)
+    w = torque if torque_input else flight[4:7]
+    per_matrix = 3 if model_inertia is InertiaInput.DIAGONAL else 9
+    start = FLIGHT_CONSTANTS_SIZE + 1
+    model_j = flight[start : start + per_matrix]
+    model_j_inv = flight[start + per_matrix : start + 2 * per_matrix]
+    if model_inertia is InertiaInput.FULL:
+        model_j, model_j_inv = ca.reshape(model_j, 3, 3), ca.reshape(model_j_inv, 3, 3)
+    tau = flight[FLIGHT_CONSTANTS_SIZE]
+
+    x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
+    measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
+    z = memory[FLIGHT_MEMORY_SIZE:PREDICTOR_MEMORY_SIZE]
+    y, z_old = (x_delayed[0:STATE_SIZE], x_delayed[STATE_SIZE:]) if d > 0 else (measured, z)
+    x_hat, switched = prediction_expr(y, z_old, z, memory[2:5], parameters[0], tau)
+    sigma_hat = x_hat[0:3]
+
+    command = gain @ x_hat
+    if limited:
+        u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
+    else:
+        u, u_plant, saturated = command, command + w, ca.DM(0.0)
+    x_next = step(x_meas, u_plant, *extra)
+    z_next = model_step(z, u, model_j, model_j_inv)
+    z_next = ca.vertcat(short_expr(z_next[0:3]), z_next[3:6])
+    # the peaks by comparisons: casadi_fmax is a libm call per use (no -ffinite-math-only)
+    size = [ca.fabs(command[i]) for i in range(INPUT_SIZE)]
+    peaks = [ca.if_else(size[i] > memory[6 + i], size[i], memory[6 + i]) for i in range(INPUT_SIZE)]
+    norm = ca.norm_2(command)
+    memory_next = ca.vertcat(
+        memory[0:2],
+        sigma_hat,
+        memory[5] + saturated,
+        *peaks,
+        ca.if_else(norm > memory[9], norm, memory[9]),
+        z_next,
+    )
+    inputs = [x, memory, x_delayed, gain, parameters, *extra, flight] + ([noise] if sensor else [])
+    names = ["x", "memory", "x_delayed", "K", "parameters"] + (["J", "J_inv"] if extra else []) + ["flight"]
+    names += ["noise"] if sensor else []
+    if torque_input:
+        inputs.append(torque)
+        names.append("torque")
+    return ca.Function(
+        "core",
+        inputs,
+        [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)],
+        names,
+        ["x_next", "memory_next", "x_meas", "u", "switched", "ring"],
+    )
+
+
+def prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:
+    """(x̂, switched): the predictor's correction and its switching rule as SX expressions.
+
+    From the delayed measurement y = [σ_y; ω_y/4], the model copy z_{k−d} (``z_old``) and z_k (``z``),
+    the previous σ̂ (``previous``), α and τ (s): Ĉ = C(τ δω) C(z_k) C(z_{k−d})ᵀ C(y) by quaternion
+    products, σ̂ its short MRP, the shadow when nearer ``previous`` (|σ̂|² > 1e-8), then the shadow
+    when |σ̂|² >= α² (``switched`` = 1.0); x̂ = [σ̂; ω_z(k)/4 + (ω_y − ω_z(k−d))/4].
+    """
+    q_y = quaternion_from_mrp_expr(y[0:3])
+    q_old = quaternion_from_mrp_expr(z_old[0:3])
+    q_z = quaternion_from_mrp_expr(z[0:3])
+    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
+    delta_omega = 4 * (y[3:6] - z_old[3:6])
+    q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
+    sigma_hat = _short_mrp_from_quaternion(q_hat)
+    shadow = _safe_shadow(sigma_hat)
+    nearer = ca.logic_and(
+        ca.dot(sigma_hat, sigma_hat) > _CONTINUITY_FLOOR,
+        ca.norm_2(shadow - previous) < ca.norm_2(sigma_hat - previous),
+    )
+    sigma_hat = ca.if_else(nearer, shadow, sigma_hat)
+    switched = ca.if_else(ca.dot(sigma_hat, sigma_hat) >= alpha * alpha, 1.0, 0.0)
+    sigma_hat = ca.if_else(switched, _safe_shadow(sigma_hat), sigma_hat)
+    return ca.vertcat(sigma_hat, z[3:6] + (y[3:6] - z_old[3:6])), switched
+
+
+def _safe_shadow(sigma: Any) -> Any:
+    # Both if_else branches are evaluated: keep the unused shadow of σ = 0 finite.
+    squared = ca.dot(sigma, sigma)
+    return -sigma / ca.if_else(squared > 0, squared, 1.0)
+
+
+def chunk_function(sample: ca.Function, d: int) -> ca.Function:
+    """``chunk(x, memory, history) -> (x_end, memory_end, measurements, u, switched)``.
+
+    One chunk is max(d, 1) samples, a ``mapaccum`` of ``sample``.
+    """
+    length = max(d, 1)
+    accumulated = sample.mapaccum("chunk_samples", length, 2)
+    x = ca.MX.sym("x", STATE_SIZE)
+    memory = ca.MX.sym("memory", MEMORY_SIZE)
+    history = ca.MX.sym("history", STATE_SIZE, length)
+    xs, memories, measurements, u, switched = accumulated(x, memory, history)
+    return ca.Function(
+        "chunk",
+        [x, memory, history],
+        [xs[:, length - 1], memories[:, length - 1], measurements, u, switched],
+        ["x", "memory", "history"],
+        ["x_end", "memory_end", "measurements", "u", "switched"],
+    )
+
+
+#: The controller's own memory in :attr:`ClosedLoopFunctions.flight_controller`: (h, c, σ̃_prev (3)).
+CONTROLLER_MEMORY_SIZE = 5
+#: Names of the flight sample's memory entries (:data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`), in order.
+FLIGHT_MEMORY_LAYOUT = (
+    "h",
+    "c",
+    "sigma_prev_1",
+    "sigma_prev_2",
+    "sigma_prev_3",
+    "saturated_samples",
+    "peak_u_command_1",
+    "peak_u_command_2",
+    "peak_u_command_3",
+    "peak_u_command_norm",
+)
+
+
+def flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
+    """``chunk(x, memory, history, noise[, torque]) -> (x_end, memory_end, states, measurements, u, switched)``.
+
+    max(d, 1) samples of the flight ``sample`` (a ``mapaccum``); ``history`` holds the
+    measurements m_{k−d}, …, m_{k−1} (the previous chunk's ``measurements``), ``noise`` one
+    column (θ_k; η_k) per sample, ``states`` the bookkept true states x_k; ``torque`` (when
+    ``sample`` has it: a per-sample disturbance) one column w_k (N m) per sample.
+    """
+    length = max(d, 1)
+    accumulated = sample.mapaccum("chunk_samples", length, 2)
+    x = ca.MX.sym("x", STATE_SIZE)
+    memory = ca.MX.sym("memory", FLIGHT_MEMORY_SIZE)
+    history = ca.MX.sym("history", STATE_SIZE, length)
+    noise = ca.MX.sym("noise", NOISE_SIZE, length)
+    inputs, names = [x, memory, history, noise], ["x", "memory", "history", "noise"]
+    if "torque" in sample.name_in():
+        inputs.append(ca.MX.sym("torque", INPUT_SIZE, length))
+        names.append("torque")
+    xs, memories, states, u, switched, measurements = accumulated(*inputs)
+    return ca.Function(
+        "chunk",
+        inputs,
+        [xs[:, length - 1], memories[:, length - 1], states, measurements, u, switched],
+        names,
+        ["x_end", "memory_end", "states", "measurements", "u", "switched"],
+    )
