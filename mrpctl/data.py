@@ -20,12 +20,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mrpctl import BatchResult, SimulationResult
 from mrpctl._validation import integer, readonly
 from mrpctl.errors import SpecificationError
+from mrpctl.predictor import Predictor
+from mrpctl.provenance import versions
+from mrpctl.rules import rule_from_name
+from mrpctl.simulation.results import FLIGHT_RECORDS, SimulationResult, to_pandas, to_xarray
+from mrpctl.spacecraft import Spacecraft
 
 if TYPE_CHECKING:
-    import pandas as pd  # type: ignore[import-untyped]
     import xarray as xr
 
 #: Rows formatted at once by :func:`write_csv` (bounds its memory to a few tens of MB).
@@ -36,22 +39,8 @@ __all__ = ["FORMAT", "load", "metadata", "save", "to_pandas", "to_xarray", "writ
 #: Format tag written into saved files; load refuses files without it.
 FORMAT = "mrpctl-run-1"
 
-_AXES = [1, 2, 3]
-_STATE = ["sigma1", "sigma2", "sigma3", "omega1/4", "omega2/4", "omega3/4"]
-
-
-def _rule_fields(rule: Any) -> dict[str, Any]:
-    from mrpctl.scenario import RULE_NAMES
-
-    names: dict[type, str] = {cls: name for name, cls in RULE_NAMES.items()}
-    if type(rule) not in names:
-        raise SpecificationError(f"rule: {type(rule).__name__} has no scenario name; it cannot be saved")
-    return {"rule_type": names[type(rule)], "rule_parameter": float(rule.parameters()[0]), "rule": str(rule)}
-
 
 def _rule(fields: dict[str, Any]) -> Any:
-    from mrpctl.scenario import rule_from_name
-
     name = str(fields["rule_type"])
     value = float(fields["rule_parameter"])
     if name == "boundary-layer":
@@ -65,214 +54,9 @@ def _rule(fields: dict[str, Any]) -> Any:
     return rule_from_name(name)
 
 
-def _versions() -> dict[str, str]:
-    from mrpctl.campaign.store import versions
-
-    return versions()
-
-
-def _time_or_nan(value: float | None) -> float:
-    return np.nan if value is None else float(value)
-
-
 def _nan_or_time(value: Any) -> float | None:
     number = float(value)
     return None if np.isnan(number) else number
-
-
-#: The flight loop's per-sample records of a run (None when absent): name, dimensions, attributes.
-_FLIGHT_RECORDS: tuple[tuple[str, tuple[str, ...], dict[str, str]], ...] = (
-    ("logic", ("time",), {"long_name": "logic variable h after the rule (+1 or -1)"}),
-    ("sigma_c", ("time", "axis"), {"units": "1", "long_name": "MRP sigma_c used by the control law"}),
-    ("delay_used", ("time",), {"units": "samples", "long_name": "delay used k - j*(k)"}),
-    ("command", ("time", "axis"), {"units": "N m", "long_name": "commanded torque u_c before the limits"}),
-)
-
-
-def _run_dataset(result: SimulationResult) -> xr.Dataset:
-    import xarray as xr
-
-    n = len(result.t)
-    every = result.keep_every or 1
-    indices = np.asarray(result.switch_indices, dtype=np.int64)
-    kept = indices[indices % every == 0] // every  # switches that fall on a kept sample
-    switched = np.zeros(n, dtype=np.int8)
-    switched[kept[kept < n]] = 1
-    data: dict[str, Any] = {
-        "sigma": (
-            ("time", "axis"),
-            np.asarray(result.sigma),
-            {"units": "1", "long_name": "MRP sigma (after the rule)"},
-        ),
-        "omega": (("time", "axis"), np.asarray(result.omega), {"units": "rad/s", "long_name": "body rate omega"}),
-        "u": (("time", "axis"), np.asarray(result.u), {"units": "N m", "long_name": "torque held over [t_k, t_k+1)"}),
-        "switched": (("time",), switched, {"long_name": "1 where sigma was replaced by its shadow (kept samples)"}),
-        "switch_index": (("switch",), indices, {"long_name": "sample index k of every recorded switch"}),
-        "switch_count": ((), int(result.switch_count), {"long_name": "number of switches (exact)"}),
-        "first_switch_time": ((), _time_or_nan(result.first_switch_time), {"units": "s"}),
-        "last_switch_time": ((), _time_or_nan(result.last_switch_time), {"units": "s"}),
-        "peak_torque": ((), float(result.peak_torque), {"units": "N m", "long_name": "max_k |u_k|_inf"}),
-        "samples": ((), int(result.samples), {"long_name": "samples simulated"}),
-        "sign_flips": (("axis",), np.asarray(result.sign_flips), {"long_name": "torque sign changes per axis"}),
-        "max_sigma": ((), float(result.max_sigma), {"units": "1"}),
-        "settling_time": ((), np.nan if result.settling_time is None else float(result.settling_time), {"units": "s"}),
-        "diverged": ((), bool(result.diverged)),
-        "inertia": (("row", "col"), np.asarray(result.spacecraft.inertia), {"units": "kg m^2"}),
-        "K": (("input", "state"), np.asarray(result.K), {"units": "N m", "long_name": "u = K x(t - tau)"}),
-        "x0": (("state",), np.asarray(result.x0), {"long_name": "initial state [sigma; omega/4]"}),
-        "tau": ((), float(result.tau), {"units": "s"}),
-        "rate": ((), float(result.rate), {"units": "Hz"}),
-        "delay_samples": ((), int(result.delay_samples)),
-        "substeps": ((), int(result.substeps)),
-        "t_final": ((), float(result.t_final), {"units": "s"}),
-    }
-    if result.predictor is not None:
-        data["predictor_inertia"] = (
-            ("row", "col"),
-            np.asarray(result.predictor.model.inertia),
-            {"units": "kg m^2", "long_name": "the predictor's model inertia J_m"},
-        )
-    if result.saturated_fraction is not None:
-        data["saturated_fraction"] = ((), float(result.saturated_fraction), {"long_name": "samples at a torque limit"})
-    if result.peak_command is not None:
-        data["peak_command"] = (
-            ("command",),
-            np.asarray(result.peak_command),
-            {"units": "N m", "long_name": "max commanded |u_c,i| per axis and |u_c|"},
-        )
-    for name, dims, attributes in _FLIGHT_RECORDS:
-        value = getattr(result, name)
-        if value is not None:
-            data[name] = (dims, np.asarray(value), attributes)
-    attrs: dict[str, Any] = {
-        **_rule_fields(result.rule),
-        "history": "array",
-        "keep_every": "none" if result.keep_every is None else int(result.keep_every),
-    }
-    if isinstance(result.history, str):
-        attrs["history"] = result.history
-    else:
-        data["history"] = (("history_sample", "state"), np.asarray(result.history))
-    coords = {"time": ("time", np.asarray(result.t), {"units": "s"}), "axis": _AXES, "state": _STATE}
-    return xr.Dataset(data, coords=coords, attrs=attrs)
-
-
-def _batch_dataset(result: BatchResult) -> xr.Dataset:
-    import xarray as xr
-
-    n = len(result)
-    x0 = np.asarray(result.x0)
-    data: dict[str, Any] = {
-        "sigma0": (("run", "axis"), x0[:, :3], {"units": "1"}),
-        "omega0": (("run", "axis"), 4.0 * x0[:, 3:], {"units": "rad/s"}),
-        "K": (("run", "input", "state"), np.asarray(result.K), {"units": "N m"}),
-        "tau": (("run",), np.asarray(result.tau), {"units": "s"}),
-        "rule": (("run",), np.array([str(rule) for rule in result.rules], dtype=object)),
-        "switch_count": (("run",), np.asarray(result.switch_count)),
-        "first_switch_time": (("run",), np.asarray(result.first_switch_time), {"units": "s"}),
-        "last_switch_time": (("run",), np.asarray(result.last_switch_time), {"units": "s"}),
-        "sign_flips": (("run", "axis"), np.asarray(result.sign_flips)),
-        "settling_time": (("run",), np.asarray(result.settling_time), {"units": "s"}),
-        "converged": (("run",), np.asarray(result.converged)),
-        "diverged": (("run",), np.asarray(result.diverged)),
-        "max_sigma": (("run",), np.asarray(result.max_sigma), {"units": "1"}),
-    }
-    peak = getattr(result, "peak_torque", None)
-    if peak is not None:
-        data["peak_torque"] = (("run",), np.asarray(peak), {"units": "N m"})
-    attrs: dict[str, Any] = {
-        "rate": float(result.rate),
-        "t_final": float(result.t_final),
-        "substeps": int(result.substeps),
-    }
-    attrs["history"] = result.history if isinstance(result.history, str) else "array"
-    coords = {"run": np.arange(n), "axis": _AXES, "state": _STATE}
-    return xr.Dataset(data, coords=coords, attrs=attrs)
-
-
-def to_xarray(result: SimulationResult | BatchResult) -> xr.Dataset:
-    """The result as an :class:`xarray.Dataset`.
-
-    A run: ``sigma``, ``omega``, ``u`` over (``time`` in s, ``axis`` 1-3), ``switched`` over
-    time, the metrics and the inputs (inertia, K, x0, τ, rate, ...) as variables, the rule
-    in ``attrs``. A batch: the initial state ``sigma0``, ``omega0`` (rad/s), ``K``, ``tau``,
-    the rule and every metric over ``run``.
-    """
-    if isinstance(result, SimulationResult):
-        return _run_dataset(result)
-    if isinstance(result, BatchResult):
-        return _batch_dataset(result)
-    raise SpecificationError(f"result must be a SimulationResult or BatchResult, got {type(result).__name__}")
-
-
-def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
-    """The result as a :class:`pandas.DataFrame`.
-
-    A run: indexed by ``t`` (s), columns sigma1-3, omega1-3 (rad/s), u1-3 (N m), switched (and,
-    for a flight run with records, logic, sigma_c1-3, u_c1-3 (N m, the commanded torque) and
-    delay_used (samples)); the inputs in ``DataFrame.attrs``. A batch: indexed by ``run``, columns for the initial
-    state, τ, the rule and every metric.
-    """
-    import pandas as pd
-
-    if isinstance(result, SimulationResult):
-        run = result
-        switched = np.zeros(len(run.t), dtype=np.int8)
-        switched[run.switch_indices] = 1
-        columns: dict[str, Any] = {}
-        for name, values in (("sigma", run.sigma), ("omega", run.omega), ("u", run.u)):
-            for i in range(3):
-                columns[f"{name}{i + 1}"] = np.asarray(values[:, i])
-        columns["switched"] = switched
-        if run.logic is not None and run.sigma_c is not None and run.command is not None:  # the flight records
-            columns["logic"] = np.asarray(run.logic)
-            for name, values in (("sigma_c", run.sigma_c), ("u_c", run.command)):
-                for i in range(3):
-                    columns[f"{name}{i + 1}"] = np.asarray(values[:, i])
-        if run.delay_used is not None:
-            columns["delay_used"] = np.asarray(run.delay_used)
-        frame = pd.DataFrame(columns, index=pd.Index(np.asarray(run.t), name="t"))
-        frame.attrs.update(
-            inertia=run.spacecraft.inertia.tolist(),
-            K=np.asarray(run.K).tolist(),
-            x0=np.asarray(run.x0).tolist(),
-            tau=run.tau,
-            rate=run.rate,
-            t_final=run.t_final,
-            rule=str(run.rule),
-            diverged=run.diverged,
-            settling_time=run.settling_time,
-        )
-        return frame
-    if isinstance(result, BatchResult):
-        batch = result
-        x0 = np.asarray(batch.x0)
-        columns = {}
-        for i in range(3):
-            columns[f"sigma0_{i + 1}"] = x0[:, i]
-        for i in range(3):
-            columns[f"omega0_{i + 1}"] = 4.0 * x0[:, 3 + i]
-        columns["tau"] = np.asarray(batch.tau)
-        columns["rule"] = [str(rule) for rule in batch.rules]
-        for name in (
-            "switch_count",
-            "first_switch_time",
-            "last_switch_time",
-            "settling_time",
-            "converged",
-            "diverged",
-            "max_sigma",
-        ):
-            columns[name] = np.asarray(getattr(batch, name))
-        peak = getattr(batch, "peak_torque", None)
-        if peak is not None:
-            columns["peak_torque"] = np.asarray(peak)
-        for i in range(3):
-            columns[f"sign_flips_{i + 1}"] = np.asarray(batch.sign_flips)[:, i]
-        frame = pd.DataFrame(columns, index=pd.Index(np.arange(len(batch)), name="run"))
-        frame.attrs.update(rate=batch.rate, t_final=batch.t_final, substeps=batch.substeps)
-        return frame
-    raise SpecificationError(f"result must be a SimulationResult or BatchResult, got {type(result).__name__}")
 
 
 def _atomic_target(path: Path) -> tuple[int, Path]:
@@ -302,8 +86,8 @@ def save(result: SimulationResult, path: str | Path, *, seed: int | None = None)
     """
     if not isinstance(result, SimulationResult):
         raise SpecificationError(f"result must be a SimulationResult, got {type(result).__name__}")
-    dataset = _run_dataset(result)
-    dataset.attrs.update(format=FORMAT, versions=json.dumps(_versions(), sort_keys=True))
+    dataset = to_xarray(result)
+    dataset.attrs.update(format=FORMAT, versions=json.dumps(versions(), sort_keys=True))
     if seed is not None:
         dataset.attrs["seed"] = str(integer("seed", seed, minimum=0))
     path = Path(path)
@@ -344,7 +128,6 @@ def metadata(path: str | Path) -> dict[str, Any]:
 
 def load(path: str | Path) -> SimulationResult:
     """Load a run written by :func:`save` (arrays read-only, as returned by the simulator)."""
-    from mrpctl.spacecraft import Spacecraft
 
     dataset = _open(path)
     rate = float(dataset["rate"])
@@ -357,15 +140,13 @@ def load(path: str | Path) -> SimulationResult:
         history = readonly(dataset["history"].values)
     predictor = None
     if "predictor_inertia" in dataset:
-        from mrpctl.predictor import Predictor
-
         predictor = Predictor(model=Spacecraft(dataset["predictor_inertia"].values))
     flown: dict[str, Any] = {}
     if "saturated_fraction" in dataset:
         flown["saturated_fraction"] = float(dataset["saturated_fraction"])
     if "peak_command" in dataset:
         flown["peak_command"] = readonly(dataset["peak_command"].values)
-    for name, _, _ in _FLIGHT_RECORDS:
+    for name, _, _ in FLIGHT_RECORDS:
         if name in dataset:
             values = dataset[name].values
             flown[name] = readonly(values, np.int64 if name == "delay_used" else float)

@@ -22,7 +22,7 @@ import tempfile
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -31,8 +31,62 @@ from matplotlib.figure import Figure
 
 from mrpctl.errors import DimensionError, SpecificationError
 
-if TYPE_CHECKING:
-    from mrpctl.simulation import BatchResult, SimulationResult
+
+class RunView(Protocol):
+    """What the figures read of a run (`mrpctl.simulation.SimulationResult` provides it).
+
+    A structural type, so that this module needs nothing of the simulator: the results call the
+    figures (``run.plot()``), never the other way round.
+    """
+
+    @property
+    def t(self) -> np.ndarray: ...
+    @property
+    def sigma(self) -> np.ndarray: ...
+    @property
+    def omega(self) -> np.ndarray: ...
+    @property
+    def u(self) -> np.ndarray: ...
+    @property
+    def switch_times(self) -> np.ndarray: ...
+    @property
+    def switch_count(self) -> int: ...
+    @property
+    def settling_time(self) -> float | None: ...
+    @property
+    def diverged(self) -> bool: ...
+    @property
+    def rate(self) -> float: ...
+    @property
+    def tau(self) -> float: ...
+    @property
+    def t_final(self) -> float: ...
+    @property
+    def rule(self) -> Any: ...
+
+
+class BatchView(Protocol):
+    """What the figures read of a batch (`mrpctl.simulation.BatchResult` provides it)."""
+
+    @property
+    def x0(self) -> np.ndarray: ...
+    @property
+    def tau(self) -> np.ndarray: ...
+    @property
+    def rules(self) -> tuple[Any, ...]: ...
+    @property
+    def switch_count(self) -> np.ndarray: ...
+    @property
+    def settling_time(self) -> np.ndarray: ...
+    @property
+    def converged(self) -> np.ndarray: ...
+    @property
+    def diverged(self) -> np.ndarray: ...
+    @property
+    def max_sigma(self) -> np.ndarray: ...
+    @property
+    def t_final(self) -> float: ...
+
 
 __all__ = [
     "SETTLING_CAPTION",
@@ -130,7 +184,7 @@ def _mark_switches(ax: Axes, switch_times: np.ndarray, *, label: bool = False) -
     )
 
 
-def _status(result: SimulationResult) -> str:
+def _status(result: RunView) -> str:
     if result.diverged:
         return f"DIVERGED at t = {float(result.t[-1]):.3f} s"
     if result.settling_time is not None:
@@ -138,13 +192,13 @@ def _status(result: SimulationResult) -> str:
     return f"did not settle in {result.t_final:g} s ({SETTLING_CAPTION.split(': ', 1)[1]})"
 
 
-def _title(result: SimulationResult) -> str:
+def _title(result: RunView) -> str:
     n = int(result.switch_count)
     switches = f"{n} shadow-set switch{'es' if n != 1 else ''}"
     return textwrap.fill(_typeset(f"{result.rule}, tau = {result.tau:g} s: {switches}; {_status(result)}"), width=95)
 
 
-def _switch_cluster(result: SimulationResult) -> tuple[float, float] | None:
+def _switch_cluster(result: RunView) -> tuple[float, float] | None:
     """The window of a dense switch cluster worth a zoom inset, or None."""
     times = np.asarray(result.switch_times)
     if len(times) < _INSET_MIN_SWITCHES:
@@ -159,13 +213,13 @@ def _switch_cluster(result: SimulationResult) -> tuple[float, float] | None:
 
 # ------------------------------------------------------------------------------ single runs
 def plot_response(
-    result: SimulationResult, *, title: str | None = None, ax: Any = None, inset: bool | None = None
+    result: RunView, *, title: str | None = None, ax: Any = None, inset: bool | None = None
 ) -> Figure:
     """σ, ω and u against t, with the switch instants marked (paper Figs. 2-7).
 
     Parameters
     ----------
-    result : SimulationResult
+    result : RunView
         A run of :func:`mrpctl.simulate`.
     title : str, optional
         Figure title; by default the rule, the delay τ, the switch count and whether the run
@@ -214,7 +268,7 @@ def plot_response(
     return fig
 
 
-def _zoom_inset(ax: Axes, result: SimulationResult, window: tuple[float, float]) -> Axes:
+def _zoom_inset(ax: Axes, result: RunView, window: tuple[float, float]) -> Axes:
     """An inset on ``ax`` showing the sampled σ around the switch cluster, as steps."""
     t = np.asarray(result.t)
     sigma = np.asarray(result.sigma)
@@ -235,7 +289,7 @@ def _zoom_inset(ax: Axes, result: SimulationResult, window: tuple[float, float])
 
 
 def plot_attitude(
-    result: SimulationResult,
+    result: RunView,
     *,
     window: tuple[float, float] | None = None,
     title: str | None = None,
@@ -250,7 +304,7 @@ def plot_attitude(
 
     Parameters
     ----------
-    result : SimulationResult
+    result : RunView
         A run of :func:`mrpctl.simulate`.
     window : (float, float), optional
         Time window in s; the whole run by default.
@@ -427,7 +481,7 @@ def _initial_angle_and_rate(x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.degrees(4.0 * np.arctan(sigma)), 4.0 * np.linalg.norm(x0[:, 3:], axis=1)
 
 
-def plot_monte_carlo(batch: BatchResult, *, title: str | None = None, ax: Any = None) -> Figure:
+def plot_monte_carlo(batch: BatchView, *, title: str | None = None, ax: Any = None) -> Figure:
     """A Monte Carlo batch as distributions: independent runs are not a line over run index.
 
     Panels: a histogram of switch counts (log bins when they span a decade), the empirical
@@ -437,7 +491,7 @@ def plot_monte_carlo(batch: BatchResult, *, title: str | None = None, ax: Any = 
 
     Parameters
     ----------
-    batch : BatchResult
+    batch : BatchView
         A batch of :func:`mrpctl.simulate_batch`.
     title : str, optional
         Figure title.
@@ -502,7 +556,7 @@ def plot_monte_carlo(batch: BatchResult, *, title: str | None = None, ax: Any = 
 
 
 def plot_batch(
-    batch: BatchResult,
+    batch: BatchView,
     *,
     over: str | None = None,
     margin: float | None = None,
@@ -513,7 +567,7 @@ def plot_batch(
 
     Parameters
     ----------
-    batch : BatchResult
+    batch : BatchView
         A batch of :func:`mrpctl.simulate_batch`.
     over : {"tau", "eps", "initial"}, optional
         What varies across the runs; detected by default (τ when the delays differ, ε when

@@ -7,7 +7,7 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -23,11 +23,10 @@ from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
 from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
+from mrpctl.simulation import SimulationResult, simulate
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
-from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
-
-if TYPE_CHECKING:
-    from mrpctl.simulation import SimulationResult
+from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
 
 __all__ = [
     "RULE_NAMES",
@@ -46,16 +45,6 @@ __all__ = [
 ]
 
 #: The names a scenario file or the command line may give a switching rule.
-RULE_NAMES = {
-    "none": NoSwitching,
-    "on-current": OnCurrent,
-    "on-delayed": OnDelayed,
-    "boundary-layer": BoundaryLayer,
-    "delay-aware": DelayAware,
-    "hysteretic": Hysteretic,
-    "on-predicted": OnPredicted,
-}
-
 _TOP_KEYS = {"name", "description", "t_final", "tau", "rate", "history", "substeps"}
 _TABLES = {"spacecraft", "gains", "initial", "rule"}
 #: The predictor controller's table (``[rule] type = "on-predicted"`` only, and then required).
@@ -192,8 +181,6 @@ class Scenario:
 
     def simulate(self) -> SimulationResult:
         """Run the scenario with :func:`mrpctl.simulate`."""
-        from mrpctl.simulation import simulate
-
         return simulate(
             self.spacecraft,
             self.K,
@@ -220,62 +207,6 @@ class Scenario:
                 *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
             )
         )
-
-
-def rule_from_name(
-    name: str, *, eps: float | None = None, alpha: float | None = None, delta: float | None = None
-) -> SwitchingRule:
-    """The switching rule called ``name`` (one of :data:`RULE_NAMES`).
-
-    ``eps`` is required by (and only allowed for) ``boundary-layer``; ``alpha`` is
-    optional for ``delay-aware`` (default 1), ``hysteretic`` and ``on-predicted`` (default 1;
-    ``inf`` or None: never switch); ``delta`` (the hysteresis δ ∈ [0, 1) on q₀) only for
-    ``hysteretic``, which takes δ or α = √((1 + δ)/(1 − δ)), not both (default δ = 0).
-    """
-    if name not in RULE_NAMES:
-        raise SpecificationError(f"rule type must be one of {sorted(RULE_NAMES)}, got {name!r}")
-    if eps is not None and name != "boundary-layer":
-        raise SpecificationError(f"rule: eps applies only to 'boundary-layer', not to {name!r}")
-    if alpha is not None and name not in ("delay-aware", "hysteretic", "on-predicted"):
-        raise SpecificationError(
-            f"rule: alpha applies only to 'delay-aware', 'hysteretic' and 'on-predicted', not to {name!r}"
-        )
-    if delta is not None and name != "hysteretic":
-        raise SpecificationError(f"rule: delta applies only to 'hysteretic', not to {name!r}")
-    if name == "hysteretic":
-        if delta is not None and alpha is not None:
-            raise SpecificationError(
-                "rule: 'hysteretic' takes delta or alpha (alpha = sqrt((1 + delta)/(1 - delta))), not both"
-            )
-        if alpha is not None:
-            return Hysteretic.from_alpha(alpha)
-        return Hysteretic(0.0 if delta is None else delta)
-    if name == "boundary-layer":
-        if eps is None:
-            raise SpecificationError("rule: 'boundary-layer' needs eps (the layer thickness, > 0)")
-        return BoundaryLayer(eps=finite_scalar("eps", eps))
-    if name == "delay-aware":
-        return DelayAware() if alpha is None else DelayAware(alpha=finite_scalar("alpha", alpha))
-    if name == "on-predicted":
-        return _on_predicted(alpha)
-    return RULE_NAMES[name]()
-
-
-def _on_predicted(alpha: Any) -> OnPredicted:
-    """``OnPredicted(alpha)``: α >= 1 (default 1); α = +inf stands for None (never switch), as in a file."""
-    if alpha is None:
-        return OnPredicted()
-    if isinstance(alpha, int | float) and not isinstance(alpha, bool) and alpha == math.inf:
-        return OnPredicted(alpha=None)
-    return OnPredicted(alpha=alpha)
-
-
-def rule_name(rule: SwitchingRule) -> str:
-    """The scenario-file name of ``rule`` (the inverse of :func:`rule_from_name`)."""
-    for name, cls in RULE_NAMES.items():
-        if type(rule) is cls:
-            return name
-    raise SpecificationError(f"rule {rule!r} has no scenario-file name; use one of {sorted(RULE_NAMES)}")
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import json
 import os
-import platform
 import shutil
 from pathlib import Path
 from typing import Any
@@ -47,6 +46,7 @@ from mrpctl.campaign.simulation import METRICS
 from mrpctl.campaign.spec import CampaignSpec, SampleFile, parse_campaign
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
+from mrpctl.provenance import versions
 
 __all__ = ["INPUTS", "STORE_NAME", "CampaignStore", "open_campaign"]
 
@@ -92,19 +92,6 @@ _UNITS = {
     "max_sigma": "1",
     "peak_torque": "N m",
 }
-
-
-def versions() -> dict[str, str]:
-    """The versions of the packages a campaign's numbers depend on."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    found = {"python": platform.python_version()}
-    for package in ("mrpctl", "numpy", "casadi", "xarray", "zarr", "dask"):
-        try:
-            found[package] = version(package)
-        except PackageNotFoundError:  # pragma: no cover - a source tree without installation
-            found[package] = "unknown"
-    return found
 
 
 #: The store's array of each per-sample file of ``[flight]``: (name, dims).
