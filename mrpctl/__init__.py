@@ -10,8 +10,6 @@ imported on the first LMI solve and matplotlib only by :mod:`mrpctl.plots`.
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
-
 from mrpctl import design, errors, loop, model, mrp, paper, simulation
 from mrpctl._export import ExportResult, export
 from mrpctl.errors import (
@@ -25,15 +23,13 @@ from mrpctl.errors import (
 from mrpctl.loop import ClosedLoopFunctions, closed_loop_functions
 from mrpctl.model import PlantModel, plant_model
 from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.provenance import mrpctl_version
 from mrpctl.scenario import Scenario, load_scenario
 from mrpctl.simulation import BatchResult, SimulationResult, simulate, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
-try:
-    __version__ = version("mrpctl")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0+unknown"
+__version__ = mrpctl_version()
 
 __all__ = [
     "BatchResult",

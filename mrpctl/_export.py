@@ -41,7 +41,14 @@ import casadi as ca
 from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_library, compiler_version, find_compiler
 from mrpctl.errors import CodegenError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, SensorModel
-from mrpctl.loop import FLIGHT_MEMORY_LAYOUT, ClosedLoopFunctions, FlightOptions, closed_loop_functions
+from mrpctl.loop import (
+    FLIGHT_MEMORY_LAYOUT,
+    PREDICTOR_MEMORY_LAYOUT,
+    ClosedLoopFunctions,
+    FlightOptions,
+    closed_loop_functions,
+)
+from mrpctl.provenance import mrpctl_version
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 
@@ -591,8 +598,6 @@ def _manifest(
     compiler: str | None,
     reason: str | None,
 ) -> dict[str, Any]:
-    import mrpctl  # the package version; imported here because mrpctl may import this module
-
     rule = closed.rule
     descriptions = _DESCRIPTIONS if closed.flight is None else _FLIGHT_DESCRIPTIONS
     if closed.predictor is not None:
@@ -604,7 +609,7 @@ def _manifest(
     manifest: dict[str, Any] = {
         "format": "mrpctl-export",
         "format_version": MANIFEST_FORMAT_VERSION,
-        "mrpctl_version": mrpctl.__version__,
+        "mrpctl_version": mrpctl_version(),
         "casadi_version": vars(ca)["__version__"],
         "state": "x = [sigma; omega/4] (6): MRPs sigma (dimensionless), body rate omega (rad/s)",
         "input": "u (3): control torque (N m), u = K x_meas",
@@ -661,8 +666,6 @@ def _manifest(
 
 def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:
     """The manifest's ``predictor`` section: the model, τ, α, the flight models and the layouts."""
-    from mrpctl.loop import PREDICTOR_MEMORY_LAYOUT
-
     predictor = closed.predictor
     flight = closed.flight
     assert flight is not None
@@ -690,7 +693,7 @@ def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:
         "delay_line": "entries (m_k; z_k) of 12: the sensor's measurement and the model copy at sample k; "
         "x_delayed of sample k is entry k - d",
         "initial_memory": "unused = 1, sigma_hat_prev = z_0 = x0 with sigma in the short set, accumulators 0 "
-        "(mrpctl.engines.scalar.predictor_memory)",
+        "(mrpctl.loop.options.predictor_memory)",
         "history": "entries for k < d: (x0; x0) (the constant history, the only one with a predictor): x_hat = z_k",
     }
 

@@ -177,6 +177,7 @@ class PredictorStudy:
         Runs that do not settle within ``t_final`` are drawn as crosses at t_final; the exact margins,
         when computed, as shaded bands of tolerated e.
         """
+        # deferred: matplotlib, only when a figure is made
         from matplotlib.figure import Figure
 
         fig = Figure(figsize=(7.0, 4.2), layout="constrained")

@@ -29,6 +29,7 @@ from mrpctl.simulation.results import FLIGHT_RECORDS, SimulationResult, to_panda
 from mrpctl.spacecraft import Spacecraft
 
 if TYPE_CHECKING:
+    # deferred: xarray (about 0.5 s to import), only for labelled data
     import xarray as xr
 
 #: Rows formatted at once by :func:`write_csv` (bounds its memory to a few tens of MB).
@@ -103,6 +104,7 @@ def save(result: SimulationResult, path: str | Path, *, seed: int | None = None)
 
 
 def _open(path: str | Path) -> xr.Dataset:
+    # deferred: xarray (about 0.5 s to import), only for labelled data
     import xarray as xr
 
     path = Path(path)

@@ -26,6 +26,7 @@ import enum
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
+from importlib import resources
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -141,7 +142,6 @@ def _ziggurat_tables() -> tuple[list[float], list[float]]:
 @lru_cache(maxsize=1)
 def _c_tables() -> tuple[np.ndarray, np.ndarray]:
     """The tables as written in mrpctl/engines/noise.c (hex-float literals): the bits both sides use."""
-    from importlib import resources
 
     text = resources.files("mrpctl").joinpath("engines", "noise.c").read_text(encoding="utf-8")
     tables = []

@@ -212,9 +212,7 @@ def _switch_cluster(result: RunView) -> tuple[float, float] | None:
 
 
 # ------------------------------------------------------------------------------ single runs
-def plot_response(
-    result: RunView, *, title: str | None = None, ax: Any = None, inset: bool | None = None
-) -> Figure:
+def plot_response(result: RunView, *, title: str | None = None, ax: Any = None, inset: bool | None = None) -> Figure:
     """σ, ω and u against t, with the switch instants marked (paper Figs. 2-7).
 
     Parameters
@@ -725,6 +723,7 @@ def plot_distributions(
 
 def render_rgba(fig: Figure, *, dpi: int = 80) -> np.ndarray:
     """The figure rendered by Agg as an (h, w, 4) uint8 array (for image regression tests)."""
+    # deferred: matplotlib, only when a figure is made
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     previous, previous_dpi = fig.canvas, fig.get_dpi()
@@ -763,6 +762,7 @@ def save_figure(fig: Figure, path: str | Path, *, dpi: int = 110) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     if getattr(fig.canvas, "manager", None) is not None:  # made by pyplot: release it there
+        # deferred: matplotlib, only when a figure is made
         import matplotlib.pyplot as plt
 
         plt.close(fig)

@@ -31,9 +31,11 @@ from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
+import scipy.linalg
 
 from mrpctl._validation import finite_scalar, integer, positive_scalar, readonly
 from mrpctl.clock import delay_samples
+from mrpctl.design import delay_margin, pd_gains
 from mrpctl.errors import InertiaWarning, SpecificationError
 from mrpctl.model import STATE_SIZE, gain_matrix, pd_from_gain, plant_model
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
@@ -310,7 +312,6 @@ def predictor_loop_matrices(
     plant : Spacecraft, keyword-only
         The true plant (inertia J, kg m²).
     """
-    import scipy.linalg
 
     model, gain, tau_value, true_plant = _inputs(spacecraft, K, tau, plant)
     a = plant_model(model).A
@@ -345,7 +346,6 @@ def sampled_predictor_matrices(
 
 
 def _zoh(a: np.ndarray, b: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    import scipy.linalg
 
     n, m = b.shape
     augmented = np.zeros((n + m, n + m))
@@ -422,7 +422,6 @@ _AXES = tuple([i, 3 + i] for i in range(3))
 
 
 def _continuous_stable(a0: np.ndarray, a1: np.ndarray, tau: float) -> bool:
-    from mrpctl.design import delay_margin
 
     if not np.any(a1):
         return bool(np.all(np.linalg.eigvals(a0).real < 0.0))
@@ -697,7 +696,6 @@ def synthesize_predictor_pd(
     SpecificationError
         On invalid input, or when no ωₙ down to 0.05/τ keeps the margin.
     """
-    from mrpctl.design import pd_gains
 
     model = check_spacecraft(spacecraft, "spacecraft")
     tau_value = positive_scalar("tau", tau)

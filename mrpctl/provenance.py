@@ -5,7 +5,7 @@ from __future__ import annotations
 import platform
 from importlib.metadata import PackageNotFoundError, version
 
-__all__ = ["versions"]
+__all__ = ["mrpctl_version", "versions"]
 
 
 def versions() -> dict[str, str]:
@@ -17,3 +17,11 @@ def versions() -> dict[str, str]:
         except PackageNotFoundError:  # pragma: no cover - a source tree without installation
             found[package] = "unknown"
     return found
+
+
+def mrpctl_version() -> str:
+    """The installed mrpctl's version (``0.0.0+unknown`` from a source tree that was never installed)."""
+    try:
+        return version("mrpctl")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "0.0.0+unknown"

@@ -1,7 +1,7 @@
 """The lane engine specialised by structure, as the scalar engine is (issue 10 leftover).
 
 A lane batch compiles the flight sample of the union of its runs' structures
-(:func:`mrpctl.engines.scalar.flight_structure`: sensor / limited / disturbed); each lane must
+(:func:`mrpctl.loop.options.flight_structure`: sensor / limited / disturbed); each lane must
 give the scalar engine's bits, and the scalar engine of each run is specialised to that run alone
 (so a union engine is checked against narrower ones). The scalar engine is itself checked against
 the NumPy reference loop in tests/test_flight_engine.py.

@@ -16,15 +16,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import xarray as xr
+from scipy.stats import beta, norm
 
+from mrpctl import simulate
 from mrpctl._validation import integer
 from mrpctl.campaign._task import run_models, simulate_chunk
+from mrpctl.campaign.sampling import run_inputs
 from mrpctl.campaign.simulation import METRICS, flight_keywords
 from mrpctl.campaign.store import INPUTS, open_campaign, spec_of, stored_noise_revision
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
+from mrpctl.spacecraft import Spacecraft
 
 if TYPE_CHECKING:
+    # deferred: matplotlib, only when a figure is made
     from matplotlib.figure import Figure
 
     from mrpctl import SimulationResult
@@ -53,7 +58,6 @@ def wilson_interval(successes: int, trials: int, *, confidence: float = 0.95) ->
     """
     if trials == 0:
         return 0.0, 1.0
-    from scipy.stats import norm
 
     z = float(norm.ppf(0.5 + confidence / 2.0)) if confidence != 0.95 else _Z95
     p = successes / trials
@@ -67,7 +71,6 @@ def clopper_pearson_interval(successes: int, trials: int, *, confidence: float =
     """Exact (Clopper–Pearson 1934) interval of a binomial proportion, from the beta quantiles."""
     if trials == 0:
         return 0.0, 1.0
-    from scipy.stats import beta
 
     alpha = 1.0 - confidence
     low = 0.0 if successes == 0 else float(beta.ppf(alpha / 2.0, successes, trials - successes + 1))
@@ -307,6 +310,7 @@ def _rule_labels(dataset: xr.Dataset) -> list[str]:
 
 def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
     """The report's figures: settling-time and switch-count histograms, outcome against the initial state."""
+    # deferred: matplotlib, only when a figure is made
     from matplotlib.figure import Figure
 
     dataset = _dataset(source)
@@ -482,9 +486,6 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
 
 
 def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> SimulationResult:
-    from mrpctl import simulate
-    from mrpctl.campaign.sampling import run_inputs
-    from mrpctl.spacecraft import Spacecraft
 
     inputs = run_inputs(spec, run)
     base = spec.base
@@ -506,6 +507,7 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
 
 def plot_replay(result: ReplayResult) -> Figure:
     """σ, ω and u of a replayed run against t, with the switches marked."""
+    # deferred: matplotlib, only when a figure is made
     from matplotlib.figure import Figure
 
     if result.trajectory is None:

@@ -80,10 +80,12 @@ def _local(spec: CampaignSpec, store: CampaignStore, todo: list[int], threads: i
 def _dask(
     spec: CampaignSpec, store: CampaignStore, todo: list[int], scheduler: str, workers: int | None
 ) -> Iterator[tuple[int, Any]]:
+    # deferred: Dask, only for a Dask campaign or a store read lazily
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None
     if scheduler == "local":
+        # deferred: Dask, only for a Dask campaign or a store read lazily
         import dask
 
         # The cluster's own housekeeping competes with the workers for the same cores: no statistical

@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -203,8 +204,6 @@ def simulate_runs(
     elif flown:
         call(flown[0], threads=1)  # loads the flight engine once before the pool shares it
     if len(flown) > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
         workers = max(1, min(len(flown) - 1, threads or _cpus()))
         with ThreadPoolExecutor(max_workers=workers) as pool:
             for future in [pool.submit(call, members, threads=1) for members in flown[1:]]:

@@ -23,7 +23,7 @@ the origin) read by :func:`mrpctl.scenario.parse_scenario`, plus ``count``, ``se
     rules = ["on-delayed", "delay-aware", "hysteretic:0.1"]   # crossed with the cases (see below)
 
 The rule of ``[rule]`` (or of each entry of ``dispersions.rule.rules``) is a name of
-:data:`mrpctl.scenario.RULE_NAMES` or ``"hysteretic"`` (the controller-side rule
+:data:`mrpctl.rules.RULE_NAMES` or ``"hysteretic"`` (the controller-side rule
 :class:`mrpctl.flight.Hysteretic`), as a table ``{type = "boundary-layer", eps = 0.05}`` or a
 string ``"name"`` / ``"name:parameter"`` (eps of boundary-layer, alpha of delay-aware, delta of
 hysteretic). A rule list is a factor **crossed** with the cases: with R rules, run i is case
@@ -278,7 +278,7 @@ def rule_label(rule: SwitchingRule) -> str:
 def parse_rule(where: str, value: Any) -> SwitchingRule:
     """A rule from ``"name"``, ``"name:parameter"`` or a table ``{type = ..., eps/alpha/delta = ...}``.
 
-    The names are those of :data:`mrpctl.scenario.RULE_NAMES` and ``"hysteretic"``
+    The names are those of :data:`mrpctl.rules.RULE_NAMES` and ``"hysteretic"``
     (:class:`mrpctl.flight.Hysteretic`, parameter delta, default 0).
     """
     names = sorted([*RULE_NAMES, "hysteretic"])

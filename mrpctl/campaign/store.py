@@ -126,6 +126,7 @@ def _attrs(spec: CampaignSpec) -> dict[str, Any]:
 
 def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
     """The store's arrays filled with the missing values, as lazy Dask arrays (memory: one chunk at a time)."""
+    # deferred: Dask, only for a Dask campaign or a store read lazily
     import dask.array as da
 
     n = spec.count
@@ -219,6 +220,7 @@ class CampaignStore:
             if name in dataset:  # shared by the runs: one Zarr chunk
                 encoding[name] = {"chunks": dataset[name].shape}
         encoding["chunk_complete"] = {"chunks": (1,)}
+        # deferred: Dask, only for a Dask campaign or a store read lazily
         import dask
 
         # The template's lazy arrays are filled here, in this process: never on a Dask Client that happens

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.linalg
 
 from mrpctl._validation import finite_array
 from mrpctl.errors import DimensionError, SpecificationError
@@ -40,7 +41,6 @@ def balancing(a: np.ndarray, a_d: np.ndarray) -> np.ndarray:
     T⁻¹AT, T⁻¹A_dT have the characteristic roots of (A, A_d) and, for LMIs, congruent certificates;
     the balanced matrices are what the eigenvalue and LMI computations see (LAPACK gebal, scaling only).
     """
-    import scipy.linalg
 
     mag = np.abs(a) + np.abs(a_d)
     if a.shape[0] == 1 or not np.any(mag - np.diag(np.diag(mag))):
@@ -94,6 +94,7 @@ def solve(problem: Any) -> SolveOutcome:
     ``warm_start=False``: warm starts through Clarabel's update path gave spurious solver errors during
     bisection.
     """
+    # deferred: cvxpy (about 1 s to import), only when an LMI is solved
     import cvxpy as cp
 
     start = time.perf_counter()

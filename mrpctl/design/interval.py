@@ -391,6 +391,7 @@ def _assemble_rcc(R2: Any, X: Any, order: int, n: int, *, numeric: bool) -> Any:
     if numeric:
         r_n = np.kron(np.diag(w), R2)
         return np.block([[r_n, X], [X.T, r_n]])
+    # deferred: cvxpy (about 1 s to import), only when an LMI is solved
     import cvxpy as cp
 
     zero = np.zeros((n, n))
@@ -546,6 +547,7 @@ def solve_lmi(
     problem is a few dense affine maps of one variable vector: fast to build, and built per call
     (nothing shared between threads).
     """
+    # deferred: cvxpy (about 1 s to import), only when an LMI is solved
     import cvxpy as cp
 
     bases: list[tuple[str, np.ndarray]] = []

@@ -339,6 +339,7 @@ class _AnalysisProblem:
     """
 
     def __init__(self, n: int, order: int, positivity: Positivity, values: dict[str, Any] | None = None) -> None:
+        # deferred: cvxpy (about 1 s to import), only when an LMI is solved
         import cvxpy as cp
 
         self.n, self.order = n, order
@@ -422,6 +423,7 @@ class _AnalysisProblem:
 
 
 def _diag_blocks(S: Any, order: int) -> Any:
+    # deferred: cvxpy (about 1 s to import), only when an LMI is solved
     import cvxpy as cp
 
     n = S.shape[0]

@@ -409,6 +409,7 @@ def _solve_vertex(
     slack_bound: float | None,
 ) -> tuple[SolveOutcome, list[dict[str, np.ndarray]] | None, float]:
     """Maximise t: every block of every vertex ≽ t I, the traces of the S, R, positivity blocks sum to 1."""
+    # deferred: cvxpy (about 1 s to import), only when an LMI is solved
     import cvxpy as cp
 
     n = plants[0][0].shape[0]

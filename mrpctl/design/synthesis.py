@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from typing import Any, overload
 
 import numpy as np
+from scipy.optimize import minimize, minimize_scalar
 
 from mrpctl._validation import nonnegative_scalar, positive_scalar, readonly
 from mrpctl.design._common import OPTIMAL, order_value, solve
@@ -155,7 +156,6 @@ def _w_bound(zeta: float) -> float:
 @functools.lru_cache(maxsize=64)
 def _best_w(zeta: float) -> tuple[float, complex]:
     """The w = ωₙτ in (0, w_bound(ζ)) that minimises Re of the rightmost root, and that root."""
-    from scipy.optimize import minimize_scalar
 
     bound = _w_bound(zeta)
     res = minimize_scalar(
@@ -177,7 +177,6 @@ def _best_w_zeta(zeta_min: float) -> tuple[float, float, complex]:
     it is compared with the 1-D optimum on the boundary ζ = zeta_min. The answer does not depend on
     the spacecraft or on τ, so it is computed once per process.
     """
-    from scipy.optimize import minimize
 
     zeta_max = _ZETA_RANGE[1]
 
@@ -606,6 +605,7 @@ class _SynthesisProblem:
     """
 
     def __init__(self, n: int, m: int, order: int) -> None:
+        # deferred: cvxpy (about 1 s to import), only when an LMI is solved
         import cvxpy as cp
 
         blocks = order + 3

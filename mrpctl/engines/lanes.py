@@ -37,7 +37,7 @@ statistics rows of :mod:`mrpctl.engines.stats`, bit for bit those of the scalar 
 and ``simulate_batch`` uses it for metrics-only batches. The flight loop
 (``mrpctl.loop.flight_core_function``) runs the same way, specialised by structure as the scalar
 engine is (:func:`lane_engine` with ``sensor``, ``limited``, ``disturbed``: the union over a
-batch's runs of :func:`mrpctl.engines.scalar.flight_structure`): with a sensor its delayed
+batch's runs of :func:`mrpctl.loop.options.flight_structure`): with a sensor its delayed
 input is fed from its ``measurement`` output and its per-sample ``noise`` is a stream shared by
 the lanes (one :meth:`~mrpctl.flight.SensorModel.noise_rows` per slice and batch), without one
 from ``x_meas`` with no stream; a time-varying delay's newest-arrived schedule is shared per
@@ -104,7 +104,7 @@ SLICE_SAMPLES = 2**16
 _DRIVER_FILE = "lanes_driver.c"
 _ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT, _ROLE_STREAMED = 0, 1, 2, 3
 _ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
-#: The keywords of the flight sample's structure (:func:`mrpctl.engines.scalar.flight_structure`).
+#: The keywords of the flight sample's structure (:func:`mrpctl.loop.options.flight_structure`).
 _STRUCTURE = ("sensor", "limited", "disturbed")
 
 # ------------------------------------------------------------------ the operations
@@ -968,7 +968,7 @@ def lane_engine(
     :class:`~mrpctl.flight.Hysteretic`, the actuator's ``saturation`` mode and the sample's
     specialisation ``sensor``, ``limited``, ``disturbed`` of
     :func:`mrpctl.loop.flight_core_function`: for a batch, the union over its runs of
-    :func:`~mrpctl.engines.scalar.flight_structure`; default the full sample, which serves
+    :func:`~mrpctl.loop.options.flight_structure`; default the full sample, which serves
     every run); plus W and the emitter options. The flight sample with a ``sensor`` feeds its
     delayed input from its ``measurement`` output (the sensor's, as the scalar driver's ring
     does) and takes its ``noise`` as a stream shared by the lanes; without one (an ideal sensor)
@@ -1063,7 +1063,7 @@ def closed_loop_batches(
     read the statistics with :func:`lane_stats` once every batch has run.
 
     For the flight sample (an engine of :func:`lane_engine` with a :attr:`~LaneEngine.structure`):
-    ``memory0`` is (N, FLIGHT_MEMORY_SIZE) (:func:`mrpctl.engines.scalar.flight_memory`
+    ``memory0`` is (N, FLIGHT_MEMORY_SIZE) (:func:`mrpctl.loop.options.flight_memory`
     of each run), ``flight_options`` the shared run-time constants (u_max (3), u_norm, w (3),
     gyro bias (3); default none), ``sensor`` the shared noise (:meth:`SensorModel.noise_rows`
     of each slice, the numbers the scalar engine gets) and ``delay`` a shared time-varying
@@ -1073,7 +1073,7 @@ def closed_loop_batches(
     engine with a ``torque`` stream), its rows of each slice (:meth:`~mrpctl.flight.Disturbance.samples`)
     streamed beside the noise; or one per-sample torque per run (an engine with a per-lane ``torque``
     stream: :func:`lane_engine` with ``torque_per_lane``), each batch's lanes streamed their own rows.
-    The engine's structure must serve every run (:func:`~mrpctl.engines.scalar.flight_structure`
+    The engine's structure must serve every run (:func:`~mrpctl.loop.options.flight_structure`
     of ``flight_options`` and ``sensor``, the union over the rows): a run with a limit, a torque w,
     a noisy sensor or a gyro bias on an engine specialised without it is refused
     (SpecificationError), as its numbers would not be the scalar engine's.

@@ -248,7 +248,7 @@ def _one_disturbance(item: Any, name: str) -> Disturbance | None:
 
 def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
     """The engine's structure keywords: the predictor's (sensor given, actuator given), or the
-    flight sample's specialisation to the run's constants (:func:`~mrpctl.engines.scalar.flight_structure`)."""
+    flight sample's specialisation to the run's constants (:func:`~mrpctl.loop.options.flight_structure`)."""
     if checked is not None:
         return {"sensor": sensor is not None, "limited": actuator is not None}
     return flight_structure(options, sensor)
@@ -834,7 +834,7 @@ def _run_lanes(
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
-    runs' :func:`~mrpctl.engines.scalar.flight_structure`), W runs per C call, the batches on the thread
+    runs' :func:`~mrpctl.loop.options.flight_structure`), W runs per C call, the batches on the thread
     pool; write the rows of ``stats`` (and of ``flight_rows``: the flight sample's memory).
     ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then

@@ -20,7 +20,10 @@ from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 
 if TYPE_CHECKING:
+    # deferred: pandas (about 0.3 s to import), only for a DataFrame
     import pandas as pd  # type: ignore[import-untyped]
+
+    # deferred: xarray (about 0.5 s to import), only for labelled data
     import xarray as xr
 
 __all__ = [
@@ -493,6 +496,7 @@ FLIGHT_RECORDS: tuple[tuple[str, tuple[str, ...], dict[str, str]], ...] = (
 
 
 def _run_dataset(result: SimulationResult) -> xr.Dataset:
+    # deferred: xarray (about 0.5 s to import), only for labelled data
     import xarray as xr  # deferred: xarray takes about 0.5 s to import
 
     n = len(result.t)
@@ -561,6 +565,7 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
 
 
 def _batch_dataset(result: BatchResult) -> xr.Dataset:
+    # deferred: xarray (about 0.5 s to import), only for labelled data
     import xarray as xr  # deferred: xarray takes about 0.5 s to import
 
     n = len(result)
@@ -616,6 +621,7 @@ def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
     delay_used (samples)); the inputs in ``DataFrame.attrs``. A batch: indexed by ``run``, columns for the initial
     state, τ, the rule and every metric.
     """
+    # deferred: pandas (about 0.3 s to import), only for a DataFrame
     import pandas as pd  # deferred: pandas takes about 0.3 s to import
 
     if isinstance(result, SimulationResult):
