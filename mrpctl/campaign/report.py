@@ -18,7 +18,6 @@ import numpy as np
 import xarray as xr
 from scipy.stats import beta, norm
 
-from mrpctl import simulate
 from mrpctl._validation import integer
 from mrpctl.campaign._task import run_models, simulate_chunk
 from mrpctl.campaign.sampling import run_inputs
@@ -26,13 +25,14 @@ from mrpctl.campaign.simulation import METRICS, flight_keywords
 from mrpctl.campaign.store import INPUTS, open_campaign, spec_of, stored_noise_revision
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
+from mrpctl.simulation import simulate
 from mrpctl.spacecraft import Spacecraft
 
 if TYPE_CHECKING:
     # deferred: matplotlib, only when a figure is made
     from matplotlib.figure import Figure
 
-    from mrpctl import SimulationResult
+    from mrpctl.simulation import SimulationResult
 
 __all__ = [
     "CampaignReport",

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl import simulate_batch
 from mrpctl.flight import Disturbance
 from mrpctl.predictor import Predictor
+from mrpctl.simulation import simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 

@@ -98,6 +98,19 @@ from mrpctl.switching import (
     SwitchingRule,
 )
 
+__all__ = [
+    "SLICE_SAMPLES",
+    "STATE_BLOCK",
+    "Engine",
+    "clear_engines",
+    "engine",
+    "engine_sample",
+    "noise_rows",
+    "rule_key",
+    "short_history",
+    "slice_samples",
+]
+
 #: Samples per C call: Ctrl-C and the batch's stop flag are seen between slices (about
 #: 10 ms of the paper's loop per slice at one substep; divided by the substeps).
 SLICE_SAMPLES = 2**16

@@ -7,6 +7,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+__all__ = [
+    "DIVERGENCE_BOUND",
+    "HISTORY_KINDS",
+    "SETTLING_OMEGA",
+    "SETTLING_SIGMA",
+    "STATS_SIZE",
+    "S_FLIPS",
+    "S_UPREV",
+    "Metrics",
+    "initial_stats",
+]
+
 #: Settling: |σ| below this (dimensionless) ...
 SETTLING_SIGMA = 1e-2
 #: ... and |ω| below this (rad/s), from the settling time to the end of the run.

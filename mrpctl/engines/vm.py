@@ -24,6 +24,10 @@ from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory
 from mrpctl.model import STATE_SIZE
 from mrpctl.spacecraft import Spacecraft
 
+__all__ = [
+    "VirtualMachineEngine",
+]
+
 _BLOCK_TARGET = 500  # samples per block (a whole number of chunks)
 
 

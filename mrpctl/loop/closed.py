@@ -74,6 +74,14 @@ from mrpctl.predictor import OnPredicted
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import MEMORY_SIZE, OnCurrent, SwitchingRule
 
+__all__ = [
+    "PREDICTOR_MEMORY_LAYOUT",
+    "ClosedLoopFunctions",
+    "FlightOptions",
+    "check_rule",
+    "closed_loop_functions",
+]
+
 
 def check_rule(rule: Any, name: str = "rule") -> SwitchingRule:
     """Return ``rule`` if it is a :class:`~mrpctl.switching.SwitchingRule`, else raise SpecificationError."""

@@ -32,6 +32,24 @@ from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, plant_model
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
 
+__all__ = [
+    "CONTROLLER_MEMORY_SIZE",
+    "FLIGHT_MEMORY_LAYOUT",
+    "PREDICTOR_MEMORY_SIZE",
+    "PREDICTOR_RING_WIDTH",
+    "InertiaInput",
+    "chunk_function",
+    "core_function",
+    "flight_chunk_function",
+    "flight_core_function",
+    "inertia_input",
+    "inertia_values",
+    "prediction_expr",
+    "predictor_constants_size",
+    "predictor_core_function",
+    "step_function",
+]
+
 
 class InertiaInput(enum.Enum):
     """How a run-time inertia enters a compiled Function (see :func:`inertia_input`)."""
