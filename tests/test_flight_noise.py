@@ -18,7 +18,7 @@ from scipy import stats
 
 from mrpctl import _compile, flight
 from mrpctl.errors import SpecificationError
-from mrpctl.flight import STREAM_ATTITUDE, STREAM_JITTER, STREAM_RATE, DelayModel, SensorModel, stream_key
+from mrpctl.flight import STREAM_ATTITUDE, STREAM_JITTER, STREAM_RATE, DelayModel, SensorModel, stream_key, streams
 
 MILLION = 1_000_000
 
@@ -58,8 +58,8 @@ def _bits(values: np.ndarray) -> np.ndarray:
 
 # ============================================================================ one source of bits
 def test_the_tables_in_the_c_source_are_the_documented_recursion_bit_for_bit():
-    x, f = flight._ziggurat_tables()
-    table_x, table_f = flight._c_tables()
+    x, f = streams._ziggurat_tables()
+    table_x, table_f = streams._c_tables()
     assert np.array_equal(_bits(np.array(x)), _bits(table_x)) and np.array_equal(_bits(np.array(f)), _bits(table_f))
     assert table_x[1] == 3.6541528853610088 and table_x[256] == 0.0 and table_f[256] == 1.0
     assert np.all(np.diff(table_x) < 0) and np.all(np.diff(table_f) > 0)
@@ -75,7 +75,7 @@ def test_the_prescaled_table_is_x_times_two_to_the_minus_53_exactly():
     text = resources.files("mrpctl").joinpath("engines", "noise.c").read_text(encoding="utf-8")
     body = text.split("mrpctl_zig_xs[256] = {", 1)[1].split("}", 1)[0]
     scaled = np.array([float.fromhex(item) for item in body.replace("\n", " ").split(",") if item.strip()])
-    table_x, _ = flight._c_tables()
+    table_x, _ = streams._c_tables()
     assert scaled.shape == (256,)
     assert np.array_equal(_bits(scaled), _bits(np.ldexp(table_x[:256], -53)))
     # the product is the same real number as the documented ((h >> 11) 2^-53) X[i]: the same rounding
@@ -86,8 +86,8 @@ def test_the_prescaled_table_is_x_times_two_to_the_minus_53_exactly():
 
 def test_mix64_is_splitmix64():
     """The first outputs of SplitMix64 seeded with 0 (the reference sequence of Vigna's splitmix64.c)."""
-    assert [flight._value(0, i) for i in range(3)] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F]
-    assert flight._values(0, np.arange(3, dtype=np.uint64)).tolist() == [flight._value(0, i) for i in range(3)]
+    assert [streams._value(0, i) for i in range(3)] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F]
+    assert streams._values(0, np.arange(3, dtype=np.uint64)).tolist() == [streams._value(0, i) for i in range(3)]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 20261201, 2**64 - 1])

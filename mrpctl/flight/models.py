@@ -1,32 +1,11 @@
-"""The loop as flown: sensor, actuator, delay and disturbance models, and controller-side set selection.
-
-The paper's loop (``mrpctl.switching``) switches the *plant's* MRP and the controller reads back
-whatever set the plant was in τ ago. Flight software works differently: a star tracker reports an
-attitude, the plant's MRP set is a simulation detail, and the controller alone chooses which MRP set
-to feed its control law, from the delayed (noisy) measurement, keeping that choice in its own memory.
-This module holds the pieces of that loop (see ``design/flight.md`` for the equations):
-
-* option values, frozen and validated: :class:`SensorModel`, :class:`ActuatorModel`,
-  :class:`DelayModel`, :class:`Disturbance`, and the controller-side rule :class:`Hysteretic`
-  (Mayhew, Sanfelice and Teel 2011);
-* seeded noise and jitter streams that depend only on (seed, sample index), never on how the
-  horizon is sliced (:meth:`SensorModel.noise`, :meth:`DelayModel.samples`);
-* the newest-arrived measurement schedule of a time-varying delay (:func:`newest_arrived`);
-* the CasADi expression builders of one flight sample, each also a small pure-SX
-  ``casadi.Function`` with named ports: :func:`measurement_function`,
-  :func:`hysteresis_function`, :func:`selection_function`, :func:`actuator_function`.
-
-Conventions are those of :mod:`mrpctl.mrp`: σ = tan(Φ/4) ê, quaternions scalar first,
-[BN] passive, x = [σ; ω/4].
-"""
+"""The option values of the loop as flown, frozen and validated: sensor, actuator, delay, disturbance and
+the controller-side rule `Hysteretic`; the newest-arrived schedule of a time-varying delay."""
 
 from __future__ import annotations
 
 import enum
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
-from importlib import resources
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -34,7 +13,8 @@ import numpy as np
 
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.mrp import skew_expr
+from mrpctl.flight.expressions import Saturation
+from mrpctl.flight.streams import sample_slice, stream_integers, stream_normal_rows, stream_seed
 from mrpctl.switching import SwitchingRule
 
 __all__ = [
@@ -50,23 +30,9 @@ __all__ = [
     "DelayModel",
     "Disturbance",
     "Hysteretic",
-    "NoiseForm",
-    "Saturation",
     "SensorModel",
-    "actuator_function",
-    "compose_mrp_expr",
-    "hysteresis_function",
-    "measurement_function",
     "newest_arrived",
     "newest_arrived_slice",
-    "quaternion_from_mrp_expr",
-    "raw_measurement_function",
-    "rotation_mrp_function",
-    "rotation_vector_to_mrp_expr",
-    "selection_function",
-    "short_expr",
-    "stream_key",
-    "stream_normals",
 ]
 
 #: The memory a controller-side rule carries in the compiled engine: (h, c, σ̃_prev) and the
@@ -90,169 +56,6 @@ _MAX_ATTITUDE_NOISE = 1e150
 _MAX_RATE_ERROR = 1e6
 
 
-# ================================================================== random streams
-# The NumPy mirror of mrpctl/engines/noise.c (read that file's header: SplitMix64 values of
-# (key, idx), a 256-layer ziggurat on them); the C driver generates the same bits per sample.
-_MASK64 = (1 << 64) - 1
-_GAMMA = 0x9E3779B97F4A7C15
-_ZIG_LAYERS = 256
-_ZIG_R = 3.6541528853610088
-_ATTEMPTS, _TAIL_TRIES = 64, 31  # the C loops' caps: attempt 63, tail try 30 accept their candidate
-_TWO_M53 = 2.0**-53
-
-
-def _mix64(z: int) -> int:
-    """Stafford's Mix13, the SplitMix64 finaliser, on a Python int (mod 2^64)."""
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
-    return z ^ (z >> 31)
-
-
-def stream_key(seed: int, stream: int) -> int:
-    """The 64-bit key of one stream (0 attitude, 1 rate, 2 jitter) of ``seed`` (< 2^64)."""
-    return _mix64((_mix64((seed + _GAMMA) & _MASK64) + (stream + 1) * 0xD1B54A32D192ED03) & _MASK64)
-
-
-def _value(key: int, idx: int) -> int:
-    """Value number idx of the stream with ``key`` (scalar, Python ints)."""
-    return _mix64((key + (idx + 1) * _GAMMA) & _MASK64)
-
-
-def _values(key: int, idx: np.ndarray) -> np.ndarray:
-    """:func:`_value` of a uint64 array of indices (uint64 arithmetic wraps mod 2^64)."""
-    z = (idx + np.uint64(1)) * np.uint64(_GAMMA) + np.uint64(key)
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
-
-
-def _ziggurat_tables() -> tuple[list[float], list[float]]:
-    """X (257) and F = exp(−X²/2) of the 256-layer ziggurat, computed in float64 as documented in noise.c."""
-    r = _ZIG_R
-    v = r * math.exp(-0.5 * r * r) + math.sqrt(math.pi / 2.0) * math.erfc(r / math.sqrt(2.0))
-    x = [0.0] * (_ZIG_LAYERS + 1)
-    x[0], x[1] = v / math.exp(-0.5 * r * r), r
-    for i in range(1, _ZIG_LAYERS - 1):
-        x[i + 1] = math.sqrt(-2.0 * math.log(v / x[i] + math.exp(-0.5 * x[i] * x[i])))
-    f = [math.exp(-0.5 * value * value) for value in x]
-    f[_ZIG_LAYERS] = 1.0
-    return x, f
-
-
-@lru_cache(maxsize=1)
-def _c_tables() -> tuple[np.ndarray, np.ndarray]:
-    """The tables as written in mrpctl/engines/noise.c (hex-float literals): the bits both sides use."""
-
-    text = resources.files("mrpctl").joinpath("engines", "noise.c").read_text(encoding="utf-8")
-    tables = []
-    for name in ("mrpctl_zig_x", "mrpctl_zig_f"):
-        body = text.split(f"{name}[{_ZIG_LAYERS + 1}] = {{", 1)[1].split("}", 1)[0]
-        values = [float.fromhex(item) for item in body.replace("\n", " ").split(",") if item.strip()]
-        if len(values) != _ZIG_LAYERS + 1:
-            raise RuntimeError(f"noise.c: {name} has {len(values)} entries, expected {_ZIG_LAYERS + 1}")
-        tables.append(np.array(values))
-    return tables[0], tables[1]
-
-
-def _normal_slow(key: int, n: int, table_x: np.ndarray, table_f: np.ndarray) -> float:
-    """Normal number n by the C code's loop, in Python floats (math.exp / math.log: the same libm)."""
-    r = float(table_x[1])
-    for attempt in range(_ATTEMPTS):
-        base = (n << 12) | (attempt << 6)
-        h = _value(key, base)
-        i, negative = h & 255, (h >> 8) & 1
-        x = float(h >> 11) * _TWO_M53 * float(table_x[i])
-        if x < table_x[i + 1]:
-            return -x if negative else x
-        if i == 0:
-            for t in range(_TAIL_TRIES):
-                u1 = float((_value(key, base | (2 * t + 1)) >> 11) + 1) * _TWO_M53
-                u2 = float((_value(key, base | (2 * t + 2)) >> 11) + 1) * _TWO_M53
-                xt = -math.log(u1) / r
-                y = -math.log(u2)
-                if y + y > xt * xt or t == _TAIL_TRIES - 1:
-                    x = r + xt
-                    return -x if negative else x
-        else:
-            u2 = float(_value(key, base | 1) >> 11) * _TWO_M53
-            f_i, f_next = float(table_f[i]), float(table_f[i + 1])
-            if f_i + u2 * (f_next - f_i) < math.exp(-0.5 * x * x) or attempt == _ATTEMPTS - 1:
-                return -x if negative else x
-    raise AssertionError("unreachable: the last attempt accepts")  # pragma: no cover
-
-
-def stream_normals(key: int, n0: int, n1: int) -> np.ndarray:
-    """Standard normal numbers n0 … n1 − 1 of the stream with ``key``, as the C code draws them (float64).
-
-    Vectorised over the values attempt by attempt (the C loop of each value, in the same
-    arithmetic); the exponentials of the wedge tests are Python's ``math.exp`` (the libm's, as in
-    the C code: NumPy's own exp may differ in the last bit) and the tail, about 4 values in 10⁴,
-    runs the C loop value by value (:func:`_normal_slow`, ``math.log``).
-    """
-    table_x, table_f = _c_tables()
-    out = np.empty(n1 - n0)
-    pending = np.arange(n1 - n0, dtype=np.int64)
-    counters = np.arange(n0, n1, dtype=np.uint64) << np.uint64(12)
-    for attempt in range(_ATTEMPTS - 1):  # the last attempt (never reached in practice) is _normal_slow's
-        if pending.size == 0:
-            break
-        base = counters[pending] | np.uint64(attempt << 6)
-        h = _values(key, base)
-        layer = (h & np.uint64(255)).astype(np.intp)
-        x = (h >> np.uint64(11)).astype(np.float64) * _TWO_M53 * table_x[layer]
-        signed = np.where((h & np.uint64(256)) != 0, -x, x)
-        accept = x < table_x[layer + 1]
-        wedge = np.flatnonzero(~accept & (layer != 0))
-        if wedge.size:
-            wx, wi = x[wedge], layer[wedge]
-            u2 = (_values(key, base[wedge] | np.uint64(1)) >> np.uint64(11)).astype(np.float64) * _TWO_M53
-            height = table_f[wi] + u2 * (table_f[wi + 1] - table_f[wi])
-            density = np.array([math.exp(value) for value in (-0.5 * wx * wx).tolist()])
-            accept[wedge] = height < density
-        out[pending[accept]] = signed[accept]
-        for position in pending[~accept & (layer == 0)].tolist():  # the tail: its own loop, value by value
-            out[position] = _normal_slow(key, n0 + position, table_x, table_f)
-        pending = pending[~accept & (layer != 0)]
-    for position in pending.tolist():
-        out[position] = _normal_slow(key, n0 + position, table_x, table_f)
-    return out
-
-
-def _stream_normals(
-    seed: int, stream: int, k0: int, k1: int, *, scale: float = 1.0, out: np.ndarray | None = None
-) -> np.ndarray:
-    """(k1 − k0, 3) standard normals of samples k0 … k1 − 1 of one stream, times ``scale``.
-
-    Component c of sample k is normal number 3k + c of the stream's key (:func:`stream_normals`),
-    written into ``out`` (any (k1 − k0, 3) float64 view, e.g. three columns of a wider array);
-    ``scale * value`` is the C driver's product.
-    """
-    out = np.empty((k1 - k0, 3)) if out is None else out
-    values = stream_normals(stream_key(seed, stream), 3 * k0, 3 * k1).reshape(k1 - k0, 3)
-    np.multiply(values, scale, out=out)
-    return out
-
-
-def _stream_integers(seed: int, stream: int, k0: int, k1: int, low: int, high: int) -> np.ndarray:
-    """(k1 − k0,) integers uniform in [low, high] of samples k0 … k1 − 1 of one stream (noise.c's map)."""
-    count = high - low + 1
-    if not 0 < count <= 2**32:
-        raise SpecificationError(f"the jitter range [{low}, {high}] must hold 1 to 2^32 whole periods")
-    h = _values(stream_key(seed, stream), np.arange(k0, k1, dtype=np.uint64) << np.uint64(12))
-    return low + (((h >> np.uint64(32)) * np.uint64(count)) >> np.uint64(32)).astype(np.int64)
-
-
-def _slice(k0: Any, k1: Any) -> tuple[int, int]:
-    start = integer("k0", k0, minimum=0)
-    stop = integer("k1", k1, minimum=start)
-    return start, stop
-
-
-def _seed(seed: Any) -> int:
-    return integer("seed", seed, minimum=0, maximum=_MASK64)
-
-
-# ================================================================== option values
 @dataclass(frozen=True, eq=False)
 class SensorModel:
     """Star tracker and gyro: attitude noise as a small random rotation, white rate noise, gyro bias.
@@ -301,7 +104,7 @@ class SensorModel:
                 )
         object.__setattr__(self, "rate_noise", rate_noise)
         object.__setattr__(self, "gyro_bias", readonly(bias))
-        object.__setattr__(self, "seed", _seed(self.seed))
+        object.__setattr__(self, "seed", stream_seed(self.seed))
 
     @property
     def ideal(self) -> bool:
@@ -330,7 +133,7 @@ class SensorModel:
         k1 − k0 rows and 6 columns, e.g. a buffer reused slice after slice; its first k1 − k0 rows
         are written and returned), else into a new array.
         """
-        start, stop = _slice(k0, k1)
+        start, stop = sample_slice(k0, k1)
         count = stop - start
         if out is None:
             rows = np.empty((count, NOISE_SIZE))
@@ -346,7 +149,7 @@ class SensorModel:
         for column, sigma, stream in ((0, self.attitude_noise, STREAM_ATTITUDE), (3, self.rate_noise, STREAM_RATE)):
             target = rows[:, column : column + 3]
             if sigma > 0.0:
-                _stream_normals(self.seed, stream, start, stop, scale=sigma, out=target)
+                stream_normal_rows(self.seed, stream, start, stop, scale=sigma, out=target)
             else:
                 target[...] = 0.0
         return rows
@@ -359,15 +162,6 @@ class SensorModel:
             f"SensorModel (attitude 1sigma {self.attitude_noise:g} rad per axis, rate 1sigma "
             f"{self.rate_noise:g} rad/s, gyro bias [{bias}] rad/s, seed {self.seed})"
         )
-
-
-class Saturation(enum.Enum):
-    """How a torque limit acts on a commanded torque u."""
-
-    #: One factor s ∈ (0, 1] on the whole vector: direction preserved, every limit met.
-    SCALE = "scale"
-    #: Each axis clipped on its own (independent actuators), then the norm limit by scaling.
-    CLIP = "clip"
 
 
 @dataclass(frozen=True, eq=False)
@@ -471,7 +265,7 @@ class DelayModel:
             raise SpecificationError("a constant delay needs tau_min == tau_max")
         object.__setattr__(self, "tau_min", tau_min)
         object.__setattr__(self, "tau_max", tau_max)
-        object.__setattr__(self, "seed", _seed(self.seed))
+        object.__setattr__(self, "seed", stream_seed(self.seed))
         if self.kind is DelayKind.SEQUENCE:
             if self.delays is None:
                 raise SpecificationError("delays: a delay sequence needs an array of per-sample delays (s)")
@@ -527,14 +321,14 @@ class DelayModel:
         Jitter is uniform over the integers in [d_min, d_max], keyed by (seed, k) (a multiply-shift
         map of a 32-bit value: the relative error of each integer's probability is below (d_max − d_min + 1)/2³²).
         """
-        start, stop = _slice(k0, k1)
+        start, stop = sample_slice(k0, k1)
         low, high = self.bounds(rate)
         if self.kind is DelayKind.CONSTANT:
             return np.full(stop - start, low, dtype=np.int64)
         if self.kind is DelayKind.JITTER:
             if low == high:
                 return np.full(stop - start, low, dtype=np.int64)
-            return _stream_integers(self.seed, STREAM_JITTER, start, stop, low, high)
+            return stream_integers(self.seed, STREAM_JITTER, start, stop, low, high)
         assert self.delays is not None  # a SEQUENCE always has delays (checked in __post_init__)
         if stop > len(self.delays):
             raise DimensionError(
@@ -602,7 +396,7 @@ def newest_arrived_slice(
     (:meth:`DelayModel.samples`, slice independent). Concatenating the slices of any slicing
     gives :func:`newest_arrived` of the whole horizon (int64).
     """
-    start, stop = _slice(k0, k1)
+    start, stop = sample_slice(k0, k1)
     depth = integer("depth", depth, minimum=0)
     low = max(0, start - depth)
     j = np.arange(low, stop, dtype=np.int64)
@@ -690,7 +484,7 @@ class Disturbance:
 
     def samples(self, k0: int, k1: int, rate: float | None = None) -> np.ndarray:
         """(k1 − k0, 3) torque over samples k0 … k1 − 1 (N m); ``rate`` (Hz) for a function of time."""
-        start, stop = _slice(k0, k1)
+        start, stop = sample_slice(k0, k1)
         if self.function is not None:
             if rate is None:
                 raise SpecificationError("rate: a disturbance given as a function of time needs the sample rate")
@@ -784,241 +578,3 @@ class Hysteretic(SwitchingRule):
 
     def __str__(self) -> str:
         return f"Hysteretic (h flips when h q0 < -{self.delta:g}; |sigma_c| <= alpha = {self.alpha:.6g})"
-
-
-# ================================================================== CasADi expressions
-def rotation_vector_to_mrp_expr(theta: Any) -> Any:
-    """σ = tan(|θ|/4) θ/|θ| of a rotation vector θ (rad, any angle), exactly 0 at θ = 0 (SX).
-
-    σ = k(Φ²) θ with Φ = |θ|. For Φ <= π (|σ| <= 1), k is Cephes' rational tan (Moshier, Cephes
-    2.8, ``double/tan.c``: tan x = x + x³ P(x²)/Q(x²) for |x| <= π/4, x = Φ/4), written in
-    y = Φ²/16 = x² as k = 1/4 + y P(y) / (4 Q(y)): no sqrt, no tan, one division, within 1 ulp of
-    tan(Φ/4)/Φ (``tests/test_sensor_rotation.py``). For Φ > π, k = tan(Φ/4)/Φ by libm (its exact
-    argument reduction keeps every angle, the largest accepted noise included, the NumPy
-    reference's rotation); σ may then be the long set. CasADi's if_else computes both branches
-    (the virtual machine and the lanes run tan(0) on the main path); in CasADi's generated C gcc
-    makes the libm call a branch, so that the main path runs neither sqrt nor tan. Both share the
-    one division.
-    """
-    angle_squared = ca.dot(theta, theta)
-    return _tan_quarter_ratio_expr(angle_squared) * theta
-
-
-#: Cephes tan.c (release 2.8, June 2000, S. L. Moshier), the IEEE coefficients of P and Q (Q monic,
-#: its leading 1 left out) of tan x = x + x³ P(x²)/Q(x²), |x| <= π/4; highest power first.
-_TAN_P = (-1.30936939181383777646e4, 1.15351664838587416140e6, -1.79565251976484877988e7)
-_TAN_Q = (1.36812963470692954678e4, -1.32089234440210967447e6, 2.50083801823357915839e7, -5.38695755929454629881e7)
-#: Φ² beyond which Cephes' interval |Φ/4| <= π/4 is left (π² in float64, within an ulp of π²).
-_PI_SQUARED = math.pi * math.pi
-
-
-def _tan_quarter_ratio_expr(angle_squared: Any) -> Any:
-    """k = tan(Φ/4)/Φ from Φ² = ``angle_squared`` (SX): 1/4 at 0; see :func:`rotation_vector_to_mrp_expr`."""
-    y = 0.0625 * angle_squared  # x² = Φ²/16 exactly (a power of two)
-    p = (_TAN_P[0] * y + _TAN_P[1]) * y + _TAN_P[2]
-    q = (((y + _TAN_Q[0]) * y + _TAN_Q[1]) * y + _TAN_Q[2]) * y + _TAN_Q[3]
-    wide = angle_squared > _PI_SQUARED
-    # Φ > π: tan(Φ/4)/Φ as before (sqrt(0) and tan(0) where both branches are computed)
-    angle = ca.sqrt(ca.if_else(wide, angle_squared, 0.0))
-    numerator = ca.if_else(wide, ca.tan(0.25 * angle), y * p)
-    denominator = ca.if_else(wide, angle, 4.0 * q)  # 4 Q exactly: k = 1/4 + yP/(4Q) = (1 + yP/Q)/4
-    return ca.if_else(wide, 0.0, 0.25) + numerator / denominator
-
-
-def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
-    """σ(F/N) of [FN] = [FB][BN] from σ_first = σ(B/N) and σ_second = σ(F/B) (SX).
-
-    σ = ((1 − |σ₁|²) σ₂ + (1 − |σ₂|²) σ₁ − 2 σ₂ × σ₁) / (1 + |σ₁|² |σ₂|² − 2 σ₁·σ₂)
-    (Schaub & Junkins Eq. 3.152), the quaternion product written in MRPs. The result may be
-    the long set. With σ₂ = 0 it returns σ₁ exactly (bit for bit).
-    """
-    s1 = ca.dot(sigma_first, sigma_first)
-    s2 = ca.dot(sigma_second, sigma_second)
-    numerator = (1 - s1) * sigma_second + (1 - s2) * sigma_first - 2 * (skew_expr(sigma_second) @ sigma_first)
-    return numerator * (1 / (1 + s1 * s2 - 2 * ca.dot(sigma_first, sigma_second)))  # one division, not three
-
-
-def short_expr(sigma: Any) -> Any:
-    """The short set (|σ| <= 1) of σ (SX): σ unchanged when |σ|² <= 1, else −σ/|σ|²."""
-    squared = ca.dot(sigma, sigma)
-    return ca.if_else(squared > 1, _safe_shadow_expr(sigma, squared), sigma)
-
-
-def _safe_shadow_expr(sigma: Any, squared: Any) -> Any:
-    # −σ/|σ|² from |σ|² = ``squared`` (computed once by the caller: SX does not merge two dot products).
-    # Both if_else branches are evaluated: keep the unused shadow of σ = 0 finite.
-    return sigma * (-1 / ca.if_else(squared > 0, squared, 1.0))  # one division, not three
-
-
-def quaternion_from_mrp_expr(sigma: Any) -> Any:
-    """β = ((1 − |σ|²)/(1 + |σ|²), 2σ/(1 + |σ|²)) (scalar first) of σ (SX); β₀ >= 0 for a short σ."""
-    squared = ca.dot(sigma, sigma)
-    return ca.vertcat((1 - squared) / (1 + squared), 2 * sigma / (1 + squared))
-
-
-class NoiseForm(enum.Enum):
-    """How a sample receives the sensor's attitude noise.
-
-    ``ROTATION_VECTOR``: θ (rad), and the sample computes its MRP σ(θ) (:func:`rotation_vector_to_mrp_expr`):
-    the exported samples, the virtual machine and the lane engine. ``MRP``: σ(θ) itself, computed before the
-    sample by :func:`rotation_mrp_function` (the same expressions, so the same bits): the compiled scalar
-    engine, which turns a block of θ rows into their MRPs at once, so that tan's latency is not on the
-    sample's path.
-    """
-
-    ROTATION_VECTOR = "rotation_vector"
-    MRP = "mrp"
-
-
-@lru_cache(maxsize=1)
-def rotation_mrp_function() -> ca.Function:
-    """``rotation_mrp(rotation_noise) -> rotation_noise_mrp``: σ(θ) of :func:`rotation_vector_to_mrp_expr` (pure SX)."""
-    theta = ca.SX.sym("rotation_noise", 3)
-    return ca.Function(
-        "rotation_mrp", [theta], [rotation_vector_to_mrp_expr(theta)], ["rotation_noise"], ["rotation_noise_mrp"]
-    )
-
-
-def _sensor_expressions(form: NoiseForm) -> tuple[list[Any], list[str], Any, Any]:
-    """The sensor's inputs (x, rotation noise, rate noise, bias), their names, σ ⊕ σ(θ) (either set) and ω̃."""
-    if not isinstance(form, NoiseForm):
-        raise SpecificationError(f"form must be a mrpctl.flight.NoiseForm, got {form!r}")
-    x = ca.SX.sym("x", 6)
-    noise_name = "rotation_noise" if form is NoiseForm.ROTATION_VECTOR else "rotation_noise_mrp"
-    noise = ca.SX.sym(noise_name, 3)
-    eta = ca.SX.sym("rate_noise", 3)
-    bias = ca.SX.sym("bias", 3)
-    rotation = rotation_vector_to_mrp_expr(noise) if form is NoiseForm.ROTATION_VECTOR else noise
-    omega_meas = 4 * x[3:6] + bias + eta
-    names = ["x", noise_name, "rate_noise", "bias"]
-    return [x, noise, eta, bias], names, compose_mrp_expr(x[0:3], rotation), omega_meas
-
-
-@lru_cache(maxsize=2)
-def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
-    """``measurement(x, rotation_noise, rate_noise, bias) -> (x_meas, q_meas)`` (pure SX).
-
-    x = [σ; ω/4] is the true state (σ in either set). The sensor reports the short set of
-    the measured attitude, σ̃ = short(σ ⊕ σ(θ)) with [B̃N] = [B̃B](θ)[BN], the rate
-    ω̃ = ω + b + η, and x_meas = [σ̃; ω̃/4]; q_meas is σ̃'s quaternion (β₀ >= 0). With zero
-    noise and bias and a short σ, x_meas is x bit for bit. With ``form`` = :attr:`NoiseForm.MRP` the
-    second input is σ(θ) (``rotation_noise_mrp``, from :func:`rotation_mrp_function`) instead of θ:
-    the same numbers, bit for bit. :func:`raw_measurement_function` is the same before the short set.
-    """
-    inputs, names, composed, omega_meas = _sensor_expressions(form)
-    sigma_meas = short_expr(composed)
-    x_meas = ca.vertcat(sigma_meas, 0.25 * omega_meas)  # = omega_meas / 4 exactly (a power of two)
-    return ca.Function(
-        "measurement", inputs, [x_meas, quaternion_from_mrp_expr(sigma_meas)], names, ["x_meas", "q_meas"]
-    )
-
-
-@lru_cache(maxsize=2)
-def raw_measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
-    """``raw_measurement(x, rotation_noise, rate_noise, bias) -> x_raw`` (pure SX): [σ ⊕ σ(θ); ω̃/4].
-
-    :func:`measurement_function` before its short set: the attitude in either set, so that
-    x_meas = [short(x_raw[0:3]); x_raw[3:6]] bit for bit. The flight sample puts x_raw in its ring
-    and takes the short set of the delayed entry, which it needs for the history anyway: one short
-    set a sample, not two.
-    """
-    inputs, names, composed, omega_meas = _sensor_expressions(form)
-    return ca.Function("raw_measurement", inputs, [ca.vertcat(composed, 0.25 * omega_meas)], names, ["x_raw"])
-
-
-@lru_cache(maxsize=1)
-def hysteresis_function() -> ca.Function:
-    """``hysteresis(h, q, delta) -> (h_next, sigma_c, switched)`` (pure SX): the Mayhew-Sanfelice-Teel rule.
-
-    q (4, scalar first, unit) is the measured quaternion, continuous in time (its sign
-    chosen by continuity, not by β₀ >= 0). h_next = −h when h q₀ < −δ, else h;
-    σ_c = h_next q_v / (1 + h_next q₀); switched = 1.0 when h flipped.
-    """
-    h = ca.SX.sym("h")
-    q = ca.SX.sym("q", 4)
-    delta = ca.SX.sym("delta")
-    switched = ca.if_else(h * q[0] < -delta, 1.0, 0.0)
-    h_next = ca.if_else(switched, -h, h)
-    sigma_c = h_next * q[1:4] / (1 + h_next * q[0])
-    return ca.Function(
-        "hysteresis", [h, q, delta], [h_next, sigma_c, switched], ["h", "q", "delta"], ["h_next", "sigma_c", "switched"]
-    )
-
-
-@lru_cache(maxsize=1)
-def selection_function() -> ca.Function:
-    """``selection(h, c, sigma_meas, sigma_prev, delta) -> (h_next, c_next, sigma_c, switched)`` (pure SX).
-
-    The controller-side rule on the sensor's short-set MRP σ̃ (β̃₀ >= 0), in the form the
-    flight sample uses. The controller's continuous quaternion is q̂ = c β̃: c ∈ {−1, +1}
-    flips when β̃ and the previous measurement's β̃' point to opposite hemispheres,
-    β̃·β̃' < 0 ⇔ (1 − |σ̃|²)(1 − |σ̃'|²) + 4 σ̃·σ̃' < 0 (the attitude passed Φ = 180°).
-    Then the rule of :func:`hysteresis_function` on q̂: with e = h c, h flips when
-    e β̃₀ < −δ ⇔ e < 0 and (1 + δ)|σ̃|² < 1 − δ. σ_c = σ̃ when h_next c_next = +1 (bit for
-    bit) and its shadow −σ̃/|σ̃|² otherwise. Identical to :func:`hysteresis_function` on q̂ up
-    to rounding; with δ = 0 σ_c is σ̃ at every sample. h and c are ±1 (flips are products by ±1).
-    """
-    h = ca.SX.sym("h")
-    c = ca.SX.sym("c")
-    sigma = ca.SX.sym("sigma_meas", 3)
-    previous = ca.SX.sym("sigma_prev", 3)
-    delta = ca.SX.sym("delta")
-    s_now = ca.dot(sigma, sigma)
-    s_prev = ca.dot(previous, previous)
-    flipped = (1 - s_now) * (1 - s_prev) + 4 * ca.dot(sigma, previous) < 0
-    # h, c = ±1: a flip is a product by ±1 (exact), not an if_else (two selects and an add)
-    c_next = c * (1 - 2 * flipped)
-    effective = h * c_next
-    switched = ca.if_else(ca.logic_and(effective < 0, (1 + delta) * s_now < 1 - delta), 1.0, 0.0)
-    h_next = h * (1 - 2 * switched)
-    # σ_c = σ (e = h_next c_next = +1) or its shadow −σ/|σ|²: σ times one selected factor, not three
-    # selected components. if_else(e > 0, σ, shadow) was (e > 0 ? σ : 0) + (e <= 0 ? shadow : 0), which
-    # turns a −0 into +0: so does the + (e² − 1) = +0 here (an exact zero that CasADi does not fold away).
-    e = h_next * c_next
-    factor = ca.if_else(e > 0, 1.0, -1 / ca.if_else(s_now > 0, s_now, 1.0))
-    sigma_c = sigma * factor + (e * e - 1)
-    return ca.Function(
-        "selection",
-        [h, c, sigma, previous, delta],
-        [h_next, c_next, sigma_c, switched],
-        ["h", "c", "sigma_meas", "sigma_prev", "delta"],
-        ["h_next", "c_next", "sigma_c", "switched"],
-    )
-
-
-@lru_cache(maxsize=2)
-def actuator_function(mode: Saturation = Saturation.SCALE) -> ca.Function:
-    """``actuator(u, u_max, norm_max, w) -> (u_applied, u_plant, saturated)`` (pure SX).
-
-    ``SCALE``: u_applied = u / r with r = max(maxᵢ |uᵢ|/u_max,ᵢ, |u|/u_norm) when r > 1
-    (direction preserved), then clipped per axis so that rounding never exceeds u_max.
-    ``CLIP``: uᵢ clipped to [−u_max,ᵢ, u_max,ᵢ], then scaled by u_norm/|u| if |u| > u_norm.
-    A limit that is not reached leaves u bit for bit; ``norm_max`` = inf means no norm limit.
-    u_plant = u_applied + w (the disturbance torque). saturated = 1.0 when a limit acted.
-    """
-    if not isinstance(mode, Saturation):
-        raise SpecificationError(f"mode must be a mrpctl.flight.Saturation, got {mode!r}")
-    u = ca.SX.sym("u", 3)
-    u_max = ca.SX.sym("u_max", 3)
-    norm_max = ca.SX.sym("norm_max")
-    w = ca.SX.sym("w", 3)
-    if mode is Saturation.SCALE:
-        ratio = ca.fmax(ca.mmax(ca.fabs(u) / u_max), ca.norm_2(u) / norm_max)
-        saturated = ratio > 1
-        # u / r when r > 1, else u: one divisor selected, not three quotients (u / 1 is u exactly); the
-        # if_else added +0 to the chosen branch (−0 → +0), and so does saturated² − saturated (= +0)
-        scaled = u / ca.if_else(saturated, ratio, 1.0) + (saturated * saturated - saturated)
-        applied = ca.fmin(ca.fmax(scaled, -u_max), u_max)
-    else:
-        clipped = ca.fmin(ca.fmax(u, -u_max), u_max)
-        ratio = ca.norm_2(clipped) / norm_max
-        scaled = ratio > 1
-        applied = clipped / ca.if_else(scaled, ratio, 1.0) + (scaled * scaled - scaled)  # as in SCALE
-        saturated = ca.logic_or(ca.mmax(ca.fabs(u) - u_max) > 0, ratio > 1)
-    return ca.Function(
-        "actuator",
-        [u, u_max, norm_max, w],
-        [applied, applied + w, saturated],  # a comparison: 1.0 or 0.0
-        ["u", "u_max", "norm_max", "w"],
-        ["u_applied", "u_plant", "saturated"],
-    )
