@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from mrpctl import _compile, flight
+from mrpctl.engines import isa
 from mrpctl.engines import lanes as _vectorize
 from mrpctl.engines.libm import inline_min_max
 from mrpctl.errors import DimensionError, SpecificationError
@@ -147,7 +148,7 @@ def test_native_flags_are_this_cpu_s_fingerprint_and_key_the_cache_per_cpu(tmp_p
     if not flags:
         pytest.skip("this compiler does not resolve -march=native")
     assert "-march=native" not in flags and any(flag.startswith("-march=") for flag in flags)
-    cpu = _vectorize._cpu_flags()  # /proc/cpuinfo, independent of the compiler
+    cpu = isa._cpu_flags()  # /proc/cpuinfo, independent of the compiler
     for feature in ("avx2", "avx512f", "sse4_2", "fma"):
         if cpu:  # the compiler enables exactly what the CPU reports
             flag = "-m" + feature.replace("_", ".")

@@ -1,0 +1,342 @@
+"""W-lane C emitted from the instruction list of a pure SX Function, bit-identical per lane to CasADi's
+scalar C (the code generator of the lane engine, `mrpctl.engines.lanes`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import casadi as ca
+
+from mrpctl._validation import integer
+from mrpctl.engines.libm import min_max_forms
+from mrpctl.errors import CodegenError, SpecificationError
+
+__all__ = ["LaneProgram", "emit_lanes"]
+
+# ------------------------------------------------------------------ the operations
+# Each entry: the C expression of one lane, as CasADi 3.8's code generator writes it for a
+# scalar (casadi/core/calculus.h, casadi_math<T>::print and the casadi_* helpers). The
+# comparison and logic operators give 0/1 as ints in CasADi's C, converted to double on
+# assignment; ``c ? ...`` tests c != 0 (NaN is true), as in C.
+_VECTOR_OPS: dict[int, str] = {
+    ca.OP_ASSIGN: "{0}",
+    ca.OP_ADD: "({0}+{1})",
+    ca.OP_SUB: "({0}-{1})",
+    ca.OP_MUL: "({0}*{1})",
+    ca.OP_DIV: "({0}/{1})",
+    ca.OP_NEG: "(-{0})",
+    ca.OP_TWICE: "(2.*{0})",
+    ca.OP_INV: "(1./{0})",
+    ca.OP_SQ: "({0}*{0})",  # casadi_sq(x) { return x*x; }
+    ca.OP_SQRT: "sqrt({0})",  # vectorised with -fno-math-errno (sqrtpd is correctly rounded, as sqrtsd)
+    ca.OP_FABS: "fabs({0})",
+    ca.OP_COPYSIGN: "copysign({0},{1})",
+    ca.OP_SIGN: "L_SELECT(L_MASK({0}<0.), -1., L_SELECT(L_MASK({0}>0.), 1., {0}))",  # x<0 ? -1 : x>0 ? 1 : x
+    ca.OP_IF_ELSE_ZERO: "mrpctl_real(mrpctl_bits({1}) & {t0})",  # (c?x:0): x, or +0.0
+}
+# Comparisons and logic: CasADi's C gives the int 0/1 (as double 1.0 or +0.0). The lanes keep
+# the all-ones/zero bit mask m as well, so that a consumer in the same loop tests "x != 0" as m
+# (the value is exactly 0.0 or 1.0, so the two tests agree). {t0}/{t1}: the operand's mask.
+_MASK_OPS: dict[int, str] = {
+    ca.OP_LT: "L_MASK({0}<{1})",
+    ca.OP_LE: "L_MASK({0}<={1})",
+    ca.OP_EQ: "L_MASK({0}=={1})",
+    ca.OP_NE: "L_MASK({0}!={1})",
+    ca.OP_NOT: "(~{t0})",  # !x
+    ca.OP_AND: "({t0}&{t1})",  # x&&y (no side effects: no short circuit needed)
+    ca.OP_OR: "({t0}|{t1})",  # x||y
+}
+# Selections are written as bit masks, not ?:, so that gcc does not sink the arithmetic of
+# one arm into a branch (which stops if-conversion and vectorisation); the bits are the same.
+_LANE_HELPERS = r"""
+#include <string.h>
+typedef unsigned long long mrpctl_bits_t;
+static inline mrpctl_bits_t mrpctl_bits(double x) { mrpctl_bits_t u; memcpy(&u, &x, sizeof u); return u; }
+static inline double mrpctl_real(mrpctl_bits_t u) { double x; memcpy(&x, &u, sizeof x); return x; }
+/* the mask of a C condition: all ones if true, zero if false */
+#define L_MASK(c) (-(mrpctl_bits_t)(c))
+/* m ? a : b for a mask m, bit for bit */
+#define L_SELECT(m, a, b) mrpctl_real((mrpctl_bits(a) & (m)) | (mrpctl_bits(b) & ~(m)))
+/* (double)c of a mask: 1.0 or +0.0 */
+#define L_BOOL(m) mrpctl_real(0x3ff0000000000000ULL & (m))
+"""
+# fmin/fmax: casadi_fmin/casadi_fmax call the C99 fmin/fmax of the libm; the lane form is
+# chosen by probing that libm (see _min_max_forms) so that ties of +0/-0 and NaNs agree.
+# Operations evaluated by a libm call in every lane (the same function the scalar code calls).
+_CALL_OPS: dict[int, str] = {
+    ca.OP_EXP: "exp({0})",
+    ca.OP_LOG: "log({0})",
+    ca.OP_POW: "pow({0},{1})",
+    ca.OP_CONSTPOW: "pow({0},{1})",
+    ca.OP_SIN: "sin({0})",
+    ca.OP_COS: "cos({0})",
+    ca.OP_TAN: "tan({0})",
+    ca.OP_ASIN: "asin({0})",
+    ca.OP_ACOS: "acos({0})",
+    ca.OP_ATAN: "atan({0})",
+    ca.OP_ATAN2: "atan2({0},{1})",
+    ca.OP_SINH: "sinh({0})",
+    ca.OP_COSH: "cosh({0})",
+    ca.OP_TANH: "tanh({0})",
+    ca.OP_ASINH: "asinh({0})",
+    ca.OP_ACOSH: "acosh({0})",
+    ca.OP_ATANH: "atanh({0})",
+    ca.OP_FLOOR: "floor({0})",
+    ca.OP_CEIL: "ceil({0})",
+    ca.OP_FMOD: "fmod({0},{1})",
+    ca.OP_ERF: "erf({0})",
+    ca.OP_HYPOT: "hypot({0},{1})",
+    ca.OP_LOG1P: "log1p({0})",
+    ca.OP_EXPM1: "expm1({0})",
+}
+_CASADI_VERSION: str = getattr(ca, "__version__", "unknown")
+_OP_NAMES = {getattr(ca, name): name for name in dir(ca) if name.startswith("OP_")}
+
+
+def _constant(value: float) -> str:
+    if math.isnan(value):
+        return "NAN"
+    if math.isinf(value):
+        return "INFINITY" if value > 0 else "(-INFINITY)"
+    return f"({value.hex()})"  # C99 hexadecimal literal: exact
+
+
+@dataclass(frozen=True)
+class _Port:
+    name: str
+    nnz: int
+
+
+@dataclass(frozen=True)
+class LaneProgram:
+    """The emitted C of one SX Function over W lanes.
+
+    Attributes
+    ----------
+    code : str
+        C source defining ``<name>(in0, ..., out0, ...)`` (``static``, restrict pointers to
+        (nnz, W) structure-of-arrays buffers) and ``<name>_call(arg, res)``.
+    name : str
+        The C function name.
+    width : int
+        W, the lanes.
+    inputs, outputs : tuple of (str, int)
+        Port names and nonzero counts, in the Function's order.
+    dropped : tuple of str
+        Outputs that are not computed.
+    segments : int
+        Loops over lanes in the body (1 per instruction without fusion).
+    """
+
+    code: str
+    name: str
+    width: int
+    inputs: tuple[tuple[str, int], ...]
+    outputs: tuple[tuple[str, int], ...]
+    dropped: tuple[str, ...]
+    segments: int
+
+
+def emit_lanes(
+    function: ca.Function,
+    width: int,
+    *,
+    name: str = "mrpctl_lanes",
+    fuse: bool = True,
+    drop: Sequence[str] = (),
+    ivdep: bool = False,
+    standalone: bool = False,
+    shared: Sequence[str] = (),
+) -> LaneProgram:
+    """Emit C evaluating a pure SX Function on ``width`` lanes at once.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        A pure SX Function (no calls to other Functions, no free variables).
+    width : int
+        W >= 1, the lanes (a compile-time constant of the code).
+    name : str, keyword-only
+        Name of the emitted C function.
+    fuse : bool, keyword-only
+        One loop over lanes per run of vectorisable instructions (True) or per instruction.
+    drop : sequence of str, keyword-only
+        Output names not to compute.
+    ivdep : bool, keyword-only
+        Put ``#pragma GCC ivdep`` before every lane loop.
+    shared : sequence of str, keyword-only
+        Input names whose values are the same in every lane: read from a (nnz,) buffer, not
+        (nnz, W) (e.g. a per-sample noise stream shared by the runs of a batch).
+    standalone : bool, keyword-only
+        Also export ``<name>_eval(const double** arg, double** res)`` (for tests).
+
+    Returns
+    -------
+    LaneProgram
+
+    Raises
+    ------
+    CodegenError
+        If the Function is not SX or uses an operation without a bit-identical lane form.
+    """
+    width = integer("width", width, minimum=1)
+    if not function.is_a("SXFunction"):
+        raise CodegenError(f"emit_lanes needs a pure SX Function, got {function.class_name()} {function.name()!r}")
+    if function.has_free():
+        raise CodegenError(f"{function.name()}: free variables {function.get_free()} cannot be emitted")
+    inputs = tuple(_Port(function.name_in(i), function.nnz_in(i)) for i in range(function.n_in()))
+    outputs = tuple(_Port(function.name_out(i), function.nnz_out(i)) for i in range(function.n_out()))
+    dropped = tuple(drop)
+    unknown = sorted(set(dropped) - {port.name for port in outputs})
+    if unknown:
+        raise SpecificationError(f"drop: {unknown} are not outputs of {function.name()} ({[p.name for p in outputs]})")
+    dropped_index = {i for i, port in enumerate(outputs) if port.name in dropped}
+    unknown_shared = sorted(set(shared) - {port.name for port in inputs})
+    if unknown_shared:
+        raise SpecificationError(f"shared: {unknown_shared} are not inputs of {function.name()}")
+    shared_index = {i for i, port in enumerate(inputs) if port.name in shared}
+    vector_ops = dict(_VECTOR_OPS)
+    vector_ops.update(min_max_forms())
+    vector_ops.update(_MASK_OPS)
+
+    # Decode the instruction list: (op, output slot or None, input slots, text template).
+    count = function.n_instructions()
+    ops: list[int] = []
+    defs: list[int | None] = []
+    reads: list[list[int]] = []
+    for k in range(count):
+        op = function.instruction_id(k)
+        ops.append(op)
+        if op == ca.OP_INPUT:
+            defs.append(function.instruction_output(k)[0])
+            reads.append([])
+        elif op == ca.OP_OUTPUT:
+            defs.append(None)
+            keep = function.instruction_output(k)[0] not in dropped_index
+            reads.append([function.instruction_input(k)[0]] if keep else [])
+        elif op == ca.OP_CONST:
+            defs.append(function.instruction_output(k)[0])
+            reads.append([])
+        elif op in vector_ops or op in _CALL_OPS:
+            defs.append(function.instruction_output(k)[0])
+            template = vector_ops.get(op) or _CALL_OPS[op]
+            arity = 2 if "{1}" in template or "{t1}" in template else 1
+            reads.append(list(function.instruction_input(k)[:arity]))
+        else:
+            label = _OP_NAMES.get(op, str(op))
+            if op in (ca.OP_FMIN, ca.OP_FMAX):
+                reason = "this host's libm fmin/fmax match no known lane form"
+            else:
+                reason = "no bit-identical lane form"
+            raise CodegenError(
+                f"{function.name()}: cannot vectorise instruction {k} ({label}): {reason}; supported: "
+                + ", ".join(sorted(_OP_NAMES[o] for o in (*vector_ops, *_CALL_OPS) if o in _OP_NAMES))
+            )
+
+    # Segments: maximal runs of vectorisable instructions (fuse) or one per instruction.
+    segment = [0] * count
+    current = 0
+    for k in range(count):
+        call = ops[k] in _CALL_OPS
+        if k > 0 and (not fuse or call or ops[k - 1] in _CALL_OPS):
+            current += 1
+        segment[k] = current
+
+    # Which definition each read refers to; values read in another segment go through arrays.
+    last_def: dict[int, int] = {}
+    source: list[list[int]] = []
+    crosses = [False] * count
+    for k in range(count):
+        refs = []
+        for slot in reads[k]:
+            if slot not in last_def:
+                raise CodegenError(f"{function.name()}: instruction {k} reads work variable {slot} before writing it")
+            origin = last_def[slot]
+            refs.append(origin)
+            if segment[origin] != segment[k]:
+                crosses[origin] = True
+        source.append(refs)
+        defined = defs[k]
+        if defined is not None:
+            last_def[defined] = k
+    array_slots = sorted({slot for k, slot in enumerate(defs) if crosses[k] and slot is not None})
+
+    def value(origin: int, at: int) -> str:
+        if segment[origin] == segment[at]:
+            return f"v{origin}"
+        return f"w{defs[origin]}[l]"
+
+    def truth(origin: int, at: int) -> str:
+        if segment[origin] == segment[at] and ops[origin] in _MASK_OPS:
+            return f"m{origin}"
+        return f"L_MASK({value(origin, at)}!=0.)"
+
+    lines: list[str] = []
+    pragma = "    #pragma GCC ivdep\n" if ivdep else ""
+    k = 0
+    segments = 0
+    while k < count:
+        start = k
+        while k < count and segment[k] == segment[start]:
+            k += 1
+        body: list[str] = []
+        for j in range(start, k):
+            op = ops[j]
+            if op == ca.OP_INPUT:
+                port, nz = function.instruction_input(j)
+                text = f"i{port}[{nz}]" if port in shared_index else f"i{port}[{nz * width}+l]"
+            elif op == ca.OP_CONST:
+                text = _constant(float(function.instruction_constant(j)))
+            elif op == ca.OP_OUTPUT:
+                port, nz = function.instruction_output(j)
+                if port not in dropped_index:
+                    body.append(f"o{port}[{nz * width}+l] = {value(source[j][0], j)};")
+                continue
+            else:
+                template = vector_ops.get(op) or _CALL_OPS[op]
+                operands = source[j]
+                masks = {f"t{i}": truth(origin, j) for i, origin in enumerate(operands) if f"{{t{i}}}" in template}
+                text = template.format(*(value(origin, j) for origin in operands), **masks)
+                if op in _MASK_OPS:
+                    body.append(f"const mrpctl_bits_t m{j} = {text};")
+                    text = f"L_BOOL(m{j})"
+            body.append(f"const double v{j} = {text};")
+            if crosses[j]:
+                body.append(f"w{defs[j]}[l] = v{j};")
+        if body:
+            segments += 1
+            lines.append(pragma + "    for (l = 0; l < W; ++l) {\n      " + "\n      ".join(body) + "\n    }")
+
+    in_params = [f"const double* restrict i{i}" for i in range(len(inputs))]
+    out_params = [f"double* restrict o{i}" for i in range(len(outputs))]
+    declarations = "".join(f"  double w{slot}[W] __attribute__((aligned(64)));\n" for slot in array_slots)
+    call_args = [f"arg[{i}]" for i in range(len(inputs))] + [f"res[{i}]" for i in range(len(outputs))]
+    signature = ", ".join(in_params + out_params) or "void"
+    code = (
+        f"/* {name}: {function.name()} on W = {width} lanes, emitted by mrpctl.engines.lanes from "
+        f"{count} CasADi {_CASADI_VERSION} instructions */\n"
+        "#include <math.h>\n" + _LANE_HELPERS + f"#undef W\n#define W {width}\n"
+        f"static void __attribute__((noinline)) {name}({signature}) {{\n"
+        "  int l;\n" + declarations + "\n".join(lines) + "\n}\n"
+        f"static inline void {name}_call(const double** arg, double** res) {{\n"
+        f"  {name}({', '.join(call_args)});\n}}\n#undef W\n"
+    )
+    if standalone:
+        code += (
+            f'__attribute__((visibility("default"))) int {name}_eval(const double** arg, double** res) {{\n'
+            f"  {name}_call(arg, res);\n  return 0;\n}}\n"
+        )
+    return LaneProgram(
+        code=code,
+        name=name,
+        width=width,
+        inputs=tuple((port.name, port.nnz) for port in inputs),
+        outputs=tuple((port.name, port.nnz) for port in outputs),
+        dropped=dropped,
+        segments=segments,
+    )
+
+
+# ------------------------------------------------------------------ flags and the build
