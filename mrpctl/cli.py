@@ -678,7 +678,7 @@ def _reproduce(args: argparse.Namespace) -> int:
 
 def _design(args: argparse.Namespace) -> int:
     from mrpctl.design import analyze_gains, synthesize_pd
-    from mrpctl.scenario import _check_delay
+    from mrpctl.scenario import check_delay
 
     if args.toml is None:
         for option, value in (("--rate", args.rate), ("--t-final", args.t_final), ("--rule", args.rule)):
@@ -711,7 +711,7 @@ def _design(args: argparse.Namespace) -> int:
     rate = 1000.0 if args.rate is None else args.rate
     if toml_path is not None:
         _refuse_existing(toml_path, args.overwrite, "--toml")
-        _check_delay(args.tau, rate)
+        check_delay(args.tau, rate)
     order = 3 if args.order is None else args.order
     design = synthesize_pd(spacecraft, args.tau, zeta=args.zeta, order=order, allow_underdamped=args.allow_underdamped)
     if not design.synthesized or design.gains is None:
@@ -1539,12 +1539,12 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     """``mrpctl design --inertia-tolerance TOL [--product-bound P] [--sampled HZ | --jitter TAU_MIN]``."""
     from mrpctl.design import analyze_gains, synthesize_pd
     from mrpctl.design.robust import RobustPDSynthesis, RobustStatus
-    from mrpctl.scenario import _check_delay
+    from mrpctl.scenario import check_delay
 
     tolerance, bound, period, rate, tau_min, jitter_rate = _robust_options(args, spacecraft)
     if toml_path is not None:
         _refuse_existing(toml_path, args.overwrite, "--toml")
-        _check_delay(args.tau, rate)
+        check_delay(args.tau, rate)
     # Wirtinger and higher orders are numerically inaccurate for the 0.2 % wide sampled interval at 1 kHz
     # (design/lmi.md section 7.3): the sampled loop defaults to Jensen; the constant delay to N = 2.
     order = (0 if period is not None else 2) if args.order is None else args.order
@@ -1635,7 +1635,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
 def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Path | None) -> int:
     """``mrpctl design --method lmi --decay-rate ALPHA [robust options]``: synthesize_lmi (descriptor method)."""
     from mrpctl.design import SynthesisStatus, analyze_gains, synthesize_lmi
-    from mrpctl.scenario import _check_delay
+    from mrpctl.scenario import check_delay
 
     if args.decay_rate is None:
         raise SpecificationError("--method lmi needs --decay-rate ALPHA (1/s): the decay rate the LMI imposes")
@@ -1659,7 +1659,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
         flags = _robust_flags(tolerance, bound, period, rate, tau_min)
     if toml_path is not None:
         _refuse_existing(toml_path, args.overwrite, "--toml")
-        _check_delay(args.tau, rate)
+        check_delay(args.tau, rate)
     # As for the PD design: Jensen for the sampled loop (Wirtinger's re-verification is inaccurate at 1 kHz).
     order = (0 if period is not None else 1) if args.order is None else args.order
     result = synthesize_lmi(spacecraft, args.tau, decay_rate=alpha, order=order, **options)
