@@ -9,7 +9,6 @@ One module per subcommand family adds its parsers and handlers: `init` (``exampl
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -62,7 +61,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (see `EXIT_CODES`)."""
     args = build_parser().parse_args(argv)
     return run_command(args.handler, args)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
