@@ -552,7 +552,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
             raise SpecificationError(f"scenario needs {key} (s)")
     tau = nonnegative_scalar("tau", data["tau"])
     rate = positive_scalar("rate", data.get("rate", 1000.0))
-    _check_delay(tau, rate)
+    check_delay(tau, rate)
     history = data.get("history", "constant")
     if history not in ("constant", "zero-input"):
         raise SpecificationError(f"history must be 'constant' or 'zero-input', got {history!r}")
@@ -604,7 +604,7 @@ def _uncertainty_table(data: dict[str, Any], spacecraft: Spacecraft) -> InertiaU
     return uncertainty
 
 
-def _check_delay(tau: float, rate: float) -> None:
+def check_delay(tau: float, rate: float) -> None:
     """τ · rate must be a whole number of measurement periods (as :func:`~mrpctl.simulate` requires)."""
     samples = tau * rate
     if not math.isfinite(samples) or abs(samples - round(samples)) > 1e-9 * max(1.0, abs(samples)):

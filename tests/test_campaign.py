@@ -211,7 +211,7 @@ def test_cli_run_report_replay(tmp_path, capsys):
     import argparse
     import tomllib
 
-    from mrpctl.campaign.cli import add_parser
+    from mrpctl.cli.campaign import add_parser
 
     spec_file = tmp_path / "c.toml"
     lines = [

@@ -367,7 +367,7 @@ def test_design_full_inertia_and_underdamped(capsys: pytest.CaptureFixture[str])
 
 
 def test_damping_words() -> None:
-    from mrpctl.cli import _damping_kind
+    from mrpctl.cli.design import _damping_kind
 
     assert _damping_kind(1.0) == _damping_kind(1.0 + 1e-12) == "critically damped"
     assert (_damping_kind(0.7), _damping_kind(1.2), _damping_kind(float("nan"))) == (

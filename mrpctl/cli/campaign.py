@@ -1,9 +1,6 @@
-"""``mrpctl campaign run | report | replay``: the sub-commands, for :mod:`mrpctl.cli` to mount.
+"""``mrpctl campaign run | report | replay``: Monte Carlo campaigns from a TOML spec into a Zarr store.
 
-In ``mrpctl/cli.py``::
-
-    from mrpctl.campaign.cli import add_parser as add_campaign_parser
-    add_campaign_parser(commands)          # in build_parser(), next to the other sub-commands
+`add_parser` adds ``campaign`` and its three actions to the subparsers of the ``mrpctl`` parser.
 """
 
 from __future__ import annotations
@@ -13,17 +10,19 @@ import sys
 from pathlib import Path
 from typing import Any
 
-__all__ = ["add_parser", "main"]
+from tqdm import tqdm  # type: ignore[import-untyped]
+
+from mrpctl.campaign.spec import load_campaign
+
+__all__ = ["MISMATCH", "add_parser"]
 
 #: Exit code when a replayed run differs from the stored one, or a campaign did not finish.
 MISMATCH = 1
 
 
 def _run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm  # type: ignore[import-untyped]
-
+    # deferred: xarray and zarr (through the campaign store), only for campaign run
     from mrpctl.campaign.run import run_campaign
-    from mrpctl.campaign.spec import load_campaign
     from mrpctl.campaign.store import CampaignStore
 
     spec = load_campaign(args.spec)
@@ -59,6 +58,7 @@ def _run(args: argparse.Namespace) -> int:
     bar.close()
     print(result)
     if args.report:
+        # deferred: xarray and zarr (through the campaign store), only for --report
         from mrpctl.campaign.report import write_report
 
         summary, paths = write_report(args.out)
@@ -68,6 +68,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
+    # deferred: xarray and zarr (through the campaign store), only for campaign report
     from mrpctl.campaign.report import write_report
 
     summary, paths = write_report(args.out, worst=args.worst)
@@ -77,6 +78,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    # deferred: xarray and zarr (through the campaign store), only for campaign replay
     from mrpctl.campaign.report import replay, save_replay_plot
 
     result = replay(args.out, args.run, trajectory=args.plot is not None)
@@ -114,21 +116,3 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     replay.add_argument("--plot", type=Path, help="write sigma, omega, u against t to this PNG")
     replay.set_defaults(handler=_replay)
     return campaign
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m mrpctl.campaign.cli ...``: the same sub-commands without the ``campaign`` word."""
-    from mrpctl.errors import MrpctlError
-
-    parser = argparse.ArgumentParser(prog="mrpctl")
-    add_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["campaign", *(sys.argv[1:] if argv is None else argv)])
-    try:
-        return int(args.handler(args))
-    except (MrpctlError, OSError) as exc:
-        print(f"mrpctl: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -1,0 +1,66 @@
+"""``mrpctl export``: the closed loop of a scenario as CasADi functions and C code."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from mrpctl._export import export
+from mrpctl.cli.common import EXIT_CODES, Formatter, add_flight_options, add_json, add_rule_options, print_json
+from mrpctl.cli.limits import check_history_fits
+from mrpctl.cli.overrides import apply_flight_options, apply_overrides
+from mrpctl.errors import SpecificationError
+from mrpctl.scenario import load_scenario
+
+__all__ = ["add_parser"]
+
+
+def _export(args: argparse.Namespace) -> int:
+    scenario = apply_flight_options(apply_overrides(load_scenario(args.scenario), args), args)
+    check_history_fits(scenario)
+    if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
+        raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")
+    result = export(
+        scenario.spacecraft,
+        scenario.K,
+        args.out,
+        tau=scenario.tau,
+        rule=scenario.rule,
+        rate=scenario.rate,
+        substeps=scenario.substeps,
+        overwrite=args.overwrite,
+        compile=not args.no_compile,
+        **scenario.run_options,
+    )
+    if args.json:
+        print_json(
+            {
+                "folder": result.folder,
+                "files": list(result.files),
+                "library": result.library,
+                "skipped_reason": result.skipped_reason,
+                "content_hash": result.content_hash,
+            }
+        )
+    else:
+        print(result)
+    return 0
+
+
+def add_parser(commands: Any) -> None:
+    parser = commands.add_parser(
+        "export",
+        help="export the closed loop as CasADi functions and C code",
+        formatter_class=Formatter,
+        epilog=EXIT_CODES,
+    )
+    parser.add_argument("scenario", help="scenario TOML or shipped name (spacecraft, gains, tau, rate, rule)")
+    parser.add_argument("--out", type=Path, required=True, help="output folder")
+    parser.add_argument("--overwrite", action="store_true", help="replace a non-empty output folder")
+    parser.add_argument("--no-compile", action="store_true", help="write sources only, no shared library")
+    add_rule_options(parser)
+    parser.add_argument("--tau", type=float, help="override the delay (s)")
+    add_flight_options(parser)
+    add_json(parser)
+    parser.set_defaults(handler=_export)

@@ -1,0 +1,325 @@
+"""``mrpctl verify``: the LMI verdict per criterion, the exact delay margin and the certificates of the loop
+as flown (sampled, jittering delay, inertia box)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+import numpy as np
+
+from mrpctl import paper
+from mrpctl._validation import nonnegative_scalar, positive_scalar
+from mrpctl.cli.common import EXIT_CODES, Formatter, add_json, add_plant_options, options_given, print_json
+from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
+from mrpctl.design import (
+    analyze_gains,
+    certify_interval,
+    certify_polytope,
+    certify_sampled,
+    criterion_name,
+    inertia_polytope,
+    linearized_loop,
+    sampled_stability,
+    spacecraft_axes,
+)
+from mrpctl.design.interval import rate_value
+from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.scenario import Scenario, load_scenario
+from mrpctl.spacecraft import Spacecraft
+
+__all__ = ["add_parser"]
+
+
+def _flown_plan(args: argparse.Namespace, tau: float, scenario: Scenario | None) -> dict[str, Any]:
+    """What ``verify`` certifies besides the idealised loop: the options, else the scenario's loop as flown.
+
+    A scenario brings its sample ``rate`` (the sampled-data loop: exact lifted check + certificate), its
+    ``[delay]`` bounds (the interval certificate, rate unknown: the flown delay jumps from sample to sample)
+    and its ``[uncertainty]`` inertia box. ``--jitter``, ``--jitter-rate``, ``--sampled`` and
+    ``--inertia-tolerance`` override the scenario's values; ``--no-flown`` keeps the idealised loop only.
+    """
+    given = options_given(
+        ("--jitter", args.jitter),
+        ("--jitter-rate", args.jitter_rate),
+        ("--sampled", args.sampled),
+        ("--inertia-tolerance", args.inertia_tolerance),
+        ("--product-bound", args.product_bound),
+    )
+    if args.no_flown and given:
+        raise SpecificationError(f"{given[0]} does not apply with --no-flown (the idealised loop only)")
+    from_file = scenario is not None and not args.no_flown
+    plan: dict[str, Any] = {"jitter": None, "sampled": None, "inertia": None}
+    if args.jitter is not None:
+        plan["jitter"] = (nonnegative_scalar("--jitter", args.jitter), "--jitter")
+    elif from_file and scenario is not None and scenario.delay is not None:
+        plan["jitter"] = (scenario.delay.tau_min, "[delay] tau_min")
+    if args.jitter_rate is not None and plan["jitter"] is None:
+        raise SpecificationError("--jitter-rate applies only with --jitter TAU_MIN (or a scenario's [delay] table)")
+    if args.sampled is not None:
+        plan["sampled"] = (positive_scalar("--sampled", args.sampled), "--sampled")
+    elif from_file and scenario is not None:
+        plan["sampled"] = (scenario.rate, "rate")
+    if args.product_bound is not None and args.inertia_tolerance is None:
+        raise SpecificationError("--product-bound applies only with --inertia-tolerance TOL")
+    if args.inertia_tolerance is not None:
+        bound = 0.0 if args.product_bound is None else nonnegative_scalar("--product-bound", args.product_bound)
+        plan["inertia"] = (positive_scalar("--inertia-tolerance", args.inertia_tolerance), bound, "--inertia-tolerance")
+    elif from_file and scenario is not None and scenario.uncertainty is not None:
+        plan["inertia"] = (scenario.uncertainty.tolerance, scenario.uncertainty.product_bound, "[uncertainty]")
+    if tau <= 0:
+        flagged = [option for option in ("--jitter", "--sampled", "--inertia-tolerance") if option in given]
+        if flagged:
+            raise SpecificationError(
+                f"{flagged[0]} needs a delay --tau > 0 (--jitter, --sampled and --inertia-tolerance)"
+            )
+        # tau = 0 from a scenario: no jitter interval, no delay to certify over the box; the sampled loop
+        # (d = 0) is still flown.
+        plan["jitter"] = plan["inertia"] = None
+    return plan
+
+
+def _flown_checks(
+    args: argparse.Namespace, spacecraft: Spacecraft, gain: np.ndarray, tau: float, scenario: Scenario | None = None
+) -> list[dict[str, Any]]:
+    """The certificates of the loop as flown (`_flown_plan`), as rows (check, verdict, fields, text)."""
+
+    plan = _flown_plan(args, tau, scenario)
+    rows: list[dict[str, Any]] = []
+    hold = 0.0
+    if plan["sampled"] is not None:
+        rate, source = plan["sampled"]
+        d = round(tau * rate)
+        if abs(tau * rate - d) > 1e-9 * max(1.0, tau * rate):
+            raise SpecificationError(f"{source}: tau * HZ must be a whole number of samples, got {tau * rate!r}")
+        hold = 1.0 / rate
+        axes = spacecraft_axes(spacecraft, gain)
+        try:
+            exact = [sampled_stability(a, b, k, hold, delay_samples=d) for a, b, k in axes]
+        except SpecificationError as exc:  # the lifted system is refused above MAX_LIFTED_SIZE rows
+            raise SpecificationError(
+                f"{source} = {rate:g} Hz: {exc}; or leave the sampled check out (--no-flown)"
+            ) from exc
+        certified = [certify_sampled(a, b, k, hold, delay_samples=d, order=0) for a, b, k in axes]
+        rows.append(
+            {
+                "check": "sampled",
+                "source": source,
+                "rate_hz": rate,
+                "delay_samples": d,
+                "criterion": "input delay, Jensen + reciprocal convexity (N=0)",
+                "certified": all(c.certified for c in certified),
+                "statuses": [c.status.name for c in certified],
+                "exact_stable": all(e.stable for e in exact),
+                "spectral_radius": max(e.spectral_radius for e in exact),
+                "text": "\n".join([str(e) for e in exact] + [str(c) for c in certified]),
+            }
+        )
+    if plan["jitter"] is not None:
+        tau_min, source = plan["jitter"]
+        if tau_min >= tau:
+            raise SpecificationError(f"{source} must be < tau = {tau:g} s, got {tau_min:g}")
+        # Sampled and held, the delay the plant sees grows by up to one period after each sample.
+        tau_max = tau + hold
+        rate_bound = rate_value(args.jitter_rate)
+        loop = linearized_loop(spacecraft, gain)
+        pairs = loop.axes if loop.split else ((loop.A, loop.A_d),)
+        certificates = [certify_interval(a, a_d, tau_max, tau_min=tau_min, rate=rate_bound) for a, a_d in pairs]
+        rows.append(
+            {
+                "check": "jitter",
+                "source": source,
+                "tau_min": tau_min,
+                "tau_max": tau_max,
+                "rate": str(rate_bound),
+                "criterion": "interval delay, Wirtinger + reciprocal convexity (N=1)",
+                "certified": all(c.certified for c in certificates),
+                "statuses": [c.status.name for c in certificates],
+                "text": "\n".join(str(c) for c in certificates),
+            }
+        )
+    if plan["inertia"] is not None:
+        tolerance, bound, source = plan["inertia"]
+        try:
+            polytope = inertia_polytope(spacecraft, tolerance, product_bound=bound)
+        except (SpecificationError, DimensionError) as exc:
+            raise type(exc)(f"{source}: {exc}") from exc
+        certificate = certify_polytope(polytope, gain, tau)
+        rows.append(
+            {
+                "check": "inertia",
+                "source": source,
+                "inertia_tolerance": tolerance,
+                "product_bound": bound,
+                "criterion": f"{certificate.functional.name.lower()} functional over {certificate.vertices} "
+                f"vertices, N={certificate.order}",
+                "certified": certificate.certified,
+                "statuses": [certificate.status.name],
+                "text": f"{polytope}\n{certificate}",
+            }
+        )
+    return rows
+
+
+def _phase_margins(spacecraft: Spacecraft, gain: np.ndarray) -> Any:
+    """Per-axis phase margin and crossover (python-control), or None when the axes are coupled."""
+    # deferred: python-control and matplotlib (through mrpctl.interop, about 3.5 s to import), only for verify
+    from mrpctl.interop import loop_margins
+
+    try:
+        return loop_margins(spacecraft, gain)
+    except SpecificationError:
+        return None
+
+
+def _verify(args: argparse.Namespace) -> int:
+    if args.scenario is not None:
+        given = plant_given(args)
+        if given:
+            raise SpecificationError(
+                f"{given[0]} does not apply with a scenario file (the file gives the plant and gain); "
+                "leave out the file or the option"
+            )
+        scenario: Scenario | None = load_scenario(args.scenario)
+        assert scenario is not None
+        spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
+    else:
+        scenario = None
+        spacecraft = spacecraft_from(list(paper.INERTIA) if args.inertia is None else args.inertia)
+        gain_or_none = gain_from_args(args)
+        gain, tau = (paper.GAIN if gain_or_none is None else gain_or_none), paper.TAU
+    if args.tau is not None:
+        tau = args.tau
+    if not math.isfinite(tau) or tau < 0:
+        raise SpecificationError(f"--tau must be finite and >= 0 s, got {tau}")
+    # The loop as flown first: a refusal (bad option, lifted system too large) comes before the long searches.
+    flown = _flown_checks(args, spacecraft, gain, tau, scenario)
+    loop = linearized_loop(spacecraft, gain)
+    margin = loop.delay_margin()
+    rows: list[dict[str, Any]] = []
+    undelayed = analyze_gains(spacecraft, gain)
+    if tau > 0:
+        for order in args.orders:
+            certificate = loop.certify(tau, order=order)
+            search = loop.max_certified_delay(order=order)
+            finite = np.isfinite(margin.margin) and margin.margin > 0
+            rows.append(
+                {
+                    "criterion": criterion_name(order),
+                    "order": order,
+                    "status": certificate.status.name,
+                    "certified": certificate.certified,
+                    "max_certified_tau": search.tau,
+                    "ratio_to_exact": search.tau / margin.margin if finite else float("nan"),
+                }
+            )
+    margins = _phase_margins(spacecraft, gain)
+    if args.json:
+        print_json(
+            {
+                "tau": tau,
+                "K": gain,
+                "inertia": spacecraft.inertia,
+                "flown": [{key: value for key, value in row.items() if key != "text"} for row in flown],
+                "phase_margins": None
+                if margins is None
+                else [
+                    {
+                        "axis": m.axis,
+                        "phase_margin_deg": math.degrees(m.phase_margin),
+                        "crossover_rad_s": m.crossover,
+                        "delay_margin_s": m.delay_margin,
+                    }
+                    for m in margins.axes
+                ],
+                "exact_delay_margin": margin.margin,
+                "stable_at_tau": margin.is_stable(tau) if tau > 0 else undelayed.stable,
+                "undelayed_stable": undelayed.stable,
+                "undelayed_poles_real": undelayed.poles.real,
+                "undelayed_poles_imag": undelayed.poles.imag,
+                "criteria": rows,
+            }
+        )
+        return 0
+    print(f"{loop}; K = {(np.round(gain, 4) + 0.0).tolist()}")
+    if tau == 0:
+        worst = float(np.max(undelayed.poles.real))
+        print(
+            "tau = 0: no delay, so no delay certificate is needed; the undelayed loop is "
+            f"{'stable' if undelayed.stable else 'NOT stable'} (rightmost pole real part {worst:.6g} 1/s)"
+        )
+        print(f"exact delay margin: {margin.margin:.6g} s (largest delay this gain tolerates)")
+        _print_flown(flown)
+        return 0
+    print(f"exact delay margin: {margin.margin:.6g} s (stable at tau = {tau:g} s: {margin.is_stable(tau)})")
+    if margins is not None:
+        print(str(margins))
+    print(f"{'criterion':<24} {'at tau':<16} {'largest certified tau (s)':>26} {'ratio to exact':>15}")
+    for row in rows:
+        print(
+            f"{row['criterion']:<24} {row['status']:<16} {row['max_certified_tau']:>26.6g} "
+            f"{row['ratio_to_exact']:>15.4f}"
+        )
+    _print_flown(flown)
+    return 0
+
+
+def _print_flown(flown: list[dict[str, Any]]) -> None:
+    """The loop-as-flown rows of ``verify``: verdict, where the check comes from, and each certificate."""
+    for row in flown:
+        print(f"{row['check']} ({row['source']}): {'certified' if row['certified'] else 'NOT certified'}")
+        print("  " + row["text"].replace("\n", "\n  "))
+
+
+def add_parser(commands: Any) -> None:
+    parser = commands.add_parser(
+        "verify",
+        help="LMI verdict per criterion and the exact delay margin",
+        formatter_class=Formatter,
+        epilog=EXIT_CODES,
+    )
+    parser.add_argument(
+        "scenario", nargs="?", help="scenario TOML or shipped name (else the plant and gain options, or the paper's)"
+    )
+    add_plant_options(parser, "the paper's 140 100 80")
+    parser.add_argument("--tau", type=float, help="delay to certify (s); default the scenario's or 0.5")
+    parser.add_argument("--orders", type=int, nargs="+", default=[0, 1, 2, 3], help="LMI orders")
+    flown = parser.add_argument_group(
+        "the loop as flown (each adds a certificate; see design/lmi.md section 7). A scenario file adds them "
+        "itself: its rate (sampled loop), [delay] (jitter, rate unknown) and [uncertainty] (inertia box); "
+        "these options override the file's values"
+    )
+    flown.add_argument(
+        "--jitter",
+        type=float,
+        metavar="TAU_MIN",
+        help="time-varying delay tau(t) in [TAU_MIN, tau] (+ one period when the loop is sampled): interval "
+        "certificate (Wirtinger + reciprocal convexity)",
+    )
+    flown.add_argument(
+        "--jitter-rate", type=float, metavar="MU", help="with --jitter: |d tau/dt| <= MU (default: rate unknown)"
+    )
+    flown.add_argument(
+        "--sampled",
+        type=float,
+        metavar="HZ",
+        help="sampled-data loop at HZ with ZOH and d = tau*HZ samples: exact lifted check and Jensen certificate",
+    )
+    flown.add_argument(
+        "--inertia-tolerance",
+        type=float,
+        metavar="TOL",
+        help="every inertia with J_ii within +-TOL (relative): a vertex-dependent LK functional "
+        "(a common one above 8 vertices)",
+    )
+    flown.add_argument(
+        "--product-bound", type=float, metavar="P", help="with --inertia-tolerance: |J_ij| <= P kg m^2 (default 0)"
+    )
+    flown.add_argument(
+        "--no-flown",
+        action="store_true",
+        help="a scenario's idealised loop only: leave out the certificates of its rate, [delay] and [uncertainty]",
+    )
+    add_json(parser)
+    parser.set_defaults(handler=_verify)
