@@ -9,7 +9,7 @@ Every import of an mrpctl module counts, wherever it stands (top level, inside a
 * ``from mrpctl import X`` only for subpackages and modules (never a name re-exported by the root,
   which would be an import of everything);
 * an import inside a function only where it defers a heavy dependency, with a ``# deferred:`` comment
-  on the line before it saying what it defers.
+  on the line before it (or before the block of imports it heads) saying what it defers.
 """
 
 from __future__ import annotations
@@ -51,9 +51,11 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
 )
 
 #: Third-party modules heavy enough to be imported only where they are used (each with a comment).
-HEAVY = {"cvxpy", "xarray", "pandas", "matplotlib", "dask", "distributed", "Basilisk"}
-#: mrpctl modules that carry a heavy dependency and may be imported where they are used.
-HEAVY_OWN = {"mrpctl.plots"}
+HEAVY = {"cvxpy", "xarray", "zarr", "pandas", "matplotlib", "control", "dask", "distributed", "Basilisk"}
+#: mrpctl modules that import a heavy dependency at their top, and so may be imported where they are used:
+#: the figures (matplotlib), the campaign store, runner and report (xarray, zarr, Dask, matplotlib) and the
+#: python-control bridge.
+HEAVY_OWN = {"mrpctl.plots", "mrpctl.campaign.run", "mrpctl.campaign.store", "mrpctl.campaign.report", "mrpctl.interop"}
 
 
 def _module(path: Path) -> str:
@@ -103,7 +105,10 @@ def _imports() -> list[dict]:
                          for alias in node.names]  # fmt: skip
             else:
                 continue
-            comment = lines[node.lineno - 2].strip() if node.lineno >= 2 else ""
+            above = node.lineno - 2  # the comment may head a block of consecutive deferred imports
+            while above > 0 and lines[above].strip().startswith(("import ", "from ")):
+                above -= 1
+            comment = lines[above].strip() if above >= 0 else ""
             for name, imported in pairs:
                 top = name.split(".")[0]
                 rows.append(

@@ -12,7 +12,6 @@ import argparse
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from mrpctl import __version__
 from mrpctl.cli import campaign, design, export, init, reproduce, simulate, verify
 from mrpctl.cli.common import (
     EXIT_BROKEN_PIPE,
@@ -24,6 +23,7 @@ from mrpctl.cli.common import (
     Parser,
     run_command,
 )
+from mrpctl.provenance import mrpctl_version
 
 __all__ = ["EXIT_BROKEN_PIPE", "EXIT_CODES", "EXIT_DIVERGED", "EXIT_INTERRUPTED", "USER_ERROR", "build_parser", "main"]
 
@@ -50,7 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=Formatter,
         epilog=EXIT_CODES,
     )
-    parser.add_argument("--version", action="version", version=f"mrpctl {__version__}")
+    parser.add_argument("--version", action="version", version=f"mrpctl {mrpctl_version()}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in SUBCOMMANDS:
         add(commands)
