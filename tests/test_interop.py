@@ -186,7 +186,7 @@ def test_basilisk_nearest_scalar_gains_report_what_is_not_applied(rng: np.random
     per_axis = np.asarray(pd_gains(Spacecraft(np.array([12.0, 15.0, 9.0])), zeta=1.0, omega_n=0.5).K)
     bsk = basilisk_mrp_feedback(per_axis, nearest=True)
     k_sigma, k_omega = np.mean(np.diag(per_axis[:, :3])), np.mean(np.diag(per_axis[:, 3:]))
-    assert bsk.K == pytest.approx(-k_sigma, rel=1e-15) and bsk.P == pytest.approx(-k_omega / 4.0, rel=1e-15)
+    assert pytest.approx(-k_sigma, rel=1e-15) == bsk.K and pytest.approx(-k_omega / 4.0, rel=1e-15) == bsk.P
     for x in rng.normal(size=(5, 6)):  # Basilisk's torque plus what it leaves out is mrpctl's u = K x
         sigma_bn, omega_bn_b = basilisk_state(x)
         torque_bsk = -(bsk.K * sigma_bn + bsk.P * omega_bn_b)
