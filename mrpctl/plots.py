@@ -179,13 +179,17 @@ def _unit_lines(ax: Axes, values: np.ndarray, norm: np.ndarray) -> None:
         ax.axhline(-1.0, color="k", linewidth=0.4, linestyle=(0, (4, 3)), label="σᵢ = −1")
 
 
-def _limit_lines(ax: Axes, u_max: Any) -> None:
-    """±u_max of each axis on the torque panel (dotted, the colour of its component)."""
-    limits = np.broadcast_to(np.asarray(u_max, dtype=float), (3,))
+def _limit_lines(ax: Axes, u_max: Any, u: np.ndarray) -> None:
+    """±u_max on the torque panel (dotted, the colour of its component; for the drawn components only)."""
+    try:
+        limits = np.broadcast_to(np.asarray(u_max, dtype=float), (3,))
+    except (TypeError, ValueError):
+        raise SpecificationError(f"u_max must be one or three torque limits in N m, got {u_max!r}") from None
     if not np.all((limits > 0) | np.isinf(limits)):
         raise SpecificationError(f"u_max must be positive torque limits in N m (one or three), got {u_max!r}")
-    finite = [i for i in range(3) if np.isfinite(limits[i])]
-    if finite and np.ptp(limits[finite]) == 0.0:  # one limit for every axis: one pair of lines
+    drawn = [i for i in range(3) if np.any(u[:, i])] or [0, 1, 2]
+    finite = [i for i in drawn if np.isfinite(limits[i])]
+    if finite and np.ptp(limits) == 0.0:  # one limit for every axis: one pair of lines
         for sign in (1.0, -1.0):
             ax.axhline(sign * limits[finite[0]], color="0.3", linewidth=0.8, linestyle=":")
         ax.plot([], [], color="0.3", linewidth=0.8, linestyle=":", label=f"±u_max = {limits[finite[0]]:g} N m")
@@ -265,7 +269,7 @@ def plot_response(
     elif hasattr(u_max, "u_max"):  # an ActuatorModel
         u_max = u_max.u_max
     if u_max is not None:
-        _limit_lines(axes[2], u_max)
+        _limit_lines(axes[2], u_max, np.asarray(result.u))
     if result.diverged:
         for panel in axes:
             panel.axvline(float(t[-1]), color=_FAIL_COLOR, linewidth=1.2, linestyle=":", label="diverged")

@@ -304,8 +304,14 @@ def test_torque_panel_draws_the_actuator_limits(result) -> None:
 
     u_ax = plots.plot_response(result, u_max=ActuatorModel(u_max=[60.0, 50.0, 40.0])).axes[2]
     levels = sorted(float(_y(line)[0]) for line in u_ax.lines if line.get_linestyle() == ":" and len(_y(line)))
-    assert levels == [-60.0, -50.0, -40.0, 40.0, 50.0, 60.0]
+    assert levels == [-60.0, 60.0]  # u₂, u₃ ≡ 0 are not drawn, nor their limits
     assert "±u_max,1 = 60 N m" in [t.get_text() for t in _legend(u_ax).get_texts()]
+    tumble = simulate(
+        paper.SPACECRAFT, paper.GAIN, [0.2, -0.1, 0.3, 0.01, 0.02, -0.01], tau=0.0, rule=OnCurrent(), t_final=1.0
+    )
+    u_ax = plots.plot_response(tumble, u_max=[60.0, 50.0, 40.0]).axes[2]
+    levels = sorted(float(_y(line)[0]) for line in u_ax.lines if line.get_linestyle() == ":" and len(_y(line)))
+    assert levels == [-60.0, -50.0, -40.0, 40.0, 50.0, 60.0]
     one = plots.plot_response(result, u_max=100.0).axes[2]
     assert "±u_max = 100 N m" in [t.get_text() for t in _legend(one).get_texts()]
     assert not [line for line in plots.plot_response(result).axes[2].lines if line.get_linestyle() == ":"]
