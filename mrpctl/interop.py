@@ -328,6 +328,9 @@ class BasiliskGains:
         −1: integral feedback off.
     controlLawType : int
         0: no ω × (Iω) term (mrpctl's PD has none).
+    unmapped : numpy.ndarray
+        (3, 6) part of mrpctl's K that Basilisk does not apply (K − [k_σ I₃, k_ω I₃]); zero
+        unless :func:`basilisk_mrp_feedback` was asked for the ``nearest`` scalar gains.
     names : dict
         Basilisk message field -> mrpctl quantity.
     """
@@ -336,6 +339,7 @@ class BasiliskGains:
     P: float
     Ki: float = -1.0
     controlLawType: int = 0
+    unmapped: np.ndarray = field(default_factory=lambda: readonly(np.zeros((3, 6))), compare=False)
     names: dict[str, str] = field(
         default_factory=lambda: {
             "sigma_BR (= sigma_BN, R = N)": "x[0:3] = sigma",
@@ -346,44 +350,77 @@ class BasiliskGains:
     )
 
     def __str__(self) -> str:
-        return (
+        text = (
             f"Basilisk mrpFeedback: K = {self.K:.6g}, P = {self.P:.6g}, Ki = {self.Ki:g}, "
             f"controlLawType = {self.controlLawType} (undelayed; Basilisk has no measurement delay here)"
         )
+        if np.any(self.unmapped):
+            text += f"; NOT the same controller: gain entries up to {np.max(np.abs(self.unmapped)):.3g} N m unmapped"
+        return text
 
 
-def basilisk_mrp_feedback(K: Any) -> BasiliskGains:
+def _scalar_block_defect(name: str, block: np.ndarray) -> str | None:
+    """Why a 3×3 gain block is not a scalar times I₃ (what mrpFeedback cannot take), or None."""
+    s = float(np.trace(block)) / 3.0
+    tolerance = 1e-12 * max(float(np.max(np.abs(block))), 1.0)
+    off = block - np.diag(np.diag(block))
+    if np.max(np.abs(off)) > tolerance:
+        i, j = np.unravel_index(int(np.argmax(np.abs(off))), off.shape)
+        return (
+            f"{name} couples the axes (entry [{i}, {j}] = {block[i, j]:.6g}): mrpFeedback applies its gain to each "
+            "axis of sigma_BR / omega_BR_B alone, so no off-diagonal gain can be expressed"
+        )
+    diagonal = np.diag(block)
+    if np.max(np.abs(diagonal - s)) > tolerance:
+        return (
+            f"{name} differs per axis (diagonal {np.round(diagonal, 6).tolist()}): mrpFeedback has one scalar "
+            "for all three axes"
+        )
+    return None
+
+
+def basilisk_mrp_feedback(K: Any, *, nearest: bool = False) -> BasiliskGains:
     """Basilisk ``mrpFeedback`` gains equal to mrpctl's K = [k_σ I₃, k_ω I₃].
+
+    Basilisk's ``mrpFeedback`` (src/fswAlgorithms/attControl/mrpFeedback) takes two scalars,
+    ``K`` on σ_BR and ``P`` on ω_BR_B, the same on the three axes; it has no gain matrix. A
+    gain whose 3×3 blocks are scalar multiples of I₃ maps exactly; a per-axis (diagonal with
+    different entries) or coupled (off-diagonal) block cannot be expressed and is refused,
+    unless ``nearest=True`` asks for the nearest scalar gains, with what Basilisk then does
+    not apply reported in :attr:`BasiliskGains.unmapped`.
 
     Parameters
     ----------
     K : array_like
         (3, 6) gain on x = [σ; ω/4] (N m).
+    nearest : bool, keyword-only
+        Map per-axis or coupled blocks to their nearest scalar times I₃ (in the Frobenius norm:
+        the mean of the diagonal) instead of refusing them. The mapped loop is then another
+        controller than K: check its stability and margins before flying it.
 
     Returns
     -------
     BasiliskGains
-        K_bsk = −k_σ and P_bsk = −k_ω/4.
+        K_bsk = −k_σ and P_bsk = −k_ω/4; ``unmapped`` = K − [k_σ I₃, k_ω I₃] (zero when exact).
 
     Raises
     ------
     SpecificationError
-        When either 3×3 block of K is not a multiple of I₃: ``mrpFeedback`` has scalar K and
-        P and cannot express per-axis or coupled gains.
+        When a 3×3 block of K is not a multiple of I₃ and ``nearest`` is False: the message
+        names the block and what in it ``mrpFeedback`` cannot take (per-axis or coupled gains).
     """
     k = gain_matrix(K)
     blocks = {"K[:, :3] (k_sigma)": k[:, :3], "K[:, 3:] (k_omega)": k[:, 3:]}
-    scalars = []
-    for name, block in blocks.items():
-        s = float(block[0, 0])
-        if not np.allclose(block, s * np.eye(3), rtol=0.0, atol=1e-12 * max(abs(s), 1.0)):
-            raise SpecificationError(
-                f"{name} must be a scalar times I3 for Basilisk's mrpFeedback (scalar K and P), got "
-                f"{np.round(block, 6).tolist()}; per-axis or coupled gains cannot be expressed there"
-            )
-        scalars.append(s)
-    k_sigma, k_omega = scalars
-    return BasiliskGains(K=-k_sigma, P=-k_omega / 4.0)
+    defects = [d for d in (_scalar_block_defect(name, block) for name, block in blocks.items()) if d]
+    if defects and not nearest:
+        raise SpecificationError(
+            "K must have each 3x3 block a scalar times I3 for Basilisk's mrpFeedback (scalar K and P): "
+            + "; ".join(defects)
+            + "; pass nearest=True for the nearest scalar gains (another controller: check it)"
+        )
+    k_sigma, k_omega = (float(np.trace(block)) / 3.0 for block in blocks.values())
+    mapped = np.hstack((k_sigma * np.eye(3), k_omega * np.eye(3)))
+    return BasiliskGains(K=-k_sigma, P=-k_omega / 4.0, unmapped=readonly(k - mapped))
 
 
 def gain_from_basilisk(K_bsk: Any, P_bsk: Any) -> np.ndarray:

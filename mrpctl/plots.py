@@ -192,10 +192,66 @@ def _status(result: RunView) -> str:
     return f"did not settle in {result.t_final:g} s ({SETTLING_CAPTION.split(': ', 1)[1]})"
 
 
+def _rule_words(rule: Any) -> str:
+    """What a switching rule does, in words and the figures' notation (never its class name or repr)."""
+    name = type(rule).__name__
+    if name == "NoSwitching":
+        return "no shadow-set switching"
+    if name == "OnCurrent":
+        return "switching when the current |σ(t)| ≥ 1"
+    if name == "OnDelayed":
+        return "switching when the delayed |σ(t − τ)| ≥ 1"
+    if name == "BoundaryLayer":
+        return f"switching when 1 ≤ |σ(t − τ)| ≤ 1 + ε (ε = {rule.eps:g})"
+    if name == "DelayAware":
+        return f"delay-aware switching when |σ(t − τ)| ≥ α (α = {rule.alpha:g})"
+    if name == "Hysteretic":
+        return f"controller-side set selection with hysteresis δ = {rule.delta:g}"
+    if name == "OnPredicted":
+        alpha = getattr(rule, "alpha", None)
+        return "predictor, no switching" if alpha is None else f"predictor, switching when |σ̂| ≥ α (α = {alpha:g})"
+    words = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", name).lower()  # a rule of the user's: its class name in words
+    return _typeset(words)
+
+
 def _title(result: RunView) -> str:
     n = int(result.switch_count)
     switches = f"{n} shadow-set switch{'es' if n != 1 else ''}"
-    return textwrap.fill(_typeset(f"{result.rule}, tau = {result.tau:g} s: {switches}; {_status(result)}"), width=95)
+    what = f"{_rule_words(result.rule)}, delay τ = {result.tau:g} s at {result.rate:g} Hz"
+    return textwrap.fill(f"{what[0].upper()}{what[1:]}: {switches}; {_status(result)}", width=95)
+
+
+def _unit_lines(ax: Axes, values: np.ndarray, norm: np.ndarray) -> None:
+    """The |σ| = 1 line (and −1 for the components) only when within or near the data; the axis fits the data."""
+    lo = float(min(np.min(values), 0.0)) if values.size else 0.0
+    hi = float(max(np.max(values), np.max(norm))) if values.size else 1.0
+    span = max(hi - lo, 1e-12)
+    near = 0.25 * span  # a line this close to the data is drawn (the axis then extends to it)
+    if hi >= 1.0 - near:
+        ax.axhline(1.0, color="k", linewidth=0.4, label="|σ| = 1")
+    if lo <= -1.0 + near:
+        ax.axhline(-1.0, color="k", linewidth=0.4, linestyle=(0, (4, 3)), label="σᵢ = −1")
+
+
+def _limit_lines(ax: Axes, u_max: Any, u: np.ndarray) -> None:
+    """±u_max on the torque panel (dotted, the colour of its component; for the drawn components only)."""
+    try:
+        limits = np.broadcast_to(np.asarray(u_max, dtype=float), (3,))
+    except (TypeError, ValueError):
+        raise SpecificationError(f"u_max must be one or three torque limits in N m, got {u_max!r}") from None
+    if not np.all((limits > 0) | np.isinf(limits)):
+        raise SpecificationError(f"u_max must be positive torque limits in N m (one or three), got {u_max!r}")
+    drawn = [i for i in range(3) if np.any(u[:, i])] or [0, 1, 2]
+    finite = [i for i in drawn if np.isfinite(limits[i])]
+    if finite and np.ptp(limits) == 0.0:  # one limit for every axis: one pair of lines
+        for sign in (1.0, -1.0):
+            ax.axhline(sign * limits[finite[0]], color="0.3", linewidth=0.8, linestyle=":")
+        ax.plot([], [], color="0.3", linewidth=0.8, linestyle=":", label=f"±u_max = {limits[finite[0]]:g} N m")
+        return
+    for i in finite:
+        for sign in (1.0, -1.0):
+            ax.axhline(sign * limits[i], color=f"C{i}", linewidth=0.8, linestyle=":")
+        ax.plot([], [], color=f"C{i}", linewidth=0.8, linestyle=":", label=f"±u_max,{i + 1} = {limits[i]:g} N m")
 
 
 def _switch_cluster(result: RunView) -> tuple[float, float] | None:
@@ -212,7 +268,14 @@ def _switch_cluster(result: RunView) -> tuple[float, float] | None:
 
 
 # ------------------------------------------------------------------------------ single runs
-def plot_response(result: RunView, *, title: str | None = None, ax: Any = None, inset: bool | None = None) -> Figure:
+def plot_response(
+    result: RunView,
+    *,
+    title: str | None = None,
+    ax: Any = None,
+    inset: bool | None = None,
+    u_max: Any = None,
+) -> Figure:
     """σ, ω and u against t, with the switch instants marked (paper Figs. 2-7).
 
     Parameters
@@ -227,6 +290,12 @@ def plot_response(result: RunView, *, title: str | None = None, ax: Any = None, 
     inset : bool, optional
         Zoom inset on the σ panel around the switches. By default drawn when at least 10
         switches fall in at most a tenth of the run (Fig. 7: 114 switches in 0.944-1.606 s).
+    u_max : float, array_like (3,) or mrpctl.flight.ActuatorModel, optional
+        The actuator's torque limits (N m): ±u_max drawn on the torque panel. By default the
+        limit of the run's actuator when the result carries one, none otherwise.
+
+    The σ axis fits the data: the |σ| = 1 line (and σᵢ = −1) is drawn only when it lies
+    within or near the data range (a quarter of the range away at most).
 
     Returns
     -------
@@ -248,7 +317,13 @@ def plot_response(result: RunView, *, title: str | None = None, ax: Any = None, 
         panel.grid(True, linewidth=0.3)
     norm = np.linalg.norm(sigma, axis=1)
     axes[0].plot(t[: len(norm)], norm, color="k", linestyle="--", linewidth=0.8, label="|σ|")
-    axes[0].axhline(1.0, color="k", linewidth=0.4, label="|σ| = 1")
+    _unit_lines(axes[0], sigma, norm)
+    if u_max is None:
+        u_max = getattr(getattr(result, "actuator", None), "u_max", None)
+    elif hasattr(u_max, "u_max"):  # an ActuatorModel
+        u_max = u_max.u_max
+    if u_max is not None:
+        _limit_lines(axes[2], u_max, np.asarray(result.u))
     if result.diverged:
         for panel in axes:
             panel.axvline(float(t[-1]), color=_FAIL_COLOR, linewidth=1.2, linestyle=":", label="diverged")
@@ -327,6 +402,7 @@ def plot_attitude(
     with_markers = int(keep.sum()) <= 2000 if markers is None else markers
     _components(axis, t[keep], sigma[keep], "σ", drawstyle="steps-post", marker="." if with_markers else None)
     axis.plot(t[keep], np.linalg.norm(sigma[keep], axis=1), color="k", linestyle="--", linewidth=0.7, label="|σ|")
+    _unit_lines(axis, sigma[keep], np.linalg.norm(sigma[keep], axis=1))
     switches = np.asarray(result.switch_times)
     shown = switches[(switches >= start) & (switches <= stop)]
     _mark_switches(axis, shown, label=True)
@@ -547,8 +623,8 @@ def plot_monte_carlo(batch: BatchView, *, title: str | None = None, ax: Any = No
     for panel in axes:
         panel.grid(True, linewidth=0.3)
         _legend_outside(panel)
-    rules = "; ".join(sorted({str(r) for r in batch.rules}))
-    head = _typeset(title) if title else textwrap.fill(_typeset(f"{n} runs, {rules}"), width=95)
+    rules = "; ".join(sorted({_rule_words(r) for r in batch.rules}))
+    head = _typeset(title) if title else textwrap.fill(f"{n} runs from dispersed initial states, {rules}", width=95)
     axes[0].set_title(f"{head}\n{SETTLING_CAPTION}", fontsize=9)
     return fig
 
@@ -637,7 +713,7 @@ def plot_noise_study(
     Parameters
     ----------
     noise : array_like
-        (m,) attitude noise levels σ_n (rad, 1σ per axis): the rows.
+        (m,) attitude noise levels (rad, standard deviation per axis): the rows.
     alpha : array_like
         (p,) bounds α on |σ_c| (δ = (α² − 1)/(α² + 1)): the columns.
     switch_count, settling_time : array_like
@@ -669,7 +745,7 @@ def plot_noise_study(
         ax.set_xticks(range(shape[1]), [f"{a:g}\n(δ = {(a * a - 1) / (a * a + 1):.3f})" for a in columns], fontsize=8)
         ax.set_yticks(range(shape[0]), [f"{n:g}" for n in rows])
         ax.set_xlabel("hysteresis bound α on |σ_c|")
-        ax.set_ylabel("attitude noise σ_n (rad, 1σ per axis)")
+        ax.set_ylabel("attitude noise (rad, std per axis)")
         ax.set_title(label, fontsize=10)
     if title:
         fig.suptitle(_typeset(title), fontsize=10)

@@ -225,8 +225,8 @@ def test_c_harness_matches_simulate(paper_export, tmp_path):
     assert done.returncode == 0, done.stderr
     parameters = paper_export.manifest["parameters"]
     x0 = np.asarray(paper.INITIAL_STATE)
-    arguments = [str(parameters["delay_samples"]), repr(parameters["initial_memory"])]
-    arguments += [repr(float(value)) for value in x0]
+    arguments = [str(parameters["delay_samples"]), "1000", *(repr(float(value)) for value in x0)]
+    arguments.append(repr(parameters["initial_memory"]))
     run = subprocess.run([str(binary), *arguments], capture_output=True, text=True, check=True, timeout=60)
     final = np.array([float(value) for value in run.stdout.split()])
     assert final.shape == (6,)

@@ -172,8 +172,28 @@ def test_basilisk_refuses_per_axis_gains() -> None:
     per_axis = pd_gains(
         Spacecraft(np.array([12.0, 15.0, 9.0])), zeta=1.0, omega_n=0.5
     ).K  # k_sigma = 4 J K1: differs per axis
-    with pytest.raises(SpecificationError, match=r"scalar times I3.*per-axis"):
+    with pytest.raises(SpecificationError, match=r"scalar times I3.*k_sigma\) differs per axis \(diagonal \[") as info:
         basilisk_mrp_feedback(per_axis)
+    assert "k_omega) differs per axis" in str(info.value) and "nearest=True" in str(info.value)
+    coupled = np.array(paper.GAIN, dtype=float)
+    coupled[0, 4] = 0.5
+    with pytest.raises(SpecificationError, match=r"k_omega\) couples the axes \(entry \[0, 1\] = 0.5\)") as info:
+        basilisk_mrp_feedback(coupled)
+    assert "k_sigma" not in str(info.value)  # the scalar block is not blamed
+
+
+def test_basilisk_nearest_scalar_gains_report_what_is_not_applied(rng: np.random.Generator) -> None:
+    per_axis = np.asarray(pd_gains(Spacecraft(np.array([12.0, 15.0, 9.0])), zeta=1.0, omega_n=0.5).K)
+    bsk = basilisk_mrp_feedback(per_axis, nearest=True)
+    k_sigma, k_omega = np.mean(np.diag(per_axis[:, :3])), np.mean(np.diag(per_axis[:, 3:]))
+    assert pytest.approx(-k_sigma, rel=1e-15) == bsk.K and pytest.approx(-k_omega / 4.0, rel=1e-15) == bsk.P
+    for x in rng.normal(size=(5, 6)):  # Basilisk's torque plus what it leaves out is mrpctl's u = K x
+        sigma_bn, omega_bn_b = basilisk_state(x)
+        torque_bsk = -(bsk.K * sigma_bn + bsk.P * omega_bn_b)
+        assert np.allclose(torque_bsk + bsk.unmapped @ x, per_axis @ x, rtol=1e-13, atol=1e-12)
+    assert np.max(np.abs(bsk.unmapped)) > 1.0 and "NOT the same controller" in str(bsk)
+    exact = basilisk_mrp_feedback(paper.GAIN, nearest=True)
+    assert not np.any(exact.unmapped) and "NOT" not in str(exact) and exact == basilisk_mrp_feedback(paper.GAIN)
 
 
 def test_basilisk_mrp_feedback_module_agrees() -> None:

@@ -19,7 +19,8 @@ from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 from mrpctl import paper, plots, simulate, simulate_batch
 from mrpctl.design import linearized_loop
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.switching import BoundaryLayer, OnDelayed
+from mrpctl.flight import Hysteretic
+from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +96,9 @@ def test_response_figure_carries_the_run(result, tmp_path: Path) -> None:
     assert len(markers) == 1 and np.array_equal(_x(markers[0]), result.switch_times)
     title = sigma_ax.get_title()
     assert str(result.switch_count) in title and "τ = 0.5 s" in title and "|σ| < 10⁻²" in title
-    assert "sigma" not in title and "tau" not in title and "ε" not in title  # Greek, consistently
+    assert "sigma" not in title and "tau" not in title  # Greek, consistently
+    assert "BoundaryLayer" not in title and "Switching when 1 ≤ |σ(t − τ)| ≤ 1 + ε (ε = 0.005)" in title  # words
+    assert [line.get_label() for line in sigma_ax.lines].count("|σ| = 1") == 1  # |σ| reaches 1: the line stays
     path = plots.save_figure(fig, tmp_path / "sub" / "response.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -280,3 +283,54 @@ def test_counts_with_zeros_use_a_symlog_axis() -> None:
         [1.0, 2.0], switch_count=[1, 2], settling_time=[1, 2], converged=[True, True], parameter_label="x"
     )
     assert flat.axes[0].get_yscale() == "linear"
+
+
+def test_sigma_axis_fits_the_data_and_unit_lines_only_when_near() -> None:
+    small = simulate(
+        paper.SPACECRAFT, paper.GAIN, np.asarray(paper.INITIAL_STATE) * 0.1, tau=0.0, rule=OnCurrent(), t_final=20.0
+    )
+    assert small.max_sigma < 0.1
+    sigma_ax = plots.plot_response(small).axes[0]
+    labels = [line.get_label() for line in sigma_ax.lines]
+    assert "|σ| = 1" not in labels and "σᵢ = −1" not in labels
+    low, high = sigma_ax.get_ylim()
+    assert high < 0.15 and low > -0.15  # the axis fits |σ| <= 0.093, not |σ| = 1
+    zoom = plots.plot_attitude(small, window=(0.0, 5.0)).axes[0]
+    assert zoom.get_ylim()[1] < 0.15
+
+
+def test_torque_panel_draws_the_actuator_limits(result) -> None:
+    from mrpctl.flight import ActuatorModel
+
+    u_ax = plots.plot_response(result, u_max=ActuatorModel(u_max=[60.0, 50.0, 40.0])).axes[2]
+    levels = sorted(float(_y(line)[0]) for line in u_ax.lines if line.get_linestyle() == ":" and len(_y(line)))
+    assert levels == [-60.0, 60.0]  # u₂, u₃ ≡ 0 are not drawn, nor their limits
+    assert "±u_max,1 = 60 N m" in [t.get_text() for t in _legend(u_ax).get_texts()]
+    tumble = simulate(
+        paper.SPACECRAFT, paper.GAIN, [0.2, -0.1, 0.3, 0.01, 0.02, -0.01], tau=0.0, rule=OnCurrent(), t_final=1.0
+    )
+    u_ax = plots.plot_response(tumble, u_max=[60.0, 50.0, 40.0]).axes[2]
+    levels = sorted(float(_y(line)[0]) for line in u_ax.lines if line.get_linestyle() == ":" and len(_y(line)))
+    assert levels == [-60.0, -50.0, -40.0, 40.0, 50.0, 60.0]
+    one = plots.plot_response(result, u_max=100.0).axes[2]
+    assert "±u_max = 100 N m" in [t.get_text() for t in _legend(one).get_texts()]
+    assert not [line for line in plots.plot_response(result).axes[2].lines if line.get_linestyle() == ":"]
+    with pytest.raises(SpecificationError, match="u_max"):
+        plots.plot_response(result, u_max=-1.0)
+
+
+@pytest.mark.parametrize(
+    ("rule", "words"),
+    [
+        (NoSwitching(), "no shadow-set switching"),
+        (OnCurrent(), "switching when the current |σ(t)| ≥ 1"),
+        (OnDelayed(), "switching when the delayed |σ(t − τ)| ≥ 1"),
+        (DelayAware(alpha=1.1), "delay-aware switching when |σ(t − τ)| ≥ α (α = 1.1)"),
+        (Hysteretic(0.02), "controller-side set selection with hysteresis δ = 0.02"),
+    ],
+)
+def test_titles_name_the_rule_in_words(rule: Any, words: str) -> None:
+    run = simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, tau=paper.TAU, rule=rule, t_final=1.0)
+    title = " ".join(plots.plot_response(run).axes[0].get_title().split())
+    assert title.startswith(words[0].upper() + words[1:])
+    assert type(rule).__name__ not in title and "(" + type(rule).__name__ not in title
