@@ -20,8 +20,8 @@ from mrpctl._export import SOURCE_NAME, export
 from mrpctl.design import pd_gains
 from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, SensorModel
 from mrpctl.loop import closed_loop_functions
+from mrpctl.loop.options import predictor_memory
 from mrpctl.predictor import perturbed_spacecraft
-from mrpctl.simulation._engine import predictor_memory
 from mrpctl.switching import OnDelayed
 
 COMPILER = find_compiler()
