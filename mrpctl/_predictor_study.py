@@ -1,10 +1,11 @@
 """The predictor study of ``mrpctl reproduce`` (issue 13): settling against inertia error, with and without prediction.
 
 The paper case at τ = 0.5 s (the paper's spacecraft, x0 = [0.93, 0, 0, 0.46/4, 0, 0], 1 kHz, 60 s,
-compiled engine): the best certified PD without prediction (:func:`mrpctl.design.synthesize_pd`,
+compiled engine): the best certified PD without prediction
+([`mrpctl.design.synthesize_pd`][mrpctl.design.synthesize_pd],
 the decay-rate-optimal certified gain, rule ``OnCurrent``) against the predictor controller with
-faster gains (ζ = 1, ωₙ = :data:`FAST_OMEGA_N`, rule ``OnPredicted(1)``), the plant's inertia scaled
-by (1 + e) while both controllers keep the nominal model. :func:`predictor_study` returns the
+faster gains (ζ = 1, ωₙ = `FAST_OMEGA_N`, rule ``OnPredicted(1)``), the plant's inertia scaled
+by (1 + e) while both controllers keep the nominal model. `predictor_study` returns the
 table rows, the sweep, the exact inertia margins of both loops, and builds the figure.
 """
 
@@ -81,7 +82,7 @@ class StudyRow:
 
 @dataclass(frozen=True, eq=False)
 class PredictorStudy:
-    """Result of :func:`predictor_study`.
+    """Result of `predictor_study`.
 
     Attributes
     ----------
@@ -96,7 +97,8 @@ class PredictorStudy:
         ωₙ (rad/s) of the two gains.
     pd_margin, predictor_margin : MarginInterval or None
         The inertia errors each loop tolerates (exact, linearised): the PD's from the delay margin of
-        the perturbed delayed loop (> τ), the predictor's from :func:`mrpctl.predictor.inertia_mismatch_margin`
+        the perturbed delayed loop (> τ), the predictor's from
+        [`mrpctl.predictor.inertia_mismatch_margin`][mrpctl.predictor.inertia_mismatch_margin]
         (sampled at 1 kHz); None when not computed.
     t_final : float
         Horizon of every run (s).
@@ -128,7 +130,8 @@ class PredictorStudy:
         return "\n".join(lines)
 
     def claims(self) -> list[Any]:
-        """The rows as :class:`mrpctl.reproduction.Claim` values (verdict: mrpctl only), for ``claims.md``."""
+        """The rows as [`mrpctl.reproduction.Claim`][mrpctl.reproduction.Claim] values (verdict: mrpctl only), for
+        ``claims.md``."""
         from mrpctl.reproduction import Claim, Verdict
 
         claims = []

@@ -121,7 +121,8 @@ def sealed(array: np.ndarray) -> np.ndarray:
 
 
 def check_spacecraft(value: Any, name: str = "spacecraft") -> Spacecraft:
-    """Return ``value`` if it is a :class:`mrpctl.Spacecraft`, else raise SpecificationError naming ``name``."""
+    """Return ``value`` if it is a [`mrpctl.Spacecraft`][mrpctl.Spacecraft], else raise SpecificationError naming
+    ``name``."""
     from mrpctl.spacecraft import Spacecraft
 
     if not isinstance(value, Spacecraft):

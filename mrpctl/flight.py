@@ -6,17 +6,21 @@ attitude, the plant's MRP set is a simulation detail, and the controller alone c
 to feed its control law, from the delayed (noisy) measurement, keeping that choice in its own memory.
 This module holds the pieces of that loop (see ``design/flight.md`` for the equations):
 
-* option values, frozen and validated: :class:`SensorModel`, :class:`ActuatorModel`,
-  :class:`DelayModel`, :class:`Disturbance`, and the controller-side rule :class:`Hysteretic`
+* option values, frozen and validated: [`SensorModel`][mrpctl.flight.SensorModel],
+[`ActuatorModel`][mrpctl.flight.ActuatorModel],
+  [`DelayModel`][mrpctl.flight.DelayModel], [`Disturbance`][mrpctl.flight.Disturbance], and the controller-side rule
+  [`Hysteretic`][mrpctl.flight.Hysteretic]
   (Mayhew, Sanfelice and Teel 2011);
 * seeded noise and jitter streams that depend only on (seed, sample index), never on how the
-  horizon is sliced (:meth:`SensorModel.noise`, :meth:`DelayModel.samples`);
-* the newest-arrived measurement schedule of a time-varying delay (:func:`newest_arrived`);
+  horizon is sliced ([`SensorModel.noise`][mrpctl.flight.SensorModel.noise],
+  [`DelayModel.samples`][mrpctl.flight.DelayModel.samples]);
+* the newest-arrived measurement schedule of a time-varying delay ([`newest_arrived`][mrpctl.flight.newest_arrived]);
 * the CasADi expression builders of one flight sample, each also a small pure-SX
-  ``casadi.Function`` with named ports: :func:`measurement_function`,
-  :func:`hysteresis_function`, :func:`selection_function`, :func:`actuator_function`.
+  ``casadi.Function`` with named ports: [`measurement_function`][mrpctl.flight.measurement_function],
+  [`hysteresis_function`][mrpctl.flight.hysteresis_function], [`selection_function`][mrpctl.flight.selection_function],
+  [`actuator_function`][mrpctl.flight.actuator_function].
 
-Conventions are those of :mod:`mrpctl.mrp`: σ = tan(Φ/4) ê, quaternions scalar first,
+Conventions are those of [`mrpctl.mrp`][mrpctl.mrp]: σ = tan(Φ/4) ê, quaternions scalar first,
 [BN] passive, x = [σ; ω/4].
 """
 
@@ -80,7 +84,7 @@ NOISE_SIZE = 6
 #: |θ| <= π (design/flight.md, phase 8a). A campaign store records it (``attrs["noise_revision"]``; a store
 #: without it is revision 1) and is not resumed across revisions.
 NOISE_REVISION = 2
-#: The stream numbers of the attitude noise, the rate noise and the delay jitter (:func:`stream_key`).
+#: The stream numbers of the attitude noise, the rate noise and the delay jitter (`stream_key`).
 STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 #: Largest attitude 1σ (rad): |θ|² of σ_θ·N(0, I₃) must stay finite (overflow from |θ| ≈ 1.3e154).
@@ -118,7 +122,7 @@ def _value(key: int, idx: int) -> int:
 
 
 def _values(key: int, idx: np.ndarray) -> np.ndarray:
-    """:func:`_value` of a uint64 array of indices (uint64 arithmetic wraps mod 2^64)."""
+    """`_value` of a uint64 array of indices (uint64 arithmetic wraps mod 2^64)."""
     z = (idx + np.uint64(1)) * np.uint64(_GAMMA) + np.uint64(key)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
@@ -187,7 +191,7 @@ def stream_normals(key: int, n0: int, n1: int) -> np.ndarray:
     Vectorised over the values attempt by attempt (the C loop of each value, in the same
     arithmetic); the exponentials of the wedge tests are Python's ``math.exp`` (the libm's, as in
     the C code: NumPy's own exp may differ in the last bit) and the tail, about 4 values in 10⁴,
-    runs the C loop value by value (:func:`_normal_slow`, ``math.log``).
+    runs the C loop value by value (`_normal_slow`, ``math.log``).
     """
     table_x, table_f = _c_tables()
     out = np.empty(n1 - n0)
@@ -223,7 +227,8 @@ def _stream_normals(
 ) -> np.ndarray:
     """(k1 − k0, 3) standard normals of samples k0 … k1 − 1 of one stream, times ``scale``.
 
-    Component c of sample k is normal number 3k + c of the stream's key (:func:`stream_normals`),
+    Component c of sample k is normal number 3k + c of the stream's key
+    ([`stream_normals`][mrpctl.flight.stream_normals]),
     written into ``out`` (any (k1 − k0, 3) float64 view, e.g. three columns of a wider array);
     ``scale * value`` is the C driver's product.
     """
@@ -317,7 +322,7 @@ class SensorModel:
             (k1 − k0, 3) attitude error rotation vectors θ_k (rad) and rate noise η_k (rad/s).
             Exactly zero when the corresponding 1σ is zero. Identical for any slicing of the
             horizon (counter-based: component c of sample k is normal number 3k + c of the
-            stream keyed by (seed, stream), :func:`stream_normals`).
+            stream keyed by (seed, stream), [`stream_normals`][mrpctl.flight.stream_normals]).
         """
         rows = self.noise_rows(k0, k1)
         return rows[:, 0:3], rows[:, 3:6]
@@ -325,7 +330,8 @@ class SensorModel:
     def noise_rows(self, k0: int, k1: int, *, out: np.ndarray | None = None) -> np.ndarray:
         """The noise of samples k0 … k1 − 1 as one (k1 − k0, 6) array of rows (θ_k, η_k).
 
-        The flight sample's per-sample ``noise`` input, the numbers of :meth:`noise` bit for bit,
+        The flight sample's per-sample ``noise`` input, the numbers of [`noise`][mrpctl.flight.SensorModel.noise] bit
+        for bit,
         generated in place: into ``out`` when given (a C-contiguous float64 array of at least
         k1 − k0 rows and 6 columns, e.g. a buffer reused slice after slice; its first k1 − k0 rows
         are written and returned), else into a new array.
@@ -381,7 +387,7 @@ class ActuatorModel:
     norm_max : float or None
         Limit on the Euclidean norm |u| (N m), > 0; None (default) for none.
     mode : Saturation
-        :attr:`Saturation.SCALE` (default; direction-preserving) or :attr:`Saturation.CLIP`.
+        `Saturation.SCALE` (default; direction-preserving) or `Saturation.CLIP`.
     """
 
     u_max: Any
@@ -440,8 +446,9 @@ class DelayModel:
 
     Measurement k (taken at t_k) reaches the controller at sample k + d_k. At sample k the
     controller uses the newest measurement that has arrived, j*(k) = max{j : j + d_j <= k};
-    a measurement overtaken by a newer one is never used (:func:`newest_arrived`). Build with
-    :meth:`constant`, :meth:`sequence` or :meth:`jitter`.
+    a measurement overtaken by a newer one is never used ([`newest_arrived`][mrpctl.flight.newest_arrived]). Build with
+    [`constant`][mrpctl.flight.DelayModel.constant], [`sequence`][mrpctl.flight.DelayModel.sequence] or
+    [`jitter`][mrpctl.flight.DelayModel.jitter].
 
     Attributes
     ----------
@@ -514,7 +521,7 @@ class DelayModel:
         return int(low), int(high)
 
     def check_horizon(self, n: int) -> None:
-        """Raise :class:`DimensionError` if a sequence does not hold exactly n delays."""
+        """Raise [`DimensionError`][mrpctl.DimensionError] if a sequence does not hold exactly n delays."""
         n = integer("n", n, minimum=1)
         if self.delays is not None and self.delays.shape != (n,):
             raise DimensionError(
@@ -595,12 +602,13 @@ def newest_arrived(delays: Any, *, history: int) -> tuple[np.ndarray, np.ndarray
 def newest_arrived_slice(
     model: DelayModel, rate: float, depth: int, k0: int, k1: int, newest_before: int
 ) -> np.ndarray:
-    """j*(k) of :func:`newest_arrived` for the samples k0 … k1 − 1 only, in bounded memory.
+    """j*(k) of [`newest_arrived`][mrpctl.flight.newest_arrived] for the samples k0 … k1 − 1 only, in bounded memory.
 
     ``newest_before`` is j*(k0 − 1) (−1 − ``depth`` for k0 = 0). Only the measurements
     j ∈ [k0 − depth, k1) can arrive in the slice, so the delays of those are generated
-    (:meth:`DelayModel.samples`, slice independent). Concatenating the slices of any slicing
-    gives :func:`newest_arrived` of the whole horizon (int64).
+    ([`DelayModel.samples`][mrpctl.flight.DelayModel.samples], slice independent). Concatenating the slices of any
+    slicing
+    gives [`newest_arrived`][mrpctl.flight.newest_arrived] of the whole horizon (int64).
     """
     start, stop = _slice(k0, k1)
     depth = integer("depth", depth, minimum=0)
@@ -626,8 +634,10 @@ class Disturbance:
         Instead of ``torque``: w(t) of a (m,) array of sample times t_k = k h (s) returning an
         (m, 3) array (N m), evaluated by the engine on each slice's times (so memory stays bounded
         by the slice; the function should be elementwise in t, e.g. NumPy ufuncs, so that the run
-        does not depend on how it is sliced). The flight and predictor loops (:func:`mrpctl.simulate`,
-        :func:`mrpctl.simulate_batch`, :func:`mrpctl.export`: there w_k is an input).
+        does not depend on how it is sliced). The flight and predictor loops
+        ([`mrpctl.simulate`][mrpctl.simulation.simulate],
+        [`mrpctl.simulate_batch`][mrpctl.simulate_batch], [`mrpctl.export`][mrpctl._export.export]: there w_k is an
+        input).
     """
 
     torque: Any = None
@@ -651,7 +661,7 @@ class Disturbance:
     def rows_view(cls, rows: np.ndarray, name: str = "torque") -> Disturbance:
         """A per-sample disturbance on the (n, 3) float64 ``rows`` without copying them (a read-only view).
 
-        For the per-run slices of a (runs, n, 3) array given to :func:`mrpctl.simulate_batch`: the
+        For the per-run slices of a (runs, n, 3) array given to [`mrpctl.simulate_batch`][mrpctl.simulate_batch]: the
         rows are checked (finite, shape) but not copied, so the batch holds no second copy of the
         array; the caller must not modify it while the view is in use.
         """
@@ -680,7 +690,8 @@ class Disturbance:
         return None if self.function is not None else tuple(self.torque.shape)
 
     def check_horizon(self, n: int, name: str = "torque") -> None:
-        """Raise :class:`DimensionError` (naming ``name``) if a per-sample torque does not have n rows."""
+        """Raise [`DimensionError`][mrpctl.DimensionError] (naming ``name``) if a per-sample torque does not have n
+        rows."""
         n = integer("n", n, minimum=1)
         if self.function is None and not self.constant and self.torque.shape != (n, 3):
             raise DimensionError(
@@ -719,18 +730,20 @@ class Hysteretic(SwitchingRule):
     """Controller-side MRP set selection with hysteresis (Mayhew, Sanfelice and Teel 2011).
 
     The controller keeps a logic variable h ∈ {−1, +1}. On the delayed, noisy measured
-    quaternion q (made continuous in time, see :func:`selection_function`) it sets
+    quaternion q (made continuous in time, see [`selection_function`][mrpctl.flight.selection_function]) it sets
     h ← −h when h q₀ < −δ, and feeds σ_c = h q_v / (1 + h q₀) to its control law.
     After the rule h q₀ >= −δ, so |σ_c| <= α = √((1 + δ)/(1 − δ)). δ = 0 picks the short set
     of the measurement at every sample. Between two switches q₀ must move by more than 2δ,
     and |q̇₀| <= |ω|/2, so switches are at least 4δ/max|ω| apart; attitude noise that moves
     q₀ by less than δ never causes a switch.
 
-    As a rule of :func:`mrpctl.simulate` (``rule=Hysteretic(delta)``) it runs in the compiled
-    flight sample (:func:`mrpctl.loop.flight_core_function`): the plant's MRP is kept in the
+    As a rule of [`mrpctl.simulate`][mrpctl.simulation.simulate] (``rule=Hysteretic(delta)``) it runs in the compiled
+    flight sample ([`mrpctl.loop.flight_core_function`][mrpctl.loop.flight_core_function]): the plant's MRP is kept in
+    the
     short set for bookkeeping only (no physical effect), the controller's h, c and previous
     measurement are the rule memory, u = K [σ_c; ω(t − τ)/4], and the run's switches are the
-    logic switches of h. Its :meth:`expressions` as a plain :class:`SwitchingRule` are that
+    logic switches of h. Its [`expressions`][mrpctl.switching.SwitchingRule.expressions] as a plain
+    [`SwitchingRule`][mrpctl.switching.SwitchingRule] are that
     bookkeeping only (the ``OnCurrent`` test); the selection is in the flight sample.
 
     Parameters
@@ -813,7 +826,8 @@ _PI_SQUARED = math.pi * math.pi
 
 
 def _tan_quarter_ratio_expr(angle_squared: Any) -> Any:
-    """k = tan(Φ/4)/Φ from Φ² = ``angle_squared`` (SX): 1/4 at 0; see :func:`rotation_vector_to_mrp_expr`."""
+    """k = tan(Φ/4)/Φ from Φ² = ``angle_squared`` (SX): 1/4 at 0; see
+    [`rotation_vector_to_mrp_expr`][mrpctl.flight.rotation_vector_to_mrp_expr]."""
     y = 0.0625 * angle_squared  # x² = Φ²/16 exactly (a power of two)
     p = (_TAN_P[0] * y + _TAN_P[1]) * y + _TAN_P[2]
     q = (((y + _TAN_Q[0]) * y + _TAN_Q[1]) * y + _TAN_Q[2]) * y + _TAN_Q[3]
@@ -826,7 +840,7 @@ def _tan_quarter_ratio_expr(angle_squared: Any) -> Any:
 
 
 def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
-    """σ(F/N) of [FN] = [FB][BN] from σ_first = σ(B/N) and σ_second = σ(F/B) (SX).
+    """σ(F/N) of `[FN] = [FB][BN]` from σ_first = σ(B/N) and σ_second = σ(F/B) (SX).
 
     σ = ((1 − |σ₁|²) σ₂ + (1 − |σ₂|²) σ₁ − 2 σ₂ × σ₁) / (1 + |σ₁|² |σ₂|² − 2 σ₁·σ₂)
     (Schaub & Junkins Eq. 3.152), the quaternion product written in MRPs. The result may be
@@ -859,9 +873,11 @@ def quaternion_from_mrp_expr(sigma: Any) -> Any:
 class NoiseForm(enum.Enum):
     """How a sample receives the sensor's attitude noise.
 
-    ``ROTATION_VECTOR``: θ (rad), and the sample computes its MRP σ(θ) (:func:`rotation_vector_to_mrp_expr`):
+    ``ROTATION_VECTOR``: θ (rad), and the sample computes its MRP σ(θ)
+    ([`rotation_vector_to_mrp_expr`][mrpctl.flight.rotation_vector_to_mrp_expr]):
     the exported samples, the virtual machine and the lane engine. ``MRP``: σ(θ) itself, computed before the
-    sample by :func:`rotation_mrp_function` (the same expressions, so the same bits): the compiled scalar
+    sample by [`rotation_mrp_function`][mrpctl.flight.rotation_mrp_function] (the same expressions, so the same bits):
+    the compiled scalar
     engine, which turns a block of θ rows into their MRPs at once, so that tan's latency is not on the
     sample's path.
     """
@@ -872,7 +888,8 @@ class NoiseForm(enum.Enum):
 
 @lru_cache(maxsize=1)
 def rotation_mrp_function() -> ca.Function:
-    """``rotation_mrp(rotation_noise) -> rotation_noise_mrp``: σ(θ) of :func:`rotation_vector_to_mrp_expr` (pure SX)."""
+    """``rotation_mrp(rotation_noise) -> rotation_noise_mrp``: σ(θ) of
+    [`rotation_vector_to_mrp_expr`][mrpctl.flight.rotation_vector_to_mrp_expr] (pure SX)."""
     theta = ca.SX.sym("rotation_noise", 3)
     return ca.Function(
         "rotation_mrp", [theta], [rotation_vector_to_mrp_expr(theta)], ["rotation_noise"], ["rotation_noise_mrp"]
@@ -901,9 +918,11 @@ def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Func
     x = [σ; ω/4] is the true state (σ in either set). The sensor reports the short set of
     the measured attitude, σ̃ = short(σ ⊕ σ(θ)) with [B̃N] = [B̃B](θ)[BN], the rate
     ω̃ = ω + b + η, and x_meas = [σ̃; ω̃/4]; q_meas is σ̃'s quaternion (β₀ >= 0). With zero
-    noise and bias and a short σ, x_meas is x bit for bit. With ``form`` = :attr:`NoiseForm.MRP` the
-    second input is σ(θ) (``rotation_noise_mrp``, from :func:`rotation_mrp_function`) instead of θ:
-    the same numbers, bit for bit. :func:`raw_measurement_function` is the same before the short set.
+    noise and bias and a short σ, x_meas is x bit for bit. With ``form`` = `NoiseForm.MRP` the
+    second input is σ(θ) (``rotation_noise_mrp``, from [`rotation_mrp_function`][mrpctl.flight.rotation_mrp_function])
+    instead of θ:
+    the same numbers, bit for bit. [`raw_measurement_function`][mrpctl.flight.raw_measurement_function] is the same
+    before the short set.
     """
     inputs, names, composed, omega_meas = _sensor_expressions(form)
     sigma_meas = short_expr(composed)
@@ -917,7 +936,8 @@ def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Func
 def raw_measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
     """``raw_measurement(x, rotation_noise, rate_noise, bias) -> x_raw`` (pure SX): [σ ⊕ σ(θ); ω̃/4].
 
-    :func:`measurement_function` before its short set: the attitude in either set, so that
+    [`measurement_function`][mrpctl.flight.measurement_function] before its short set: the attitude in either set, so
+    that
     x_meas = [short(x_raw[0:3]); x_raw[3:6]] bit for bit. The flight sample puts x_raw in its ring
     and takes the short set of the delayed entry, which it needs for the history anyway: one short
     set a sample, not two.
@@ -953,9 +973,10 @@ def selection_function() -> ca.Function:
     flight sample uses. The controller's continuous quaternion is q̂ = c β̃: c ∈ {−1, +1}
     flips when β̃ and the previous measurement's β̃' point to opposite hemispheres,
     β̃·β̃' < 0 ⇔ (1 − |σ̃|²)(1 − |σ̃'|²) + 4 σ̃·σ̃' < 0 (the attitude passed Φ = 180°).
-    Then the rule of :func:`hysteresis_function` on q̂: with e = h c, h flips when
+    Then the rule of [`hysteresis_function`][mrpctl.flight.hysteresis_function] on q̂: with e = h c, h flips when
     e β̃₀ < −δ ⇔ e < 0 and (1 + δ)|σ̃|² < 1 − δ. σ_c = σ̃ when h_next c_next = +1 (bit for
-    bit) and its shadow −σ̃/|σ̃|² otherwise. Identical to :func:`hysteresis_function` on q̂ up
+    bit) and its shadow −σ̃/|σ̃|² otherwise. Identical to [`hysteresis_function`][mrpctl.flight.hysteresis_function] on
+    q̂ up
     to rounding; with δ = 0 σ_c is σ̃ at every sample. h and c are ±1 (flips are products by ±1).
     """
     h = ca.SX.sym("h")

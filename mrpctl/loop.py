@@ -1,8 +1,9 @@
 """The closed loop as CasADi Functions: controller, rule, RK4 step, one sample, one chunk.
 
-Shared by :mod:`mrpctl.simulation` (whose engine adds the metric accumulators and a C
-horizon driver around :func:`core_function`) and :mod:`mrpctl.export` (which generates
-C for :func:`closed_loop_functions`). The model (paper Eq. nonc, sampled; see
+Shared by [`mrpctl.simulation`][mrpctl.simulation] (whose engine adds the metric accumulators and a C
+horizon driver around [`core_function`][mrpctl.loop.core_function]) and [`mrpctl.export`][mrpctl._export.export] (which
+generates
+C for [`closed_loop_functions`][mrpctl.loop.closed_loop_functions]). The model (paper Eq. nonc, sampled; see
 ``design/switching.md``)::
 
     ẋ(t) = A x + B u(t) + f(x),   x = [σ; ω/4]
@@ -12,7 +13,7 @@ C for :func:`closed_loop_functions`). The model (paper Eq. nonc, sampled; see
 with τ = d h (d an integer >= 0). At each sample k: (1) the rule may replace σ_k by its
 shadow; (2) the result is recorded as the measurement m_k; (3) u_k = K m_{k−d} is held
 over one period (zero-order hold; for d = 0, u_k = K m_k); (4) the plant of
-:func:`mrpctl.model.dynamics_expr` is integrated over one period by RK4 with a fixed
+[`mrpctl.model.dynamics_expr`][mrpctl.model.dynamics_expr] is integrated over one period by RK4 with a fixed
 number of substeps.
 """
 
@@ -106,7 +107,7 @@ def delay_samples(tau: Any, rate: Any) -> int:
 
 
 def check_rule(rule: Any, name: str = "rule") -> SwitchingRule:
-    """Return ``rule`` if it is a :class:`~mrpctl.switching.SwitchingRule`, else raise SpecificationError."""
+    """Return ``rule`` if it is a [`SwitchingRule`][mrpctl.switching.SwitchingRule], else raise SpecificationError."""
     if not isinstance(rule, SwitchingRule):
         raise SpecificationError(
             f"{name} must be a switching rule such as mrpctl.switching.OnDelayed(), got {type(rule).__name__}: {rule!r}"
@@ -115,7 +116,7 @@ def check_rule(rule: Any, name: str = "rule") -> SwitchingRule:
 
 
 def check_substeps(substeps: Any) -> int:
-    """RK4 substeps per measurement period: an integer in 1 .. :data:`MAX_SUBSTEPS`."""
+    """RK4 substeps per measurement period: an integer in 1 .. `MAX_SUBSTEPS`."""
     if isinstance(substeps, int | np.integer) and not isinstance(substeps, bool) and substeps > MAX_SUBSTEPS:
         raise SpecificationError(
             f"substeps must be <= {MAX_SUBSTEPS}, got {substeps}: each substep is unrolled into the compiled "
@@ -126,7 +127,7 @@ def check_substeps(substeps: Any) -> int:
 
 # ================================================================ symbolic building blocks
 class InertiaInput(enum.Enum):
-    """How a run-time inertia enters a compiled Function (see :func:`inertia_input`)."""
+    """How a run-time inertia enters a compiled Function (see [`inertia_input`][mrpctl.loop.inertia_input])."""
 
     #: J and J⁻¹ diagonal: two 3-vectors (the diagonals), the same operations as constants.
     DIAGONAL = "diagonal"
@@ -164,7 +165,7 @@ def step_function(
     """``step(x, u) -> x_next``: RK4 over one period h with ``substeps`` equal substeps.
 
     With ``inertia`` the spacecraft's J and J⁻¹ are inputs instead of constants:
-    ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see :class:`InertiaInput`).
+    ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see [`InertiaInput`][mrpctl.loop.InertiaInput]).
     """
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", INPUT_SIZE)
@@ -243,12 +244,13 @@ def flight_core_function(
     short_measurements: bool = False,
     squared_peak: bool = False,
 ) -> ca.Function:
-    """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
+    """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
     ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight, noise) ->
     (x_next, memory_next, x_meas, u, switched, measurement)``:
-    the ports of :func:`core_function` with memory (h, c, σ̃_prev, n_sat, peak |u_c,i| (3), peak |u_c|)
-    of :data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`, parameters (δ,), the run-time constants
+    the ports of [`core_function`][mrpctl.loop.core_function] with memory (h, c, σ̃_prev, n_sat, peak |u_c,i| (3), peak
+    |u_c|)
+    of `FLIGHT_MEMORY_SIZE`, parameters (δ,), the run-time constants
     ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) (N m, rad/s; inf: no limit), and per
     sample ``noise`` = (θ_k, η_k) (rad, rad/s). Without ``sensor`` the ``noise`` input and the
     ``measurement`` output are left out and the measurement is the bookkept state (the
@@ -261,8 +263,8 @@ def flight_core_function(
     commanded torque before the actuator limits, N m): the result's per-sample records. With
     ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the sample (a
     per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
-    ``noise_form`` (:class:`~mrpctl.flight.NoiseForm`): with ``MRP`` the first half of ``noise`` is the
-    attitude noise's MRP σ(θ_k) (:func:`~mrpctl.flight.rotation_mrp_function`, computed by the engine
+    ``noise_form`` ([`NoiseForm`][mrpctl.flight.NoiseForm]): with ``MRP`` the first half of ``noise`` is the
+    attitude noise's MRP σ(θ_k) ([`rotation_mrp_function`][mrpctl.flight.rotation_mrp_function], computed by the engine
     before the sample) instead of θ_k: the same numbers bit for bit.
     With ``short_measurements`` (only without ``sensor``) the controller reads ``x_delayed`` (and,
     for d = 0, m_k) as it is, without taking its short set: the same numbers bit for bit for a
@@ -277,12 +279,12 @@ def flight_core_function(
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
-    2. the sensor (:func:`~mrpctl.flight.raw_measurement_function`): m_k = [σ_k ⊕ σ(θ_k); ω̃_k/4]
+    2. the sensor ([`raw_measurement_function`][mrpctl.flight.raw_measurement_function]): m_k = [σ_k ⊕ σ(θ_k); ω̃_k/4]
        (the ring's entry, the attitude in either set; x_meas bit for bit without noise and bias);
     3. the controller reads the delayed measurement m_{k−d} (m_k when d = 0), takes its short
-       set σ̃ and applies :func:`~mrpctl.flight.selection_function` with its memory
+       set σ̃ and applies [`selection_function`][mrpctl.flight.selection_function] with its memory
        (h, c, σ̃_prev) and δ: σ_c, and ``switched`` = 1.0 when h flipped (the run's switches);
-    4. u_c = K [σ_c; ω̃_{k−d}/4]; the actuator (:func:`~mrpctl.flight.actuator_function` of
+    4. u_c = K [σ_c; ω̃_{k−d}/4]; the actuator ([`actuator_function`][mrpctl.flight.actuator_function] of
        ``saturation``) gives the applied torque u (the ``u`` output), and u + w is held over
        the period while the plant is integrated by RK4.
 
@@ -405,12 +407,13 @@ def predictor_core_function(
     """One sample of the predictor loop (issue 13; ``design/predictor.md``, form (b)) (pure SX).
 
     ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight[, noise][, torque]) ->
-    (x_next, memory_next, x_meas, u, switched, ring)``: memory of :data:`PREDICTOR_MEMORY_SIZE`
+    (x_next, memory_next, x_meas, u, switched, ring)``: memory of `PREDICTOR_MEMORY_SIZE`
     (1, 1, σ̂_prev, the flight sample's actuator accumulators, the model copy z); ``x_delayed`` and
-    ``ring`` are entries of :data:`PREDICTOR_RING_WIDTH`: (m_k, z_k), read back as (y_k, z_{k−d}) =
+    ``ring`` are entries of `PREDICTOR_RING_WIDTH`: (m_k, z_k), read back as (y_k, z_{k−d}) =
     (m_{k−d}, z_{k−d}); parameters (α,) (inf: never switch); ``flight`` = (u_max (3), u_norm,
     w (3), gyro bias (3), τ, J_m, J_m⁻¹) with the model's inertia in the layout ``model_inertia``;
-    ``noise`` (with ``sensor``) as in :func:`flight_core_function`. Without ``limited`` the
+    ``noise`` (with ``sensor``) as in [`flight_core_function`][mrpctl.loop.flight_core_function]. Without ``limited``
+    the
     actuator is left out of the expressions (u = u_c; u_max, u_norm unused), which saves its
     libm calls. With ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the
     sample (a per-sample disturbance streamed by the engine; the constant w in ``flight`` is then
@@ -543,9 +546,9 @@ def _chunk_function(sample: ca.Function, d: int) -> ca.Function:
     )
 
 
-#: The controller's own memory in :attr:`ClosedLoopFunctions.flight_controller`: (h, c, σ̃_prev (3)).
+#: The controller's own memory in `ClosedLoopFunctions.flight_controller`: (h, c, σ̃_prev (3)).
 CONTROLLER_MEMORY_SIZE = 5
-#: Names of the flight sample's memory entries (:data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`), in order.
+#: Names of the flight sample's memory entries (`FLIGHT_MEMORY_SIZE`), in order.
 FLIGHT_MEMORY_LAYOUT = (
     "h",
     "c",
@@ -590,7 +593,7 @@ def _flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
 
 @dataclass(frozen=True, eq=False)
 class FlightOptions:
-    """The models of the loop as flown that a :class:`ClosedLoopFunctions` was built with.
+    """The models of the loop as flown that a [`ClosedLoopFunctions`][mrpctl.loop.ClosedLoopFunctions] was built with.
 
     Attributes
     ----------
@@ -620,7 +623,7 @@ class FlightOptions:
     saturation: Saturation
 
     def initial_memory(self, x0: Any, delay_samples: int, history: Any = None) -> np.ndarray:
-        """The ``sample`` memory at k = 0 for the initial state x0 (see :data:`FLIGHT_MEMORY_LAYOUT`).
+        """The ``sample`` memory at k = 0 for the initial state x0 (see `FLIGHT_MEMORY_LAYOUT`).
 
         h = c = +1, σ̃_prev the short set of the σ the controller sees at k = 0 (the first
         history row for d > 0, by default x0; the bookkept σ0 for d = 0), accumulators 0. The
@@ -643,16 +646,17 @@ class ClosedLoopFunctions:
     and ``sample`` are pure SX Functions; ``chunk`` is an MX ``mapaccum`` of ``sample``
     (a loop, not an unrolled expression), also code-generatable and serialisable.
 
-    With the controller-side rule :class:`~mrpctl.flight.Hysteretic` (``flight`` is not
-    None) ``sample`` and ``chunk`` are the flight loop's (:func:`flight_core_function` with
-    K, δ and the :class:`FlightOptions` constants bound), and ``flight_controller`` and
+    With the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (``flight`` is not
+    None) ``sample`` and ``chunk`` are the flight loop's ([`flight_core_function`][mrpctl.loop.flight_core_function]
+    with
+    K, δ and the [`FlightOptions`][mrpctl.loop.FlightOptions] constants bound), and ``flight_controller`` and
     ``sensor`` are what flight software and a sensor simulation need; see
-    :meth:`functions`.
+    [`functions`][mrpctl.loop.ClosedLoopFunctions.functions].
 
     Attributes
     ----------
     dynamics : casadi.Function
-        ``dynamics(x, u) -> xdot`` from :mod:`mrpctl.model`.
+        ``dynamics(x, u) -> xdot`` from [`mrpctl.model`][mrpctl.model].
     controller : casadi.Function
         ``controller(x_meas) -> u``: u = K x_meas.
     switching : casadi.Function
@@ -664,7 +668,7 @@ class ClosedLoopFunctions:
         one measurement period (rule, record, hold, integrate); ``x_delayed`` is m_{k−d}
         and is not used when d = 0. Flight loop: ``sample(x, memory, x_delayed, noise) ->
         (x_next, memory_next, x_meas, u, switched, measurement)`` with the memory of
-        :data:`FLIGHT_MEMORY_LAYOUT`, ``noise`` = (θ_k; η_k) (rad, rad/s), ``x_meas`` the
+        `FLIGHT_MEMORY_LAYOUT`, ``noise`` = (θ_k; η_k) (rad, rad/s), ``x_meas`` the
         bookkept true state, ``measurement`` the sensor's m_k (what goes into the delay
         line) and ``u`` the applied torque (without the disturbance).
     chunk : casadi.Function
@@ -673,7 +677,8 @@ class ClosedLoopFunctions:
         Flight loop: ``chunk(x, memory, history, noise) -> (x_end, memory_end, states,
         measurements, u, switched)``.
     initial_memory : float
-        The rule memory at k = 0 (flight loop: see :meth:`FlightOptions.initial_memory`).
+        The rule memory at k = 0 (flight loop: see
+        [`FlightOptions.initial_memory`][mrpctl.loop.FlightOptions.initial_memory]).
     flight_controller : casadi.Function or None
         Flight loop only: ``flight_controller(x_meas, memory, delta) -> (u, u_command,
         memory_next, switched)``: from the delayed measurement [σ̃; ω̃/4] and the
@@ -764,7 +769,7 @@ class ClosedLoopFunctions:
 
 
 def _as_disturbance(disturbance: Any) -> Disturbance | None:
-    """The export's disturbance as a :class:`~mrpctl.flight.Disturbance` (None: none given)."""
+    """The export's disturbance as a [`Disturbance`][mrpctl.flight.Disturbance] (None: none given)."""
     if disturbance is None or isinstance(disturbance, Disturbance):
         return disturbance
     return Disturbance(disturbance)
@@ -784,7 +789,7 @@ def closed_loop_functions(
     delay: DelayModel | None = None,
     predictor: Any = None,
 ) -> ClosedLoopFunctions:
-    """Build the closed loop's named CasADi Functions (see :class:`ClosedLoopFunctions`).
+    """Build the closed loop's named CasADi Functions (see [`ClosedLoopFunctions`][mrpctl.loop.ClosedLoopFunctions]).
 
     Parameters
     ----------
@@ -795,23 +800,23 @@ def closed_loop_functions(
     tau : float, keyword-only
         Delay τ (s), a whole number d of periods 1/rate (with ``delay``: its tau_max).
     rule : SwitchingRule, keyword-only
-        The shadow-set switching rule, or the controller-side :class:`~mrpctl.flight.Hysteretic`.
+        The shadow-set switching rule, or the controller-side [`Hysteretic`][mrpctl.flight.Hysteretic].
     rate : float, keyword-only
         Measurement rate (Hz), default 1000.
     substeps : int, keyword-only
         RK4 substeps per measurement period, default 1.
     actuator, disturbance, sensor, delay : keyword-only
-        The flight loop's models, as in :func:`mrpctl.simulate` (``rule=Hysteretic(...)``
-        only; the same checks): :class:`~mrpctl.flight.ActuatorModel`, a constant
-        :class:`~mrpctl.flight.Disturbance` (or a (3,) torque, N m; a per-sample one, (n, 3) rows or
+        The flight loop's models, as in [`mrpctl.simulate`][mrpctl.simulation.simulate] (``rule=Hysteretic(...)``
+        only; the same checks): [`ActuatorModel`][mrpctl.flight.ActuatorModel], a constant
+        [`Disturbance`][mrpctl.flight.Disturbance] (or a (3,) torque, N m; a per-sample one, (n, 3) rows or
         a function of time, makes w_k an input ``torque`` of ``sample`` (3) and ``chunk`` (3 × max(d, 1))),
-        :class:`~mrpctl.flight.SensorModel`, :class:`~mrpctl.flight.DelayModel`.
+        [`SensorModel`][mrpctl.flight.SensorModel], [`DelayModel`][mrpctl.flight.DelayModel].
     predictor : mrpctl.Predictor, keyword-only
         The predictor controller (with ``rule=OnPredicted(alpha)``; actuator, disturbance (constant, or
         per sample: the ``torque`` input of ``sample`` and ``chunk``, plant only) and sensor allowed,
         no delay model): ``sample`` and ``chunk`` are the engine's predictor sample with K,
         α, τ, J_m and the flight constants bound, and ``predictor_controller``, ``prediction``,
-        ``model_step`` and ``sensor`` are the flight-software pieces (see :func:`_predictor_loop`).
+        ``model_step`` and ``sensor`` are the flight-software pieces (see `_predictor_loop`).
 
     Raises
     ------
@@ -907,10 +912,10 @@ def _flight_functions(
 ) -> tuple[ca.Function, ca.Function, ca.Function]:
     """(sample, flight_controller, sensor) of the flight loop with K, δ and the flight constants bound.
 
-    ``sample`` is :func:`flight_core_function` (the simulator's sample) with its run-time
+    ``sample`` is [`flight_core_function`][mrpctl.loop.flight_core_function] (the simulator's sample) with its run-time
     inputs bound; ``flight_controller`` and ``sensor`` are written from the same builders
-    (:func:`~mrpctl.flight.selection_function`, :func:`~mrpctl.flight.actuator_function`,
-    :func:`~mrpctl.flight.measurement_function`) in the same order, so that a loop of
+    ([`selection_function`][mrpctl.flight.selection_function], [`actuator_function`][mrpctl.flight.actuator_function],
+    [`measurement_function`][mrpctl.flight.measurement_function]) in the same order, so that a loop of
     ``sensor``, ``flight_controller`` and ``step`` gives the sample's numbers bit for bit.
     """
     constants = ca.DM(np.asarray(flight.constants))
@@ -954,7 +959,7 @@ def _flight_functions(
     return sample, flight_controller, sensor
 
 
-#: Names of the predictor sample's memory entries (:data:`PREDICTOR_MEMORY_SIZE`), in order.
+#: Names of the predictor sample's memory entries (`PREDICTOR_MEMORY_SIZE`), in order.
 PREDICTOR_MEMORY_LAYOUT = (
     "unused_1",
     "unused_2",
@@ -992,7 +997,8 @@ def _predictor_loop(
     """The predictor loop's Functions (K, α, τ, J_m and the flight constants bound into them).
 
     * ``sample(x, memory, x_delayed, noise) -> (x_next, memory_next, x_meas, u, switched, ring)``:
-      the engine's sample (:func:`predictor_core_function`); memory of :data:`PREDICTOR_MEMORY_LAYOUT`,
+      the engine's sample ([`predictor_core_function`][mrpctl.loop.predictor_core_function]); memory of
+      `PREDICTOR_MEMORY_LAYOUT`,
       ``x_delayed`` = (m_{k−d}; z_{k−d}) (12), ``ring`` = (m_k; z_k), the next entry of the delay line;
     * ``chunk(x, memory, history, noise)``: max(d, 1) samples (``mapaccum``), ``history`` 12 × d;
     * with a per-sample disturbance (rows or a function of time) both take w_k as a last input
@@ -1000,7 +1006,8 @@ def _predictor_loop(
       (``step(x, u + w_k)``; the model copy and ``predictor_controller`` never see it);
     * ``predictor_controller(y, z_delayed, z, sigma_prev) -> (u, u_command, x_hat, switched, z_next)``:
       what flight software runs each sample, from the delayed measurement y and its own record of the
-      model copy: :func:`prediction_expr`, u_c = K x̂, the actuator, z_{k+1} = short(RK4_m(z_k, u));
+      model copy: [`prediction_expr`][mrpctl.loop.prediction_expr], u_c = K x̂, the actuator, z_{k+1} = short(RK4_m(z_k,
+      u));
     * ``prediction(y, z_delayed, z, sigma_prev) -> (x_hat, switched)``: the correction and the rule;
     * ``model_step(z, u) -> z_next``: one RK4 step of J_m over h, kept in the short set;
     * ``sensor(x, noise) -> (x_true, measurement)``: as in the flight loop.

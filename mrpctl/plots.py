@@ -1,6 +1,6 @@
 """Figures of simulations, sweeps and Monte Carlo batches: the only module that imports matplotlib.
 
-The functions build :class:`matplotlib.figure.Figure` objects and never select a backend,
+The functions build `matplotlib.figure.Figure` objects and never select a backend,
 so they work headless (``save_figure`` renders through Agg) and in notebooks (the figure
 is displayed by the notebook's own backend). Every function takes ``ax=``: one
 ``Axes`` for single-panel figures, a sequence of ``Axes`` for multi-panel ones (e.g. from
@@ -50,7 +50,7 @@ __all__ = [
 _SUB = ("₁", "₂", "₃")
 _SWITCH_COLOR = "crimson"
 _FAIL_COLOR = "crimson"
-#: The settling tolerance of :class:`~mrpctl.simulation.SimulationResult` (|σ| < 1e-2, |ω| < 1e-3 rad/s).
+#: The settling tolerance of `SimulationResult` (|σ| < 1e-2, |ω| < 1e-3 rad/s).
 SETTLING_CAPTION = "settled: |σ| < 10⁻² and |ω| < 10⁻³ rad/s to the end"
 #: A cluster of at least this many switches in at most this fraction of the run gets a zoom inset.
 _INSET_MIN_SWITCHES = 10
@@ -166,7 +166,7 @@ def plot_response(
     Parameters
     ----------
     result : SimulationResult
-        A run of :func:`mrpctl.simulate`.
+        A run of [`mrpctl.simulate`][mrpctl.simulation.simulate].
     title : str, optional
         Figure title; by default the rule, the delay τ, the switch count and whether the run
         settled (with the settling tolerance).
@@ -251,7 +251,7 @@ def plot_attitude(
     Parameters
     ----------
     result : SimulationResult
-        A run of :func:`mrpctl.simulate`.
+        A run of [`mrpctl.simulate`][mrpctl.simulation.simulate].
     window : (float, float), optional
         Time window in s; the whole run by default.
     title : str, optional
@@ -438,7 +438,7 @@ def plot_monte_carlo(batch: BatchResult, *, title: str | None = None, ax: Any = 
     Parameters
     ----------
     batch : BatchResult
-        A batch of :func:`mrpctl.simulate_batch`.
+        A batch of [`mrpctl.simulate_batch`][mrpctl.simulate_batch].
     title : str, optional
         Figure title.
     ax : sequence of 3 matplotlib.axes.Axes, optional
@@ -514,7 +514,7 @@ def plot_batch(
     Parameters
     ----------
     batch : BatchResult
-        A batch of :func:`mrpctl.simulate_batch`.
+        A batch of [`mrpctl.simulate_batch`][mrpctl.simulate_batch].
     over : {"tau", "eps", "initial"}, optional
         What varies across the runs; detected by default (τ when the delays differ, ε when
         every rule is a BoundaryLayer and their ε differ, the initial state otherwise).

@@ -1,8 +1,9 @@
 """The sampled nonlinear closed loop with delayed feedback and shadow-set switching.
 
-:func:`simulate` runs one case, :func:`simulate_batch` many on a thread pool; both
-return frozen results (:mod:`mrpctl.simulation.results`). The closed loop's CasADi
-Functions are built by :mod:`mrpctl.loop`; here they get the metric accumulators and a C
+[`simulate`][mrpctl.simulation.simulate] runs one case, [`simulate_batch`][mrpctl.simulate_batch] many on a thread pool;
+both
+return frozen results (`mrpctl.simulation.results`). The closed loop's CasADi
+Functions are built by [`mrpctl.loop`][mrpctl.loop]; here they get the metric accumulators and a C
 horizon driver (``_engine.py``, ``_driver.c``), or, without a C compiler, CasADi's
 virtual machine (``_vm.py``). The model and the engine: ``design/switching.md``.
 """

@@ -1,4 +1,5 @@
-"""Results of closed-loop runs: :class:`SimulationResult`, :class:`BatchResult`, and their assembly."""
+"""Results of closed-loop runs: [`SimulationResult`][mrpctl.SimulationResult], [`BatchResult`][mrpctl.BatchResult], and
+their assembly."""
 
 from __future__ import annotations
 
@@ -24,16 +25,16 @@ logger = logging.getLogger("mrpctl.simulation")
 
 
 class _Conversions:
-    """``to_xarray()`` and ``to_pandas()`` of a result, through :mod:`mrpctl.data`."""
+    """``to_xarray()`` and ``to_pandas()`` of a result, through [`mrpctl.data`][mrpctl.data]."""
 
     def to_xarray(self) -> Any:
-        """The result as a labelled ``xarray.Dataset`` (:func:`mrpctl.data.to_xarray`)."""
+        """The result as a labelled ``xarray.Dataset`` ([`mrpctl.data.to_xarray`][mrpctl.data.to_xarray])."""
         from mrpctl.data import to_xarray
 
         return to_xarray(self)  # type: ignore[arg-type]
 
     def to_pandas(self) -> Any:
-        """The result as a ``pandas.DataFrame`` (:func:`mrpctl.data.to_pandas`)."""
+        """The result as a ``pandas.DataFrame`` ([`mrpctl.data.to_pandas`][mrpctl.data.to_pandas])."""
         from mrpctl.data import to_pandas
 
         return to_pandas(self)  # type: ignore[arg-type]
@@ -158,7 +159,7 @@ class SimulationResult(_Conversions):
         return np.hstack((self.sigma, self.omega / 4.0))
 
     def plot(self, **kwargs: Any) -> Any:
-        """Plot the run: :func:`mrpctl.plots.plot_response` (``kwargs`` passed on)."""
+        """Plot the run: [`mrpctl.plots.plot_response`][mrpctl.plots.plot_response] (``kwargs`` passed on)."""
         from mrpctl.plots import plot_response
 
         return plot_response(self, **kwargs)
@@ -200,7 +201,7 @@ class SimulationResult(_Conversions):
 
 
 def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: dict[str, Any]) -> SimulationResult:
-    """The one place a :class:`SimulationResult` is built from what an engine returned."""
+    """The one place a [`SimulationResult`][mrpctl.SimulationResult] is built from what an engine returned."""
     rate = common["rate"]
     metrics = Metrics.from_stats(output.stats)
     valid = metrics.valid_samples(n)
@@ -386,7 +387,7 @@ class BatchResult(_Conversions):
         )
 
     def plot(self, **kwargs: Any) -> Any:
-        """Plot the batch: :func:`mrpctl.plots.plot_batch` (``kwargs`` passed on)."""
+        """Plot the batch: [`mrpctl.plots.plot_batch`][mrpctl.plots.plot_batch] (``kwargs`` passed on)."""
         from mrpctl.plots import plot_batch
 
         return plot_batch(self, **kwargs)
@@ -423,7 +424,7 @@ def assemble_batch(
     runs: list[SimulationResult] | None,
     flight_memory: np.ndarray | None = None,
 ) -> BatchResult:
-    """The :class:`BatchResult` from the (N, stats) rows of the runs (and the (N, 10) flight
+    """The [`BatchResult`][mrpctl.BatchResult] from the (N, stats) rows of the runs (and the (N, 10) flight
     memories after the runs: n_sat at 5, peak |u_c,i| at 6:9, peak |u_c| at 9; NaN rows for
     runs of other rules)."""
     metrics = [Metrics.from_stats(row) for row in stats]
