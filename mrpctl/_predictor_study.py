@@ -1,4 +1,4 @@
-"""The predictor study of ``mrpctl reproduce`` (issue 13): settling against inertia error, with and without prediction.
+"""The predictor study of ``mrpctl reproduce``: settling against inertia error, with and without prediction.
 
 The paper case at τ = 0.5 s (the paper's spacecraft, x0 = [0.93, 0, 0, 0.46/4, 0, 0], 1 kHz, 60 s,
 compiled engine): the best certified PD without prediction
@@ -139,7 +139,7 @@ class PredictorStudy:
             settled = "not settled" if row.settling_time is None else f"settling {row.settling_time:.3f} s"
             claims.append(
                 Claim(
-                    source="issue 13",
+                    source="predictor study",
                     claim=f"{row.controller}, "
                     + ("paper K" if row.omega_n is None else f"omega_n = {row.omega_n:.4g} rad/s")
                     + f", inertia error {row.e:+.0%}",
@@ -151,7 +151,7 @@ class PredictorStudy:
             if margin is not None:
                 claims.append(
                     Claim(
-                        source="issue 13",
+                        source="predictor study",
                         claim=f"largest inertia error the {name} tolerates (exact, linearised)",
                         measurement=str(margin),
                         verdict=Verdict.EXTENDS,

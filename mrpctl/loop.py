@@ -404,7 +404,7 @@ def predictor_core_function(
     limited: bool = True,
     torque_input: bool = False,
 ) -> ca.Function:
-    """One sample of the predictor loop (issue 13; ``design/predictor.md``, form (b)) (pure SX).
+    """One sample of the predictor loop (``design/predictor.md``, form (b)) (pure SX).
 
     ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight[, noise][, torque]) ->
     (x_next, memory_next, x_meas, u, switched, ring)``: memory of `PREDICTOR_MEMORY_SIZE`

@@ -826,7 +826,7 @@ def max_certified_interval_delay(
 
 
 # --------------------------------------------------------------------------------------------
-# Preconditioning (issue 11: the sampled loop at 1 kHz). In time normalised by τ_max the points and moments of
+# Preconditioning (the sampled loop at 1 kHz). In time normalised by τ_max the points and moments of
 # ζ (x(t), x(t − h1), x(t − τ), x(t − h2), Legendre moments) are nearly equal when the dynamics are
 # slow over a segment (‖A‖·h ≪ 1 at 1 kHz, or the 1/(d+1)-wide varying segment for d > 0): Φ ≺ 0
 # must then hold in directions of size ε = ‖A‖·(segment length) next to directions of size 1, and
