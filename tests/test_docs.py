@@ -40,7 +40,8 @@ def test_no_sphinx_role_in_the_package_sources() -> None:
 
 
 def test_no_ticket_number_in_what_users_read() -> None:
-    files = [*_sources(), ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), *(ROOT / "examples").rglob("*")]
+    files = [*_sources(), ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "design").glob("*.md")]
+    files += [*(ROOT / "examples").rglob("*")]
     files = [p for p in files if p.is_file() and p.suffix in {".py", ".md", ".toml", ".txt", ""}]
     assert _hits(BOOKKEEPING, files) == []
 
@@ -90,3 +91,42 @@ def test_the_strict_site_build_passes_and_holds_no_raw_role(tmp_path: Path) -> N
         assert (site / "reference" / module).is_dir(), module
     raw = [str(p.relative_to(site)) for p in pages if ROLE.search(p.read_text(encoding="utf-8"))]
     assert raw == []
+
+
+def _public_modules() -> list[str]:
+    names = []
+    for path in _sources():
+        rel = path.relative_to(ROOT).with_suffix("").as_posix().replace("/", ".").removesuffix(".__init__")
+        if not any(part.startswith("_") for part in rel.split(".")):
+            names.append(rel)
+    return names
+
+
+def test_every_name_in_a_public_all_exists() -> None:
+    import importlib
+
+    checked = 0
+    for name in _public_modules():
+        module = importlib.import_module(name)
+        for export in getattr(module, "__all__", ()):
+            assert hasattr(module, export), f"{name}.__all__ names {export!r}, which it does not define"
+            checked += 1
+    assert checked > 200
+
+
+def test_what_the_docs_import_is_public() -> None:
+    import importlib
+
+    texts = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), *sorted((ROOT / "examples").rglob("*.py"))]
+    imports = re.compile(r"from (mrpctl[\w.]*) import ([\w, ]+)")
+    seen = 0
+    for path in texts:
+        for module_name, names in imports.findall(path.read_text(encoding="utf-8")):
+            public = importlib.import_module(module_name).__all__
+            for name in (n.strip() for n in names.split(",")):
+                module = importlib.import_module(module_name)
+                if name and not (hasattr(module, "__path__") and importlib.util.find_spec(f"{module_name}.{name}")):
+                    # a submodule is public by its name; anything else must be in __all__
+                    assert name in public, f"{path.relative_to(ROOT)} imports {module_name}.{name}, not in __all__"
+                    seen += 1
+    assert seen > 20
