@@ -1,11 +1,12 @@
 """mrpctl: delayed-feedback attitude control with MRP shadow-set switching.
 
-The flow: a :class:`Spacecraft` and gains K go to :mod:`mrpctl.design` (PD gains, LMI
-certificates, the exact delay margin, synthesis), to :func:`simulate` and
-:func:`simulate_batch` (:mod:`mrpctl.simulation`: the sampled nonlinear closed loop
+The flow: a [`Spacecraft`][mrpctl.Spacecraft] and gains K go to [`mrpctl.design`][mrpctl.design] (PD gains, LMI
+certificates, the exact delay margin, synthesis), to [`simulate`][mrpctl.simulation.simulate] and
+[`simulate_batch`][mrpctl.simulate_batch] ([`mrpctl.simulation`][mrpctl.simulation]: the sampled nonlinear closed loop
 with a switching rule, generated as C through CasADi from the Functions of
-:mod:`mrpctl.loop`), to :mod:`mrpctl.plots` and to :mod:`mrpctl.export`. cvxpy is
-imported on the first LMI solve and matplotlib only by :mod:`mrpctl.plots`.
+[`mrpctl.loop`][mrpctl.loop]), to [`mrpctl.plots`][mrpctl.plots] and to [`mrpctl.export`][mrpctl._export.export]. cvxpy
+is
+imported on the first LMI solve and matplotlib only by [`mrpctl.plots`][mrpctl.plots].
 """
 
 from __future__ import annotations

@@ -1,23 +1,23 @@
 """Compile C code to shared libraries: one compiler call, an on-disk cache that checks what it loads.
 
-:func:`compile_function` generates C from a CasADi Function with
-:class:`casadi.CodeGenerator`, compiles it (or reuses the cached library) and loads it with
-:func:`casadi.external`; :func:`compile_source` does the same for C source that is not a
-CasADi Function and returns the library's path (load it with :mod:`ctypes`). Both go
-through :func:`build_library`, the one place the compiler runs; :mod:`mrpctl._export`
+`compile_function` generates C from a CasADi Function with
+`casadi.CodeGenerator`, compiles it (or reuses the cached library) and loads it with
+`casadi.external`; `compile_source` does the same for C source that is not a
+CasADi Function and returns the library's path (load it with `ctypes`). Both go
+through `build_library`, the one place the compiler runs; [`mrpctl._export`][mrpctl._export]
 builds its shared library with it too.
 
-Flags: ``-O2 -shared -fPIC`` by default (:data:`DEFAULT_FLAGS`); the simulator uses
-:data:`SIMULATION_FLAGS` (-O3 without FMA contraction). Never ``-ffast-math`` nor
+Flags: ``-O2 -shared -fPIC`` by default (`DEFAULT_FLAGS`); the simulator uses
+`SIMULATION_FLAGS` (-O3 without FMA contraction). Never ``-ffast-math`` nor
 ``-march=native``: IEEE arithmetic in the order CasADi wrote it, so that the same code
 gives the same bits on every machine with the same compiler.
 
 The compiler is ``$CC`` when that variable is set (a program name or path, without
-arguments; if it cannot be found a :class:`CodegenError` says so, and how to unset it),
-else ``gcc``, else ``cc``. Without any, :func:`compile_function` returns the Function for
-CasADi's virtual machine with a :class:`CompilerWarning`. Each compiler call is bounded by a
-timeout (:data:`DEFAULT_TIMEOUT` = 600 s, ``$MRPCTL_COMPILE_TIMEOUT``, or the ``timeout``
-keyword): past it the compiler and its children are killed and a :class:`CodegenError`
+arguments; if it cannot be found a [`CodegenError`][mrpctl.errors.CodegenError] says so, and how to unset it),
+else ``gcc``, else ``cc``. Without any, `compile_function` returns the Function for
+CasADi's virtual machine with a [`CompilerWarning`][mrpctl.errors.CompilerWarning]. Each compiler call is bounded by a
+timeout (`DEFAULT_TIMEOUT` = 600 s, ``$MRPCTL_COMPILE_TIMEOUT``, or the ``timeout``
+keyword): past it the compiler and its children are killed and a [`CodegenError`][mrpctl.errors.CodegenError]
 names the compiler and the limit.
 
 The cache
@@ -28,7 +28,7 @@ and CasADi's version. Beside it, ``<name>_<hash>.so.sha256`` records its size an
 it is written (atomically) after the library is in place. Before a library is loaded its
 size and checksum are verified: a truncated one (which would kill the interpreter with a
 bus error when loaded), a garbage one, or one without a checksum file is deleted and
-rebuilt with a :class:`CacheWarning`.
+rebuilt with a [`CacheWarning`][mrpctl.errors.CacheWarning].
 
 Builds run in a private folder ``build-<pid>-<random>`` inside the cache directory, and the
 library is written to ``<name>_<hash>.so.<pid>-<random>.part`` and renamed into place, so a
@@ -105,7 +105,7 @@ DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-shared", "-fPIC")
 SIMULATION_FLAGS: tuple[str, ...] = ("-O3", "-ffp-contract=off", "-fno-semantic-interposition", "-shared", "-fPIC")
 #: Default limit of one compiler call (s).
 DEFAULT_TIMEOUT = 600.0
-#: Environment variable overriding :data:`DEFAULT_TIMEOUT` (seconds).
+#: Environment variable overriding `DEFAULT_TIMEOUT` (seconds).
 TIMEOUT_VARIABLE = "MRPCTL_COMPILE_TIMEOUT"
 #: Age (s) after which a leftover ``.part`` file or build folder is removed even if its pid lives.
 STALE_SECONDS = 86400.0
@@ -273,11 +273,11 @@ def build_library(
     output : path-like
         The library to write (replaced if present).
     compiler : str, optional, keyword-only
-        The compiler; default :func:`find_compiler`.
+        The compiler; default `find_compiler`.
     flags : tuple of str, keyword-only
-        Compiler flags; default :data:`DEFAULT_FLAGS`.
+        Compiler flags; default `DEFAULT_FLAGS`.
     timeout : float, optional, keyword-only
-        Limit of the compiler call (s); default :func:`compile_timeout`.
+        Limit of the compiler call (s); default `compile_timeout`.
 
     Returns
     -------
@@ -346,8 +346,8 @@ def compile_source(
 ) -> Path:
     """Compile the C source ``code`` to a cached shared library and return its path.
 
-    The same cache as :func:`compile_function` (same hashing, validation and repair); load
-    the library with :mod:`ctypes`.
+    The same cache as `compile_function` (same hashing, validation and repair); load
+    the library with `ctypes`.
 
     Parameters
     ----------
@@ -356,11 +356,11 @@ def compile_source(
     name : str
         Stem of the library's file name (a C identifier, e.g. the main function's name).
     flags : tuple of str, keyword-only
-        Compiler flags; default :data:`DEFAULT_FLAGS`.
+        Compiler flags; default `DEFAULT_FLAGS`.
     directory : path-like, optional, keyword-only
-        Cache directory; default :func:`cache_dir`.
+        Cache directory; default `cache_dir`.
     timeout : float, optional, keyword-only
-        Limit of the compiler call (s); default :func:`compile_timeout`.
+        Limit of the compiler call (s); default `compile_timeout`.
 
     Returns
     -------
@@ -400,15 +400,15 @@ def compile_function(
     function : casadi.Function
         Any code-generatable CasADi Function (SX, or MX calling SX Functions).
     flags : tuple of str, keyword-only
-        Compiler flags; the default is :data:`DEFAULT_FLAGS`.
+        Compiler flags; the default is `DEFAULT_FLAGS`.
     directory : path-like, optional, keyword-only
-        Cache directory; default :func:`cache_dir`.
+        Cache directory; default `cache_dir`.
     appendix : str, keyword-only
         C source appended to the generated code (part of the hash), e.g. a driver loop
         that calls the generated function; load its exported symbols from
-        :attr:`CompiledFunction.library` with ctypes.
+        `CompiledFunction.library` with ctypes.
     timeout : float, optional, keyword-only
-        Limit of the compiler call (s); default :func:`compile_timeout`.
+        Limit of the compiler call (s); default `compile_timeout`.
     others : tuple of casadi.Function, keyword-only
         More Functions generated into the same library (for the ``appendix`` to call, under their names).
 
@@ -416,7 +416,7 @@ def compile_function(
     -------
     CompiledFunction
         The loaded Function. With no C compiler, the original Function for CasADi's
-        virtual machine, and a :class:`CompilerWarning` is issued.
+        virtual machine, and a [`CompilerWarning`][mrpctl.errors.CompilerWarning] is issued.
 
     Raises
     ------
@@ -588,7 +588,7 @@ def _pid_alive(pid: int) -> bool:
 def abandoned(path: Path, pid: int | None, *, now: float | None = None) -> bool:
     """True if ``path``, written by process ``pid`` (None: unknown), is a leftover.
 
-    A leftover's writer is dead, or it is older than :data:`STALE_SECONDS` (a day: the pid
+    A leftover's writer is dead, or it is older than `STALE_SECONDS` (a day: the pid
     may have been reused, or belong to another machine sharing the folder).
     """
     try:

@@ -1,6 +1,6 @@
 """Export the closed loop's CasADi Functions: ``.casadi`` files, C source and header, shared library.
 
-:func:`export` writes one folder for a given spacecraft, gain K, delay τ, measurement
+[`export`][mrpctl._export.export] writes one folder for a given spacecraft, gain K, delay τ, measurement
 rate and switching rule::
 
     out_dir/
@@ -9,7 +9,7 @@ rate and switching rule::
         libmrpctl_model.so                  gcc -O2 -shared -fPIC (only when a compiler is found)
         manifest.json                       versions, parameters, ports, SHA-256 content hash
 
-The Functions are those of :func:`mrpctl.loop.closed_loop_functions`, with the
+The Functions are those of [`mrpctl.loop.closed_loop_functions`][mrpctl.loop.closed_loop_functions], with the
 same named ports (x = [σ; ω/4], u in N m; K, J and the rule's parameters are constants
 inside them). The ``.casadi`` files keep the plain names (``step``, ``rule``, ...); in the
 C code and the shared library every symbol carries the prefix ``mrpctl_``
@@ -73,7 +73,7 @@ C_PREFIX = "mrpctl_"
 #: The generated C source and header (one translation unit for all Functions).
 SOURCE_NAME = "mrpctl_model.c"
 HEADER_NAME = "mrpctl_model.h"
-#: The shared library built from :data:`SOURCE_NAME`.
+#: The shared library built from `SOURCE_NAME`.
 LIBRARY_NAME = "libmrpctl_model.so"
 #: The manifest (not covered by the content hash it holds).
 MANIFEST_NAME = "manifest.json"
@@ -169,7 +169,7 @@ _PREDICTOR_TORQUE_DESCRIPTIONS = {
 # =============================================================================== result
 @dataclass(frozen=True)
 class ExportResult:
-    """What :func:`export` wrote.
+    """What [`export`][mrpctl._export.export] wrote.
 
     Attributes
     ----------
@@ -198,7 +198,8 @@ class ExportResult:
 
     @property
     def content_hash(self) -> str:
-        """SHA-256 over the written files except the manifest (see :func:`content_hash`)."""
+        """SHA-256 over the written files except the manifest (see
+        [`content_hash`][mrpctl._export.ExportResult.content_hash])."""
         return self.manifest["content_hash"]["value"]
 
     def __str__(self) -> str:
@@ -261,14 +262,14 @@ def export(
         Delay τ (s), a whole number d of measurement periods 1/rate.
     rule : SwitchingRule, keyword-only
         The shadow-set switching rule, e.g. ``OnDelayed()``, or the controller-side
-        :class:`~mrpctl.flight.Hysteretic`: then the loop as flown is exported
-        (:data:`FLIGHT_EXPORTED_FUNCTIONS`, with ``flight_controller`` for flight software).
+        [`Hysteretic`][mrpctl.flight.Hysteretic]: then the loop as flown is exported
+        (`FLIGHT_EXPORTED_FUNCTIONS`, with ``flight_controller`` for flight software).
     rate : float, keyword-only
         Measurement rate (Hz), default 1000; ``step`` integrates over h = 1/rate.
     substeps : int, keyword-only
         RK4 substeps per measurement period in ``step``, default 1.
     actuator, disturbance, sensor, delay : keyword-only
-        The flight loop's models (``rule=Hysteretic(...)`` only), as in :func:`mrpctl.simulate`:
+        The flight loop's models (``rule=Hysteretic(...)`` only), as in [`mrpctl.simulate`][mrpctl.simulation.simulate]:
         torque limits and saturation mode, a disturbance torque (N m; constant: bound into the
         Functions; per sample, (n, 3) rows or ``Disturbance(function=w)``: the ``torque`` input
         w_k of ``sample`` (3) and ``chunk`` (3 × max(d, 1)), named in the manifest), the sensor's
@@ -277,7 +278,7 @@ def export(
         the manifest's ``flight`` section.
     predictor : mrpctl.Predictor, keyword-only
         Export the predictor loop (with ``rule=OnPredicted(alpha)``; actuator, disturbance and sensor
-        allowed): :data:`PREDICTOR_EXPORTED_FUNCTIONS`, with ``predictor_controller`` (and its pieces
+        allowed): `PREDICTOR_EXPORTED_FUNCTIONS`, with ``predictor_controller`` (and its pieces
         ``prediction`` and ``model_step``) for flight software, and a ``predictor`` section in the
         manifest (model inertia, τ, α, the memory and delay-line layouts). A per-sample disturbance
         is the ``torque`` input of ``sample`` and ``chunk`` here too (plant only; named in

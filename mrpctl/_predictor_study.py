@@ -1,10 +1,11 @@
-"""The predictor study of ``mrpctl reproduce`` (issue 13): settling against inertia error, with and without prediction.
+"""The predictor study of ``mrpctl reproduce``: settling against inertia error, with and without prediction.
 
 The paper case at τ = 0.5 s (the paper's spacecraft, x0 = [0.93, 0, 0, 0.46/4, 0, 0], 1 kHz, 60 s,
-compiled engine): the best certified PD without prediction (:func:`mrpctl.design.synthesize_pd`,
+compiled engine): the best certified PD without prediction
+([`mrpctl.design.synthesize_pd`][mrpctl.design.synthesize_pd],
 the decay-rate-optimal certified gain, rule ``OnCurrent``) against the predictor controller with
-faster gains (ζ = 1, ωₙ = :data:`FAST_OMEGA_N`, rule ``OnPredicted(1)``), the plant's inertia scaled
-by (1 + e) while both controllers keep the nominal model. :func:`predictor_study` returns the
+faster gains (ζ = 1, ωₙ = `FAST_OMEGA_N`, rule ``OnPredicted(1)``), the plant's inertia scaled
+by (1 + e) while both controllers keep the nominal model. `predictor_study` returns the
 table rows, the sweep, the exact inertia margins of both loops, and builds the figure.
 """
 
@@ -83,7 +84,7 @@ class StudyRow:
 
 @dataclass(frozen=True, eq=False)
 class PredictorStudy:
-    """Result of :func:`predictor_study`.
+    """Result of `predictor_study`.
 
     Attributes
     ----------
@@ -98,7 +99,8 @@ class PredictorStudy:
         ωₙ (rad/s) of the two gains.
     pd_margin, predictor_margin : MarginInterval or None
         The inertia errors each loop tolerates (exact, linearised): the PD's from the delay margin of
-        the perturbed delayed loop (> τ), the predictor's from :func:`mrpctl.predictor.inertia_mismatch_margin`
+        the perturbed delayed loop (> τ), the predictor's from
+        [`mrpctl.predictor.inertia_mismatch_margin`][mrpctl.predictor.inertia_mismatch_margin]
         (sampled at 1 kHz); None when not computed.
     t_final : float
         Horizon of every run (s).
@@ -130,13 +132,14 @@ class PredictorStudy:
         return "\n".join(lines)
 
     def claims(self) -> list[Any]:
-        """The rows as :class:`mrpctl.reproduction.Claim` values (verdict: mrpctl only), for ``claims.md``."""
+        """The rows as [`mrpctl.reproduction.Claim`][mrpctl.reproduction.Claim] values (verdict: mrpctl only), for
+        ``claims.md``."""
         claims = []
         for row in self.rows:
             settled = "not settled" if row.settling_time is None else f"settling {row.settling_time:.3f} s"
             claims.append(
                 Claim(
-                    source="issue 13",
+                    source="predictor study",
                     claim=f"{row.controller}, "
                     + ("paper K" if row.omega_n is None else f"omega_n = {row.omega_n:.4g} rad/s")
                     + f", inertia error {row.e:+.0%}",
@@ -148,7 +151,7 @@ class PredictorStudy:
             if margin is not None:
                 claims.append(
                     Claim(
-                        source="issue 13",
+                        source="predictor study",
                         claim=f"largest inertia error the {name} tolerates (exact, linearised)",
                         measurement=str(margin),
                         verdict=Verdict.EXTENDS,

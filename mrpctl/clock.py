@@ -50,7 +50,7 @@ def delay_samples(tau: Any, rate: Any) -> int:
 
 
 def check_substeps(substeps: Any) -> int:
-    """RK4 substeps per measurement period: an integer in 1 .. :data:`MAX_SUBSTEPS`."""
+    """RK4 substeps per measurement period: an integer in 1 .. `MAX_SUBSTEPS`."""
     if isinstance(substeps, int | np.integer) and not isinstance(substeps, bool) and substeps > MAX_SUBSTEPS:
         raise SpecificationError(
             f"substeps must be <= {MAX_SUBSTEPS}, got {substeps}: each substep is unrolled into the compiled "

@@ -1,13 +1,14 @@
 """Results as labelled data: xarray and pandas conversions, save/load of a run, a decimating CSV writer.
 
-* :func:`to_xarray` / :func:`to_pandas`: a :class:`~mrpctl.simulation.SimulationResult`
-  over ``time`` (and ``axis``), a :class:`~mrpctl.simulation.BatchResult` over ``run`` with
+* [`to_xarray`][mrpctl.data.to_xarray] / [`to_pandas`][mrpctl.data.to_pandas]: a
+[`SimulationResult`][mrpctl.SimulationResult]
+  over ``time`` (and ``axis``), a [`BatchResult`][mrpctl.BatchResult] over ``run`` with
   each run's initial state and inputs.
-* :func:`save` / :func:`load`: one run with its inputs (a predictor run's model inertia and
+* [`save`][mrpctl.data.save] / [`load`][mrpctl.data.load]: one run with its inputs (a predictor run's model inertia and
   the flight loop's saturation metrics included), the package versions and a seed, as a
   NetCDF-3 file (xarray's scipy engine, no netCDF4 library needed), written
   atomically (temporary file, then rename).
-* :func:`write_csv`: every n-th sample of a run, with the switches in between counted.
+* [`write_csv`][mrpctl.data.write_csv]: every n-th sample of a run, with the switches in between counted.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ if TYPE_CHECKING:
     # deferred: xarray (about 0.5 s to import), only for labelled data
     import xarray as xr
 
-#: Rows formatted at once by :func:`write_csv` (bounds its memory to a few tens of MB).
+#: Rows formatted at once by `write_csv` (bounds its memory to a few tens of MB).
 _CSV_BLOCK = 65536
 
 __all__ = ["FORMAT", "load", "metadata", "save", "to_pandas", "to_xarray", "write_csv"]
@@ -129,7 +130,7 @@ def metadata(path: str | Path) -> dict[str, Any]:
 
 
 def load(path: str | Path) -> SimulationResult:
-    """Load a run written by :func:`save` (arrays read-only, as returned by the simulator)."""
+    """Load a run written by [`save`][mrpctl.data.save] (arrays read-only, as returned by the simulator)."""
 
     dataset = _open(path)
     rate = float(dataset["rate"])

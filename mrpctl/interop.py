@@ -1,14 +1,17 @@
 """python-control and Basilisk interop: the linearised loop, runs and gains in their terms.
 
-* :func:`delayed_loop` gives the linearised attitude loop ẋ = A x + B u, u = K x(t − τ)
+* [`delayed_loop`][mrpctl.interop.delayed_loop] gives the linearised attitude loop ẋ = A x + B u, u = K x(t − τ)
   as a ``control.StateSpace`` plant, the static gain K and the delay τ, with
-  :meth:`DelayedLoop.pade` closing it through a Padé approximation of e^{−sτ}.
-* :func:`loop_margins` gives the per-axis phase margin and gain crossover of the loop
+  [`DelayedLoop.pade`][mrpctl.interop.DelayedLoop.pade] closing it through a Padé approximation of e^{−sτ}.
+* [`loop_margins`][mrpctl.interop.loop_margins] gives the per-axis phase margin and gain crossover of the loop
   broken at the delay, L_i(s) = −(K₂ᵢ s + K₁ᵢ)/s², and the delay margin PM/ω_c they imply
-  (equal to :meth:`mrpctl.design.LinearizedLoop.delay_margin` for a decoupled loop).
-* :func:`to_time_response` / :func:`from_time_response` convert a
-  :class:`~mrpctl.simulation.SimulationResult` to ``control.TimeResponseData`` and back.
-* :func:`basilisk_mrp_feedback` maps K to the scalar gains of Basilisk's ``mrpFeedback``.
+  (equal to [`mrpctl.design.LinearizedLoop.delay_margin`][mrpctl.design.LinearizedLoop.delay_margin] for a decoupled
+  loop).
+* [`to_time_response`][mrpctl.interop.to_time_response] / [`from_time_response`][mrpctl.interop.from_time_response]
+convert a
+  [`SimulationResult`][mrpctl.SimulationResult] to ``control.TimeResponseData`` and back.
+* [`basilisk_mrp_feedback`][mrpctl.interop.basilisk_mrp_feedback] maps K to the scalar gains of Basilisk's
+``mrpFeedback``.
 
 Conventions: x = [σ; ω/4] (σ dimensionless, ω in rad/s), u in N m, τ in s.
 """
@@ -137,8 +140,8 @@ def delayed_loop(spacecraft: Spacecraft, K: Any, tau: Any = 0.0) -> DelayedLoop:
     Returns
     -------
     DelayedLoop
-        ``plant.A`` and ``plant.B`` are exactly :func:`mrpctl.model.plant_model`'s A and B,
-        so ``B @ K`` is :func:`mrpctl.design.linearized_loop`'s A_d.
+        ``plant.A`` and ``plant.B`` are exactly [`mrpctl.model.plant_model`][mrpctl.model.plant_model]'s A and B,
+        so ``B @ K`` is [`mrpctl.design.linearized_loop`][mrpctl.design.linearized_loop]'s A_d.
     """
     sc = check_spacecraft(spacecraft)
     k = gain_matrix(K)
@@ -235,7 +238,7 @@ def loop_margins(spacecraft: Spacecraft, K: Any) -> LoopMargins:
     ------
     SpecificationError
         When K₁ or K₂ is not diagonal (coupled axes have no per-axis phase margin; use
-        :meth:`mrpctl.design.LinearizedLoop.delay_margin`).
+        [`mrpctl.design.LinearizedLoop.delay_margin`][mrpctl.design.LinearizedLoop.delay_margin]).
     """
     sc = check_spacecraft(spacecraft)
     k1, k2 = pd_from_gain(sc, gain_matrix(K))
@@ -281,7 +284,8 @@ def to_time_response(result: SimulationResult) -> control.TimeResponseData:
 
 
 def from_time_response(response: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t, x, u) arrays from a ``control.TimeResponseData`` with the labels of :func:`to_time_response`.
+    """(t, x, u) arrays from a ``control.TimeResponseData`` with the labels of
+    [`to_time_response`][mrpctl.interop.to_time_response].
 
     Returns
     -------
@@ -330,7 +334,8 @@ class BasiliskGains:
         0: no ω × (Iω) term (mrpctl's PD has none).
     unmapped : numpy.ndarray
         (3, 6) part of mrpctl's K that Basilisk does not apply (K − [k_σ I₃, k_ω I₃]); zero
-        unless :func:`basilisk_mrp_feedback` was asked for the ``nearest`` scalar gains.
+        unless [`basilisk_mrp_feedback`][mrpctl.interop.basilisk_mrp_feedback] was asked for the ``nearest`` scalar
+        gains.
     names : dict
         Basilisk message field -> mrpctl quantity.
     """
@@ -387,7 +392,7 @@ def basilisk_mrp_feedback(K: Any, *, nearest: bool = False) -> BasiliskGains:
     gain whose 3×3 blocks are scalar multiples of I₃ maps exactly; a per-axis (diagonal with
     different entries) or coupled (off-diagonal) block cannot be expressed and is refused,
     unless ``nearest=True`` asks for the nearest scalar gains, with what Basilisk then does
-    not apply reported in :attr:`BasiliskGains.unmapped`.
+    not apply reported in `BasiliskGains.unmapped`.
 
     Parameters
     ----------

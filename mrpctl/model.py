@@ -151,7 +151,8 @@ def gain_from_pd(spacecraft: Spacecraft, K1: Any, K2: Any) -> np.ndarray:
 
 
 def pd_from_gain(spacecraft: Spacecraft, K: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(K₁, K₂) = J⁻¹ K / 4 split into its σ and σ̇ blocks (the inverse of :func:`gain_from_pd`)."""
+    """(K₁, K₂) = J⁻¹ K / 4 split into its σ and σ̇ blocks (the inverse of
+    [`gain_from_pd`][mrpctl.model.gain_from_pd])."""
     loop = spacecraft.inertia_inverse @ gain_matrix(K) / 4.0
     return loop[:, 0:3], loop[:, 3:6]
 

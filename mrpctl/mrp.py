@@ -15,8 +15,9 @@ Conventions (see ``design/conventions.md``):
 All functions are vectorised over leading axes: σ has shape (..., 3).
 
 The kinematic matrix B(σ) is written once, as a CasADi expression
-(:func:`b_matrix_expr`); the NumPy functions :func:`b_matrix` and :func:`sigma_dot`
-evaluate that expression, and :mod:`mrpctl.model` builds the plant from it.
+([`b_matrix_expr`][mrpctl.mrp.b_matrix_expr]); the NumPy functions [`b_matrix`][mrpctl.mrp.b_matrix] and
+[`sigma_dot`][mrpctl.mrp.sigma_dot]
+evaluate that expression, and [`mrpctl.model`][mrpctl.model] builds the plant from it.
 """
 
 from __future__ import annotations
@@ -317,7 +318,7 @@ def add(sigma1: Any, sigma2: Any) -> np.ndarray:
 def subtract(sigma: Any, sigma1: Any) -> np.ndarray:
     """Relative attitude: σ = σ(F/N), σ1 = σ(B/N) -> σ(F/B), short set.
 
-    It inverts :func:`add`: add(σ1, subtract(σ, σ1)) is σ (as an attitude).
+    It inverts [`add`][mrpctl.mrp.add]: add(σ1, subtract(σ, σ1)) is σ (as an attitude).
     """
     q = to_quaternion(_sigma("sigma", sigma))
     q1 = to_quaternion(_sigma("sigma1", sigma1))

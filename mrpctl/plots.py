@@ -1,6 +1,6 @@
 """Figures of simulations, sweeps and Monte Carlo batches: the only module that imports matplotlib.
 
-The functions build :class:`matplotlib.figure.Figure` objects and never select a backend,
+The functions build `matplotlib.figure.Figure` objects and never select a backend,
 so they work headless (``save_figure`` renders through Agg) and in notebooks (the figure
 is displayed by the notebook's own backend). Every function takes ``ax=``: one
 ``Axes`` for single-panel figures, a sequence of ``Axes`` for multi-panel ones (e.g. from
@@ -104,7 +104,7 @@ __all__ = [
 _SUB = ("₁", "₂", "₃")
 _SWITCH_COLOR = "crimson"
 _FAIL_COLOR = "crimson"
-#: The settling tolerance of :class:`~mrpctl.simulation.SimulationResult` (|σ| < 1e-2, |ω| < 1e-3 rad/s).
+#: The settling tolerance of `SimulationResult` (|σ| < 1e-2, |ω| < 1e-3 rad/s).
 SETTLING_CAPTION = "settled: |σ| < 10⁻² and |ω| < 10⁻³ rad/s to the end"
 #: A cluster of at least this many switches in at most this fraction of the run gets a zoom inset.
 _INSET_MIN_SWITCHES = 10
@@ -278,10 +278,13 @@ def plot_response(
 ) -> Figure:
     """σ, ω and u against t, with the switch instants marked (paper Figs. 2-7).
 
+    The σ axis fits the data: the |σ| = 1 line (and σᵢ = −1) is drawn only when it lies
+    within or near the data range (a quarter of the range away at most).
+
     Parameters
     ----------
-    result : RunView
-        A run of :func:`mrpctl.simulate`.
+    result : SimulationResult
+        A run of [`mrpctl.simulate`][mrpctl.simulation.simulate].
     title : str, optional
         Figure title; by default the rule, the delay τ, the switch count and whether the run
         settled (with the settling tolerance).
@@ -293,9 +296,6 @@ def plot_response(
     u_max : float, array_like (3,) or mrpctl.flight.ActuatorModel, optional
         The actuator's torque limits (N m): ±u_max drawn on the torque panel. By default the
         limit of the run's actuator when the result carries one, none otherwise.
-
-    The σ axis fits the data: the |σ| = 1 line (and σᵢ = −1) is drawn only when it lies
-    within or near the data range (a quarter of the range away at most).
 
     Returns
     -------
@@ -377,8 +377,8 @@ def plot_attitude(
 
     Parameters
     ----------
-    result : RunView
-        A run of :func:`mrpctl.simulate`.
+    result : SimulationResult
+        A run of [`mrpctl.simulate`][mrpctl.simulation.simulate].
     window : (float, float), optional
         Time window in s; the whole run by default.
     title : str, optional
@@ -565,8 +565,8 @@ def plot_monte_carlo(batch: BatchView, *, title: str | None = None, ax: Any = No
 
     Parameters
     ----------
-    batch : BatchView
-        A batch of :func:`mrpctl.simulate_batch`.
+    batch : BatchResult
+        A batch of [`mrpctl.simulate_batch`][mrpctl.simulate_batch].
     title : str, optional
         Figure title.
     ax : sequence of 3 matplotlib.axes.Axes, optional
@@ -641,8 +641,8 @@ def plot_batch(
 
     Parameters
     ----------
-    batch : BatchView
-        A batch of :func:`mrpctl.simulate_batch`.
+    batch : BatchResult
+        A batch of [`mrpctl.simulate_batch`][mrpctl.simulate_batch].
     over : {"tau", "eps", "initial"}, optional
         What varies across the runs; detected by default (τ when the delays differ, ε when
         every rule is a BoundaryLayer and their ε differ, the initial state otherwise).

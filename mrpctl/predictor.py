@@ -14,7 +14,8 @@ the plant equation eliminates x: the prediction itself obeys a delay equation,
 
 and x → 0 exactly when x̂ → 0 (Φ^d is invertible). With J = J_m the delayed term vanishes and the
 loop is the undelayed one (the finite spectrum of A + B K); the inertia error alone limits the gains.
-Exact tests: the continuous equation by the crossing method of :func:`mrpctl.design.delay_margin`
+Exact tests: the continuous equation by the crossing method of
+[`mrpctl.design.delay_margin`][mrpctl.design.delay_margin]
 (at the given τ, with the delayed matrix that itself depends on τ); the sampled one by the spectral
 radius of the lifted (block companion) matrix of size n (d + 1), reduced per axis to the roots of a
 scalar polynomial of degree d + 2 when the loop splits into three axes. See ``design/predictor.md``.
@@ -139,7 +140,7 @@ class MarginInterval:
 
 @dataclass(frozen=True, eq=False)
 class MismatchMargin:
-    """Result of :func:`inertia_mismatch_margin`.
+    """Result of [`inertia_mismatch_margin`][mrpctl.predictor.inertia_mismatch_margin].
 
     Attributes
     ----------
@@ -177,7 +178,8 @@ class MismatchMargin:
 
 @dataclass(frozen=True, eq=False)
 class PredictorDesign:
-    """Result of :func:`synthesize_predictor_pd`: the fastest PD at ζ whose predictor loop keeps the margin.
+    """Result of [`synthesize_predictor_pd`][mrpctl.predictor.synthesize_predictor_pd]: the fastest PD at ζ whose
+    predictor loop keeps the margin.
 
     Attributes
     ----------
@@ -208,7 +210,8 @@ class PredictorDesign:
 # ================================================================ the controller's options
 @dataclass(frozen=True, eq=False)
 class Predictor:
-    """The predictor controller of :func:`mrpctl.simulate` and :func:`mrpctl.simulate_batch` (form (b)).
+    """The predictor controller of [`mrpctl.simulate`][mrpctl.simulation.simulate] and
+    [`mrpctl.simulate_batch`][mrpctl.simulate_batch] (form (b)).
 
     The controller keeps a copy z of its model (inertia J_m of ``model``), advanced by one RK4
     step per sample with the torque it actually applied (after the actuator's limits; without the
@@ -220,7 +223,7 @@ class Predictor:
 
     (``design/predictor.md``). With J_m = J the prediction is the present state up to the
     integration error of one RK4 step per sample, and the loop is the undelayed one. The
-    controller's MRP set is chosen on σ̂ by the rule :class:`OnPredicted`, the one rule a
+    controller's MRP set is chosen on σ̂ by the rule [`OnPredicted`][mrpctl.predictor.OnPredicted], the one rule a
     predictor run takes.
 
     Parameters
@@ -240,14 +243,15 @@ class Predictor:
 
 @dataclass(frozen=True)
 class OnPredicted(SwitchingRule):
-    """Switch the controller's MRP set on the predicted attitude σ̂ (with a :class:`Predictor` only).
+    """Switch the controller's MRP set on the predicted attitude σ̂ (with a [`Predictor`][mrpctl.predictor.Predictor]
+    only).
 
     At each sample σ̂ is first taken in the set nearest σ̂_{k−1} (continuity), then replaced by its
     shadow when |σ̂| >= α; that replacement is the run's switch. α = 1 keeps σ̂ in the short set
     (the paper's undelayed rule, applied to the prediction); α > 1 adds hysteresis (σ̂ may go up to
     α before it switches); ``alpha=None`` never switches (σ̂ follows continuity only). The plant's
     own MRP is kept in the short set as bookkeeping (no physical effect): its
-    :meth:`~mrpctl.switching.SwitchingRule.expressions` as a plain rule are the ``OnCurrent`` test.
+    [`expressions`][mrpctl.switching.SwitchingRule.expressions] as a plain rule are the ``OnCurrent`` test.
 
     Parameters
     ----------
@@ -368,7 +372,8 @@ def predictor_stability(
     """Exact stability of the linearised predictor loop with model ``spacecraft`` and true ``plant``.
 
     When the loop splits into three axes (diagonal J_m, J and gain blocks) each 2×2 axis is tested
-    alone: continuous, by the crossing method of :func:`mrpctl.design.delay_margin`; sampled, by the
+    alone: continuous, by the crossing method of [`mrpctl.design.delay_margin`][mrpctl.design.delay_margin]; sampled, by
+    the
     number of roots of the axis polynomial λ^d det(λI − F₀) − c(λ) inside the unit circle (the winding
     number of λ^{−d}-scaled values on |λ| = 1, on a grid refined until every phase step is < π/2).
     Otherwise the 6×6 loop is tested: crossing method, or the eigenvalues of the lifted matrix of size
@@ -570,7 +575,8 @@ def inertia_mismatch_margin(
     The predictor uses the model ``spacecraft``; the plant's inertia is perturbed uniformly and, when
     ``per_axis``, on one axis at a time. On each side |e| is scanned geometrically (ratio 1.25) from
     1e-3 to the search limit (``e_max`` above, J_plant = 1e-3 J_model below) with the exact test of
-    :func:`predictor_stability`, and the first [stable, unstable] pair is bisected to relative width
+    [`predictor_stability`][mrpctl.predictor.predictor_stability], and the first [stable, unstable] pair is bisected to
+    relative width
     ``rtol``: the search always terminates (at most ~50 + 200 tests per side). A stable island
     narrower than one scan step beyond the first instability is not reported (the answer is the
     interval around 0).
@@ -666,7 +672,8 @@ def synthesize_predictor_pd(
 ) -> PredictorDesign:
     """The fastest PD gains (largest ωₙ at ζ) whose predictor loop keeps a ± ``mismatch`` inertia margin.
 
-    The requirement is tested exactly (:func:`predictor_stability`) at e = ±m j/10, j = 1..10,
+    The requirement is tested exactly ([`predictor_stability`][mrpctl.predictor.predictor_stability]) at e = ±m j/10, j
+    = 1..10,
     uniform and per axis (the uniform test covers the axes when J_m is diagonal: the loop then splits
     and the uniform error is stable exactly when each axis loop is). ωₙ is doubled from
     0.05/τ until the requirement fails (at most 40 doublings) and the bracket is bisected to ``rtol``.

@@ -49,7 +49,7 @@ SWITCH_TIME_TOLERANCE = 0.0005
 ZOOM_WINDOW = 0.1
 #: The LMI order used for the certificate claim (Bessel-Legendre N = 3).
 CERTIFICATE_ORDER = 3
-#: The figures written by :func:`write_reproduction`, in order.
+#: The figures written by `write_reproduction`, in order.
 FIGURE_FILES = (
     "fig2_tau0_on_current.png",
     "fig3_on_current.png",
@@ -63,13 +63,13 @@ FIGURE_FILES = (
 )
 #: The figures of the flight studies (noise × δ, distributions over initial states and rates).
 STUDY_FIGURE_FILES = ("noise_delta_study.png", "distributions.png", "predictor_study.png")
-#: Every file :func:`write_reproduction` writes into its folder (nothing else is touched there).
+#: Every file `write_reproduction` writes into its folder (nothing else is touched there).
 OUTPUT_FILES = (*FIGURE_FILES, *STUDY_FIGURE_FILES, "claims.md", "summary.json")
 
 
 @dataclass(frozen=True, eq=False)
 class Reproduction:
-    """The outcome of :func:`reproduce`: the runs, the claims and the written files.
+    """The outcome of [`reproduce`][mrpctl.reproduction.reproduce]: the runs, the claims and the written files.
 
     Attributes
     ----------
@@ -192,7 +192,7 @@ def flight_scenarios(*, t_final: float = 60.0) -> dict[str, Scenario]:
     """The shipped scenarios of the loop as flown (``mrpctl/scenarios/flight-*.toml``), by name.
 
     ``flight-paper``: the paper's case with the controller-side rule
-    :class:`~mrpctl.flight.Hysteretic` (α = 1.2), 0.01 rad / 1e-4 rad/s sensor noise (seed 1),
+    [`Hysteretic`][mrpctl.flight.Hysteretic] (α = 1.2), 0.01 rad / 1e-4 rad/s sensor noise (seed 1),
     a 20 N m per-axis torque limit, a 1e-3 N m disturbance about x and a delay jittering in
     [0.45, 0.5] s (seed 2).
     """
@@ -483,7 +483,8 @@ def _distribution_rules() -> dict[str, SwitchingRule]:
 
 
 def _distribution_study(t_final: float) -> list[dict[str, Any]]:
-    """Each switching claim over :func:`perturbed_states` at the rates of :data:`RATE_STUDY` (metrics only)."""
+    """Each switching claim over [`perturbed_states`][mrpctl.reproduction.perturbed_states] at the rates of `RATE_STUDY`
+    (metrics only)."""
 
     states = perturbed_states()
     rows = []
@@ -805,11 +806,11 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
     Parameters
     ----------
     reproduction : Reproduction
-        From :func:`run_reproduction`.
+        From [`run_reproduction`][mrpctl.reproduction.run_reproduction].
     out_dir : path
         Output folder (created when missing).
     overwrite : bool, keyword-only
-        Replace files of :data:`OUTPUT_FILES` already in ``out_dir`` (default False: refuse).
+        Replace files of `OUTPUT_FILES` already in ``out_dir`` (default False: refuse).
 
     Returns
     -------
@@ -819,7 +820,7 @@ def write_reproduction(reproduction: Reproduction, out_dir: str | Path, *, overw
     Raises
     ------
     SpecificationError
-        If ``out_dir`` already holds one of :data:`OUTPUT_FILES` and ``overwrite`` is False,
+        If ``out_dir`` already holds one of `OUTPUT_FILES` and ``overwrite`` is False,
         or is not a folder.
     """
     out = Path(out_dir)
@@ -875,7 +876,7 @@ def reproduce(out_dir: str | Path | None = None, *, t_final: float = 60.0, overw
     ----------
     out_dir : path, optional
         Folder for the figures (PNG), ``claims.md`` and ``summary.json``; nothing is
-        written when it is None. Written atomically by :func:`write_reproduction`.
+        written when it is None. Written atomically by [`write_reproduction`][mrpctl.reproduction.write_reproduction].
     t_final : float, keyword-only
         Horizon of every run (s), default 60.
     overwrite : bool, keyword-only

@@ -29,7 +29,7 @@ RULE_NAMES = {
 def rule_from_name(
     name: str, *, eps: float | None = None, alpha: float | None = None, delta: float | None = None
 ) -> SwitchingRule:
-    """The switching rule called ``name`` (one of :data:`RULE_NAMES`).
+    """The switching rule called ``name`` (one of `RULE_NAMES`).
 
     ``eps`` is required by (and only allowed for) ``boundary-layer``; ``alpha`` is
     optional for ``delay-aware`` (default 1), ``hysteretic`` and ``on-predicted`` (default 1;
@@ -75,7 +75,7 @@ def _on_predicted(alpha: Any) -> OnPredicted:
 
 
 def rule_name(rule: SwitchingRule) -> str:
-    """The scenario-file name of ``rule`` (the inverse of :func:`rule_from_name`)."""
+    """The scenario-file name of ``rule`` (the inverse of [`rule_from_name`][mrpctl.scenario.rule_from_name])."""
     for name, cls in RULE_NAMES.items():
         if type(rule) is cls:
             return name

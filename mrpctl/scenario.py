@@ -73,7 +73,8 @@ class InertiaUncertainty:
 
     Every J with |J_ii − J0_ii| <= ``tolerance`` · J0_ii and symmetric products of inertia
     |J_ij| <= ``product_bound`` (kg m²) around the scenario's diagonal J0
-    (:func:`mrpctl.design.inertia_polytope`). Only the certificates use it: the simulation flies J0.
+    ([`mrpctl.design.inertia_polytope`][mrpctl.design.inertia_polytope]). Only the certificates use it: the simulation
+    flies J0.
 
     Attributes
     ----------
@@ -100,7 +101,7 @@ class InertiaUncertainty:
 
 @dataclass(frozen=True, eq=False)
 class Scenario:
-    """One simulation set-up: everything :func:`mrpctl.simulate` needs.
+    """One simulation set-up: everything [`mrpctl.simulate`][mrpctl.simulation.simulate] needs.
 
     Attributes
     ----------
@@ -127,13 +128,13 @@ class Scenario:
     description : str
         Free text (the paper figure it reproduces, for instance).
     actuator, sensor, disturbance, delay : optional
-        The loop as flown (``rule`` a :class:`~mrpctl.flight.Hysteretic`, or an
-        :class:`~mrpctl.predictor.OnPredicted` without ``delay``):
-        :class:`~mrpctl.flight.ActuatorModel`, :class:`~mrpctl.flight.SensorModel`,
-        :class:`~mrpctl.flight.Disturbance` (constant or per sample), :class:`~mrpctl.flight.DelayModel`
+        The loop as flown (``rule`` a [`Hysteretic`][mrpctl.flight.Hysteretic], or an
+        [`OnPredicted`][mrpctl.predictor.OnPredicted] without ``delay``):
+        [`ActuatorModel`][mrpctl.flight.ActuatorModel], [`SensorModel`][mrpctl.flight.SensorModel],
+        [`Disturbance`][mrpctl.flight.Disturbance] (constant or per sample), [`DelayModel`][mrpctl.flight.DelayModel]
         (seeded jitter with ``tau_max`` = ``tau``). None: not modelled.
     predictor : Predictor or None
-        The predictor controller (``rule`` an :class:`~mrpctl.predictor.OnPredicted`, and then
+        The predictor controller (``rule`` an [`OnPredicted`][mrpctl.predictor.OnPredicted], and then
         required): u = K x̂ with x̂ predicted by the controller's model ``predictor.model``
         (``design/predictor.md``). None: the plain delayed law u = K x(t − τ).
     uncertainty : InertiaUncertainty or None
@@ -161,15 +162,17 @@ class Scenario:
 
     @property
     def flight_options(self) -> dict[str, Any]:
-        """The flight models that are set, as keywords of :func:`mrpctl.simulate` and :func:`mrpctl.export`."""
+        """The flight models that are set, as keywords of [`mrpctl.simulate`][mrpctl.simulation.simulate] and
+        [`mrpctl.export`][mrpctl._export.export]."""
         options: dict[str, Any] = {"actuator": self.actuator, "sensor": self.sensor, "disturbance": self.disturbance}
         options["delay"] = self.delay
         return {key: value for key, value in options.items() if value is not None}
 
     @property
     def run_options(self) -> dict[str, Any]:
-        """:attr:`flight_options` and, when set, ``predictor``: the optional keywords of
-        :func:`mrpctl.simulate` and :func:`mrpctl.export` for this scenario."""
+        """[`flight_options`][mrpctl.Scenario.flight_options] and, when set, ``predictor``: the optional keywords of
+        [`mrpctl.simulate`][mrpctl.simulation.simulate] and [`mrpctl.export`][mrpctl._export.export] for this
+        scenario."""
         options = self.flight_options
         if self.predictor is not None:
             options["predictor"] = self.predictor
@@ -180,7 +183,7 @@ class Scenario:
         return replace(self, rule=rule)
 
     def simulate(self) -> SimulationResult:
-        """Run the scenario with :func:`mrpctl.simulate`."""
+        """Run the scenario with [`mrpctl.simulate`][mrpctl.simulation.simulate]."""
         return simulate(
             self.spacecraft,
             self.K,
@@ -218,7 +221,8 @@ class _Horizon:
 
 
 def sample_count(t_final: float, rate: float) -> int:
-    """n = floor(t_final · rate) + 1, the measurement samples of a run (as :func:`mrpctl.simulate` counts them):
+    """n = floor(t_final · rate) + 1, the measurement samples of a run (as
+    [`mrpctl.simulate`][mrpctl.simulation.simulate] counts them):
     the rows a per-sample file must hold."""
     return math.floor(t_final * rate + 1e-9) + 1
 
@@ -391,7 +395,7 @@ _FLIGHT_BUILDERS = {"actuator": _actuator, "sensor": _sensor, "disturbance": _di
 def _predictor_table(
     data: dict[str, Any], rule: SwitchingRule, spacecraft: Spacecraft, history: str
 ) -> Predictor | None:
-    """The [predictor] table as a :class:`~mrpctl.predictor.Predictor` (required exactly with 'on-predicted')."""
+    """The [predictor] table as a [`Predictor`][mrpctl.predictor.Predictor] (required exactly with 'on-predicted')."""
     if _PREDICTOR_TABLE not in data:
         if isinstance(rule, OnPredicted):
             raise SpecificationError(
@@ -435,7 +439,8 @@ def predictor_model(spacecraft: Spacecraft, inertia: Any = None, inertia_error: 
 
     Notes
     -----
-    The margin of :func:`mrpctl.predictor.inertia_mismatch_margin` is stated the other way round,
+    The margin of [`mrpctl.predictor.inertia_mismatch_margin`][mrpctl.predictor.inertia_mismatch_margin] is stated the
+    other way round,
     J = (1 + e') J_m: a uniform model error e is the plant error e' = 1/(1 + e) − 1.
     """
     plant = check_spacecraft(spacecraft, "spacecraft")
@@ -524,11 +529,11 @@ def _initial_state(initial: dict[str, Any]) -> np.ndarray:
 
 
 def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | Path | None = None) -> Scenario:
-    """Build a :class:`Scenario` from the parsed contents of a scenario file.
+    """Build a [`Scenario`][mrpctl.Scenario] from the parsed contents of a scenario file.
 
-    Unknown keys raise a :class:`~mrpctl.errors.SpecificationError` naming the key. ``base``: the
+    Unknown keys raise a [`SpecificationError`][mrpctl.SpecificationError] naming the key. ``base``: the
     folder relative file names (``[disturbance] torque_file``, ``[delay] sequence_file``) are taken
-    from (:func:`load_scenario`: the scenario file's folder; None: the working directory).
+    from ([`load_scenario`][mrpctl.load_scenario]: the scenario file's folder; None: the working directory).
     """
     _check_keys("", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE})
     spacecraft_table = _table(data, "spacecraft")
@@ -605,7 +610,7 @@ def _uncertainty_table(data: dict[str, Any], spacecraft: Spacecraft) -> InertiaU
 
 
 def check_delay(tau: float, rate: float) -> None:
-    """τ · rate must be a whole number of measurement periods (as :func:`~mrpctl.simulate` requires)."""
+    """τ · rate must be a whole number of measurement periods (as [`simulate`][mrpctl.simulation.simulate] requires)."""
     samples = tau * rate
     if not math.isfinite(samples) or abs(samples - round(samples)) > 1e-9 * max(1.0, abs(samples)):
         raise SpecificationError(
@@ -625,10 +630,11 @@ def shipped_scenarios() -> dict[str, Path]:
 
 
 def resolve_scenario(name_or_path: str | Path) -> Path:
-    """The file of a scenario given as a path or as the name of a shipped scenario (see :func:`shipped_scenarios`).
+    """The file of a scenario given as a path or as the name of a shipped scenario (see
+    [`shipped_scenarios`][mrpctl.scenario.shipped_scenarios]).
 
     An existing file wins over a shipped name; a name that is neither raises a
-    :class:`~mrpctl.errors.SpecificationError` listing the shipped names.
+    [`SpecificationError`][mrpctl.SpecificationError] listing the shipped names.
     """
     path = Path(name_or_path)
     if path.exists():
@@ -641,7 +647,8 @@ def resolve_scenario(name_or_path: str | Path) -> Path:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read a scenario TOML file (UTF-8), or a shipped scenario by name (see :func:`resolve_scenario`)."""
+    """Read a scenario TOML file (UTF-8), or a shipped scenario by name (see
+    [`resolve_scenario`][mrpctl.scenario.resolve_scenario])."""
     path = resolve_scenario(path)
     try:
         with path.open("rb") as handle:
@@ -672,7 +679,7 @@ def _toml_value(value: Any) -> str:
 
 
 def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
-    """The scenario as a TOML file that :func:`load_scenario` reads back to the same scenario.
+    """The scenario as a TOML file that [`load_scenario`][mrpctl.load_scenario] reads back to the same scenario.
 
     Floats are written with ``repr`` (shortest round-trip form), so K, J and x0 come back
     bit for bit; the gain is written as the full 3×6 K, with the per-axis loop gains

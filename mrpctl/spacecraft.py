@@ -114,7 +114,8 @@ class Spacecraft:
 
 
 def check_spacecraft(value: Any, name: str = "spacecraft") -> Spacecraft:
-    """Return ``value`` if it is a :class:`mrpctl.Spacecraft`, else raise SpecificationError naming ``name``."""
+    """Return ``value`` if it is a [`mrpctl.Spacecraft`][mrpctl.Spacecraft], else raise SpecificationError naming
+    ``name``."""
     if not isinstance(value, Spacecraft):
         raise SpecificationError(
             f"{name} must be a mrpctl.Spacecraft (e.g. Spacecraft([140, 100, 80])), got {type(value).__name__}"

@@ -56,12 +56,13 @@ PARAMETER_SIZE = 1
 class SwitchingRule(abc.ABC):
     """Base class of the shadow-set switching rules.
 
-    A rule is a frozen value; :meth:`expressions` writes it as CasADi expressions and
-    :meth:`function` as a named CasADi Function
+    A rule is a frozen value; [`expressions`][mrpctl.switching.SwitchingRule.expressions] writes it as CasADi
+    expressions and
+    [`function`][mrpctl.switching.SwitchingRule.function] as a named CasADi Function
     ``rule(x, x_meas, memory) -> (x_next, memory_next, switched)``.
 
-    Subclasses define :meth:`_condition` (when to switch) and, when they carry memory,
-    :meth:`_next_memory` and :meth:`initial_memory`.
+    Subclasses define `_condition` (when to switch) and, when they carry memory,
+    `_next_memory` and [`initial_memory`][mrpctl.switching.SwitchingRule.initial_memory].
     """
 
     #: Short label used in summaries and file names.
@@ -99,7 +100,8 @@ class SwitchingRule(abc.ABC):
         delay_samples : int
             d = τ/h, keyword-only.
         parameters : casadi.SX or None
-            The parameter vector (1); ``None`` uses :meth:`parameters` as constants.
+            The parameter vector (1); ``None`` uses [`parameters`][mrpctl.switching.SwitchingRule.parameters] as
+            constants.
 
         Returns
         -------
@@ -174,7 +176,7 @@ class OnCurrent(SwitchingRule):
     plant's MRP in the short set, so every recorded measurement is a short-set MRP and
     u = K [short(σ(t − τ)); ω(t − τ)/4] is exactly what a controller computes from the
     delayed measurement alone (no knowledge of the current σ is needed). The chatter of the
-    paper's Figs. 4-5 needs the state-side model of :class:`OnDelayed`.
+    paper's Figs. 4-5 needs the state-side model of [`OnDelayed`][mrpctl.OnDelayed].
     """
 
     label: ClassVar[str] = "on-current"
@@ -240,7 +242,7 @@ class BoundaryLayer(SwitchingRule):
 class DelayAware(SwitchingRule):
     """Switch σ_k when |σ(m_{k−d})| >= α and m_{k−d} postdates the last switch.
 
-    The chatter of :class:`OnDelayed` comes from acting again and again on stale
+    The chatter of [`OnDelayed`][mrpctl.OnDelayed] comes from acting again and again on stale
     measurements taken before the last switch, which still show the old set. This rule
     ignores them: its memory is the number of samples since the last switch
     (saturated at max(d, 1)), and a switch is allowed only when it is >= d, that is when
@@ -251,8 +253,9 @@ class DelayAware(SwitchingRule):
     paper's K, but after a crossing the plant stays in the long set for τ and the torque acts on
     |σ_long| = tan((180° + |ω|τ)/4), unbounded as |ω|τ → π. With 0.7× the fastest certified
     critically damped gains and 200 tumbles at |ω| = 5 rad/s it fails to settle in 60 s on 6/200
-    runs at τ = 0.5 s and 42/200 at τ = 1.0 s, where :class:`NoSwitching`, :class:`OnCurrent`
-    and the controller-side hysteretic selection (:class:`mrpctl.flight.Hysteretic`) converge on
+    runs at τ = 0.5 s and 42/200 at τ = 1.0 s, where [`NoSwitching`][mrpctl.NoSwitching],
+    [`OnCurrent`][mrpctl.OnCurrent]
+    and the controller-side hysteretic selection ([`mrpctl.flight.Hysteretic`][mrpctl.flight.Hysteretic]) converge on
     all 200 (``design/flight.md``). Prefer the controller-side rule for flight designs.
 
     Parameters

@@ -37,7 +37,8 @@ def run_models(spec: CampaignSpec, inputs: RunInputs, j: int) -> tuple[Switching
 
     The models are ``actuator``, ``disturbance`` (the run's constant torque, (3,)), ``sensor``, ``delay``
     and ``disturbance_rows`` (the (n, 3) rows of ``flight.disturbance_file`` shared by the runs, or None);
-    :func:`mrpctl.campaign.simulation.flight_keywords` makes them keywords of :func:`mrpctl.simulate_batch`.
+    [`mrpctl.campaign.simulation.flight_keywords`][mrpctl.campaign.simulation.flight_keywords] makes them keywords of
+    [`mrpctl.simulate_batch`][mrpctl.simulate_batch].
     """
     rule = spec.rule_list[int(inputs.rule[j])]
     if isinstance(rule, Hysteretic) and spec.flight_dispersion.delta is not None:
@@ -76,8 +77,8 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
     Returns
     -------
     dict of numpy.ndarray
-        The arrays of :data:`mrpctl.campaign.store.INPUTS` and
-        :data:`mrpctl.campaign.simulation.METRICS`, one row per run.
+        The arrays of `mrpctl.campaign.store.INPUTS` and
+        `mrpctl.campaign.simulation.METRICS`, one row per run.
     """
     inputs = run_inputs(spec, start, stop)
     base = spec.base
@@ -119,7 +120,8 @@ def chunk_on_worker(
 ) -> dict[str, np.ndarray]:
     """The Dask task: rebuild the spec from plain data (cheap to ship) and run the chunk on one thread.
 
-    ``files``: the numbers of the campaign's per-sample files (:attr:`CampaignSpec.files`), shipped with
+    ``files``: the numbers of the campaign's per-sample files
+    ([`CampaignSpec.files`][mrpctl.campaign.CampaignSpec.files]), shipped with
     the task, so a worker never reads them (it may not see the campaign file's folder).
     """
     return simulate_chunk(parse_campaign(source, name=name, files=files), start, stop, threads=1)

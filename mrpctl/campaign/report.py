@@ -1,6 +1,6 @@
 """Campaign summaries (convergence with confidence intervals, distributions, worst cases), figures and replay.
 
-Figures are built as :class:`matplotlib.figure.Figure` objects (no backend is selected and
+Figures are built as `matplotlib.figure.Figure` objects (no backend is selected and
 no pyplot state is touched) and written atomically.
 """
 
@@ -410,7 +410,7 @@ class ReplayResult:
     trajectory : SimulationResult or None
         The full run, when asked for.
     noise_revisions : tuple of int or None
-        (stored, current) :data:`~mrpctl.flight.NOISE_REVISION` when they differ and the campaign has attitude
+        (stored, current) `NOISE_REVISION` when they differ and the campaign has attitude
         noise: its runs then differ in their last bits by design; None otherwise.
     """
 
@@ -532,7 +532,7 @@ def plot_replay(result: ReplayResult) -> Figure:
 
 
 def save_replay_plot(result: ReplayResult, path: str | Path) -> Path:
-    """Write :func:`plot_replay` to ``path`` atomically."""
+    """Write [`plot_replay`][mrpctl.campaign.report.plot_replay] to ``path`` atomically."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     return _save(plot_replay(result), path)

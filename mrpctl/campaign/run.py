@@ -38,7 +38,7 @@ def _cpus() -> int:
 
 @dataclass(frozen=True)
 class CampaignRun:
-    """What :func:`run_campaign` did.
+    """What [`run_campaign`][mrpctl.campaign.run_campaign] did.
 
     Attributes
     ----------

@@ -137,7 +137,8 @@ def haar_angle_cdf(theta: np.ndarray | float) -> np.ndarray:
 
 
 def _haar_angle_quantile(p: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`haar_angle_cdf` by bisection: 64 halvings of [0, π], always terminates."""
+    """Inverse of [`haar_angle_cdf`][mrpctl.campaign.sampling.haar_angle_cdf] by bisection: 64 halvings of [0, π],
+    always terminates."""
     low = np.zeros_like(p)
     high = np.full_like(p, math.pi)
     for _ in range(64):

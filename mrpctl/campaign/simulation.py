@@ -36,8 +36,9 @@ METRICS: dict[str, tuple[Any, Any]] = {
 
 
 def flight_keywords(models: dict[str, Any]) -> dict[str, Any]:
-    """A run's flight models (:func:`mrpctl.campaign._task.run_models`) as keywords of :func:`mrpctl.simulate_batch`
-    and :func:`mrpctl.simulate`: ``actuator``, ``sensor``, ``delay`` and ``disturbance``.
+    """A run's flight models (`mrpctl.campaign._task.run_models`) as keywords of
+    [`mrpctl.simulate_batch`][mrpctl.simulate_batch]
+    and [`mrpctl.simulate`][mrpctl.simulation.simulate]: ``actuator``, ``sensor``, ``delay`` and ``disturbance``.
 
     The torque is the run's constant w (3,) or, with ``flight.disturbance_file``, the (n, 3) rows
     W_k + w: the file's rows themselves when w = 0 (so such a run equals a run given the file's rows),
@@ -140,22 +141,24 @@ def simulate_runs(
     rule : SwitchingRule or sequence of SwitchingRule
         The rule of every run, or one per run.
     t_final, rate, history, substeps, threads
-        As in :func:`mrpctl.simulate_batch`.
+        As in [`mrpctl.simulate_batch`][mrpctl.simulate_batch].
     peak_torque : bool
         Also return the peak torque max_k |u_k|_∞ (N m) per run (NaN when False).
     flight : sequence of dict or None, optional
         Per run, None or the flight models (``actuator``, ``disturbance``, ``sensor``, ``delay``
-        of :func:`mrpctl.simulate_batch`, and ``disturbance_rows``: see :func:`flight_keywords`).
+        of [`mrpctl.simulate_batch`][mrpctl.simulate_batch], and ``disturbance_rows``: see
+        [`flight_keywords`][mrpctl.campaign.simulation.flight_keywords]).
         Runs with equal models share one call; the calls
         run on ``threads`` threads (one each), and every run's result is the same either way.
     predictor : Predictor or None, optional
         The predictor controller shared by every run (every rule an
-        :class:`~mrpctl.predictor.OnPredicted`): each call to :func:`mrpctl.simulate_batch` takes it.
+        [`OnPredicted`][mrpctl.predictor.OnPredicted]): each call to [`mrpctl.simulate_batch`][mrpctl.simulate_batch]
+        takes it.
 
     Returns
     -------
     dict of numpy.ndarray
-        One (N,) array per name in :data:`METRICS`, in input order.
+        One (N,) array per name in `METRICS`, in input order.
     """
     n = len(x0)
     options: dict[str, Any] = dict(t_final=t_final, rate=rate, history=history, substeps=substeps, threads=threads)

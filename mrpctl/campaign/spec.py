@@ -2,7 +2,7 @@
 
 A campaign file is a scenario file (``[spacecraft]``, ``[gains]``, ``[rule]``, ``tau``,
 ``rate``, ``t_final``, ``history``, ``substeps``; ``[initial]`` optional, default at rest at
-the origin) read by :func:`mrpctl.scenario.parse_scenario`, plus ``count``, ``seed`` and a
+the origin) read by [`mrpctl.scenario.parse_scenario`][mrpctl.scenario.parse_scenario], plus ``count``, ``seed`` and a
 ``[dispersions]`` table::
 
     count = 1000
@@ -23,8 +23,8 @@ the origin) read by :func:`mrpctl.scenario.parse_scenario`, plus ``count``, ``se
     rules = ["on-delayed", "delay-aware", "hysteretic:0.1"]   # crossed with the cases (see below)
 
 The rule of ``[rule]`` (or of each entry of ``dispersions.rule.rules``) is a name of
-:data:`mrpctl.rules.RULE_NAMES` or ``"hysteretic"`` (the controller-side rule
-:class:`mrpctl.flight.Hysteretic`), as a table ``{type = "boundary-layer", eps = 0.05}`` or a
+`mrpctl.rules.RULE_NAMES` or ``"hysteretic"`` (the controller-side rule
+[`mrpctl.flight.Hysteretic`][mrpctl.flight.Hysteretic]), as a table ``{type = "boundary-layer", eps = 0.05}`` or a
 string ``"name"`` / ``"name:parameter"`` (eps of boundary-layer, alpha of delay-aware, delta of
 hysteretic). A rule list is a factor **crossed** with the cases: with R rules, run i is case
 ⌊i / R⌋ (its dispersed inputs drawn from (seed, ⌊i / R⌋)) under rule i mod R, so every case is
@@ -50,8 +50,9 @@ is w_k = W_k + w with W_k the file's row k, shared by the runs, and w its consta
 (``disturbance`` plus its ``[dispersions.disturbance]`` draw); the delay sequence is shared by the
 runs (``[dispersions.tau]``, ``jitter`` and the predictor are refused with it; the predictor takes
 ``disturbance_file``: the torque acts on the plant, not on its model copy). The file's numbers are
-kept with the campaign (:class:`SampleFile`): the store holds them, so a replay never reads the
-file again (see :mod:`mrpctl.campaign.store`).
+kept with the campaign ([`SampleFile`][mrpctl.campaign.spec.SampleFile]): the store holds them, so a replay never reads
+the
+file again (see [`mrpctl.campaign.store`][mrpctl.campaign.store]).
 
 and their dispersions::
 
@@ -66,9 +67,10 @@ and their dispersions::
     rate_noise = [0.0, 1e-4]        # rad/s, uniform
     gyro_bias = [0.0, 1e-3]         # rad/s, magnitude uniform, direction uniform, added to [flight] gyro_bias
 
-Each run's noise and jitter streams are seeded from (seed, case) (:mod:`mrpctl.campaign.sampling`).
+Each run's noise and jitter streams are seeded from (seed, case)
+([`mrpctl.campaign.sampling`][mrpctl.campaign.sampling]).
 
-The predictor controller (:class:`mrpctl.Predictor`; every rule ``on-predicted``, ``alpha`` >= 1
+The predictor controller ([`mrpctl.Predictor`][mrpctl.predictor.Predictor]; every rule ``on-predicted``, ``alpha`` >= 1
 may differ: ``"on-predicted:1.2"``, ``"on-predicted:inf"`` never switches)::
 
     [rule]
@@ -260,7 +262,8 @@ class GainDispersion:
 
 
 def rule_label(rule: SwitchingRule) -> str:
-    """The campaign-file string of ``rule``: ``"name"`` or ``"name:parameter"`` (the inverse of :func:`parse_rule`)."""
+    """The campaign-file string of ``rule``: ``"name"`` or ``"name:parameter"`` (the inverse of
+    [`parse_rule`][mrpctl.campaign.spec.parse_rule])."""
     if isinstance(rule, Hysteretic):
         return f"hysteretic:{rule.delta!r}"
     if isinstance(rule, OnPredicted):
@@ -278,8 +281,8 @@ def rule_label(rule: SwitchingRule) -> str:
 def parse_rule(where: str, value: Any) -> SwitchingRule:
     """A rule from ``"name"``, ``"name:parameter"`` or a table ``{type = ..., eps/alpha/delta = ...}``.
 
-    The names are those of :data:`mrpctl.rules.RULE_NAMES` and ``"hysteretic"``
-    (:class:`mrpctl.flight.Hysteretic`, parameter delta, default 0).
+    The names are those of `mrpctl.rules.RULE_NAMES` and ``"hysteretic"``
+    ([`mrpctl.flight.Hysteretic`][mrpctl.flight.Hysteretic], parameter delta, default 0).
     """
     names = sorted([*RULE_NAMES, "hysteretic"])
     if isinstance(value, str):
@@ -325,7 +328,8 @@ class RuleDispersion:
 
     @property
     def labels(self) -> tuple[str, ...]:
-        """The rules' campaign-file strings (:func:`rule_label`), stored with the results."""
+        """The rules' campaign-file strings ([`rule_label`][mrpctl.campaign.spec.rule_label]), stored with the
+        results."""
         return tuple(rule_label(rule) for rule in self.rules)
 
     def __str__(self) -> str:
@@ -341,7 +345,7 @@ class SampleFile:
     """The numbers of a per-sample file named in ``[flight]``, as read when the campaign was parsed.
 
     The campaign keeps the numbers, not only the name: they are written into the store
-    (:mod:`mrpctl.campaign.store`) and shipped to the Dask workers with each chunk, so the runs, a
+    ([`mrpctl.campaign.store`][mrpctl.campaign.store]) and shipped to the Dask workers with each chunk, so the runs, a
     resume and a replay never depend on the file still being there. A resume re-reads the file and
     refuses it if its numbers changed (the message names the file and both SHA-256 hashes).
 
@@ -390,7 +394,7 @@ class FlightOptions:
     disturbance_file : SampleFile or None
         (n, 3) torque rows W_k (N m) shared by the runs, added to each run's constant torque.
     delay_file : SampleFile or None
-        (n,) per-sample delays (s) shared by the runs (:attr:`delay_sequence`); exclusive with ``jitter``.
+        (n,) per-sample delays (s) shared by the runs (`delay_sequence`); exclusive with ``jitter``.
     delay_sequence : DelayModel or None
         The delay sequence of ``delay_file`` (tau_min = 1/rate, tau_max = tau), one object for every run.
     """
@@ -462,7 +466,7 @@ class FlightDispersion:
 class CampaignSpec:
     """A Monte Carlo campaign: ``count`` runs of ``base`` dispersed by ``seed``.
 
-    Run i's inputs depend on (seed, i) alone (see :mod:`mrpctl.campaign.sampling`).
+    Run i's inputs depend on (seed, i) alone (see [`mrpctl.campaign.sampling`][mrpctl.campaign.sampling]).
 
     Attributes
     ----------
@@ -508,7 +512,8 @@ class CampaignSpec:
 
     @property
     def rule_labels(self) -> tuple[str, ...]:
-        """:func:`rule_label` of each rule of :attr:`rule_list` (what the results store per rule index)."""
+        """[`rule_label`][mrpctl.campaign.spec.rule_label] of each rule of
+        [`rule_list`][mrpctl.campaign.CampaignSpec.rule_list] (what the results store per rule index)."""
         return tuple(rule_label(rule) for rule in self.rule_list)
 
     @property
@@ -518,7 +523,7 @@ class CampaignSpec:
 
     @property
     def attitude_noisy(self) -> bool:
-        """True when a run has sensor attitude noise (its numbers depend on :data:`~mrpctl.flight.NOISE_REVISION`)."""
+        """True when a run has sensor attitude noise (its numbers depend on `NOISE_REVISION`)."""
         dispersed = self.flight_dispersion.attitude_noise
         return (self.flight is not None and self.flight.attitude_noise > 0) or (
             dispersed is not None and dispersed[1] > 0
@@ -550,7 +555,7 @@ def parse_campaign(
     base: str | Path | None = None,
     files: Mapping[str, SampleFile] | None = None,
 ) -> CampaignSpec:
-    """Build a :class:`CampaignSpec` from the parsed contents of a campaign TOML file.
+    """Build a [`CampaignSpec`][mrpctl.campaign.CampaignSpec] from the parsed contents of a campaign TOML file.
 
     Parameters
     ----------
@@ -560,9 +565,11 @@ def parse_campaign(
         The campaign's name when ``data`` has none.
     base : path or None
         The folder relative names of ``flight.disturbance_file`` / ``flight.delay_file`` are taken
-        from (:func:`load_campaign`: the campaign file's folder; None: the working directory).
+        from ([`load_campaign`][mrpctl.campaign.load_campaign]: the campaign file's folder; None: the working
+        directory).
     files : mapping of str to SampleFile, optional
-        The numbers of those files as read before (:attr:`CampaignSpec.files`, from a store or shipped
+        The numbers of those files as read before ([`CampaignSpec.files`][mrpctl.campaign.CampaignSpec.files], from a
+        store or shipped
         to a Dask worker): used instead of reading the files, and checked as if read.
 
     Raises
@@ -721,7 +728,8 @@ def _sample_file(
     table: dict[str, Any], key: str, folder: Path | None, files: Mapping[str, SampleFile]
 ) -> tuple[str, np.ndarray]:
     """The name and numbers of the per-sample file ``flight.<key>``: as given in ``files``, or read
-    (relative to ``folder``) by the scenario files' reader :func:`mrpctl.scenario.samples_file`."""
+    (relative to ``folder``) by the scenario files' reader
+    [`mrpctl.scenario.samples_file`][mrpctl.scenario.samples_file]."""
     where = f"flight.{key}"
     given = files.get(key)
     if given is not None:

@@ -4,7 +4,7 @@ Layout of ``<out>/campaign.zarr`` (a Zarr group written by xarray):
 
 * coordinate ``run`` (count,) and, over ``run``, the inputs ``sigma0`` (run, axis),
   ``omega0`` (run, axis), ``inertia`` (run, row, col), ``tau``, ``gain_scale``,
-  ``initial_angle``, ``initial_rate`` and the metrics of :data:`METRICS`; every array is
+  ``initial_angle``, ``initial_rate`` and the metrics of `METRICS`; every array is
   chunked along ``run`` by the campaign chunk, so a chunk's write touches only its own files;
 * per run also ``rule`` (index into the JSON list ``attrs["rules"]``, the rules crossed with the
   cases), ``case``, and the flight loop's ``delta``, ``u_max`` (run, axis; inf: none),
@@ -23,7 +23,8 @@ and renamed into place, so a store that exists always has all its arrays.
 **Per-sample files are stored, not referenced.** ``attrs["campaign"]`` holds the TOML as written,
 so ``flight.disturbance_file`` / ``flight.delay_file`` there are file names only. Their numbers are
 stored too (n x 3 float64 at most, n = floor(t_final · rate) + 1: 1.4 MB for a minute at 1 kHz, as
-much as the file itself; counted in the size check), and :func:`spec_of` rebuilds the campaign
+much as the file itself; counted in the size check), and [`spec_of`][mrpctl.campaign.store.spec_of] rebuilds the
+campaign
 from them: a replay reproduces a run bit for bit even when the file was moved, edited or deleted
 (storing only a SHA-256 would make every replay depend on the file and refuse to work without it).
 The hash is kept as well, to refuse a **resume** whose file now holds other numbers (the message
@@ -299,7 +300,7 @@ def _available_memory() -> int | None:
 
 
 def stored_noise_revision(attrs: Any) -> int:
-    """The :data:`~mrpctl.flight.NOISE_REVISION` a store was written with (1 for a store without the attribute)."""
+    """The `NOISE_REVISION` a store was written with (1 for a store without the attribute)."""
     return int(str(attrs.get("noise_revision", 1)))
 
 

@@ -183,7 +183,8 @@ class AxisDamping:
 
 @dataclass(frozen=True, eq=False)
 class GainAnalysis:
-    """Result of :func:`analyze_gains`: damping of the delay-free linearised loop under a gain K.
+    """Result of [`analyze_gains`][mrpctl.design.analyze_gains]: damping of the delay-free linearised loop under a gain
+    K.
 
     Attributes
     ----------

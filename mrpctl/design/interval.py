@@ -58,8 +58,9 @@ class RateKind(enum.Enum):
 class DelayRate:
     """Bounds on the delay derivative τ̇ (dimensionless).
 
-    Build with :meth:`bounded` (|τ̇| ≤ μ), :meth:`between` (τ̇ ∈ [lower, upper]), :meth:`sawtooth`
-    (τ̇ = 1, the sampled-data input delay) or :meth:`unknown`.
+    Build with [`bounded`][mrpctl.design.DelayRate.bounded] (|τ̇| ≤ μ), [`between`][mrpctl.design.DelayRate.between] (τ̇
+    ∈ [lower, upper]), [`sawtooth`][mrpctl.design.DelayRate.sawtooth]
+    (τ̇ = 1, the sampled-data input delay) or [`unknown`][mrpctl.design.DelayRate.unknown].
     """
 
     kind: RateKind
@@ -117,7 +118,7 @@ class DelayRate:
 
 @dataclass(frozen=True, eq=False)
 class IntervalCertificate:
-    """Result of :func:`certify_interval` at one delay interval.
+    """Result of [`certify_interval`][mrpctl.design.certify_interval] at one delay interval.
 
     Attributes
     ----------
@@ -174,7 +175,8 @@ class IntervalCertificate:
 
 @dataclass(frozen=True, eq=False)
 class IntervalDelayCertification:
-    """Result of :func:`max_certified_interval_delay`: the largest certified τ_max for a fixed τ_min.
+    """Result of [`max_certified_interval_delay`][mrpctl.design.max_certified_interval_delay]: the largest certified
+    τ_max for a fixed τ_min.
 
     Attributes
     ----------
@@ -474,7 +476,7 @@ def descriptor_interval_blocks(
     """The interval criterion in descriptor form, after the synthesis congruence (time normalised by τ_max).
 
     ``plants`` are (A, B) pairs of ẋ = A x + B u, u = K x(t − τ(t)). ζ gets a free block ẋ(t); every
-    occurrence of A x + A_d x(t − τ) in :func:`interval_blocks` becomes that block, and the descriptor
+    occurrence of A x + A_d x(t − τ) in `interval_blocks` becomes that block, and the descriptor
     identity 2(xᵀP₂ᵀ + ε ẋᵀP₂ᵀ)(A x + B K x(t − τ) − ẋ) = 0 (Fridman 2001) is added. After the
     congruence diag(G, …, G), G = P₂⁻¹ (every other selector of ζ is a scalar combination of
     blocks, so it commutes), with Y = K G and the functional's matrices read as G-transformed:
@@ -483,7 +485,7 @@ def descriptor_interval_blocks(
 
     linear in (P̄, S̄, R̄, X̄, …, G, Y) for fixed ε and affine in the plant (A, B): the blocks at the
     vertices of a polytope of plants certify its convex hull, and K = Y G⁻¹. ``matrices`` holds the
-    interval unknowns (see :func:`interval_unknowns`) and ``G`` (n, n), ``Y`` (m, n).
+    interval unknowns (see `interval_unknowns`) and ``G`` (n, n), ``Y`` (m, n).
     """
     n = plants[0][0].shape[0]
     has0 = h1 > 0.0
@@ -752,7 +754,7 @@ def max_certified_interval_delay(
     A, A_d : array_like
     tau_min : float, optional
     rate : DelayRate, float or None, optional
-        As in :func:`certify_interval`.
+        As in [`certify_interval`][mrpctl.design.certify_interval].
     order : int, optional
     rtol : float, optional
         Relative width of the final bracket (default 1e-3).
@@ -826,7 +828,7 @@ def max_certified_interval_delay(
 
 
 # --------------------------------------------------------------------------------------------
-# Preconditioning (issue 11: the sampled loop at 1 kHz). In time normalised by τ_max the points and moments of
+# Preconditioning (the sampled loop at 1 kHz). In time normalised by τ_max the points and moments of
 # ζ (x(t), x(t − h1), x(t − τ), x(t − h2), Legendre moments) are nearly equal when the dynamics are
 # slow over a segment (‖A‖·h ≪ 1 at 1 kHz, or the 1/(d+1)-wide varying segment for d > 0): Φ ≺ 0
 # must then hold in directions of size ε = ‖A‖·(segment length) next to directions of size 1, and
@@ -894,7 +896,7 @@ def solve_interval_preconditioned(
     *,
     scale_variables: bool = False,
 ) -> IntervalCertificate:
-    """:func:`solve_interval` in difference coordinates with power-of-two block scaling (an equivalent LMI).
+    """`solve_interval` in difference coordinates with power-of-two block scaling (an equivalent LMI).
 
     For problems that come back ``optimal_inaccurate`` because the dynamics are slow over a segment
     (see the comment above). ``scale_variables`` also measures R1, R2, X, U, Z in units of 1/ε.

@@ -90,7 +90,7 @@ class BlockMargin:
 
 @dataclass(frozen=True, eq=False)
 class Certificate:
-    """Result of :func:`certify`: an LMI test of ẋ = A x + A_d x(t − τ) at one delay τ.
+    """Result of [`certify`][mrpctl.design.certify]: an LMI test of ẋ = A x + A_d x(t − τ) at one delay τ.
 
     Attributes
     ----------
@@ -160,7 +160,7 @@ class Certificate:
 
 
 class SearchStatus(enum.Enum):
-    """Outcome of :func:`max_certified_delay`."""
+    """Outcome of [`max_certified_delay`][mrpctl.design.max_certified_delay]."""
 
     CERTIFIED = "certified interval found"
     SEARCH_LIMIT = "certified up to the search limit tau_max"
@@ -169,7 +169,8 @@ class SearchStatus(enum.Enum):
 
 @dataclass(frozen=True, eq=False)
 class DelayCertification:
-    """Result of :func:`max_certified_delay`: the certified delay interval of one criterion.
+    """Result of [`max_certified_delay`][mrpctl.design.max_certified_delay]: the certified delay interval of one
+    criterion.
 
     Attributes
     ----------
@@ -317,7 +318,8 @@ def _sym(m: np.ndarray) -> np.ndarray:
 
 
 def block_margins(blocks: dict[str, np.ndarray]) -> tuple[BlockMargin, ...]:
-    """λ_min and λ_min/‖block‖₂ of every block of :func:`lmi_blocks` (positive means satisfied)."""
+    """λ_min and λ_min/‖block‖₂ of every block of [`lmi_blocks`][mrpctl.design.lmi_blocks] (positive means
+    satisfied)."""
     out = []
     for name, block in blocks.items():
         eig = float(np.linalg.eigvalsh(block)[0])
@@ -482,7 +484,7 @@ def _xi_scaling(scale: np.ndarray, tau: float, order: int) -> np.ndarray:
 def from_unit_delay(
     p: np.ndarray, s: np.ndarray, r: np.ndarray, scale: np.ndarray, tau: float, order: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Map a certificate (P̃, S̃, R̃) of :func:`unit_delay_system` back to (P, S, R) of (A, A_d) at τ.
+    """Map a certificate (P̃, S̃, R̃) of `unit_delay_system` back to (P, S, R) of (A, A_d) at τ.
 
     V(x_t) = τ Ṽ(y_t'): P = τ (DT_b)⁻¹ P̃ (DT_b)⁻¹, S = T⁻¹ S̃ T⁻¹, R = T⁻¹ R̃ T⁻¹ (``design/lmi.md``).
     """
@@ -494,7 +496,7 @@ def from_unit_delay(
 def to_unit_delay(
     p: np.ndarray, s: np.ndarray, r: np.ndarray, scale: np.ndarray, tau: float, order: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The inverse of :func:`from_unit_delay`."""
+    """The inverse of `from_unit_delay`."""
     d = _xi_scaling(scale, tau, order)
     return (d[:, None] * p * d[None, :]) / tau, scale[:, None] * s * scale[None, :], scale[:, None] * r * scale[None, :]
 
@@ -536,7 +538,7 @@ def certify(
     The criterion (Seuret & Gouaisbaut, Systems & Control Letters 81, 2015; N = 0 is the
     Jensen-based and N = 1 the Wirtinger-based criterion of Seuret & Gouaisbaut, Automatica 49,
     2013): find P ∈ S^{(N+1)n}, S, R ∈ Sⁿ with S ≻ 0, R ≻ 0, a positivity condition (P ≻ 0, or
-    the relaxed τP + diag(0, S, 3S, ..., (2N−1)S) ≻ 0) and Φ_N(τ) ≺ 0 (see :func:`lmi_blocks`
+    the relaxed τP + diag(0, S, 3S, ..., (2N−1)S) ≻ 0) and Φ_N(τ) ≺ 0 (see [`lmi_blocks`][mrpctl.design.lmi_blocks]
     and ``design/lmi.md``). Exponential stability at τ follows.
 
     The result is CERTIFIED only when Clarabel reports ``optimal`` and an independent float64
@@ -585,7 +587,7 @@ def certify(
 
 
 def check_positivity(value: Any) -> Positivity:
-    """Return ``value`` if it is a :class:`Positivity` member, else raise SpecificationError."""
+    """Return ``value`` if it is a [`Positivity`][mrpctl.design.Positivity] member, else raise SpecificationError."""
     if not isinstance(value, Positivity):
         raise SpecificationError(f"positivity must be a Positivity member, got {value!r}")
     return value
@@ -600,7 +602,7 @@ def certify_checked(
     parametric: bool,
     positivity: Positivity,
 ) -> Certificate:
-    """:func:`certify` on checked inputs: solved on :func:`unit_delay_system`, mapped back, re-verified."""
+    """[`certify`][mrpctl.design.certify] on checked inputs: solved on `unit_delay_system`, mapped back, re-verified."""
     n = a.shape[0]
     a_u, a_d_u, scale = unit_delay_system(a, a_d, tau)
     if parametric:
@@ -664,7 +666,7 @@ def max_certified_delay(
 ) -> DelayCertification:
     """The largest delay τ (s) the order-N criterion certifies for ẋ = A x + A_d x(t − τ).
 
-    The exact analysis (:func:`~mrpctl.design.margin.delay_margin`) only chooses where to look: its
+    The exact analysis ([`delay_margin`][mrpctl.design.delay_margin]) only chooses where to look: its
     stable intervals are the only places a sound criterion can certify, so the search starts inside
     them, and a system stable at no delay returns NOT_CERTIFIED without a solve. The brackets are
     LMI answers only (the exact margin is tested, never assumed), so a certified delay above the
@@ -672,7 +674,7 @@ def max_certified_delay(
     be an interval [lower, upper] with lower > 0; both ends are searched.
 
     Each end is found by a safeguarded secant search on the solver margin t(τ) (alternating with
-    bisection, see :func:`bracket_root`) until the bracket [certified, not certified] is narrower
+    bisection, see `bracket_root`) until the bracket [certified, not certified] is narrower
     than ``rtol`` relative. τ enters the compiled problem as cvxpy
     Parameters, so the problem is compiled once per (n, N).
 
@@ -685,11 +687,11 @@ def max_certified_delay(
     rtol : float, optional
         Relative width of the final brackets (default 1e-4).
     positivity : Positivity, optional
-        Passed to :func:`certify`.
+        Passed to [`certify`][mrpctl.design.certify].
     tau_max : float, optional
         Search limit (s) for systems stable for every delay; default 1e3 / max(‖A‖₂, ‖A_d‖₂).
     margin_tol : float, optional
-        Relative eigenvalue margin passed to :func:`certify`.
+        Relative eigenvalue margin passed to [`certify`][mrpctl.design.certify].
     parametric : bool, optional
         False rebuilds the cvxpy problem at every delay (for benchmarks).
 

@@ -63,7 +63,7 @@ class LinearizedLoop:
         return f"linearised delayed loop of {self.spacecraft} ({how})"
 
     def delay_margin(self) -> DelayMargin:
-        """Exact delay margin of the 6×6 loop (:func:`~mrpctl.design.margin.delay_margin`)."""
+        """Exact delay margin of the 6×6 loop ([`delay_margin`][mrpctl.design.delay_margin])."""
         return delay_margin(self.A, self.A_d)
 
     def certify(
@@ -74,7 +74,7 @@ class LinearizedLoop:
         positivity: Positivity = Positivity.RELAXED,
         margin_tol: float = DEFAULT_MARGIN_TOL,
     ) -> Certificate:
-        """:func:`~mrpctl.design.lmi.certify` for the 6×6 loop, solved per axis when it splits.
+        """[`certify`][mrpctl.design.certify] for the 6×6 loop, solved per axis when it splits.
 
         Per-axis decision matrices are assembled block-diagonally into the 6×6 coordinates, and the
         assembled certificate is re-verified on the full 6×6 LMI blocks in float64.
@@ -102,7 +102,7 @@ class LinearizedLoop:
         positivity: Positivity = Positivity.RELAXED,
         margin_tol: float = DEFAULT_MARGIN_TOL,
     ) -> DelayCertification:
-        """:func:`~mrpctl.design.lmi.max_certified_delay` for the loop, per axis when it splits.
+        """[`max_certified_delay`][mrpctl.design.max_certified_delay] for the loop, per axis when it splits.
 
         The certified interval is the intersection of the per-axis intervals; the certificate at
         its upper end is assembled and re-verified on the full 6×6 LMI.

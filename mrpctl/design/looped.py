@@ -48,7 +48,7 @@ __all__ = [
 
 @dataclass(frozen=True, eq=False)
 class LoopedCertificate:
-    """Result of :func:`certify_looped` at one sampling period.
+    """Result of [`certify_looped`][mrpctl.design.certify_looped] at one sampling period.
 
     Attributes
     ----------
@@ -230,11 +230,12 @@ def max_looped_period(
     margin_tol: float = DEFAULT_MARGIN_TOL,
     delay_samples: int = 0,
 ) -> SampledCertification:
-    """The largest sampling period certified by :func:`certify_looped` (bisection below the exact period).
+    """The largest sampling period certified by [`certify_looped`][mrpctl.design.certify_looped] (bisection below the
+    exact period).
 
-    Returns a :class:`~mrpctl.design.sampled.SampledCertification` whose ``criterion`` is
+    Returns a [`SampledCertification`][mrpctl.design.SampledCertification] whose ``criterion`` is
     ``SampledCriterion.LOOPED``. Only ``delay_samples = 0`` is supported (for d > 0 use
-    :func:`~mrpctl.design.sampled.max_certified_period`).
+    [`max_certified_period`][mrpctl.design.max_certified_period]).
     """
     a, b, k = sampled_system(A, B, K)
     if integer("delay_samples", delay_samples, minimum=0) != 0:

@@ -4,7 +4,7 @@ The J-set: J = J₀ + diag(δ) + E with |δᵢ| ≤ tol·J₀,ᵢᵢ (per-axis r
 of the nominal J₀, which must be diagonal) and symmetric off-diagonal products of inertia
 |E_ij| ≤ ``product_bound`` (kg m²). The loop matrix A_d = B(J) K = [[0, 0], [J⁻¹K_σ/4, J⁻¹K_ω/4]] is
 affine in J⁻¹, not in J, so the certified set is a box in the entries of J⁻¹ that contains the
-image of the J-set (:func:`inverse_box`):
+image of the J-set (`inverse_box`):
 
 - products of inertia zero: J⁻¹ = diag(1/Jᵢᵢ) and the box [1/((1+tol)J₀,ᵢᵢ), 1/((1−tol)J₀,ᵢᵢ)] is the
   image itself (exact; its 8 vertices are physical inertias);
@@ -12,13 +12,13 @@ image of the J-set (:func:`inverse_box`):
   of the first two terms plus ±‖R‖₂ on every entry give a box of the 6 entries (64 vertices).
 
 Every plant of the convex hull of the vertices is certified. Constant delay, by default
-(:attr:`Functional.VERTEX`): a vertex-dependent Lyapunov-Krasovskii functional V(α) = Σ αᵢ Vᵢ with
+(`Functional.VERTEX`): a vertex-dependent Lyapunov-Krasovskii functional V(α) = Σ αᵢ Vᵢ with
 (Pᵢ, Sᵢ, Rᵢ) per vertex and one Finsler/descriptor slack M common to the vertices, which makes
 every vertex LMI affine in the vertex's (A, A_d) and the convex combination valid (He, Wu, She &
-Liu, IEEE TAC 49(5), 2004; see :func:`vertex_blocks`); or (:attr:`Functional.COMMON`) one
+Liu, IEEE TAC 49(5), 2004; see `vertex_blocks`); or (`Functional.COMMON`) one
 functional for all vertices. Interval delay: one common functional. Vertices of the outer box that are not the
 inverse of a physical inertia (not positive definite, or violating the triangle inequality) are
-KEPT: certifying a superset is sound, only more conservative; :attr:`InertiaPolytope.nonphysical`
+KEPT: certifying a superset is sound, only more conservative; `InertiaPolytope.nonphysical`
 counts them.
 """
 
@@ -67,7 +67,8 @@ __all__ = [
 
 
 class Functional(enum.Enum):
-    """Which Lyapunov-Krasovskii functional :func:`certify_polytope` searches for (constant delay)."""
+    """Which Lyapunov-Krasovskii functional [`certify_polytope`][mrpctl.design.certify_polytope] searches for (constant
+    delay)."""
 
     COMMON = "one functional common to all vertices"
     VERTEX = "vertex-dependent functional (descriptor form, common Finsler slack)"
@@ -273,7 +274,7 @@ def _common_constant(
 ) -> tuple[CertificateStatus, tuple[BlockMargin, ...], float, str]:
     """Seuret-Gouaisbaut order-N LMI with common (P, S, R) at every plant, in time normalised by τ.
 
-    The blocks are those of :func:`~mrpctl.design.lmi.lmi_blocks` (linear in P, S, R) at every
+    The blocks are those of [`lmi_blocks`][mrpctl.design.lmi_blocks] (linear in P, S, R) at every
     vertex (τA, τA_d) with τ = 1; the same function re-checks the solution in float64.
     """
     n = plants[0][0].shape[0]
@@ -565,9 +566,9 @@ def certify_polytope(
 
     With ``tau_min=None`` the delay is constant τ and the criterion is the order-N Bessel-Legendre
     LMI (Seuret & Gouaisbaut 2015): with ``Functional.VERTEX`` (default up to 8 vertices) in descriptor
-    form with (Pᵢ, Sᵢ, Rᵢ) per vertex and a common slack (re-checked by :func:`vertex_blocks` at
-    every vertex); with ``Functional.COMMON`` as in :func:`~mrpctl.design.lmi.certify` with (P, S, R)
-    common to the vertices (re-checked by :func:`~mrpctl.design.lmi.lmi_blocks`). Otherwise the delay
+    form with (Pᵢ, Sᵢ, Rᵢ) per vertex and a common slack (re-checked by `vertex_blocks` at
+    every vertex); with ``Functional.COMMON`` as in [`certify`][mrpctl.design.certify] with (P, S, R)
+    common to the vertices (re-checked by [`lmi_blocks`][mrpctl.design.lmi_blocks]). Otherwise the delay
     varies in [tau_min, tau] with ``rate`` and the interval criterion is used with common matrices
     (``functional`` is then ignored).
 
@@ -588,7 +589,7 @@ def certify_polytope(
         Relative eigenvalue margin every re-computed block must keep.
     functional : Functional, optional
         Which functional (constant delay only); None (default): VERTEX for sub-problems of at most
-        :data:`VERTEX_LIMIT` vertices (every diagonal box: 2 per axis), COMMON above.
+        `VERTEX_LIMIT` vertices (every diagonal box: 2 per axis), COMMON above.
     decay_rate : float, optional
         α >= 0 (1/s): certify the shifted loops ż = (A + αI) z + g A_d z(t − τ(t)) instead, with
         g = e^{ατ} (constant delay) or g ∈ {e^{ατ_min}, e^{ατ_max}} as extra vertices (interval:
@@ -660,7 +661,8 @@ def certify_vertices(
 ) -> PolytopeCertificate:
     """Certify ẋ = A x + A_d x(t − τ) for every (A, A_d) in the convex hull of the given vertices.
 
-    The general form of :func:`certify_polytope` (constant delay), for any polytope of plants with
+    The general form of [`certify_polytope`][mrpctl.design.certify_polytope] (constant delay), for any polytope of
+    plants with
     a constant uncertain parameter.
 
     Parameters
@@ -675,7 +677,7 @@ def certify_vertices(
         Relative eigenvalue margin every re-computed block must keep.
     functional : Functional, optional
         VERTEX: vertex-dependent functional with a common Finsler slack; COMMON: one functional for
-        all vertices; None (default): VERTEX up to :data:`VERTEX_LIMIT` vertices, else COMMON.
+        all vertices; None (default): VERTEX up to `VERTEX_LIMIT` vertices, else COMMON.
     """
 
     checked = [system_matrices(a, a_d) for a, a_d in plants]
@@ -741,7 +743,8 @@ def exact_polytope_margin(polytope: InertiaPolytope, K: Any, *, points: int = 41
 def max_stable_tolerance(spacecraft: Spacecraft, K: Any, tau: float, *, points: int = 41, rtol: float = 1e-4) -> float:
     """The largest relative tolerance tol such that every grid inertia of the diagonal box is stable at τ.
 
-    Bisection on tol ∈ [0, 1) with :func:`exact_polytope_margin` (products of inertia zero).
+    Bisection on tol ∈ [0, 1) with [`exact_polytope_margin`][mrpctl.design.exact_polytope_margin] (products of inertia
+    zero).
     Returns nan when the nominal loop is unstable at τ.
     """
     tau = positive_scalar("tau", tau)
@@ -774,7 +777,8 @@ def max_certified_tolerance(
     product_bound: float = 0.0,
     rtol: float = 1e-3,
 ) -> tuple[float, PolytopeCertificate | None]:
-    """The largest relative tolerance certified at τ by :func:`certify_polytope` (bisection, terminates).
+    """The largest relative tolerance certified at τ by [`certify_polytope`][mrpctl.design.certify_polytope] (bisection,
+    terminates).
 
     Returns (tol, certificate at tol); (nan, None) when the nominal loop is not certified.
     """

@@ -2,9 +2,9 @@
 
 The delay is one of: a constant τ; an interval τ(t) ∈ [τ_min, τ] with a rate bound (jitter); the
 sampled-data sawtooth τ(t) ∈ [d h, (d+1) h], τ̇ = 1 (the loop as simulated at period h with
-τ = d h). The plants are the vertices of :func:`~mrpctl.design.polytope.inertia_polytope`
+τ = d h). The plants are the vertices of [`inertia_polytope`][mrpctl.design.inertia_polytope]
 (tolerance 0 means the nominal spacecraft), certified by
-:func:`~mrpctl.design.polytope.certify_polytope`: for a constant delay a vertex-dependent
+[`certify_polytope`][mrpctl.design.certify_polytope]: for a constant delay a vertex-dependent
 Lyapunov-Krasovskii functional per axis (one functional common to the 64 vertices with products of
 inertia); for the interval and sampled delays one functional common to the vertices. A certificate
 test that ends SOLVER_FAILED (after the polytope's own retries) counts as not certified; the count
@@ -49,7 +49,7 @@ class DelayModel(enum.Enum):
 
 
 class RobustStatus(enum.Enum):
-    """Outcome of :func:`synthesize_robust_pd`."""
+    """Outcome of [`synthesize_robust_pd`][mrpctl.design.synthesize_robust_pd]."""
 
     SYNTHESIZED = "synthesized, certified and checked exactly"
     NOT_VERIFIED = "certified, but the exact check failed (report this)"
@@ -58,7 +58,7 @@ class RobustStatus(enum.Enum):
 
 @dataclass(frozen=True, eq=False)
 class RobustPDSynthesis:
-    """Result of :func:`synthesize_robust_pd`.
+    """Result of [`synthesize_robust_pd`][mrpctl.design.synthesize_robust_pd].
 
     Attributes
     ----------
@@ -119,7 +119,7 @@ def synthesize_robust_pd(
     Parameters
     ----------
     spacecraft : Spacecraft
-        Nominal spacecraft (diagonal J); gains are :func:`~mrpctl.design.gains.pd_gains` of it.
+        Nominal spacecraft (diagonal J); gains are [`pd_gains`][mrpctl.design.pd_gains] of it.
     tau : float
         Delay (s): the constant delay, the upper end of the jitter interval, or (with ``period``)
         the delay d·h of the sampled loop (τ/h must be an integer to 1e-9).
@@ -128,7 +128,7 @@ def synthesize_robust_pd(
     order : int, optional
         Bessel-Legendre order of the certificate (default 2).
     tolerance, product_bound : float, optional
-        The inertia set (see :func:`~mrpctl.design.polytope.inertia_polytope`).
+        The inertia set (see [`inertia_polytope`][mrpctl.design.inertia_polytope]).
     period : float, optional
         Sampling period h (s): certify the sawtooth τ(t) ∈ [τ, τ + h], τ̇ = 1.
     tau_min : float, optional
@@ -138,7 +138,7 @@ def synthesize_robust_pd(
         Relative width of the final ωₙ bracket.
     omega_max : float, optional
         Search no higher than this ωₙ (rad/s): it is tested first and returned when certified, else
-        the search runs below it. :func:`~mrpctl.design.synthesis.synthesize_pd` passes its
+        the search runs below it. [`synthesize_pd`][mrpctl.design.synthesize_pd] passes its
         decay-optimal nominal ωₙ, so a set close to the nominal one gives the nominal design.
     """
     sc = check_spacecraft(spacecraft)
@@ -230,7 +230,7 @@ def synthesize_robust_pd(
 
 @dataclass(frozen=True)
 class DelaySet:
-    """The delay a robust certificate covers (see :func:`delay_set`).
+    """The delay a robust certificate covers (see `delay_set`).
 
     Attributes
     ----------
@@ -297,7 +297,7 @@ def exact_check_of_set(
 
     Sampled loop: the lifted spectral radius per axis at J = (1 ± tol) J₀ (the lifted check needs a
     diagonal J, so products of inertia are not covered by it). Otherwise the smallest exact
-    constant-delay margin over the grid of :func:`~mrpctl.design.polytope.exact_polytope_margin`
+    constant-delay margin over the grid of [`exact_polytope_margin`][mrpctl.design.exact_polytope_margin]
     (21 points per axis), which must exceed ``hi``.
 
     Parameters

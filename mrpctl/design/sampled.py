@@ -4,12 +4,16 @@ u(t) = K x(t_{k−d}) for t ∈ [t_k, t_{k+1}), t_k = k h, on ẋ = A x + B u. T
 
 - **exact**: the lifted discrete-time system x_{k+1} = Φ x_k + Γ K x_{k−d}, Φ = e^{Ah},
   Γ = ∫₀ʰ e^{As} ds B, is stable iff the spectral radius of its companion matrix (size n(d+1))
-  is below 1 (:func:`sampled_stability`, :func:`max_stable_delay_samples`, :func:`max_stable_period`);
+  is below 1 ([`sampled_stability`][mrpctl.design.sampled_stability],
+  [`max_stable_delay_samples`][mrpctl.design.max_stable_delay_samples],
+  [`max_stable_period`][mrpctl.design.max_stable_period]);
 - **certified**: the input-delay approach, ẋ = A x + B K x(t − τ(t)) with the sawtooth
   τ(t) = d h + (t − t_k) ∈ [d h, (d+1) h), τ̇ = 1, through the interval criterion of
-  :mod:`mrpctl.design.interval` (:func:`certify_sampled`, :func:`max_certified_period`).
+  `mrpctl.design.interval` ([`certify_sampled`][mrpctl.design.certify_sampled],
+  [`max_certified_period`][mrpctl.design.max_certified_period]).
 
-For a spacecraft with a gain that splits per axis, :func:`spacecraft_axes` returns the three 2×2
+For a spacecraft with a gain that splits per axis, [`spacecraft_axes`][mrpctl.design.spacecraft_axes] returns the three
+2×2
 (A, B, K) triples, so d = 500 (τ = 0.5 s at 1 kHz) is a 1002×1002 eigenproblem per axis.
 """
 
@@ -47,7 +51,7 @@ __all__ = [
     "spacecraft_axes",
 ]
 
-#: Largest companion matrix (rows) :func:`sampled_stability` builds densely (8·N² bytes: 128 MB at 4000).
+#: Largest companion matrix (rows) `sampled_stability` builds densely (8·N² bytes: 128 MB at 4000).
 MAX_LIFTED_SIZE = 4000
 
 
@@ -209,7 +213,7 @@ def max_stable_delay_samples(A: Any, B: Any, K: Any, period: float, *, d_limit: 
     """The largest d such that the lifted loop is stable for every delay 0, 1, ..., d samples.
 
     Stability in d is located by doubling then bisection on the first unstable d (each test by the
-    argument principle, :func:`_stable_by_winding`, so d in the thousands is cheap), and the answer
+    argument principle, `_stable_by_winding`, so d in the thousands is cheap), and the answer
     is verified (stable at d, unstable at d + 1). Returns -1 when d = 0 is already unstable and
     ``d_limit`` when every d up to the limit is stable (checked at the limit only).
     """
@@ -309,7 +313,7 @@ def certify_sampled(
     """Certify the sampled loop by the input-delay approach (interval delay with τ̇ = 1).
 
     ẋ = A x + B K x(t − τ(t)), τ(t) = d h + t − t_k ∈ [d h, (d+1) h], τ̇ = 1; see
-    :func:`~mrpctl.design.interval.certify_interval`. When the problem as written does not certify
+    [`certify_interval`][mrpctl.design.certify_interval]. When the problem as written does not certify
     (typically Clarabel ``optimal_inaccurate`` for N >= 1 at 1 kHz), it is solved again in difference
     coordinates with power-of-two block scaling (an equivalent LMI, design/lmi.md 7.3); the returned
     certificate says which one certified. ``precondition=False`` (keyword-only) skips the retry.
@@ -323,17 +327,18 @@ def certify_sampled(
 
 
 class SampledCriterion(enum.Enum):
-    """Which sampled-data certificate a :class:`SampledCertification` comes from."""
+    """Which sampled-data certificate a [`SampledCertification`][mrpctl.design.SampledCertification] comes from."""
 
     #: Input-delay approach: the interval criterion with the sawtooth τ(t) ∈ [d h, (d+1) h] (any d).
     INPUT_DELAY = "input-delay"
-    #: Looped functional with Wirtinger's inequality (:mod:`mrpctl.design.looped`; d = 0, periodic).
+    #: Looped functional with Wirtinger's inequality (`mrpctl.design.looped`; d = 0, periodic).
     LOOPED = "looped"
 
 
 @dataclass(frozen=True, eq=False)
 class SampledCertification:
-    """Result of :func:`max_certified_period` and :func:`~mrpctl.design.looped.max_looped_period`.
+    """Result of [`max_certified_period`][mrpctl.design.max_certified_period] and
+    [`max_looped_period`][mrpctl.design.max_looped_period].
 
     Attributes
     ----------
@@ -441,9 +446,11 @@ def max_certified_period(
     period_limit: float | None = None,
     margin_tol: float = DEFAULT_MARGIN_TOL,
 ) -> SampledCertification:
-    """The largest sampling period h certified by :func:`certify_sampled` (bisection, ≤ 206 solves).
+    """The largest sampling period h certified by [`certify_sampled`][mrpctl.design.certify_sampled] (bisection, ≤ 206
+    solves).
 
-    The exact period (:func:`max_stable_period`) bounds the search from above: a sound certificate
+    The exact period ([`max_stable_period`][mrpctl.design.max_stable_period]) bounds the search from above: a sound
+    certificate
     cannot exceed it. The bound itself is tested too.
     """
     a, b, k = sampled_system(A, B, K)
@@ -491,7 +498,8 @@ def max_certified_delay_samples(
     d_max: int,
     margin_tol: float = DEFAULT_MARGIN_TOL,
 ) -> tuple[int, IntervalCertificate | None, int]:
-    """The largest d <= d_max such that :func:`certify_sampled` certifies delays d' = d (bisection on d).
+    """The largest d <= d_max such that [`certify_sampled`][mrpctl.design.certify_sampled] certifies delays d' = d
+    (bisection on d).
 
     Certified d means the sawtooth τ(t) ∈ [d h, (d+1) h] is certified; the search assumes the
     certified set in d is an interval starting at 0 (the certificate at the answer is returned and

@@ -69,7 +69,7 @@ __all__ = [
 class SynthesisStatus(enum.Enum):
     """Outcome of a synthesis."""
 
-    #: Gains found, and re-verified by :func:`~mrpctl.design.lmi.certify` and the exact margin.
+    #: Gains found, and re-verified by `certify` and the exact margin.
     SYNTHESIZED = "synthesized and verified"
     #: The synthesis LMI was feasible but the re-verification of the gains failed.
     NOT_VERIFIED = "synthesized but not verified"
@@ -204,7 +204,8 @@ def _best_w_zeta(zeta_min: float) -> tuple[float, float, complex]:
 
 @dataclass(frozen=True, eq=False)
 class PDSynthesis:
-    """Result of :func:`synthesize_pd`: the decay-optimal delayed PD gains and their certificates.
+    """Result of [`synthesize_pd`][mrpctl.design.synthesize_pd]: the decay-optimal delayed PD gains and their
+    certificates.
 
     Attributes
     ----------
@@ -335,7 +336,7 @@ def synthesize_pd(
     """The fastest-decaying delayed PD gains for the delay τ, with a certified decay rate.
 
     The loop per axis is σ̈ = K₁σ(t − τ) + K₂σ̇(t − τ), K₁ = −ωₙ², K₂ = −2ζωₙ (the gains of
-    :func:`~mrpctl.design.gains.pd_gains`), with characteristic function s² + (2ζωₙ s + ωₙ²)e^{−sτ}.
+    [`pd_gains`][mrpctl.design.pd_gains]), with characteristic function s² + (2ζωₙ s + ωₙ²)e^{−sτ}.
     In normalised time t/τ it depends on w = ωₙτ and ζ only, so the design is searched in w (and ζ)
     once for every τ: w (and ζ when ``zeta=None``) minimises the real part of the exact rightmost
     root (bounded scalar searches on the spectral abscissa). With ζ free the optimum is the triple
@@ -366,7 +367,7 @@ def synthesize_pd(
     margin_tol : float, optional
         Relative eigenvalue margin of the certificates.
     tolerance, product_bound : float, optional
-        Robust design over the inertia set of :func:`~mrpctl.design.polytope.inertia_polytope`
+        Robust design over the inertia set of [`inertia_polytope`][mrpctl.design.inertia_polytope]
         (relative per-axis tolerance 0 <= tol < 1 on the diagonal of a diagonal nominal J; bound on
         |J_ij| (kg m²)).
     period : float, optional
@@ -382,8 +383,8 @@ def synthesize_pd(
     PDSynthesis or RobustPDSynthesis
         PDSynthesis without the robust options (the nominal design above). With any of
         ``tolerance``, ``product_bound``, ``period``, ``tau_min``, ``rate`` given:
-        :class:`~mrpctl.design.robust.RobustPDSynthesis` from
-        :func:`~mrpctl.design.robust.synthesize_robust_pd` (the one robust search), started at the
+        [`RobustPDSynthesis`][mrpctl.design.RobustPDSynthesis] from
+        [`synthesize_robust_pd`][mrpctl.design.synthesize_robust_pd] (the one robust search), started at the
         decay-optimal nominal ωₙ = w/τ above: when the polytope certificate (order ``order``) holds
         there for the whole set, those are the gains (so a tolerance 0 returns the nominal design's
         gains); else the largest ωₙ below it that is certified, to relative width max(``rtol``,
@@ -506,10 +507,10 @@ def synthesize_pd(
 
 @dataclass(frozen=True, eq=False)
 class LMISynthesis:
-    """Result of :func:`synthesize_lmi`: a delayed state feedback u = K x(t − τ).
+    """Result of [`synthesize_lmi`][mrpctl.design.synthesize_lmi]: a delayed state feedback u = K x(t − τ).
 
     With the robust options, ``certificate`` and ``decay_certificate`` are
-    :class:`~mrpctl.design.polytope.PolytopeCertificate` objects of the whole set (the independent
+    [`PolytopeCertificate`][mrpctl.design.PolytopeCertificate] objects of the whole set (the independent
     analysis of K and of its α-shifted loops).
 
     Attributes
@@ -526,9 +527,9 @@ class LMISynthesis:
     epsilon : float
         The descriptor tuning scalar ε (s) of P₃ = εP₂ that was kept (nan when none).
     certificate : Certificate or None
-        :func:`~mrpctl.design.lmi.certify` of ẋ = A x + B K x(t − τ) at τ (same order).
+        [`certify`][mrpctl.design.certify] of ẋ = A x + B K x(t − τ) at τ (same order).
     decay_certificate : Certificate or None
-        :func:`~mrpctl.design.lmi.certify` of the shifted system ż = (A + αI) z + e^{ατ} B K z(t − τ).
+        [`certify`][mrpctl.design.certify] of the shifted system ż = (A + αI) z + e^{ατ} B K z(t − τ).
     margin : DelayMargin or None
         Exact delay margin of the loop under K (at the nominal inertia).
     solves : int
@@ -735,8 +736,8 @@ def synthesize_lmi(
     is the design objective. When J is diagonal the three axes share one 2×2 synthesis of the
     loop gains (K₁, K₂), and K = [4 J K₁, 4 J K₂].
 
-    Every K found is re-verified: :func:`~mrpctl.design.lmi.certify` of the loop at τ and of the
-    shifted loop (decay rate α), and :func:`~mrpctl.design.margin.delay_margin` > τ.
+    Every K found is re-verified: [`certify`][mrpctl.design.certify] of the loop at τ and of the
+    shifted loop (decay rate α), and [`delay_margin`][mrpctl.design.delay_margin] > τ.
 
     Parameters
     ----------
@@ -752,7 +753,7 @@ def synthesize_lmi(
     margin_tol : float, optional
         Relative eigenvalue margin for the re-verification certificates.
     tolerance, product_bound : float, optional
-        Robust synthesis over the inertia set of :func:`~mrpctl.design.polytope.inertia_polytope`
+        Robust synthesis over the inertia set of [`inertia_polytope`][mrpctl.design.inertia_polytope]
         (relative per-axis tolerance 0 <= tol < 1 of a diagonal nominal J; |J_ij| bound, kg m²).
     period : float, optional
         Robust synthesis for the sampled loop at period h (s), ZOH: the sawtooth τ(t) ∈ [τ, τ + h],
@@ -775,13 +776,13 @@ def synthesize_lmi(
     gain b = J₀/J ∈ [1/(1+tol), 1/(1−tol)] (2 vertices, one 2×2 synthesis shared by the axes);
     with products of inertia the 6×6 loop at the (deduplicated) vertices of the J⁻¹ box. Constant
     delay: the order-N functional of this function, vertex-dependent up to
-    :data:`~mrpctl.design.polytope.VERTEX_LIMIT` vertices (common above). Jitter and sampled loop:
-    the interval criterion of :mod:`~mrpctl.design.interval` (order-N Bessel-Legendre with the
+    `VERTEX_LIMIT` vertices (common above). Jitter and sampled loop:
+    the interval criterion of `interval` (order-N Bessel-Legendre with the
     reciprocally convex combination, N = 1: Wirtinger) in descriptor form
-    (:func:`~mrpctl.design.interval.descriptor_interval_blocks`), one functional common to the
+    (`descriptor_interval_blocks`), one functional common to the
     vertices; the decay rate enters as z = e^{αt} x, whose delayed gain e^{ατ(t)} varies in
     [e^{ατ_min}, e^{ατ_max}] (two more vertices). Every K found is re-verified by
-    :func:`~mrpctl.design.polytope.certify_polytope` (the analysis, at α = 0 and at the decay rate)
+    [`certify_polytope`][mrpctl.design.certify_polytope] (the analysis, at α = 0 and at the decay rate)
     and by the exact reference (the grid of exact constant-delay margins over the set, or the
     lifted spectral radius of the sampled loop at the box ends). The set equal to the nominal one
     (tolerance 0, no products, constant delay) runs the nominal synthesis above, number for number.
@@ -920,7 +921,7 @@ def _constant_blocks(
 ) -> tuple[list[UnknownRate], Any, list[str]]:
     """Unknowns, block function and normalised blocks of the constant-delay descriptor synthesis (τ = 1).
 
-    ζ̃ = [x; x(t − 1); Ω₀ … Ω_{N−1}; ẋ] as in :func:`~mrpctl.design.polytope.vertex_blocks`, whose
+    ζ̃ = [x; x(t − 1); Ω₀ … Ω_{N−1}; ẋ] as in `vertex_blocks`, whose
     plant-free part Ψ (A = A_d = 0, M = 0) is reused; the descriptor term after the congruence is
     He((e_x + ε e_ẋ)ᵀ (A X e_x + B Y e_d − X e_ẋ)).
     """

@@ -27,7 +27,7 @@ def _cpu_flags() -> set[str]:
 def host_isa_flags() -> tuple[str, ...]:
     """Vector-ISA flags for this host: ``-march=native`` as the compiler resolves it.
 
-    :func:`native_isa_flags` (explicit flags, so that the cache key, which hashes the flags,
+    `native_isa_flags` (explicit flags, so that the cache key, which hashes the flags,
     tells libraries for different CPUs apart); measured 1.2x the explicit ``-mavx2`` on the
     AVX2 development host (``bench/lanes_rate.py``, bit for bit the same results). Where the
     compiler does not resolve it: ``-mavx2`` where the CPU has AVX2, else none (SSE2).

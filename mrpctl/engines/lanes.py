@@ -1,6 +1,6 @@
 """A vectorised batch engine generated from the same CasADi sample Function as the scalar one.
 
-:func:`emit_lanes` walks the instruction list of a pure SX Function (``casadi.Function.
+`emit_lanes` walks the instruction list of a pure SX Function (``casadi.Function.
 instructions``) and writes C in which every value is W-wide, one lane per run, so that gcc
 vectorises across runs: W runs advance in lockstep through the sample. Each operation is
 written as CasADi's own generated C writes it for one scalar (``casadi_sq(x)`` is ``x*x``,
@@ -24,24 +24,24 @@ Two layouts (``fuse``):
   vector registers (the shape of a hand-written structure-of-arrays loop); only values used
   across a libm call go through W-wide arrays.
 
-:class:`LaneEngine` compiles the emitted sample with the horizon driver ``lanes_driver.c``
+`LaneEngine` compiles the emitted sample with the horizon driver ``lanes_driver.c``
 and runs N runs in batches of W on a thread pool (ctypes releases the GIL); the ports are read
 from the Function: an input ``p`` with an output ``p_next`` is carried from sample to sample,
 the input ``x_delayed`` is fed m_{k-d} from a ring of the output ``x_meas``, every other input
 is a per-lane constant (K, rule parameters, ...), every other output is not computed.
 
-The closed loop comes from :mod:`mrpctl.engines.scalar` (``engine_sample`` of
+The closed loop comes from `mrpctl.engines.scalar` (``engine_sample`` of
 ``mrpctl.loop.core_function`` with the run-time inertia: J and J⁻¹ are per-lane constants, so
-one library serves every spacecraft of an inertia layout); :func:`simulate_lanes` gives the
-statistics rows of :mod:`mrpctl.engines.stats`, bit for bit those of the scalar ``Engine.run``,
+one library serves every spacecraft of an inertia layout); `simulate_lanes` gives the
+statistics rows of `mrpctl.engines.stats`, bit for bit those of the scalar ``Engine.run``,
 and ``simulate_batch`` uses it for metrics-only batches. The flight loop
 (``mrpctl.loop.flight_core_function``) runs the same way, specialised by structure as the scalar
-engine is (:func:`lane_engine` with ``sensor``, ``limited``, ``disturbed``: the union over a
-batch's runs of :func:`mrpctl.loop.options.flight_structure`): with a sensor its delayed
+engine is (`lane_engine` with ``sensor``, ``limited``, ``disturbed``: the union over a
+batch's runs of `mrpctl.loop.options.flight_structure`): with a sensor its delayed
 input is fed from its ``measurement`` output and its per-sample ``noise`` is a stream shared by
-the lanes (one :meth:`~mrpctl.flight.SensorModel.noise_rows` per slice and batch), without one
+the lanes (one [`noise_rows`][mrpctl.flight.SensorModel.noise_rows] per slice and batch), without one
 from ``x_meas`` with no stream; a time-varying delay's newest-arrived schedule is shared per
-slice (:func:`closed_loop_batches`).
+slice (`closed_loop_batches`).
 """
 
 from __future__ import annotations
@@ -101,14 +101,14 @@ SLICE_SAMPLES = 2**16
 _DRIVER_FILE = "lanes_driver.c"
 _ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT, _ROLE_STREAMED = 0, 1, 2, 3
 _ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
-#: The keywords of the flight sample's structure (:func:`mrpctl.loop.options.flight_structure`).
+#: The keywords of the flight sample's structure (`mrpctl.loop.options.flight_structure`).
 _STRUCTURE = ("sensor", "limited", "disturbed")
 
 LANE_FLAGS: tuple[str, ...] = (*_compile.SIMULATION_FLAGS, "-fno-math-errno", "-fschedule-insns", "-fsched-pressure")
 
 
 def _build_library(code: str, name: str, flags: tuple[str, ...]) -> Path:
-    """Compile ``code`` to a cached shared library (:func:`mrpctl._compile.compile_source`)."""
+    """Compile ``code`` to a cached shared library (`mrpctl._compile.compile_source`)."""
     return _compile.compile_source(code, name, flags=flags)
 
 
@@ -130,26 +130,27 @@ class LaneEngine:
     delay_samples : int
         d >= 0.
     width : int, keyword-only
-        W, lanes per batch (default :data:`DEFAULT_WIDTH`).
+        W, lanes per batch (default `DEFAULT_WIDTH`).
     fuse, ivdep : bool, keyword-only
-        Emitter options (see :func:`emit_lanes`).
+        Emitter options (see `emit_lanes`).
     isa : tuple of str, keyword-only
-        Vector-ISA flags (default :func:`host_isa_flags`).
+        Vector-ISA flags (default `host_isa_flags`).
     flags : tuple of str, keyword-only
-        The other compiler flags (default :data:`LANE_FLAGS`); they must keep IEEE arithmetic.
+        The other compiler flags (default `LANE_FLAGS`); they must keep IEEE arithmetic.
     delayed : (str, str), keyword-only
         The delayed input and the output that feeds it.
     streamed : sequence of str, keyword-only
         Inputs given per sample and shared by the W lanes (e.g. the flight sample's ``noise``):
-        their values of sample k are row k − k0 of the ``stream`` of :meth:`LaneBatches.run`
-        (the inputs side by side, :attr:`stream_size` values a row).
+        their values of sample k are row k − k0 of the ``stream`` of `LaneBatches.run`
+        (the inputs side by side, `stream_size` values a row).
     lane_streamed : sequence of str, keyword-only
         Inputs given per sample and per lane (e.g. each run's own disturbance ``torque``): in the
         same row after the shared ones, nnz × W values each (nonzero j of lane l at j W + l); the
         ``stream`` is then called as ``stream(k0, k1, runs)`` with the W runs of the batch.
     structure : mapping of str to bool, keyword-only
         When ``sample`` is the flight sample: its structure, the keywords ``sensor``, ``limited``,
-        ``disturbed`` of :func:`mrpctl.loop.flight_core_function` (kept as :attr:`structure`, the
+        ``disturbed`` of [`mrpctl.loop.flight_core_function`][mrpctl.loop.flight_core_function] (kept as `structure`,
+        the
         explicit mark of a flight engine); None (default) for any other sample.
     """
 
@@ -312,14 +313,14 @@ class LaneEngine:
         stream: Callable[..., np.ndarray] | np.ndarray | None = None,
         schedule: Callable[[int, int, int], np.ndarray] | None = None,
     ) -> LaneBatches:
-        """The N runs packed into batches of W lanes, checked and ready to run (see :meth:`run`).
+        """The N runs packed into batches of W lanes, checked and ready to run (see `run`).
 
         ``finished`` names a carried nonzero (``"stats[13]"``-style: port and index) that a
         lane sets >= 0 when nothing more of it changes but the sample counter; a batch whose
         lanes all have it stops early (the caller completes the counter).
 
         ``stream`` gives the streamed inputs (shared by every run): ``stream(k0, k1)`` the
-        (k1 − k0, :attr:`stream_size`) rows of a slice, or one (:attr:`stream_size`,) row for
+        (k1 − k0, `stream_size`) rows of a slice, or one (`stream_size`,) row for
         every sample; with per-lane streamed inputs ``stream(k0, k1, runs)``, ``runs`` the W run
         indices of the batch (padding lanes repeat its first run). ``schedule(k0, k1,
         newest_before)`` gives the newest arrived measurement j*(k) (int64, in [k − d, k − 1])
@@ -415,10 +416,10 @@ class LaneEngine:
 
 
 class LaneBatches:
-    """N runs of one :class:`LaneEngine` packed into ``count`` batches of W lanes.
+    """N runs of one `LaneEngine` packed into ``count`` batches of W lanes.
 
-    :meth:`run` advances one batch to the horizon slice by slice and writes its lanes'
-    carried values into :attr:`out` (N, carried nonzeros); batches are independent (a thread
+    `run` advances one batch to the horizon slice by slice and writes its lanes'
+    carried values into `out` (N, carried nonzeros); batches are independent (a thread
     pool may run them in any order: each lane's bits do not depend on it).
     """
 
@@ -558,20 +559,20 @@ def lane_engine(
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
 
-    The structure is the scalar engine's (:func:`mrpctl.engines.scalar.engine`): the
+    The structure is the scalar engine's (`mrpctl.engines.scalar.engine`): the
     inertia layout of ``spacecraft`` (J and J⁻¹ are run-time inputs, one per lane), the
     rule's expressions, d, h, substeps (and, for the flight rule
-    :class:`~mrpctl.flight.Hysteretic`, the actuator's ``saturation`` mode and the sample's
+    [`Hysteretic`][mrpctl.flight.Hysteretic], the actuator's ``saturation`` mode and the sample's
     specialisation ``sensor``, ``limited``, ``disturbed`` of
-    :func:`mrpctl.loop.flight_core_function`: for a batch, the union over its runs of
-    :func:`~mrpctl.loop.options.flight_structure`; default the full sample, which serves
+    [`mrpctl.loop.flight_core_function`][mrpctl.loop.flight_core_function]: for a batch, the union over its runs of
+    `flight_structure`; default the full sample, which serves
     every run); plus W and the emitter options. The flight sample with a ``sensor`` feeds its
     delayed input from its ``measurement`` output (the sensor's, as the scalar driver's ring
     does) and takes its ``noise`` as a stream shared by the lanes; without one (an ideal sensor)
     it has neither and the delayed input is fed from ``x_meas``. With ``torque_input`` it takes its
     per-sample disturbance ``torque`` (a stream shared by the lanes too; with ``torque_per_lane`` a
     stream of each lane's own torque; ``disturbed`` is then implied). The keywords are ignored for
-    the other rules. The engine's :attr:`LaneEngine.structure` is the flight sample's structure.
+    the other rules. The engine's `LaneEngine.structure` is the flight sample's structure.
 
     Raises
     ------
@@ -655,21 +656,22 @@ def closed_loop_batches(
     rate: float = 1.0,
     disturbance: Disturbance | Sequence[Disturbance] | None = None,
 ) -> LaneBatches:
-    """The closed-loop runs packed for :meth:`LaneBatches.run` (arguments as :func:`simulate_lanes`);
-    read the statistics with :func:`lane_stats` once every batch has run.
+    """The closed-loop runs packed for `LaneBatches.run` (arguments as `simulate_lanes`);
+    read the statistics with `lane_stats` once every batch has run.
 
-    For the flight sample (an engine of :func:`lane_engine` with a :attr:`~LaneEngine.structure`):
-    ``memory0`` is (N, FLIGHT_MEMORY_SIZE) (:func:`mrpctl.loop.options.flight_memory`
+    For the flight sample (an engine of `lane_engine` with a `structure`):
+    ``memory0`` is (N, FLIGHT_MEMORY_SIZE) (`mrpctl.loop.options.flight_memory`
     of each run), ``flight_options`` the shared run-time constants (u_max (3), u_norm, w (3),
-    gyro bias (3); default none), ``sensor`` the shared noise (:meth:`SensorModel.noise_rows`
+    gyro bias (3); default none), ``sensor`` the shared noise
+    ([`SensorModel.noise_rows`][mrpctl.flight.SensorModel.noise_rows]
     of each slice, the numbers the scalar engine gets) and ``delay`` a shared time-varying
     delay at ``rate`` (Hz), whose newest-arrived schedule is computed per slice
-    (:func:`~mrpctl.flight.newest_arrived_slice`), as in ``Engine.run``. ``flight_options`` may
+    ([`newest_arrived_slice`][mrpctl.flight.newest_arrived_slice]), as in ``Engine.run``. ``flight_options`` may
     also be (N, 10), one row per run. ``disturbance``: a per-sample torque shared by the runs (an
-    engine with a ``torque`` stream), its rows of each slice (:meth:`~mrpctl.flight.Disturbance.samples`)
+    engine with a ``torque`` stream), its rows of each slice ([`samples`][mrpctl.flight.Disturbance.samples])
     streamed beside the noise; or one per-sample torque per run (an engine with a per-lane ``torque``
-    stream: :func:`lane_engine` with ``torque_per_lane``), each batch's lanes streamed their own rows.
-    The engine's structure must serve every run (:func:`~mrpctl.loop.options.flight_structure`
+    stream: `lane_engine` with ``torque_per_lane``), each batch's lanes streamed their own rows.
+    The engine's structure must serve every run (`flight_structure`
     of ``flight_options`` and ``sensor``, the union over the rows): a run with a limit, a torque w,
     a noisy sensor or a gyro bias on an engine specialised without it is refused
     (SpecificationError), as its numbers would not be the scalar engine's.
@@ -772,7 +774,7 @@ def _lane_torques(
     runs: np.ndarray,
 ) -> np.ndarray:
     """The stream rows of a slice for the W ``runs`` of a batch: the shared noise (``noise_columns``, as in
-    :func:`_noise_and_torque`), then each lane's own torque w_k (nonzero j of lane l at noise_columns + j W + l)."""
+    `_noise_and_torque`), then each lane's own torque w_k (nonzero j of lane l at noise_columns + j W + l)."""
     rows = np.zeros((k1 - k0, noise_columns + 3 * width))
     if sensor is not None:
         rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
@@ -819,7 +821,7 @@ def simulate_lanes(
     Parameters
     ----------
     engine : LaneEngine
-        From :func:`lane_engine`.
+        From `lane_engine`.
     x0 : numpy.ndarray
         (N, 6) initial states x = [σ; ω/4] (ω in rad/s).
     memory0 : numpy.ndarray

@@ -1,11 +1,11 @@
 """The compiled engine: one sample as generated C, and a horizon driver run slice by slice.
 
-One sample (:func:`engine_sample`) is the loop's core sample (:func:`mrpctl.loop.core_function`)
+One sample (`engine_sample`) is the loop's core sample ([`mrpctl.loop.core_function`][mrpctl.loop.core_function])
 plus the divergence guard and the metric accumulators, a pure SX Function with K, the rule
 parameters (and, for a run-time inertia, J and J⁻¹) as inputs. CasADi generates its C
 code; ``scalar_driver.c`` (package data) is appended and the whole is compiled by
-:mod:`mrpctl._compile`, cached on disk. A run is a few C calls, one per slice of
-:data:`SLICE_SAMPLES` samples, so that Ctrl-C is seen between slices; the driver stops at
+`mrpctl._compile`, cached on disk. A run is a few C calls, one per slice of
+`SLICE_SAMPLES` samples, so that Ctrl-C is seen between slices; the driver stops at
 the first divergence.
 
 Engines are cached in-process by the *structure* they compile: the inertia layout
@@ -127,8 +127,9 @@ def short_history(history: np.ndarray) -> np.ndarray:
     """The history rows (columns, 6) with σ in the short set, through the flight sample's own SX (same bits).
 
     The compiled flight sample without a sensor reads its delayed measurement as it is (``short_measurements``
-    of :func:`~mrpctl.loop.flight_core_function`); this is the short set its controller took of a history
-    row before: :func:`~mrpctl.flight.short_expr` evaluated by CasADi's SX machine, operation by
+    of [`flight_core_function`][mrpctl.loop.flight_core_function]); this is the short set its controller took of a
+    history
+    row before: [`short_expr`][mrpctl.flight.short_expr] evaluated by CasADi's SX machine, operation by
     operation the IEEE operations of the generated C (-0 becomes +0 there too).
     """
     rows = np.array(history, dtype=float)
@@ -169,7 +170,8 @@ def _noise_fill() -> Any:
 
 
 def noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
-    """:meth:`SensorModel.noise_rows` (k1 − k0, 6) drawn by the C code of ``noise.c`` (the same bits, ≈ 15×
+    """[`SensorModel.noise_rows`][mrpctl.flight.SensorModel.noise_rows] (k1 − k0, 6) drawn by the C code of ``noise.c``
+    (the same bits, ≈ 15×
     faster than its NumPy mirror); the NumPy mirror when there is no C compiler."""
     fill = _noise_fill()
     if fill is None:
@@ -251,7 +253,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
 
 def _driver_source(sample: ca.Function, rotation: ca.Function | None = None) -> str:
     """``scalar_driver.c`` with the #defines that bind it to ``sample`` (and to ``rotation``, the attitude noise's
-    θ -> σ(θ) for a sample of :attr:`~mrpctl.flight.NoiseForm.MRP`)."""
+    θ -> σ(θ) for a sample of `MRP`)."""
     memory_size = sample.size1_in(1)
     defines: dict[str, Any] = {
         "MRPCTL_SAMPLE": sample.name(),
@@ -289,7 +291,7 @@ class Engine:
     """The compiled engine of one structure (inertia layout, d, h, rule expressions, substeps).
 
     J and J⁻¹ are run-time inputs, so one library serves every spacecraft of the same
-    :class:`~mrpctl.loop.InertiaInput` layout (diagonal, or full).
+    [`InertiaInput`][mrpctl.loop.InertiaInput] layout (diagonal, or full).
     """
 
     def __init__(
@@ -459,7 +461,7 @@ class Engine:
         keep_every : int or None
             Keep m_k and u_k for k = 0, k, 2k, …; None keeps nothing.
         workspace : Workspace
-            From :meth:`workspace` (its ``switched`` buffer set when switch instants are wanted).
+            From `workspace` (its ``switched`` buffer set when switch instants are wanted).
         switch_limit : int
             Keep at most this many switch indices (the count in the statistics stays exact).
         stop : callable, optional
@@ -467,19 +469,20 @@ class Engine:
             returns what it has). KeyboardInterrupt raised by it propagates.
         flight_options : numpy.ndarray, optional
             The flight sample's constants (u_max (3), u_norm, w (3)); default
-            :data:`NO_FLIGHT_OPTIONS`. Ignored by the other engines.
+            `NO_FLIGHT_OPTIONS`. Ignored by the other engines.
         sensor : SensorModel, optional
             The flight sample's noise: the driver draws θ_k, η_k of every sample itself
             (``noise.c``, from the seed's stream keys and the two 1σ; the bits of
-            :meth:`SensorModel.noise`); its gyro bias is in ``flight_options``. None: no noise.
+            [`SensorModel.noise`][mrpctl.flight.SensorModel.noise]); its gyro bias is in ``flight_options``. None: no
+            noise.
         delay, rate : DelayModel, float, optional
             A time-varying delay (d_max = this engine's d, d_min >= 1) at ``rate`` (Hz): seeded
             jitter is drawn and scheduled by the driver (O(1) a sample); for a given sequence the
             newest-arrived index j*(k) of each slice is computed in NumPy
-            (:func:`~mrpctl.flight.newest_arrived_slice`) and handed to the driver.
+            ([`newest_arrived_slice`][mrpctl.flight.newest_arrived_slice]) and handed to the driver.
         disturbance : Disturbance, optional
             A per-sample torque (engine built with ``torque_input``): the rows of each slice
-            (:meth:`~mrpctl.flight.Disturbance.samples`) are handed to the driver.
+            ([`samples`][mrpctl.flight.Disturbance.samples]) are handed to the driver.
         """
         if self.torque_input != (disturbance is not None and not disturbance.constant):
             raise ValueError("a per-sample disturbance needs an engine with a torque input, and only it")
@@ -603,8 +606,8 @@ class Engine:
         )
 
 
-#: The rules of :mod:`mrpctl.switching`: their expressions depend on their values only
-#: through :meth:`~mrpctl.switching.SwitchingRule.parameters` (a run-time input), so
+#: The rules of `mrpctl.switching`: their expressions depend on their values only
+#: through `parameters` (a run-time input), so
 #: all instances of one of these classes share an engine.
 _BUILT_IN_RULES = (NoSwitching, OnCurrent, OnDelayed, BoundaryLayer, DelayAware)
 
@@ -662,9 +665,9 @@ def engine(
     structure, its values are run-time inputs) for the predictor sample, with a sensor port when
     ``sensor``, the actuator when ``limited`` and a per-sample ``torque`` input when ``torque_input``; the
     predictor needs a C compiler. The flight
-    sample (``rule`` a :class:`~mrpctl.flight.Hysteretic`) is specialised the same way, with a
+    sample (``rule`` a [`Hysteretic`][mrpctl.flight.Hysteretic]) is specialised the same way, with a
     sensor port when ``sensor``, the actuator when ``limited`` and the disturbance add when
-    ``disturbed`` (:func:`flight_structure` of a run's constants; one library per structure).
+    ``disturbed`` (`flight_structure` of a run's constants; one library per structure).
     """
     model = None if predictor is None else inertia_input(predictor)
     flight = isinstance(rule, Hysteretic)

@@ -25,7 +25,7 @@ SETTLING_SIGMA = 1e-2
 SETTLING_OMEGA = 1e-3
 #: A run is stopped and flagged diverged when |σ| or |ω| (rad/s) exceeds this or is not finite.
 DIVERGENCE_BOUND = 1e6
-#: The history names accepted by :func:`mrpctl.simulate` (or give a (d, 6) array).
+#: The history names accepted by `mrpctl.simulate` (or give a (d, 6) array).
 HISTORY_KINDS = ("constant", "zero-input")
 
 # Layout of the statistics vector accumulated in the generated code.

@@ -154,7 +154,7 @@ class VirtualMachineEngine:
         delay: Any = None,
         rate: float = 1.0,
     ) -> RunOutput:
-        """As :meth:`mrpctl.engines.scalar.Engine.run`, the whole horizon at once."""
+        """As `mrpctl.engines.scalar.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
         inertia = inertia_values(spacecraft, self.inertia)
         constants = list(inertia)

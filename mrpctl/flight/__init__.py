@@ -6,17 +6,21 @@ attitude, the plant's MRP set is a simulation detail, and the controller alone c
 to feed its control law, from the delayed (noisy) measurement, keeping that choice in its own memory.
 This module holds the pieces of that loop (see ``design/flight.md`` for the equations):
 
-* option values, frozen and validated: :class:`SensorModel`, :class:`ActuatorModel`,
-  :class:`DelayModel`, :class:`Disturbance`, and the controller-side rule :class:`Hysteretic`
+* option values, frozen and validated: [`SensorModel`][mrpctl.flight.SensorModel],
+[`ActuatorModel`][mrpctl.flight.ActuatorModel],
+  [`DelayModel`][mrpctl.flight.DelayModel], [`Disturbance`][mrpctl.flight.Disturbance], and the controller-side rule
+  [`Hysteretic`][mrpctl.flight.Hysteretic]
   (Mayhew, Sanfelice and Teel 2011);
 * seeded noise and jitter streams that depend only on (seed, sample index), never on how the
-  horizon is sliced (:meth:`SensorModel.noise`, :meth:`DelayModel.samples`);
-* the newest-arrived measurement schedule of a time-varying delay (:func:`newest_arrived`);
+  horizon is sliced ([`SensorModel.noise`][mrpctl.flight.SensorModel.noise],
+  [`DelayModel.samples`][mrpctl.flight.DelayModel.samples]);
+* the newest-arrived measurement schedule of a time-varying delay ([`newest_arrived`][mrpctl.flight.newest_arrived]);
 * the CasADi expression builders of one flight sample, each also a small pure-SX
-  ``casadi.Function`` with named ports: :func:`measurement_function`,
-  :func:`hysteresis_function`, :func:`selection_function`, :func:`actuator_function`.
+  ``casadi.Function`` with named ports: [`measurement_function`][mrpctl.flight.measurement_function],
+  [`hysteresis_function`][mrpctl.flight.hysteresis_function], [`selection_function`][mrpctl.flight.selection_function],
+  [`actuator_function`][mrpctl.flight.actuator_function].
 
-Conventions are those of :mod:`mrpctl.mrp`: σ = tan(Φ/4) ê, quaternions scalar first,
+Conventions are those of [`mrpctl.mrp`][mrpctl.mrp]: σ = tan(Φ/4) ê, quaternions scalar first,
 [BN] passive, x = [σ; ω/4].
 """
 

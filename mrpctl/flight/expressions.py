@@ -64,7 +64,8 @@ _PI_SQUARED = math.pi * math.pi
 
 
 def _tan_quarter_ratio_expr(angle_squared: Any) -> Any:
-    """k = tan(Φ/4)/Φ from Φ² = ``angle_squared`` (SX): 1/4 at 0; see :func:`rotation_vector_to_mrp_expr`."""
+    """k = tan(Φ/4)/Φ from Φ² = ``angle_squared`` (SX): 1/4 at 0; see
+    [`rotation_vector_to_mrp_expr`][mrpctl.flight.rotation_vector_to_mrp_expr]."""
     y = 0.0625 * angle_squared  # x² = Φ²/16 exactly (a power of two)
     p = (_TAN_P[0] * y + _TAN_P[1]) * y + _TAN_P[2]
     q = (((y + _TAN_Q[0]) * y + _TAN_Q[1]) * y + _TAN_Q[2]) * y + _TAN_Q[3]
@@ -77,7 +78,7 @@ def _tan_quarter_ratio_expr(angle_squared: Any) -> Any:
 
 
 def compose_mrp_expr(sigma_first: Any, sigma_second: Any) -> Any:
-    """σ(F/N) of [FN] = [FB][BN] from σ_first = σ(B/N) and σ_second = σ(F/B) (SX).
+    """σ(F/N) of `[FN] = [FB][BN]` from σ_first = σ(B/N) and σ_second = σ(F/B) (SX).
 
     σ = ((1 − |σ₁|²) σ₂ + (1 − |σ₂|²) σ₁ − 2 σ₂ × σ₁) / (1 + |σ₁|² |σ₂|² − 2 σ₁·σ₂)
     (Schaub & Junkins Eq. 3.152), the quaternion product written in MRPs. The result may be
@@ -110,9 +111,11 @@ def quaternion_from_mrp_expr(sigma: Any) -> Any:
 class NoiseForm(enum.Enum):
     """How a sample receives the sensor's attitude noise.
 
-    ``ROTATION_VECTOR``: θ (rad), and the sample computes its MRP σ(θ) (:func:`rotation_vector_to_mrp_expr`):
+    ``ROTATION_VECTOR``: θ (rad), and the sample computes its MRP σ(θ)
+    ([`rotation_vector_to_mrp_expr`][mrpctl.flight.rotation_vector_to_mrp_expr]):
     the exported samples, the virtual machine and the lane engine. ``MRP``: σ(θ) itself, computed before the
-    sample by :func:`rotation_mrp_function` (the same expressions, so the same bits): the compiled scalar
+    sample by [`rotation_mrp_function`][mrpctl.flight.rotation_mrp_function] (the same expressions, so the same bits):
+    the compiled scalar
     engine, which turns a block of θ rows into their MRPs at once, so that tan's latency is not on the
     sample's path.
     """
@@ -123,7 +126,8 @@ class NoiseForm(enum.Enum):
 
 @lru_cache(maxsize=1)
 def rotation_mrp_function() -> ca.Function:
-    """``rotation_mrp(rotation_noise) -> rotation_noise_mrp``: σ(θ) of :func:`rotation_vector_to_mrp_expr` (pure SX)."""
+    """``rotation_mrp(rotation_noise) -> rotation_noise_mrp``: σ(θ) of
+    [`rotation_vector_to_mrp_expr`][mrpctl.flight.rotation_vector_to_mrp_expr] (pure SX)."""
     theta = ca.SX.sym("rotation_noise", 3)
     return ca.Function(
         "rotation_mrp", [theta], [rotation_vector_to_mrp_expr(theta)], ["rotation_noise"], ["rotation_noise_mrp"]
@@ -152,9 +156,11 @@ def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Func
     x = [σ; ω/4] is the true state (σ in either set). The sensor reports the short set of
     the measured attitude, σ̃ = short(σ ⊕ σ(θ)) with [B̃N] = [B̃B](θ)[BN], the rate
     ω̃ = ω + b + η, and x_meas = [σ̃; ω̃/4]; q_meas is σ̃'s quaternion (β₀ >= 0). With zero
-    noise and bias and a short σ, x_meas is x bit for bit. With ``form`` = :attr:`NoiseForm.MRP` the
-    second input is σ(θ) (``rotation_noise_mrp``, from :func:`rotation_mrp_function`) instead of θ:
-    the same numbers, bit for bit. :func:`raw_measurement_function` is the same before the short set.
+    noise and bias and a short σ, x_meas is x bit for bit. With ``form`` = `NoiseForm.MRP` the
+    second input is σ(θ) (``rotation_noise_mrp``, from [`rotation_mrp_function`][mrpctl.flight.rotation_mrp_function])
+    instead of θ:
+    the same numbers, bit for bit. [`raw_measurement_function`][mrpctl.flight.raw_measurement_function] is the same
+    before the short set.
     """
     inputs, names, composed, omega_meas = _sensor_expressions(form)
     sigma_meas = short_expr(composed)
@@ -168,7 +174,8 @@ def measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Func
 def raw_measurement_function(form: NoiseForm = NoiseForm.ROTATION_VECTOR) -> ca.Function:
     """``raw_measurement(x, rotation_noise, rate_noise, bias) -> x_raw`` (pure SX): [σ ⊕ σ(θ); ω̃/4].
 
-    :func:`measurement_function` before its short set: the attitude in either set, so that
+    [`measurement_function`][mrpctl.flight.measurement_function] before its short set: the attitude in either set, so
+    that
     x_meas = [short(x_raw[0:3]); x_raw[3:6]] bit for bit. The flight sample puts x_raw in its ring
     and takes the short set of the delayed entry, which it needs for the history anyway: one short
     set a sample, not two.
@@ -204,9 +211,10 @@ def selection_function() -> ca.Function:
     flight sample uses. The controller's continuous quaternion is q̂ = c β̃: c ∈ {−1, +1}
     flips when β̃ and the previous measurement's β̃' point to opposite hemispheres,
     β̃·β̃' < 0 ⇔ (1 − |σ̃|²)(1 − |σ̃'|²) + 4 σ̃·σ̃' < 0 (the attitude passed Φ = 180°).
-    Then the rule of :func:`hysteresis_function` on q̂: with e = h c, h flips when
+    Then the rule of [`hysteresis_function`][mrpctl.flight.hysteresis_function] on q̂: with e = h c, h flips when
     e β̃₀ < −δ ⇔ e < 0 and (1 + δ)|σ̃|² < 1 − δ. σ_c = σ̃ when h_next c_next = +1 (bit for
-    bit) and its shadow −σ̃/|σ̃|² otherwise. Identical to :func:`hysteresis_function` on q̂ up
+    bit) and its shadow −σ̃/|σ̃|² otherwise. Identical to [`hysteresis_function`][mrpctl.flight.hysteresis_function] on
+    q̂ up
     to rounding; with δ = 0 σ_c is σ̃ at every sample. h and c are ±1 (flips are products by ±1).
     """
     h = ca.SX.sym("h")

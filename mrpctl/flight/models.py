@@ -47,7 +47,7 @@ NOISE_SIZE = 6
 #: |θ| <= π (design/flight.md, phase 8a). A campaign store records it (``attrs["noise_revision"]``; a store
 #: without it is revision 1) and is not resumed across revisions.
 NOISE_REVISION = 2
-#: The stream numbers of the attitude noise, the rate noise and the delay jitter (:func:`stream_key`).
+#: The stream numbers of the attitude noise, the rate noise and the delay jitter (`stream_key`).
 STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
 #: Largest attitude 1σ (rad): |θ|² of σ_θ·N(0, I₃) must stay finite (overflow from |θ| ≈ 1.3e154).
@@ -120,7 +120,7 @@ class SensorModel:
             (k1 − k0, 3) attitude error rotation vectors θ_k (rad) and rate noise η_k (rad/s).
             Exactly zero when the corresponding 1σ is zero. Identical for any slicing of the
             horizon (counter-based: component c of sample k is normal number 3k + c of the
-            stream keyed by (seed, stream), :func:`stream_normals`).
+            stream keyed by (seed, stream), [`stream_normals`][mrpctl.flight.stream_normals]).
         """
         rows = self.noise_rows(k0, k1)
         return rows[:, 0:3], rows[:, 3:6]
@@ -128,7 +128,8 @@ class SensorModel:
     def noise_rows(self, k0: int, k1: int, *, out: np.ndarray | None = None) -> np.ndarray:
         """The noise of samples k0 … k1 − 1 as one (k1 − k0, 6) array of rows (θ_k, η_k).
 
-        The flight sample's per-sample ``noise`` input, the numbers of :meth:`noise` bit for bit,
+        The flight sample's per-sample ``noise`` input, the numbers of [`noise`][mrpctl.flight.SensorModel.noise] bit
+        for bit,
         generated in place: into ``out`` when given (a C-contiguous float64 array of at least
         k1 − k0 rows and 6 columns, e.g. a buffer reused slice after slice; its first k1 − k0 rows
         are written and returned), else into a new array.
@@ -175,7 +176,7 @@ class ActuatorModel:
     norm_max : float or None
         Limit on the Euclidean norm |u| (N m), > 0; None (default) for none.
     mode : Saturation
-        :attr:`Saturation.SCALE` (default; direction-preserving) or :attr:`Saturation.CLIP`.
+        `Saturation.SCALE` (default; direction-preserving) or `Saturation.CLIP`.
     """
 
     u_max: Any
@@ -234,8 +235,9 @@ class DelayModel:
 
     Measurement k (taken at t_k) reaches the controller at sample k + d_k. At sample k the
     controller uses the newest measurement that has arrived, j*(k) = max{j : j + d_j <= k};
-    a measurement overtaken by a newer one is never used (:func:`newest_arrived`). Build with
-    :meth:`constant`, :meth:`sequence` or :meth:`jitter`.
+    a measurement overtaken by a newer one is never used ([`newest_arrived`][mrpctl.flight.newest_arrived]). Build with
+    [`constant`][mrpctl.flight.DelayModel.constant], [`sequence`][mrpctl.flight.DelayModel.sequence] or
+    [`jitter`][mrpctl.flight.DelayModel.jitter].
 
     Attributes
     ----------
@@ -308,7 +310,7 @@ class DelayModel:
         return int(low), int(high)
 
     def check_horizon(self, n: int) -> None:
-        """Raise :class:`DimensionError` if a sequence does not hold exactly n delays."""
+        """Raise [`DimensionError`][mrpctl.DimensionError] if a sequence does not hold exactly n delays."""
         n = integer("n", n, minimum=1)
         if self.delays is not None and self.delays.shape != (n,):
             raise DimensionError(
@@ -389,12 +391,13 @@ def newest_arrived(delays: Any, *, history: int) -> tuple[np.ndarray, np.ndarray
 def newest_arrived_slice(
     model: DelayModel, rate: float, depth: int, k0: int, k1: int, newest_before: int
 ) -> np.ndarray:
-    """j*(k) of :func:`newest_arrived` for the samples k0 … k1 − 1 only, in bounded memory.
+    """j*(k) of [`newest_arrived`][mrpctl.flight.newest_arrived] for the samples k0 … k1 − 1 only, in bounded memory.
 
     ``newest_before`` is j*(k0 − 1) (−1 − ``depth`` for k0 = 0). Only the measurements
     j ∈ [k0 − depth, k1) can arrive in the slice, so the delays of those are generated
-    (:meth:`DelayModel.samples`, slice independent). Concatenating the slices of any slicing
-    gives :func:`newest_arrived` of the whole horizon (int64).
+    ([`DelayModel.samples`][mrpctl.flight.DelayModel.samples], slice independent). Concatenating the slices of any
+    slicing
+    gives [`newest_arrived`][mrpctl.flight.newest_arrived] of the whole horizon (int64).
     """
     start, stop = sample_slice(k0, k1)
     depth = integer("depth", depth, minimum=0)
@@ -420,8 +423,10 @@ class Disturbance:
         Instead of ``torque``: w(t) of a (m,) array of sample times t_k = k h (s) returning an
         (m, 3) array (N m), evaluated by the engine on each slice's times (so memory stays bounded
         by the slice; the function should be elementwise in t, e.g. NumPy ufuncs, so that the run
-        does not depend on how it is sliced). The flight and predictor loops (:func:`mrpctl.simulate`,
-        :func:`mrpctl.simulate_batch`, :func:`mrpctl.export`: there w_k is an input).
+        does not depend on how it is sliced). The flight and predictor loops
+        ([`mrpctl.simulate`][mrpctl.simulation.simulate],
+        [`mrpctl.simulate_batch`][mrpctl.simulate_batch], [`mrpctl.export`][mrpctl._export.export]: there w_k is an
+        input).
     """
 
     torque: Any = None
@@ -445,7 +450,7 @@ class Disturbance:
     def rows_view(cls, rows: np.ndarray, name: str = "torque") -> Disturbance:
         """A per-sample disturbance on the (n, 3) float64 ``rows`` without copying them (a read-only view).
 
-        For the per-run slices of a (runs, n, 3) array given to :func:`mrpctl.simulate_batch`: the
+        For the per-run slices of a (runs, n, 3) array given to [`mrpctl.simulate_batch`][mrpctl.simulate_batch]: the
         rows are checked (finite, shape) but not copied, so the batch holds no second copy of the
         array; the caller must not modify it while the view is in use.
         """
@@ -474,7 +479,8 @@ class Disturbance:
         return None if self.function is not None else tuple(self.torque.shape)
 
     def check_horizon(self, n: int, name: str = "torque") -> None:
-        """Raise :class:`DimensionError` (naming ``name``) if a per-sample torque does not have n rows."""
+        """Raise [`DimensionError`][mrpctl.DimensionError] (naming ``name``) if a per-sample torque does not have n
+        rows."""
         n = integer("n", n, minimum=1)
         if self.function is None and not self.constant and self.torque.shape != (n, 3):
             raise DimensionError(
@@ -513,18 +519,20 @@ class Hysteretic(SwitchingRule):
     """Controller-side MRP set selection with hysteresis (Mayhew, Sanfelice and Teel 2011).
 
     The controller keeps a logic variable h ∈ {−1, +1}. On the delayed, noisy measured
-    quaternion q (made continuous in time, see :func:`selection_function`) it sets
+    quaternion q (made continuous in time, see [`selection_function`][mrpctl.flight.selection_function]) it sets
     h ← −h when h q₀ < −δ, and feeds σ_c = h q_v / (1 + h q₀) to its control law.
     After the rule h q₀ >= −δ, so |σ_c| <= α = √((1 + δ)/(1 − δ)). δ = 0 picks the short set
     of the measurement at every sample. Between two switches q₀ must move by more than 2δ,
     and |q̇₀| <= |ω|/2, so switches are at least 4δ/max|ω| apart; attitude noise that moves
     q₀ by less than δ never causes a switch.
 
-    As a rule of :func:`mrpctl.simulate` (``rule=Hysteretic(delta)``) it runs in the compiled
-    flight sample (:func:`mrpctl.loop.flight_core_function`): the plant's MRP is kept in the
+    As a rule of [`mrpctl.simulate`][mrpctl.simulation.simulate] (``rule=Hysteretic(delta)``) it runs in the compiled
+    flight sample ([`mrpctl.loop.flight_core_function`][mrpctl.loop.flight_core_function]): the plant's MRP is kept in
+    the
     short set for bookkeeping only (no physical effect), the controller's h, c and previous
     measurement are the rule memory, u = K [σ_c; ω(t − τ)/4], and the run's switches are the
-    logic switches of h. Its :meth:`expressions` as a plain :class:`SwitchingRule` are that
+    logic switches of h. Its [`expressions`][mrpctl.switching.SwitchingRule.expressions] as a plain
+    [`SwitchingRule`][mrpctl.switching.SwitchingRule] are that
     bookkeeping only (the ``OnCurrent`` test); the selection is in the flight sample.
 
     Parameters

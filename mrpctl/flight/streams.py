@@ -50,7 +50,7 @@ def _value(key: int, idx: int) -> int:
 
 
 def _values(key: int, idx: np.ndarray) -> np.ndarray:
-    """:func:`_value` of a uint64 array of indices (uint64 arithmetic wraps mod 2^64)."""
+    """`_value` of a uint64 array of indices (uint64 arithmetic wraps mod 2^64)."""
     z = (idx + np.uint64(1)) * np.uint64(_GAMMA) + np.uint64(key)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
@@ -118,7 +118,7 @@ def stream_normals(key: int, n0: int, n1: int) -> np.ndarray:
     Vectorised over the values attempt by attempt (the C loop of each value, in the same
     arithmetic); the exponentials of the wedge tests are Python's ``math.exp`` (the libm's, as in
     the C code: NumPy's own exp may differ in the last bit) and the tail, about 4 values in 10⁴,
-    runs the C loop value by value (:func:`_normal_slow`, ``math.log``).
+    runs the C loop value by value (`_normal_slow`, ``math.log``).
     """
     table_x, table_f = _c_tables()
     out = np.empty(n1 - n0)
@@ -154,7 +154,8 @@ def stream_normal_rows(
 ) -> np.ndarray:
     """(k1 − k0, 3) standard normals of samples k0 … k1 − 1 of one stream, times ``scale``.
 
-    Component c of sample k is normal number 3k + c of the stream's key (:func:`stream_normals`),
+    Component c of sample k is normal number 3k + c of the stream's key
+    ([`stream_normals`][mrpctl.flight.stream_normals]),
     written into ``out`` (any (k1 − k0, 3) float64 view, e.g. three columns of a wider array);
     ``scale * value`` is the C driver's product.
     """

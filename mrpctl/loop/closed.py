@@ -3,9 +3,10 @@
 `closed_loop_functions` assembles them (with the options of `mrpctl.loop.options` bound) into a
 `ClosedLoopFunctions`.
 
-Shared by :mod:`mrpctl.simulation` (whose engine adds the metric accumulators and a C
-horizon driver around :func:`core_function`) and :mod:`mrpctl.export` (which generates
-C for :func:`closed_loop_functions`). The model (paper Eq. nonc, sampled; see
+Shared by [`mrpctl.simulation`][mrpctl.simulation] (whose engine adds the metric accumulators and a C
+horizon driver around [`core_function`][mrpctl.loop.core_function]) and [`mrpctl.export`][mrpctl._export.export] (which
+generates
+C for [`closed_loop_functions`][mrpctl.loop.closed_loop_functions]). The model (paper Eq. nonc, sampled; see
 ``design/switching.md``)::
 
     ẋ(t) = A x + B u(t) + f(x),   x = [σ; ω/4]
@@ -15,7 +16,7 @@ C for :func:`closed_loop_functions`). The model (paper Eq. nonc, sampled; see
 with τ = d h (d an integer >= 0). At each sample k: (1) the rule may replace σ_k by its
 shadow; (2) the result is recorded as the measurement m_k; (3) u_k = K m_{k−d} is held
 over one period (zero-order hold; for d = 0, u_k = K m_k); (4) the plant of
-:func:`mrpctl.model.dynamics_expr` is integrated over one period by RK4 with a fixed
+[`mrpctl.model.dynamics_expr`][mrpctl.model.dynamics_expr] is integrated over one period by RK4 with a fixed
 number of substeps.
 """
 
@@ -84,7 +85,7 @@ __all__ = [
 
 
 def check_rule(rule: Any, name: str = "rule") -> SwitchingRule:
-    """Return ``rule`` if it is a :class:`~mrpctl.switching.SwitchingRule`, else raise SpecificationError."""
+    """Return ``rule`` if it is a [`SwitchingRule`][mrpctl.switching.SwitchingRule], else raise SpecificationError."""
     if not isinstance(rule, SwitchingRule):
         raise SpecificationError(
             f"{name} must be a switching rule such as mrpctl.switching.OnDelayed(), got {type(rule).__name__}: {rule!r}"
@@ -94,7 +95,7 @@ def check_rule(rule: Any, name: str = "rule") -> SwitchingRule:
 
 @dataclass(frozen=True, eq=False)
 class FlightOptions:
-    """The models of the loop as flown that a :class:`ClosedLoopFunctions` was built with.
+    """The models of the loop as flown that a [`ClosedLoopFunctions`][mrpctl.loop.ClosedLoopFunctions] was built with.
 
     Attributes
     ----------
@@ -124,7 +125,7 @@ class FlightOptions:
     saturation: Saturation
 
     def initial_memory(self, x0: Any, delay_samples: int, history: Any = None) -> np.ndarray:
-        """The ``sample`` memory at k = 0 for the initial state x0 (see :data:`FLIGHT_MEMORY_LAYOUT`).
+        """The ``sample`` memory at k = 0 for the initial state x0 (see `FLIGHT_MEMORY_LAYOUT`).
 
         h = c = +1, σ̃_prev the short set of the σ the controller sees at k = 0 (the first
         history row for d > 0, by default x0; the bookkept σ0 for d = 0), accumulators 0. The
@@ -144,16 +145,17 @@ class ClosedLoopFunctions:
     and ``sample`` are pure SX Functions; ``chunk`` is an MX ``mapaccum`` of ``sample``
     (a loop, not an unrolled expression), also code-generatable and serialisable.
 
-    With the controller-side rule :class:`~mrpctl.flight.Hysteretic` (``flight`` is not
-    None) ``sample`` and ``chunk`` are the flight loop's (:func:`flight_core_function` with
-    K, δ and the :class:`FlightOptions` constants bound), and ``flight_controller`` and
+    With the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (``flight`` is not
+    None) ``sample`` and ``chunk`` are the flight loop's ([`flight_core_function`][mrpctl.loop.flight_core_function]
+    with
+    K, δ and the [`FlightOptions`][mrpctl.loop.FlightOptions] constants bound), and ``flight_controller`` and
     ``sensor`` are what flight software and a sensor simulation need; see
-    :meth:`functions`.
+    [`functions`][mrpctl.loop.ClosedLoopFunctions.functions].
 
     Attributes
     ----------
     dynamics : casadi.Function
-        ``dynamics(x, u) -> xdot`` from :mod:`mrpctl.model`.
+        ``dynamics(x, u) -> xdot`` from [`mrpctl.model`][mrpctl.model].
     controller : casadi.Function
         ``controller(x_meas) -> u``: u = K x_meas.
     switching : casadi.Function
@@ -165,7 +167,7 @@ class ClosedLoopFunctions:
         one measurement period (rule, record, hold, integrate); ``x_delayed`` is m_{k−d}
         and is not used when d = 0. Flight loop: ``sample(x, memory, x_delayed, noise) ->
         (x_next, memory_next, x_meas, u, switched, measurement)`` with the memory of
-        :data:`FLIGHT_MEMORY_LAYOUT`, ``noise`` = (θ_k; η_k) (rad, rad/s), ``x_meas`` the
+        `FLIGHT_MEMORY_LAYOUT`, ``noise`` = (θ_k; η_k) (rad, rad/s), ``x_meas`` the
         bookkept true state, ``measurement`` the sensor's m_k (what goes into the delay
         line) and ``u`` the applied torque (without the disturbance).
     chunk : casadi.Function
@@ -174,7 +176,8 @@ class ClosedLoopFunctions:
         Flight loop: ``chunk(x, memory, history, noise) -> (x_end, memory_end, states,
         measurements, u, switched)``.
     initial_memory : float
-        The rule memory at k = 0 (flight loop: see :meth:`FlightOptions.initial_memory`).
+        The rule memory at k = 0 (flight loop: see
+        [`FlightOptions.initial_memory`][mrpctl.loop.FlightOptions.initial_memory]).
     flight_controller : casadi.Function or None
         Flight loop only: ``flight_controller(x_meas, memory, delta) -> (u, u_command,
         memory_next, switched)``: from the delayed measurement [σ̃; ω̃/4] and the
@@ -265,7 +268,7 @@ class ClosedLoopFunctions:
 
 
 def _as_disturbance(disturbance: Any) -> Disturbance | None:
-    """The export's disturbance as a :class:`~mrpctl.flight.Disturbance` (None: none given)."""
+    """The export's disturbance as a [`Disturbance`][mrpctl.flight.Disturbance] (None: none given)."""
     if disturbance is None or isinstance(disturbance, Disturbance):
         return disturbance
     return Disturbance(disturbance)
@@ -285,7 +288,7 @@ def closed_loop_functions(
     delay: DelayModel | None = None,
     predictor: Any = None,
 ) -> ClosedLoopFunctions:
-    """Build the closed loop's named CasADi Functions (see :class:`ClosedLoopFunctions`).
+    """Build the closed loop's named CasADi Functions (see [`ClosedLoopFunctions`][mrpctl.loop.ClosedLoopFunctions]).
 
     Parameters
     ----------
@@ -296,23 +299,23 @@ def closed_loop_functions(
     tau : float, keyword-only
         Delay τ (s), a whole number d of periods 1/rate (with ``delay``: its tau_max).
     rule : SwitchingRule, keyword-only
-        The shadow-set switching rule, or the controller-side :class:`~mrpctl.flight.Hysteretic`.
+        The shadow-set switching rule, or the controller-side [`Hysteretic`][mrpctl.flight.Hysteretic].
     rate : float, keyword-only
         Measurement rate (Hz), default 1000.
     substeps : int, keyword-only
         RK4 substeps per measurement period, default 1.
     actuator, disturbance, sensor, delay : keyword-only
-        The flight loop's models, as in :func:`mrpctl.simulate` (``rule=Hysteretic(...)``
-        only; the same checks): :class:`~mrpctl.flight.ActuatorModel`, a constant
-        :class:`~mrpctl.flight.Disturbance` (or a (3,) torque, N m; a per-sample one, (n, 3) rows or
+        The flight loop's models, as in [`mrpctl.simulate`][mrpctl.simulation.simulate] (``rule=Hysteretic(...)``
+        only; the same checks): [`ActuatorModel`][mrpctl.flight.ActuatorModel], a constant
+        [`Disturbance`][mrpctl.flight.Disturbance] (or a (3,) torque, N m; a per-sample one, (n, 3) rows or
         a function of time, makes w_k an input ``torque`` of ``sample`` (3) and ``chunk`` (3 × max(d, 1))),
-        :class:`~mrpctl.flight.SensorModel`, :class:`~mrpctl.flight.DelayModel`.
+        [`SensorModel`][mrpctl.flight.SensorModel], [`DelayModel`][mrpctl.flight.DelayModel].
     predictor : mrpctl.Predictor, keyword-only
         The predictor controller (with ``rule=OnPredicted(alpha)``; actuator, disturbance (constant, or
         per sample: the ``torque`` input of ``sample`` and ``chunk``, plant only) and sensor allowed,
         no delay model): ``sample`` and ``chunk`` are the engine's predictor sample with K,
         α, τ, J_m and the flight constants bound, and ``predictor_controller``, ``prediction``,
-        ``model_step`` and ``sensor`` are the flight-software pieces (see :func:`_predictor_loop`).
+        ``model_step`` and ``sensor`` are the flight-software pieces (see `_predictor_loop`).
 
     Raises
     ------
@@ -401,10 +404,10 @@ def _flight_functions(
 ) -> tuple[ca.Function, ca.Function, ca.Function]:
     """(sample, flight_controller, sensor) of the flight loop with K, δ and the flight constants bound.
 
-    ``sample`` is :func:`flight_core_function` (the simulator's sample) with its run-time
+    ``sample`` is [`flight_core_function`][mrpctl.loop.flight_core_function] (the simulator's sample) with its run-time
     inputs bound; ``flight_controller`` and ``sensor`` are written from the same builders
-    (:func:`~mrpctl.flight.selection_function`, :func:`~mrpctl.flight.actuator_function`,
-    :func:`~mrpctl.flight.measurement_function`) in the same order, so that a loop of
+    ([`selection_function`][mrpctl.flight.selection_function], [`actuator_function`][mrpctl.flight.actuator_function],
+    [`measurement_function`][mrpctl.flight.measurement_function]) in the same order, so that a loop of
     ``sensor``, ``flight_controller`` and ``step`` gives the sample's numbers bit for bit.
     """
     constants = ca.DM(np.asarray(flight.constants))
@@ -448,7 +451,7 @@ def _flight_functions(
     return sample, flight_controller, sensor
 
 
-#: Names of the predictor sample's memory entries (:data:`PREDICTOR_MEMORY_SIZE`), in order.
+#: Names of the predictor sample's memory entries (`PREDICTOR_MEMORY_SIZE`), in order.
 PREDICTOR_MEMORY_LAYOUT = (
     "unused_1",
     "unused_2",
@@ -486,7 +489,8 @@ def _predictor_loop(
     """The predictor loop's Functions (K, α, τ, J_m and the flight constants bound into them).
 
     * ``sample(x, memory, x_delayed, noise) -> (x_next, memory_next, x_meas, u, switched, ring)``:
-      the engine's sample (:func:`predictor_core_function`); memory of :data:`PREDICTOR_MEMORY_LAYOUT`,
+      the engine's sample ([`predictor_core_function`][mrpctl.loop.predictor_core_function]); memory of
+      `PREDICTOR_MEMORY_LAYOUT`,
       ``x_delayed`` = (m_{k−d}; z_{k−d}) (12), ``ring`` = (m_k; z_k), the next entry of the delay line;
     * ``chunk(x, memory, history, noise)``: max(d, 1) samples (``mapaccum``), ``history`` 12 × d;
     * with a per-sample disturbance (rows or a function of time) both take w_k as a last input
@@ -494,7 +498,7 @@ def _predictor_loop(
       (``step(x, u + w_k)``; the model copy and ``predictor_controller`` never see it);
     * ``predictor_controller(y, z_delayed, z, sigma_prev) -> (u, u_command, x_hat, switched, z_next)``:
       what flight software runs each sample, from the delayed measurement y and its own record of the
-      model copy: :func:`prediction_expr`, u_c = K x̂, the actuator, z_{k+1} = short(RK4_m(z_k, u));
+      model copy: `prediction_expr`, u_c = K x̂, the actuator, z_{k+1} = short(RK4_m(z_k, u));
     * ``prediction(y, z_delayed, z, sigma_prev) -> (x_hat, switched)``: the correction and the rule;
     * ``model_step(z, u) -> z_next``: one RK4 step of J_m over h, kept in the short set;
     * ``sensor(x, noise) -> (x_true, measurement)``: as in the flight loop.

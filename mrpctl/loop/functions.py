@@ -1,7 +1,8 @@
 """The closed loop's symbolic building blocks: the RK4 step, the sample cores (paper rules, flight loop,
 predictor) and their d-sample chunks, as CasADi Functions built from the one plant model.
 
-J enters either as a constant or as a run-time input (:class:`InertiaInput`), so one compiled engine
+J enters either as a constant or as a run-time input ([`InertiaInput`][mrpctl.loop.InertiaInput]), so one compiled
+engine
 serves every spacecraft of a campaign.
 """
 
@@ -52,7 +53,7 @@ __all__ = [
 
 
 class InertiaInput(enum.Enum):
-    """How a run-time inertia enters a compiled Function (see :func:`inertia_input`)."""
+    """How a run-time inertia enters a compiled Function (see [`inertia_input`][mrpctl.loop.inertia_input])."""
 
     #: J and J⁻¹ diagonal: two 3-vectors (the diagonals), the same operations as constants.
     DIAGONAL = "diagonal"
@@ -90,7 +91,7 @@ def step_function(
     """``step(x, u) -> x_next``: RK4 over one period h with ``substeps`` equal substeps.
 
     With ``inertia`` the spacecraft's J and J⁻¹ are inputs instead of constants:
-    ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see :class:`InertiaInput`).
+    ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see [`InertiaInput`][mrpctl.loop.InertiaInput]).
     """
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", INPUT_SIZE)
@@ -169,12 +170,13 @@ def flight_core_function(
     short_measurements: bool = False,
     squared_peak: bool = False,
 ) -> ca.Function:
-    """One sample of the flight loop with the controller-side rule :class:`~mrpctl.flight.Hysteretic` (pure SX).
+    """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
     ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight, noise) ->
     (x_next, memory_next, x_meas, u, switched, measurement)``:
-    the ports of :func:`core_function` with memory (h, c, σ̃_prev, n_sat, peak |u_c,i| (3), peak |u_c|)
-    of :data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`, parameters (δ,), the run-time constants
+    the ports of [`core_function`][mrpctl.loop.core_function] with memory (h, c, σ̃_prev, n_sat, peak |u_c,i| (3), peak
+    |u_c|)
+    of `FLIGHT_MEMORY_SIZE`, parameters (δ,), the run-time constants
     ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) (N m, rad/s; inf: no limit), and per
     sample ``noise`` = (θ_k, η_k) (rad, rad/s). Without ``sensor`` the ``noise`` input and the
     ``measurement`` output are left out and the measurement is the bookkept state (the
@@ -187,8 +189,8 @@ def flight_core_function(
     commanded torque before the actuator limits, N m): the result's per-sample records. With
     ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the sample (a
     per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
-    ``noise_form`` (:class:`~mrpctl.flight.NoiseForm`): with ``MRP`` the first half of ``noise`` is the
-    attitude noise's MRP σ(θ_k) (:func:`~mrpctl.flight.rotation_mrp_function`, computed by the engine
+    ``noise_form`` ([`NoiseForm`][mrpctl.flight.NoiseForm]): with ``MRP`` the first half of ``noise`` is the
+    attitude noise's MRP σ(θ_k) ([`rotation_mrp_function`][mrpctl.flight.rotation_mrp_function], computed by the engine
     before the sample) instead of θ_k: the same numbers bit for bit.
     With ``short_measurements`` (only without ``sensor``) the controller reads ``x_delayed`` (and,
     for d = 0, m_k) as it is, without taking its short set: the same numbers bit for bit for a
@@ -203,12 +205,12 @@ def flight_core_function(
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
        no physical effect): x_meas, the true state recorded in the result;
-    2. the sensor (:func:`~mrpctl.flight.raw_measurement_function`): m_k = [σ_k ⊕ σ(θ_k); ω̃_k/4]
+    2. the sensor ([`raw_measurement_function`][mrpctl.flight.raw_measurement_function]): m_k = [σ_k ⊕ σ(θ_k); ω̃_k/4]
        (the ring's entry, the attitude in either set; x_meas bit for bit without noise and bias);
     3. the controller reads the delayed measurement m_{k−d} (m_k when d = 0), takes its short
-       set σ̃ and applies :func:`~mrpctl.flight.selection_function` with its memory
+       set σ̃ and applies [`selection_function`][mrpctl.flight.selection_function] with its memory
        (h, c, σ̃_prev) and δ: σ_c, and ``switched`` = 1.0 when h flipped (the run's switches);
-    4. u_c = K [σ_c; ω̃_{k−d}/4]; the actuator (:func:`~mrpctl.flight.actuator_function` of
+    4. u_c = K [σ_c; ω̃_{k−d}/4]; the actuator ([`actuator_function`][mrpctl.flight.actuator_function] of
        ``saturation``) gives the applied torque u (the ``u`` output), and u + w is held over
        the period while the plant is integrated by RK4.
 
@@ -328,15 +330,16 @@ def predictor_core_function(
     limited: bool = True,
     torque_input: bool = False,
 ) -> ca.Function:
-    """One sample of the predictor loop (issue 13; ``design/predictor.md``, form (b)) (pure SX).
+    """One sample of the predictor loop (``design/predictor.md``, form (b)) (pure SX).
 
     ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight[, noise][, torque]) ->
-    (x_next, memory_next, x_meas, u, switched, ring)``: memory of :data:`PREDICTOR_MEMORY_SIZE`
+    (x_next, memory_next, x_meas, u, switched, ring)``: memory of `PREDICTOR_MEMORY_SIZE`
     (1, 1, σ̂_prev, the flight sample's actuator accumulators, the model copy z); ``x_delayed`` and
-    ``ring`` are entries of :data:`PREDICTOR_RING_WIDTH`: (m_k, z_k), read back as (y_k, z_{k−d}) =
+    ``ring`` are entries of `PREDICTOR_RING_WIDTH`: (m_k, z_k), read back as (y_k, z_{k−d}) =
     (m_{k−d}, z_{k−d}); parameters (α,) (inf: never switch); ``flight`` = (u_max (3), u_norm,
     w (3), gyro bias (3), τ, J_m, J_m⁻¹) with the model's inertia in the layout ``model_inertia``;
-    ``noise`` (with ``sensor``) as in :func:`flight_core_function`. Without ``limited`` the
+    ``noise`` (with ``sensor``) as in [`flight_core_function`][mrpctl.loop.flight_core_function]. Without ``limited``
+    the
     actuator is left out of the expressions (u = u_c; u_max, u_norm unused), which saves its
     libm calls. With ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the
     sample (a per-sample disturbance streamed by the engine; the constant w in ``flight`` is then
@@ -469,9 +472,9 @@ def chunk_function(sample: ca.Function, d: int) -> ca.Function:
     )
 
 
-#: The controller's own memory in :attr:`ClosedLoopFunctions.flight_controller`: (h, c, σ̃_prev (3)).
+#: The controller's own memory in `ClosedLoopFunctions.flight_controller`: (h, c, σ̃_prev (3)).
 CONTROLLER_MEMORY_SIZE = 5
-#: Names of the flight sample's memory entries (:data:`~mrpctl.flight.FLIGHT_MEMORY_SIZE`), in order.
+#: Names of the flight sample's memory entries (`FLIGHT_MEMORY_SIZE`), in order.
 FLIGHT_MEMORY_LAYOUT = (
     "h",
     "c",

@@ -80,7 +80,8 @@ def flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.n
 
 
 def predictor_disturbance(disturbance: Any, n: int | None, name: str = "disturbance") -> Disturbance | None:
-    """The predictor run's disturbance as a :class:`Disturbance` (None: none), per-sample rows checked
+    """The predictor run's disturbance as a [`Disturbance`][mrpctl.flight.Disturbance] (None: none), per-sample rows
+    checked
     against the n samples of the run (None: an export, any number of rows); an error names ``name``
     (the parameter, or ``disturbance[i]``)."""
     if disturbance is None:
@@ -198,11 +199,11 @@ NO_FLIGHT_OPTIONS = np.array([np.inf, np.inf, np.inf, np.inf, 0.0, 0.0, 0.0, 0.0
 
 
 def flight_structure(options: np.ndarray | None, sensor: SensorModel | None) -> dict[str, bool]:
-    """The flight sample's structure for a run's constants and sensor (keywords of :func:`engine`).
+    """The flight sample's structure for a run's constants and sensor (keywords of `engine`).
 
     ``sensor``: noise or a gyro bias (an ideal sensor measures x_meas bit for bit); ``limited``:
     a finite u_max or u_norm; ``disturbed``: a non-zero torque w. ``options`` as
-    :data:`NO_FLIGHT_OPTIONS` (None: none), or (N, 10), one row per run: the union over the runs
+    `NO_FLIGHT_OPTIONS` (None: none), or (N, 10), one row per run: the union over the runs
     (the structure of a lane batch).
     """
     constants = NO_FLIGHT_OPTIONS if options is None else np.asarray(options, dtype=float)

@@ -1,8 +1,9 @@
 """The sampled nonlinear closed loop with delayed feedback and shadow-set switching.
 
-:func:`simulate` runs one case, :func:`simulate_batch` many on a thread pool; both
-return frozen results (:mod:`mrpctl.simulation.results`). The closed loop's CasADi
-Functions are built by :mod:`mrpctl.loop` and run by the engines of :mod:`mrpctl.engines` (the
+[`simulate`][mrpctl.simulation.simulate] runs one case, [`simulate_batch`][mrpctl.simulate_batch] many on a thread pool;
+both
+return frozen results (`mrpctl.simulation.results`). The closed loop's CasADi
+Functions are built by [`mrpctl.loop`][mrpctl.loop] and run by the engines of `mrpctl.engines` (the
 scalar engine with its C horizon driver, the lanes, or CasADi's virtual machine without a C
 compiler). The model and the engine: ``design/switching.md``.
 """

@@ -66,7 +66,7 @@ _BYTES_PER_RUN = 400
 #: 4.6-5.3 KB measured (RSS of 2e5 and 4e5 runs, keep_every None and 1), rounded up
 _BYTES_PER_RESULT = 6000
 #: Metrics-only batches (``trajectories=False``) of compiled code run on the lane engine
-#: (:mod:`mrpctl.engines.lanes`); False runs them on the scalar engine (tests, benchmarks).
+#: (`mrpctl.engines.lanes`); False runs them on the scalar engine (tests, benchmarks).
 _LANES = True
 _LOGGER = logging.getLogger(__name__)
 
@@ -208,10 +208,10 @@ _SHARED_HINT = (
 def _per_run_disturbances(disturbance: Any, n_runs: int, n: int) -> list[Disturbance | None] | None:
     """simulate_batch's per-run disturbances, or None when one disturbance is shared by the runs.
 
-    Per run: a list or tuple of 1 or N items of which at least one is None, a :class:`Disturbance`
-    or a NumPy array (each item as :func:`simulate` takes it), or a (N, n, 3) array (each run's
+    Per run: a list or tuple of 1 or N items of which at least one is None, a [`Disturbance`][mrpctl.flight.Disturbance]
+    or a NumPy array (each item as [`simulate`][mrpctl.simulation.simulate] takes it), or a (N, n, 3) array (each run's
     rows a read-only view, not a copy). Anything else is shared (a (3,) torque, (n, 3) rows, a
-    :class:`Disturbance`).
+    [`Disturbance`][mrpctl.flight.Disturbance]).
     """
     if disturbance is None or isinstance(disturbance, Disturbance):
         return None
@@ -248,7 +248,7 @@ def _one_disturbance(item: Any, name: str) -> Disturbance | None:
 
 def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
     """The engine's structure keywords: the predictor's (sensor given, actuator given), or the
-    flight sample's specialisation to the run's constants (:func:`~mrpctl.loop.options.flight_structure`)."""
+    flight sample's specialisation to the run's constants (`flight_structure`)."""
     if checked is not None:
         return {"sensor": sensor is not None, "limited": actuator is not None}
     return flight_structure(options, sensor)
@@ -288,7 +288,7 @@ def simulate(
     K : array_like
         (3, 6) gain on x = [σ; ω/4] (N m).
     x0 : array_like
-        (6,) initial state x = [σ; ω/4] (ω in rad/s; see :func:`mrpctl.model.state`).
+        (6,) initial state x = [σ; ω/4] (ω in rad/s; see [`mrpctl.model.state`][mrpctl.model.state]).
     tau : float, keyword-only
         Measurement delay τ >= 0 (s), a whole number of periods 1/rate.
     rule : SwitchingRule, keyword-only
@@ -321,7 +321,8 @@ def simulate(
         predictor: there on the plant only, never on the controller's model copy):
         constant (3,), one row per sample (n, 3), or ``Disturbance(function=w)`` with w(t) of the
         sample times (evaluated slice by slice); the per-sample forms are streamed per slice
-        like the noise (compiled engine only; :func:`simulate_batch` takes them too, shared or per run).
+        like the noise (compiled engine only; [`simulate_batch`][mrpctl.simulate_batch] takes them too, shared or per
+        run).
     sensor : mrpctl.flight.SensorModel, keyword-only
         Attitude and rate noise and gyro bias of the flight loop's measurements
         (``rule=Hysteretic(...)`` only); the noise of each slice of samples is generated in
@@ -476,7 +477,7 @@ def simulate_batch(
     Compiled runs are spread over a pool of worker threads, each with its own buffers
     (reused from run to run), calling the generated library slice by slice; Ctrl-C (or an
     exception from ``progress``) sets a stop flag that the workers check between slices.
-    Without ``trajectories`` the runs go to the lane engine (:mod:`mrpctl.engines.lanes`): the
+    Without ``trajectories`` the runs go to the lane engine (`mrpctl.engines.lanes`): the
     same sample vectorised across runs, W = 8 runs per C call, each run's metrics bit for bit
     those of the scalar engine (about 5x its runs/s per core; ``design/campaigns.md``).
     Without a C compiler the runs are evaluated one after the other in CasADi's virtual
@@ -499,40 +500,42 @@ def simulate_batch(
     rule : SwitchingRule or sequence of SwitchingRule, keyword-only
         One rule, or one per run (their parameters, such as ε, may differ).
     t_final, rate, history, substeps
-        As in :func:`simulate`; ``history`` is shared by all runs (an array is allowed
+        As in [`simulate`][mrpctl.simulation.simulate]; ``history`` is shared by all runs (an array is allowed
         only when all runs have the same delay).
     trajectories : bool, keyword-only
-        Also return every run as a :class:`SimulationResult` (memory: about 104 bytes per
+        Also return every run as a [`SimulationResult`][mrpctl.SimulationResult] (memory: about 104 bytes per
         kept sample and run).
     keep_every : int or None, keyword-only
-        With ``trajectories``, the samples kept per run, as in :func:`simulate`.
+        With ``trajectories``, the samples kept per run, as in [`simulate`][mrpctl.simulation.simulate].
     threads : int, keyword-only
         Worker threads; default: the CPUs available to this process.
     memory_limit : float, keyword-only
-        As in :func:`simulate`, for all the runs kept.
+        As in [`simulate`][mrpctl.simulation.simulate], for all the runs kept.
     progress : callable, keyword-only
         ``progress(samples_done, samples_total)``, called from the calling thread while
         the workers run; an exception raised by it stops the batch and propagates.
 
     actuator, sensor, delay : keyword-only
-        The flight loop's models (as in :func:`simulate`), shared by every run; each rule
-        must then be a :class:`mrpctl.flight.Hysteretic`. Without trajectories flight runs take
+        The flight loop's models (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run; each rule
+        must then be a [`mrpctl.flight.Hysteretic`][mrpctl.flight.Hysteretic]. Without trajectories flight runs take
         the lane engine too (noise and jitter streamed per slice, shared by the lanes), bit
         for bit the scalar engine's; the result then has ``saturated_fraction`` and
         ``peak_command``.
     disturbance : keyword-only
-        The body-frame torque w (N m), shared by every run in any form :func:`simulate` takes
+        The body-frame torque w (N m), shared by every run in any form [`simulate`][mrpctl.simulation.simulate] takes
         (constant (3,), (n, 3) rows, ``Disturbance(function=w)`` of the sample times), or one per
-        run: a list or tuple of N items, each None, a :class:`mrpctl.flight.Disturbance` or a NumPy
+        run: a list or tuple of N items, each None, a [`mrpctl.flight.Disturbance`][mrpctl.flight.Disturbance] or a
+        NumPy
         array ((3,) or (n, 3)), or a (N, n, 3) array. Nothing of size (N, n, 3) is made that was not
         given: a shared per-sample torque is evaluated slice by slice (a function on the slice's
         times) and streamed, a given (N, n, 3) array is read through views. Each run equals
-        :func:`simulate` with its own disturbance bit for bit. Metrics-only runs take the lane
+        [`simulate`][mrpctl.simulation.simulate] with its own disturbance bit for bit. Metrics-only runs take the lane
         engine, a shared torque's rows streamed beside the noise, per-run torques as a per-lane
         stream.
     predictor : mrpctl.Predictor, keyword-only
-        The predictor controller (as in :func:`simulate`), shared by every run; each rule must
-        then be a :class:`mrpctl.OnPredicted`. Predictor runs take the scalar engine (on the thread
+        The predictor controller (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run; each rule must
+        then be a [`mrpctl.OnPredicted`][mrpctl.predictor.OnPredicted]. Predictor runs take the scalar engine (on the
+        thread
         pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
         (shared or per run), each run streaming its own rows.
 
@@ -834,7 +837,7 @@ def _run_lanes(
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
-    runs' :func:`~mrpctl.loop.options.flight_structure`), W runs per C call, the batches on the thread
+    runs' `flight_structure`), W runs per C call, the batches on the thread
     pool; write the rows of ``stats`` (and of ``flight_rows``: the flight sample's memory).
     ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then

@@ -1,4 +1,5 @@
-"""Results of closed-loop runs: :class:`SimulationResult`, :class:`BatchResult`, and their assembly."""
+"""Results of closed-loop runs: [`SimulationResult`][mrpctl.SimulationResult], [`BatchResult`][mrpctl.BatchResult], and
+their assembly."""
 
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ logger = logging.getLogger("mrpctl.simulation")
 
 
 class _Conversions:
-    """``to_xarray()`` and ``to_pandas()`` of a result, through :mod:`mrpctl.data`."""
+    """``to_xarray()`` and ``to_pandas()`` of a result, through [`mrpctl.data`][mrpctl.data]."""
 
     def to_xarray(self) -> Any:
         """The result as a labelled ``xarray.Dataset`` (`mrpctl.data.to_xarray`)."""
@@ -171,7 +172,7 @@ class SimulationResult(_Conversions):
         return np.hstack((self.sigma, self.omega / 4.0))
 
     def plot(self, **kwargs: Any) -> Any:
-        """Plot the run: :func:`mrpctl.plots.plot_response` (``kwargs`` passed on)."""
+        """Plot the run: [`mrpctl.plots.plot_response`][mrpctl.plots.plot_response] (``kwargs`` passed on)."""
         # deferred: matplotlib (through mrpctl.plots), only when a figure is asked for
         from mrpctl.plots import plot_response
 
@@ -214,7 +215,7 @@ class SimulationResult(_Conversions):
 
 
 def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: dict[str, Any]) -> SimulationResult:
-    """The one place a :class:`SimulationResult` is built from what an engine returned."""
+    """The one place a [`SimulationResult`][mrpctl.SimulationResult] is built from what an engine returned."""
     rate = common["rate"]
     metrics = Metrics.from_stats(output.stats)
     valid = metrics.valid_samples(n)
@@ -400,7 +401,7 @@ class BatchResult(_Conversions):
         )
 
     def plot(self, **kwargs: Any) -> Any:
-        """Plot the batch: :func:`mrpctl.plots.plot_batch` (``kwargs`` passed on)."""
+        """Plot the batch: [`mrpctl.plots.plot_batch`][mrpctl.plots.plot_batch] (``kwargs`` passed on)."""
         # deferred: matplotlib (through mrpctl.plots), only when a figure is asked for
         from mrpctl.plots import plot_batch
 
@@ -438,7 +439,7 @@ def assemble_batch(
     runs: list[SimulationResult] | None,
     flight_memory: np.ndarray | None = None,
 ) -> BatchResult:
-    """The :class:`BatchResult` from the (N, stats) rows of the runs (and the (N, 10) flight
+    """The [`BatchResult`][mrpctl.BatchResult] from the (N, stats) rows of the runs (and the (N, 10) flight
     memories after the runs: n_sat at 5, peak |u_c,i| at 6:9, peak |u_c| at 9; NaN rows for
     runs of other rules)."""
     metrics = [Metrics.from_stats(row) for row in stats]
@@ -599,7 +600,7 @@ def _batch_dataset(result: BatchResult) -> xr.Dataset:
 
 
 def to_xarray(result: SimulationResult | BatchResult) -> xr.Dataset:
-    """The result as an :class:`xarray.Dataset`.
+    """The result as an `xarray.Dataset`.
 
     A run: ``sigma``, ``omega``, ``u`` over (``time`` in s, ``axis`` 1-3), ``switched`` over
     time, the metrics and the inputs (inertia, K, x0, τ, rate, ...) as variables, the rule
@@ -614,7 +615,7 @@ def to_xarray(result: SimulationResult | BatchResult) -> xr.Dataset:
 
 
 def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
-    """The result as a :class:`pandas.DataFrame`.
+    """The result as a `pandas.DataFrame`.
 
     A run: indexed by ``t`` (s), columns sigma1-3, omega1-3 (rad/s), u1-3 (N m), switched (and,
     for a flight run with records, logic, sigma_c1-3, u_c1-3 (N m, the commanded torque) and
