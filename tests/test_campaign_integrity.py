@@ -1,4 +1,4 @@
-"""Campaign store integrity: damaged chunks detected by report/replay and repaired by resume, one writer, strict JSON."""
+"""Campaign store integrity: damaged chunks found by report/replay and repaired by resume, one writer, strict JSON."""
 
 from __future__ import annotations
 
@@ -134,7 +134,7 @@ def test_summary_json_is_strict_json_with_nulls(tmp_path):
     spec["t_final"] = 0.2
     out = tmp_path / "out"
     run_campaign(parse_campaign(spec), out, chunk=CHUNK, threads=1)
-    result, paths = write_report(out)
+    result, _paths = write_report(out)
     assert result.converged == 0
     summary = _strict((out / "report" / "summary.json").read_text())
     assert summary["settling_time_s"] == {"median": None, "p95": None, "max": None}
@@ -171,7 +171,7 @@ def _writer(out: str, go, results) -> None:  # a child campaign writer started t
         results.put(("ran", result.simulated))
     except StoreLockedError as exc:
         results.put(("locked", str(exc)))
-    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which fails
+    except BaseException as exc:
         results.put(("error", repr(exc)))
 
 

@@ -7,8 +7,8 @@ the chunk's completion flag is set. The files written when the store is created 
 ``zarr.json``, the ``run`` coordinate, the per-sample files' arrays) are recorded in
 ``chunk_complete/sha256/store.json`` inside the temporary store, before it is renamed into place,
 so a store that exists has its record (the ``zarr.json`` files only as "must exist and parse": their
-attributes may be edited on purpose; the data files by SHA-256). A chunk file Zarr did not write (its values all equal the
-array's fill value) is recorded as absent. The records live inside the ``chunk_complete`` array's
+attributes may be edited on purpose; the data files by SHA-256). A chunk file Zarr did not write (its values all equal
+the array's fill value) is recorded as absent. The records live inside the ``chunk_complete`` array's
 folder, where Zarr never looks (no warning for readers of the group) and where they travel with
 the store.
 
@@ -139,9 +139,9 @@ def writer_lock(out: str | Path) -> Iterator[None]:
             holder = _read_holder(fd)
             os.close(fd)
             note = ""
-            if holder.get("host") == socket.gethostname() and isinstance(holder.get("pid"), int):
-                if not _pid_alive(holder["pid"]):
-                    note = " (that pid is gone; a process it started still holds the lock)"
+            pid = holder.get("pid")
+            if holder.get("host") == socket.gethostname() and isinstance(pid, int) and not _pid_alive(pid):
+                note = " (that pid is gone; a process it started still holds the lock)"
             raise StoreLockedError(
                 f"out: {folder} is being written by another process ({_describe(holder)}){note}; wait until it "
                 f"ends (the lock {path} is released when it exits) or choose another --out"
@@ -214,9 +214,7 @@ def record_path(store: Path, index: int) -> Path:
 def record_chunk(store: Path, arrays: dict[str, int], index: int) -> None:
     """Hash chunk ``index``'s files and write the record atomically (before its flag is set)."""
     files = chunk_files(store, arrays, index)
-    _write_json_atomically(
-        record_path(store, index), {str(p.relative_to(store)): _digest(p) for p in files.values()}
-    )
+    _write_json_atomically(record_path(store, index), {str(p.relative_to(store)): _digest(p) for p in files.values()})
 
 
 def forget_chunk(store: Path, arrays: dict[str, int], index: int) -> None:
@@ -311,14 +309,14 @@ def _flags(store: Path, chunks: int) -> tuple[list[bool], list[str | None]]:
     array = zarr.open_array(str(store / "chunk_complete"), mode="r")
     try:
         return [bool(v) for v in np.asarray(array[:], dtype=bool)], [None] * chunks
-    except Exception:  # noqa: BLE001 - a damaged flag chunk: read them one by one
+    except Exception:
         flags: list[bool] = []
         problems: list[str | None] = []
         for i in range(chunks):
             try:
                 flags.append(bool(array[i]))
                 problems.append(None)
-            except Exception as exc:  # noqa: BLE001
+            except Exception as exc:
                 flags.append(False)
                 problems.append(f"cannot be decoded ({type(exc).__name__})")
         return flags, problems
@@ -368,7 +366,9 @@ def check_store(store: Path, arrays: dict[str, int], runs_per_chunk: int, count:
                 for name, digest in entries.items():
                     found = _digest(store / name)
                     if found != digest:
-                        problem = ChunkDamage(i, start, stop, Path(name).parts[0], str(store / name), _problem(found, digest))
+                        problem = ChunkDamage(
+                            i, start, stop, Path(name).parts[0], str(store / name), _problem(found, digest)
+                        )
                         break
                 if problem is None and not flags[i]:
                     if not flag_files[i].exists():

@@ -203,7 +203,9 @@ class CampaignReport:
                 + "); repair with mrpctl campaign run CAMPAIGN.toml --out OUT"
             )
             for d in damaged:
-                lines.append(f"    chunk {d['chunk']} (runs {d['runs'][0]}-{d['runs'][1]}), {d['array']}: {d['problem']}")
+                lines.append(
+                    f"    chunk {d['chunk']} (runs {d['runs'][0]}-{d['runs'][1]}), {d['array']}: {d['problem']}"
+                )
         if len(self.by_rule) > 1:
             lines.append("  by rule (the same cases under each rule):")
             lines.append(
@@ -412,9 +414,7 @@ def _write_text(path: Path, text: str) -> None:
     os.replace(temporary, path)
 
 
-def write_report(
-    out: str | Path, *, worst: int = 10, intact_only: bool = False
-) -> tuple[CampaignReport, list[Path]]:
+def write_report(out: str | Path, *, worst: int = 10, intact_only: bool = False) -> tuple[CampaignReport, list[Path]]:
     """Write ``out/report/``: report.md (the table), summary.json (strict JSON: NaN and infinities are
     ``null``) and one PNG per figure. ``intact_only``: as in :func:`report`."""
     out = Path(out)
@@ -545,10 +545,8 @@ def _damaged_run(out: str | Path, run: int, attrs: dict[str, Any], damage: str) 
     try:
         with xr.open_zarr(str(Path(out) / STORE_NAME), consolidated=False) as stored:
             one = stored.drop_vars("chunk_complete").isel(run=[run]).load()
-    except Exception as exc:  # noqa: BLE001 - a truncated or garbled chunk
-        raise StoreDamagedError(
-            f"out: run {run} cannot be read from {out}: {damage} ({type(exc).__name__})"
-        ) from None
+    except Exception as exc:
+        raise StoreDamagedError(f"out: run {run} cannot be read from {out}: {damage} ({type(exc).__name__})") from None
     one.attrs = dict(attrs)
     return one
 

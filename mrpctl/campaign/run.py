@@ -82,7 +82,9 @@ class CampaignRun:
         if self.repaired:
             text += f"\n  re-ran {len(self.repaired)} damaged chunk(s): " + "; ".join(self.repaired)
         if not self.verified:
-            text += "\n  note: the store has no checksum records (an older mrpctl wrote it): its chunks were not verified"
+            text += (
+                "\n  note: the store has no checksum records (an older mrpctl wrote it): its chunks were not verified"
+            )
         return text
 
 

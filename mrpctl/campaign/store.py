@@ -353,10 +353,11 @@ def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: b
             selected = selected.isel(run=np.flatnonzero(done))
         try:
             dataset = selected.load()
-        except Exception as exc:  # noqa: BLE001 - a store without records: a chunk Zarr cannot decode
+        except Exception as exc:
             raise integrity.StoreDamagedError(
                 f"out: the campaign store {path} cannot be read ({type(exc).__name__}: {exc}); it was written "
-                "without checksum records, so the damaged chunk cannot be named; run the campaign again into a new --out"
+                "without checksum records, so the damaged chunk cannot be named; run the campaign again into a new "
+                "--out"
             ) from None
     note = {
         "verified": check.verified,
