@@ -182,6 +182,7 @@ def context():
     return ctx
 
 
+@pytest.mark.slow  # 20 x 2 processes: about 4 minutes on 2 loaded cores
 def test_two_concurrent_writers_never_damage_the_store(clean, tmp_path, context):
     """20 attempts: two processes started together on one new --out; one proceeds (the other is refused, naming
     the holder) or they serialise (the second resumes a complete store); the store equals the clean one."""
