@@ -20,6 +20,7 @@ from scipy.stats import beta, norm
 
 from mrpctl._validation import integer
 from mrpctl.campaign._task import run_models, simulate_chunk
+from mrpctl.campaign.integrity import StoreDamagedError
 from mrpctl.campaign.sampling import run_inputs
 from mrpctl.campaign.simulation import METRICS, flight_keywords
 from mrpctl.campaign.store import INPUTS, open_campaign, spec_of, stored_noise_revision
@@ -160,6 +161,9 @@ class CampaignReport:
     peak_torque_max: float
     worst: tuple[WorstCase, ...] = field(repr=False)
     by_rule: tuple[RuleSummary, ...] = field(default=(), repr=False)
+    #: The store's check: ``verified`` (False: written without checksum records) and the ``damaged`` chunks
+    #: left out of this report (only with ``intact_only``).
+    integrity: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def summary(self) -> dict[str, Any]:
         """The report as JSON-ready values."""
@@ -177,6 +181,7 @@ class CampaignReport:
             "peak_torque_max_Nm": None if math.isnan(self.peak_torque_max) else self.peak_torque_max,
             "worst": [case.__dict__ for case in self.worst],
             "by_rule": [{**entry.__dict__, "wilson": list(entry.wilson)} for entry in self.by_rule],
+            "integrity": self.integrity,
         }
 
     def __str__(self) -> str:
@@ -191,6 +196,19 @@ class CampaignReport:
             f"  switches      median {w['median']:.4g}, p95 {w['p95']:.4g}, max {w['max']:.4g}",
             f"  peak torque   max {self.peak_torque_max:.4g} N m",
         ]
+        if self.integrity and not self.integrity.get("verified", True):
+            lines.append(f"  integrity     NOT VERIFIED: {self.integrity.get('note', 'no checksum records')}")
+        damaged = self.integrity.get("damaged", []) if self.integrity else []
+        if damaged:
+            lines.append(
+                f"  integrity     {len(damaged)} damaged chunk(s) LEFT OUT (runs "
+                + ", ".join(f"{d['runs'][0]}-{d['runs'][1]}" for d in damaged)
+                + "); repair with mrpctl campaign run CAMPAIGN.toml --out OUT"
+            )
+            for d in damaged:
+                lines.append(
+                    f"    chunk {d['chunk']} (runs {d['runs'][0]}-{d['runs'][1]}), {d['array']}: {d['problem']}"
+                )
         if len(self.by_rule) > 1:
             lines.append("  by rule (the same cases under each rule):")
             lines.append(
@@ -227,16 +245,36 @@ def _quantiles(values: np.ndarray) -> dict[str, float]:
     }
 
 
-def _dataset(source: str | Path | xr.Dataset) -> xr.Dataset:
-    return source if isinstance(source, xr.Dataset) else open_campaign(source)
+def _dataset(source: str | Path | xr.Dataset, intact_only: bool = False) -> xr.Dataset:
+    return source if isinstance(source, xr.Dataset) else open_campaign(source, intact_only=intact_only)
 
 
-def report(source: str | Path | xr.Dataset, *, worst: int = 10, out: str | Path | None = None) -> CampaignReport:
+def strict_json(value: Any) -> Any:
+    """``value`` with every NaN or infinite float replaced by None (JSON ``null``), recursively."""
+    if isinstance(value, dict):
+        return {str(k): strict_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict_json(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def report(
+    source: str | Path | xr.Dataset, *, worst: int = 10, out: str | Path | None = None, intact_only: bool = False
+) -> CampaignReport:
     """Summarise a campaign's complete runs (a results folder or its dataset).
 
     ``out`` is the folder written into the replay commands (default: ``source`` when it is a path).
+    A folder is checked first (:func:`~mrpctl.campaign.store.open_campaign`): a damaged chunk raises
+    ``StoreDamagedError`` naming it, unless ``intact_only``, which reports over the intact runs and lists
+    the damaged chunks in ``integrity`` (and in the table).
     """
-    dataset = _dataset(source)
+    dataset = _dataset(source, intact_only)
     worst = integer("worst", worst, minimum=0)
     folder = str(out if out is not None else (source if not isinstance(source, xr.Dataset) else "OUT"))
     n = dataset.sizes["run"]
@@ -298,6 +336,7 @@ def report(source: str | Path | xr.Dataset, *, worst: int = 10, out: str | Path 
         peak_torque_max=float(np.nanmax(peak)) if np.any(np.isfinite(peak)) else math.nan,
         worst=tuple(cases),
         by_rule=tuple(by_rule),
+        integrity=json.loads(str(dataset.attrs.get("integrity", "{}"))),
     )
 
 
@@ -379,10 +418,11 @@ def _write_text(path: Path, text: str) -> None:
     os.replace(temporary, path)
 
 
-def write_report(out: str | Path, *, worst: int = 10) -> tuple[CampaignReport, list[Path]]:
-    """Write ``out/report/``: report.md (the table), summary.json and one PNG per figure."""
+def write_report(out: str | Path, *, worst: int = 10, intact_only: bool = False) -> tuple[CampaignReport, list[Path]]:
+    """Write ``out/report/``: report.md (the table), summary.json (strict JSON: NaN and infinities are
+    ``null``) and one PNG per figure. ``intact_only``: as in :func:`report`."""
     out = Path(out)
-    dataset = open_campaign(out)
+    dataset = open_campaign(out, intact_only=intact_only)
     result = report(dataset, worst=worst, out=out)
     folder = out / "report"
     folder.mkdir(parents=True, exist_ok=True)
@@ -391,7 +431,7 @@ def write_report(out: str | Path, *, worst: int = 10) -> tuple[CampaignReport, l
         f"![{p.stem}]({p.name})\n\n" for p in written
     )
     _write_text(folder / "report.md", markdown)
-    _write_text(folder / "summary.json", json.dumps(result.summary(), indent=2, allow_nan=True) + "\n")
+    _write_text(folder / "summary.json", json.dumps(strict_json(result.summary()), indent=2, allow_nan=False) + "\n")
     return result, [folder / "report.md", folder / "summary.json", *written]
 
 
@@ -412,6 +452,9 @@ class ReplayResult:
     noise_revisions : tuple of int or None
         (stored, current) `NOISE_REVISION` when they differ and the campaign has attitude
         noise: its runs then differ in their last bits by design; None otherwise.
+    damage : str or None
+        The run's chunk does not match its checksum record (what is wrong and the repairing command); the
+        stored values were still decodable and are compared. None when the chunk is intact.
     """
 
     run: int
@@ -420,6 +463,7 @@ class ReplayResult:
     mismatches: tuple[str, ...]
     trajectory: SimulationResult | None = field(default=None, repr=False)
     noise_revisions: tuple[int, int] | None = None
+    damage: str | None = None
 
     @property
     def matches(self) -> bool:
@@ -431,6 +475,8 @@ class ReplayResult:
             f"replay of run {self.run}: "
             + ("identical to the stored run" if self.matches else "DIFFERS in " + ", ".join(self.mismatches))
         ]
+        if self.damage is not None:
+            lines.append(f"  the run's chunk is DAMAGED (does not match its checksum record): {self.damage}")
         if self.noise_revisions is not None:
             lines.append(
                 f"  the store was written with noise revision {self.noise_revisions[0]}, this mrpctl computes revision "
@@ -457,17 +503,27 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
     ------
     SpecificationError
         If the run is out of range or its chunk is not complete yet.
+    StoreDamagedError
+        If the run's chunk does not match its checksum record (other chunks' damage does not stop a replay).
     """
-    dataset = open_campaign(out, complete_only=False)
-    count = dataset.sizes["run"]
+    dataset = open_campaign(out, intact_only=True)
+    count = int(dataset.attrs["count"])
     run = integer("run", run, minimum=0, maximum=count - 1)
-    complete = open_campaign(out)
-    if run not in set(np.asarray(complete["run"]).tolist()):
+    damage_text = None
+    for damage in json.loads(str(dataset.attrs.get("integrity", "{}"))).get("damaged", []):
+        first, last = damage["runs"]
+        if first <= run <= last:
+            damage_text = (
+                f"chunk {damage['chunk']} (runs {first}-{last}), array {damage['array']}: {damage['file']} "
+                f"{damage['problem']}; repair with: mrpctl campaign run CAMPAIGN.toml --out {out}"
+            )
+            dataset = _damaged_run(out, run, dataset.attrs, damage_text)
+    if run not in set(np.asarray(dataset["run"]).tolist()):
         raise SpecificationError(f"run: run {run} has not been stored yet (its chunk is not complete)")
     spec = spec_of(dataset)
     values = simulate_chunk(spec, run, run + 1)
     names = list(INPUTS) + list(METRICS)
-    stored = {name: np.asarray(dataset[name].isel(run=run).values) for name in names}
+    stored = {name: np.asarray(dataset[name].sel(run=run).values) for name in names}
     replayed = {name: np.asarray(values[name][0]) for name in names}
     mismatches = tuple(name for name in names if not _same(stored[name], replayed[name]))
     result = None
@@ -482,7 +538,21 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
         mismatches=mismatches,
         trajectory=result,
         noise_revisions=revisions,
+        damage=damage_text,
     )
+
+
+def _damaged_run(out: str | Path, run: int, attrs: dict[str, Any], damage: str) -> xr.Dataset:
+    """Run ``run`` read from a chunk that fails its checksum (it may still decode: then it is compared)."""
+    from mrpctl.campaign.store import STORE_NAME
+
+    try:
+        with xr.open_zarr(str(Path(out) / STORE_NAME), consolidated=False) as stored:
+            one = stored.drop_vars("chunk_complete").isel(run=[run]).load()
+    except Exception as exc:
+        raise StoreDamagedError(f"out: run {run} cannot be read from {out}: {damage} ({type(exc).__name__})") from None
+    one.attrs = dict(attrs)
+    return one
 
 
 def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> SimulationResult:

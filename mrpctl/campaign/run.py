@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
 import os
+import secrets
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +16,7 @@ import numpy as np
 
 from mrpctl._validation import integer
 from mrpctl.campaign._task import chunk_on_worker, simulate_chunk
+from mrpctl.campaign.integrity import writer_lock
 from mrpctl.campaign.spec import CampaignSpec
 from mrpctl.campaign.store import CampaignStore
 from mrpctl.errors import SpecificationError
@@ -52,6 +56,10 @@ class CampaignRun:
         Chunks simulated by this call.
     runs : int
         Runs simulated by this call.
+    repaired : tuple of str
+        The damaged chunks found when the call started (each with its runs and what was wrong), simulated again.
+    verified : bool
+        False for a store written without checksum records (its chunks could not be checked).
     """
 
     out: Path
@@ -59,6 +67,8 @@ class CampaignRun:
     already_complete: int
     simulated: int
     runs: int
+    repaired: tuple[str, ...] = ()
+    verified: bool = True
 
     @property
     def complete(self) -> bool:
@@ -68,7 +78,38 @@ class CampaignRun:
     def __str__(self) -> str:
         resumed = f" (resumed: {self.already_complete} chunk(s) were already complete)" if self.already_complete else ""
         state = "complete" if self.complete else "INCOMPLETE"
-        return f"campaign {state}: {self.simulated} chunk(s), {self.runs} runs simulated into {self.out}{resumed}"
+        text = f"campaign {state}: {self.simulated} chunk(s), {self.runs} runs simulated into {self.out}{resumed}"
+        if self.repaired:
+            text += f"\n  re-ran {len(self.repaired)} damaged chunk(s): " + "; ".join(self.repaired)
+        if not self.verified:
+            text += (
+                "\n  note: the store has no checksum records (an older mrpctl wrote it): its chunks were not verified"
+            )
+        return text
+
+
+def campaign_token(spec: CampaignSpec, out: str | Path) -> str:
+    """A short hash of the campaign (its file's values, its per-sample files) and of its store's path.
+
+    Part of every Dask task key, so campaigns sharing one cluster never share a key (Dask would hand one
+    chunk's result to both).
+    """
+    text = json.dumps(
+        {
+            "campaign": spec.source,
+            "name": spec.base.name,
+            "files": {key: each.sha256 for key, each in spec.files.items()},
+            "out": str(Path(out).resolve()),
+        },
+        sort_keys=True,
+        default=str,
+    )
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def task_key(token: str, attempt: str, index: int) -> str:
+    """The Dask key of chunk ``index``: ``chunk-<campaign token>-<attempt>-<index>`` (the index last)."""
+    return f"chunk-{token}-{attempt}-{index}"
 
 
 def _local(spec: CampaignSpec, store: CampaignStore, todo: list[int], threads: int | None) -> Iterator[tuple[int, Any]]:
@@ -80,6 +121,8 @@ def _local(spec: CampaignSpec, store: CampaignStore, todo: list[int], threads: i
 def _dask(
     spec: CampaignSpec, store: CampaignStore, todo: list[int], scheduler: str, workers: int | None
 ) -> Iterator[tuple[int, Any]]:
+    # one attempt per call: a resumed campaign never receives a result the cluster kept from an earlier call
+    token, attempt = campaign_token(spec, store.out), secrets.token_hex(4)
     # deferred: Dask, only for a Dask campaign or a store read lazily
     from dask.distributed import Client, LocalCluster, as_completed
 
@@ -110,7 +153,7 @@ def _dask(
         def submit(index: int) -> None:  # the chunk's task: the spec's text and its files' numbers
             start, stop = store.bounds(index)
             task = (spec.source, spec.base.name, start, stop, spec.files)
-            futures.add(client.submit(chunk_on_worker, *task, key=f"chunk-{index}", pure=False))
+            futures.add(client.submit(chunk_on_worker, *task, key=task_key(token, attempt, index), pure=False))
 
         for index in pending:
             submit(index)
@@ -171,6 +214,15 @@ def run_campaign(
     Returns
     -------
     CampaignRun
+
+    Raises
+    ------
+    StoreLockedError
+        If another process is writing the same store: the one-writer lock
+        ([writer_lock][mrpctl.campaign.integrity.writer_lock]) is held from before the store is created
+        until this call returns or raises (Ctrl-C included).
+    StoreDamagedError
+        If a file written at the store's creation is damaged (a damaged *chunk* is simulated again).
     """
     if chunk is not None:
         chunk = integer("chunk", chunk, minimum=1)
@@ -178,8 +230,24 @@ def run_campaign(
         workers = integer("workers", workers, minimum=1)
     if scheduler is not None and scheduler != "local" and "://" not in scheduler:
         raise SpecificationError(f"scheduler must be 'local' or an address such as tcp://host:8786, got {scheduler!r}")
+    with writer_lock(out):
+        return _run_locked(spec, out, chunk, scheduler, workers, threads, on_chunk)
+
+
+def _run_locked(
+    spec: CampaignSpec,
+    out: str | Path,
+    chunk: int | None,
+    scheduler: str | None,
+    workers: int | None,
+    threads: int | None,
+    on_chunk: ChunkCallback | None,
+) -> CampaignRun:
     store = CampaignStore(out, spec, chunk)
     complete = store.complete()
+    repaired = tuple(str(d) for d in store.damaged)
+    for damage in store.damaged:
+        logger.warning("campaign %s: re-running damaged %s", spec.base.name, damage)
     todo = [int(i) for i in np.flatnonzero(~complete)]
     already = int(complete.sum())
     logger.info("campaign %s: %d of %d chunks to run", spec.base.name, len(todo), store.chunks)
@@ -197,4 +265,12 @@ def run_campaign(
         close = getattr(source, "close", None)
         if close is not None:
             close()
-    return CampaignRun(out=Path(out), chunks=store.chunks, already_complete=already, simulated=simulated, runs=runs)
+    return CampaignRun(
+        out=Path(out),
+        chunks=store.chunks,
+        already_complete=already,
+        simulated=simulated,
+        runs=runs,
+        repaired=repaired,
+        verified=store.verified,
+    )

@@ -43,6 +43,7 @@ import numpy as np
 import xarray as xr
 import zarr
 
+from mrpctl.campaign import integrity
 from mrpctl.campaign.simulation import METRICS
 from mrpctl.campaign.spec import CampaignSpec, SampleFile, parse_campaign
 from mrpctl.errors import SpecificationError
@@ -147,6 +148,11 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
     return dataset
 
 
+def run_arrays() -> dict[str, int]:
+    """The per-run arrays (chunked by the campaign chunk) and their number of dimensions."""
+    return {**{name: 1 + len(dims) for name, (dims, _) in INPUTS.items()}, **{name: 1 for name in METRICS}}
+
+
 def bytes_per_run() -> int:
     """Uncompressed bytes one run takes in the store (inputs, metrics and its coordinate)."""
     inputs = sum(8 * int(np.prod([_SIZES[d] for d in dims])) for dims, _ in INPUTS.values())
@@ -165,12 +171,22 @@ class CampaignStore:
         The campaign. Reopening a store of another campaign is an error.
     chunk : int or None
         Runs per chunk. None: the store's (when it exists) or 1000.
+
+    Opening or creating the store holds the one-writer lock
+    ([writer_lock][mrpctl.campaign.integrity.writer_lock]); a caller that writes chunks holds it
+    for as long as it writes (``run_campaign`` does).
     """
 
     def __init__(self, out: str | Path, spec: CampaignSpec, chunk: int | None = None) -> None:
         self.out = Path(out)
         self.path = self.out / STORE_NAME
         self.spec = spec
+        with integrity.writer_lock(self.out):
+            self._open(chunk)
+        self.chunks = -(-spec.count // self.chunk)
+
+    def _open(self, chunk: int | None) -> None:
+        spec = self.spec
         if self.path.exists():
             stored = zarr.open_group(str(self.path), mode="r")
             attrs = dict(stored.attrs)
@@ -198,7 +214,6 @@ class CampaignStore:
             if self.chunk < 1:
                 raise SpecificationError(f"chunk must be >= 1, got {self.chunk}")
             self._create()
-        self.chunks = -(-spec.count // self.chunk)
 
     def _create(self) -> None:
         self.out.mkdir(parents=True, exist_ok=True)
@@ -228,31 +243,61 @@ class CampaignStore:
         # to be the default (the campaign's own, or a user's), which would ship every chunk as a task.
         with dask.config.set(scheduler="synchronous"):
             dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
+        # the per-sample files' arrays are checked by their own SHA-256 (attrs["flight_files"], stored_files)
+        skip = {*run_arrays(), "chunk_complete", *(name for name, _ in FILE_ARRAYS.values())}
+        integrity.record_static(temporary, skip=skip)
         os.replace(temporary, self.path)
 
+    def check(self) -> integrity.StoreCheck:
+        """Every complete chunk checked against its SHA-256 record."""
+        return integrity.check_store(self.path, run_arrays(), self.chunk, self.spec.count)
+
     def complete(self) -> np.ndarray:
-        """(chunks,) True for every chunk whose runs are all written."""
-        return np.asarray(zarr.open_array(str(self.path / "chunk_complete"), mode="r")[:], dtype=bool)
+        """(chunks,) True for every chunk whose runs are all written and intact (damaged chunks are not).
+
+        Raises
+        ------
+        StoreDamagedError
+            If a file written at the store's creation (metadata, coordinates) is damaged.
+        """
+        check = self.check()
+        if check.static:
+            raise check.error(repair="")
+        self.damaged = check.damaged
+        self.verified = check.verified
+        return np.asarray(check.intact, dtype=bool)
 
     def bounds(self, index: int) -> tuple[int, int]:
         """The runs [start, stop) of chunk ``index``."""
         return index * self.chunk, min((index + 1) * self.chunk, self.spec.count)
 
     def write(self, index: int, values: dict[str, np.ndarray]) -> None:
-        """Write chunk ``index``'s arrays, then mark it complete (in that order)."""
+        """Write chunk ``index``'s arrays, their SHA-256 record, then mark it complete (in that order).
+
+        A chunk written before (damaged, or half-written) is first unflagged and its record and files removed.
+        """
         start, stop = self.bounds(index)
+        verified = (self.path / integrity.RECORDS).is_dir()
+        flags = zarr.open_array(str(self.path / "chunk_complete"), mode="r+")
+        if verified:
+            flags[index] = False
+            integrity.forget_chunk(self.path, run_arrays(), index)
         data = {}
         for name, (dims, _) in INPUTS.items():
             data[name] = (("run", *dims), values[name])
         for name in METRICS:
             data[name] = (("run",), values[name])
         xr.Dataset(data).to_zarr(str(self.path), region={"run": slice(start, stop)}, mode="r+", consolidated=False)
-        flags = zarr.open_array(str(self.path / "chunk_complete"), mode="r+")
+        if verified:
+            integrity.record_chunk(self.path, run_arrays(), index)
         flags[index] = True
 
 
-def open_campaign(out: str | Path, *, complete_only: bool = True) -> xr.Dataset:
+def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: bool = False) -> xr.Dataset:
     """The results of a campaign (running, interrupted or finished) as an in-memory Dataset.
+
+    Every complete chunk is first checked against its SHA-256 record
+    ([check_store][mrpctl.campaign.integrity.check_store]).
 
     Parameters
     ----------
@@ -261,11 +306,21 @@ def open_campaign(out: str | Path, *, complete_only: bool = True) -> xr.Dataset:
     complete_only : bool
         Keep only the runs of complete chunks (default); False returns every run, with
         the missing values (NaN, −1, False) where a run has not finished.
+    intact_only : bool
+        With a damaged chunk, return the runs of the intact complete chunks (and record the damaged
+        ones in ``attrs["integrity"]``) rather than refusing.
 
     Returns
     -------
     xarray.Dataset
-        Over ``run``; ``attrs`` holds the campaign (JSON), seed, count and versions.
+        Over ``run``; ``attrs`` holds the campaign (JSON), seed, count and versions, and ``integrity``
+        (JSON: ``verified``, and the ``damaged`` chunks with their runs, array, file and problem).
+
+    Raises
+    ------
+    StoreDamagedError
+        If a chunk (or a file written at the store's creation) does not match its record; the message
+        names the store, the array, the chunk's runs, what is wrong and the command that repairs it.
     """
     path = Path(out) / STORE_NAME
     if not path.exists():
@@ -278,13 +333,35 @@ def open_campaign(out: str | Path, *, complete_only: bool = True) -> xr.Dataset:
                 f"out: the campaign needs about {estimate / 1e9:.3g} GB in memory but {available / 1e9:.3g} GB are "
                 f"available; read it lazily with xarray.open_zarr({str(path)!r}) instead"
             )
-        dataset = stored.drop_vars("chunk_complete").load()
-    if not complete_only:
-        return dataset
-    flags = np.asarray(zarr.open_array(str(path / "chunk_complete"), mode="r")[:], dtype=bool)
-    runs_per_chunk = int(str(zarr.open_array(str(path / "chunk_complete"), mode="r").attrs["runs_per_chunk"]))
-    done = np.repeat(flags, runs_per_chunk)[: dataset.sizes["run"]]
-    return dataset.isel(run=np.flatnonzero(done))
+        runs_per_chunk = int(str(stored["chunk_complete"].attrs["runs_per_chunk"]))
+        count = stored.sizes["run"]
+        check = integrity.check_store(path, run_arrays(), runs_per_chunk, count)
+        repair = f"mrpctl campaign run CAMPAIGN.toml --out {out} (CAMPAIGN.toml: the file this store was run from)"
+        if check.static or (check.damaged and not (intact_only and complete_only)):
+            raise check.error(repair=repair)
+        selected = stored.drop_vars("chunk_complete")
+        if complete_only:
+            done = np.repeat(np.asarray(check.intact, dtype=bool), runs_per_chunk)[:count]
+            selected = selected.isel(run=np.flatnonzero(done))
+        try:
+            dataset = selected.load()
+        except Exception as exc:
+            raise integrity.StoreDamagedError(
+                f"out: the campaign store {path} cannot be read ({type(exc).__name__}: {exc}); it was written "
+                "without checksum records, so the damaged chunk cannot be named; run the campaign again into a new "
+                "--out"
+            ) from None
+    note = {
+        "verified": check.verified,
+        "damaged": [
+            {"chunk": d.index, "runs": [d.start, d.stop - 1], "array": d.array, "file": d.file, "problem": d.problem}
+            for d in check.damaged
+        ],
+    }
+    if not check.verified:
+        note["note"] = "written without checksum records (an older mrpctl): the chunks cannot be verified"
+    dataset.attrs["integrity"] = json.dumps(note, sort_keys=True)
+    return dataset
 
 
 def _available_memory() -> int | None:

@@ -71,7 +71,7 @@ def _report(args: argparse.Namespace) -> int:
     # deferred: xarray and zarr (through the campaign store), only for campaign report
     from mrpctl.campaign.report import write_report
 
-    summary, paths = write_report(args.out, worst=args.worst)
+    summary, paths = write_report(args.out, worst=args.worst, intact_only=args.intact_only)
     print(summary)
     print(f"report.md, summary.json and {len(paths) - 2} figures written to {paths[0].parent}")
     return 0
@@ -85,7 +85,7 @@ def _replay(args: argparse.Namespace) -> int:
     print(result)
     if args.plot is not None:
         print(f"figure written to {save_replay_plot(result, args.plot)}")
-    return 0 if result.matches else MISMATCH
+    return 0 if result.matches and result.damage is None else MISMATCH
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -108,6 +108,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     report = commands.add_parser("report", help="table and figures of a campaign's complete runs")
     report.add_argument("out", type=Path, help="results folder")
     report.add_argument("--worst", type=int, default=10, help="worst cases to list (default 10)")
+    report.add_argument(
+        "--intact-only", action="store_true", help="report over the intact runs of a damaged store and list the rest"
+    )
     report.set_defaults(handler=_report)
 
     replay = commands.add_parser("replay", help="re-run one run alone and check it against the stored metrics")
