@@ -31,6 +31,7 @@ v4 maps it to a byte-range lock).
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import json
 import logging
@@ -43,6 +44,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from mrpctl.errors import MrpctlError
 
@@ -119,8 +122,6 @@ def writer_lock(out: str | Path) -> Iterator[None]:
     StoreLockedError
         If another process holds it; the message names the holder (host, pid, start time, command).
     """
-    import fcntl
-
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / LOCK_NAME
@@ -303,7 +304,7 @@ def _flag_files(store: Path, chunks: int) -> list[Path]:
 
 def _flags(store: Path, chunks: int) -> tuple[list[bool], list[str | None]]:
     """Each chunk's completion flag, and a problem text where its file cannot be decoded."""
-    import numpy as np
+    # deferred: zarr (with xarray about 0.5 s to import), only when a store is read
     import zarr
 
     array = zarr.open_array(str(store / "chunk_complete"), mode="r")

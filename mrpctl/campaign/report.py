@@ -544,8 +544,6 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
 
 def _damaged_run(out: str | Path, run: int, attrs: dict[str, Any], damage: str) -> xr.Dataset:
     """Run ``run`` read from a chunk that fails its checksum (it may still decode: then it is compared)."""
-    from mrpctl.campaign.store import STORE_NAME
-
     try:
         with xr.open_zarr(str(Path(out) / STORE_NAME), consolidated=False) as stored:
             one = stored.drop_vars("chunk_complete").isel(run=[run]).load()
