@@ -23,7 +23,7 @@ from mrpctl.campaign._task import run_models, simulate_chunk
 from mrpctl.campaign.integrity import StoreDamagedError
 from mrpctl.campaign.sampling import run_inputs
 from mrpctl.campaign.simulation import METRICS, flight_keywords
-from mrpctl.campaign.store import INPUTS, open_campaign, spec_of, stored_noise_revision
+from mrpctl.campaign.store import INPUTS, STORE_NAME, open_campaign, spec_of, stored_noise_revision
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
 from mrpctl.simulation import simulate
