@@ -350,7 +350,7 @@ def delay_periods(value: Any, key: str, rate: float) -> int:
         return delay_samples(seconds, rate)
     except SpecificationError as exc:
         raise SpecificationError(
-            f"{key} must be a whole number of measurement periods: {seconds!r} s at rate = {rate!r} Hz is "
+            f"{key}: delays must be whole numbers of measurement periods: {seconds!r} s at rate = {rate!r} Hz is "
             f"{seconds * rate!r} periods; choose it as a multiple of 1/rate"
         ) from exc
 
@@ -366,7 +366,8 @@ def _delay_bounds(tau: float, rate: float, tau_min: Any) -> tuple[float, float]:
         raise SpecificationError(f"tau_min must be >= 1/rate = {1.0 / rate:g} s, got {low!r} s")
     if d_low > d_high:
         raise SpecificationError(
-            f"tau_min must be <= tau = {tau!r} s ({d_high} periods), got {low!r} s ({d_low} periods)"
+            f"tau_max must be >= tau_min (compared as whole periods), got tau_min = {low!r} s ({d_low} periods), "
+            f"tau_max = tau = {tau!r} s ({d_high} periods)"
         )
     return min(low, tau), tau
 
