@@ -740,8 +740,11 @@ def _check_delay(tau: float, rate: float) -> None:
     """τ · rate must be a whole number of measurement periods (as :func:`~mrpctl.simulate` requires).
 
     The rule is [delay_samples][mrpctl.loop.delay_samples]'s, the one the engine applies (relative
-    tolerance 1e-9: τ = k · h written in floating point is k periods).
+    tolerance 1e-9: τ = k · h written in floating point is k periods). A delay beyond 2^53 periods is left
+    to the memory checks, which name the option that fixes it.
     """
+    if math.isfinite(tau * rate) and tau * rate > 2.0**53:
+        return
     delay_samples(tau, rate)
 
 
