@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
@@ -11,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from mrpctl._files import read_numbers, read_toml
 from mrpctl._validation import (
     finite_array,
     finite_scalar,
@@ -21,6 +21,7 @@ from mrpctl._validation import (
 )
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
+from mrpctl.loop import delay_samples
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
@@ -233,26 +234,21 @@ def samples_file(value: Any, key: str, *, base: Path | None = None) -> np.ndarra
     ``value`` is the file name: ``.npy`` (NumPy, no pickles) or ``.csv`` / ``.txt`` (comma-separated,
     ``#`` comments), relative to ``base`` (the folder of the scenario or campaign TOML file; None: the
     working directory).
-    Errors (not a name, a missing file, an unknown suffix, unreadable or non-finite numbers) name ``key``.
+    A UTF-8 byte-order mark is allowed (a spreadsheet's "CSV UTF-8" export); memory is estimated before
+    reading (from a ``.npy`` header, or from the CSV's size). Errors (not a name, a missing file, a folder,
+    an unknown suffix, text that is not UTF-8, a cell that is not a number, a non-finite value) name ``key``,
+    the file (and the file a link points to) and the row and column (from 1, as a spreadsheet shows them),
+    never the file's content.
     """
     if not isinstance(value, str | Path) or not str(value):
         raise SpecificationError(f"{key} must be a file name (.csv or .npy, relative to the TOML file), got {value!r}")
     path = Path(value)
     if not path.is_absolute() and base is not None:
         path = base / path
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         where = "the TOML file's folder" if base is not None else "the working directory"
         raise SpecificationError(f"{key}: no file {path} (a relative name is taken from {where})")
-    suffix = path.suffix.lower()
-    if suffix not in (".npy", ".csv", ".txt"):
-        raise SpecificationError(f"{key}: {path} must be a .npy or a .csv (.txt) file, got the suffix {suffix!r}")
-    try:
-        if suffix == ".npy":
-            raw = np.load(path, allow_pickle=False)
-        else:
-            raw = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
-    except (OSError, ValueError) as exc:
-        raise SpecificationError(f"{key}: cannot read the numbers of {path}: {exc}") from exc
+    raw = read_numbers(path, key)
     return finite_array(f"{key} ({path})", raw)
 
 
@@ -277,17 +273,94 @@ def delay_values(array: np.ndarray, key: str, n: int) -> np.ndarray:
     return values
 
 
+def delay_periods(value: Any, key: str, rate: float) -> int:
+    """The delay ``value`` (s) named ``key`` as a whole number of periods at ``rate`` (Hz).
+
+    The rule is [delay_samples][mrpctl.loop.delay_samples]'s (τ · rate whole to a relative 1e-9), so a
+    delay written as k · h in floating point (3 × 0.1 = 0.30000000000000004 s at 10 Hz) is k periods.
+    """
+    seconds = nonnegative_scalar(key, value)
+    try:
+        return delay_samples(seconds, rate)
+    except SpecificationError as exc:
+        raise SpecificationError(
+            f"{key}: delays must be whole numbers of measurement periods: {seconds!r} s at rate = {rate!r} Hz is "
+            f"{seconds * rate!r} periods; choose it as a multiple of 1/rate"
+        ) from exc
+
+
+def _delay_bounds(tau: float, rate: float, tau_min: Any) -> tuple[float, float]:
+    """(tau_min, tau) of a varying delay (s), compared as whole periods: 1 <= tau_min <= tau periods.
+
+    ``tau_min`` defaults to one period; one that equals tau in periods but not in floating point is tau.
+    """
+    low = 1.0 / rate if tau_min is None else nonnegative_scalar("tau_min", tau_min)
+    d_low, d_high = delay_periods(low, "tau_min", rate), delay_periods(tau, "tau", rate)
+    if d_low < 1:
+        raise SpecificationError(f"tau_min must be >= 1/rate = {1.0 / rate:g} s, got {low!r} s")
+    if d_low > d_high:
+        raise SpecificationError(
+            f"tau_max must be >= tau_min (compared as whole periods), got tau_min = {low!r} s ({d_low} periods), "
+            f"tau_max = tau = {tau!r} s ({d_high} periods)"
+        )
+    return min(low, tau), tau
+
+
+def _check_tau_max(tau_max: Any, tau: float, rate: float) -> None:
+    """``tau_max`` must be the scenario's tau (the history depth), compared as whole periods."""
+    given = nonnegative_scalar("tau_max", tau_max)
+    if delay_periods(given, "tau_max", rate) != delay_samples(tau, rate):
+        raise SpecificationError(
+            f"tau_max must equal the scenario's tau = {tau!r} s (the history depth), got {given!r}"
+        )
+
+
 def delay_sequence(delays: np.ndarray, key: str, *, tau: float, rate: float, tau_min: Any = None) -> DelayModel:
     """The per-sample delay sequence of a file named by ``key``: each delay in [tau_min, tau], whole periods.
 
-    ``tau_min`` defaults to one period 1/rate (the smallest delay the engine takes).
+    ``tau_min`` defaults to one period 1/rate (the smallest delay the engine takes). Delays and bounds are
+    compared as whole periods (the rule of [delay_periods][mrpctl.scenario.delay_periods]), so k · h written
+    in floating point is accepted; the model holds each delay as d_k / rate (s), the first delay that is not
+    whole or lies outside the bounds is refused with its row (from 1).
     """
-    low = 1.0 / rate if tau_min is None else nonnegative_scalar("tau_min", tau_min)
-    model = DelayModel.sequence(delays, tau_min=low, tau_max=tau)
-    if model.bounds(rate)[0] < 1:
-        raise SpecificationError(f"tau_min must be >= 1/rate = {1.0 / rate:g} s, got {model.tau_min!r} s")
+    low, high = _delay_bounds(tau, rate, tau_min)
+    d_low, d_high = delay_periods(low, "tau_min", rate), delay_periods(high, "tau", rate)
+    values = finite_array(key, delays)
+    if values.ndim != 1 or values.size == 0:
+        raise DimensionError(f"{key}: expected shape (n,) (one delay per sample) but found {values.shape}")
+    negative = np.flatnonzero(values < 0.0)
+    if negative.size:
+        row = int(negative[0])
+        raise SpecificationError(
+            f"delays must lie in [tau_min, tau_max]: delay {row + 1} of {key} (counted from 1) is "
+            f"{float(values[row])!r} s"
+        )
+    try:  # the engine's rule, vectorised (a constant bound pair that holds every value)
+        periods = DelayModel.sequence(values, tau_min=float(values.min()), tau_max=float(values.max())).samples(
+            rate, 0, len(values)
+        )
+    except SpecificationError as exc:
+        for row, value in enumerate(values.tolist()):  # the first delay that is not whole, named by its row
+            try:
+                delay_samples(value, rate)
+            except SpecificationError:
+                raise SpecificationError(
+                    f"{key}: delays must be whole numbers of measurement periods: delay {row + 1} (counted from 1) "
+                    f"is {value!r} s, "
+                    f"{value * rate!r} periods at rate = {rate!r} Hz; choose delays as multiples of 1/rate"
+                ) from exc
+        raise SpecificationError(f"{key}: {exc}") from exc
+    outside = np.flatnonzero((periods < d_low) | (periods > d_high))
+    if outside.size:
+        row = int(outside[0])
+        raise SpecificationError(
+            f"delays must lie in [tau_min, tau_max] = [{low:g}, {high:g}] s = [{d_low}, {d_high}] periods: "
+            f"delay {row + 1} of {key} (counted from 1) is {float(values[row])!r} s = {int(periods[row])} periods"
+        )
+    seconds = np.clip(periods / rate, low, high)  # d_k / rate: the same whole periods, within the bounds
+    model = DelayModel.sequence(seconds, tau_min=low, tau_max=high)
     try:
-        model.samples(rate, 0, len(delays))  # each a whole number of periods
+        model.samples(rate, 0, len(values))  # each a whole number of periods (as the engine will read them)
     except (SpecificationError, DimensionError) as exc:
         raise type(exc)(f"{key}: {exc}") from exc
     return model
@@ -363,11 +436,7 @@ def _delay(table: dict[str, Any], tau: float, rate: float, horizon: _Horizon) ->
     if "sequence_file" in table:
         if "seed" in table:
             raise SpecificationError("seed applies to the jitter (tau_min, seed), not to a sequence_file")
-        tau_max = nonnegative_scalar("tau_max", table.get("tau_max", tau))
-        if tau_max != tau:
-            raise SpecificationError(
-                f"tau_max must equal the scenario's tau = {tau!r} s (the history depth), got {tau_max!r}"
-            )
+        _check_tau_max(table.get("tau_max", tau), tau, rate)
         values = delay_values(
             samples_file(table["sequence_file"], "sequence_file", base=horizon.base), "sequence_file", horizon.samples
         )
@@ -377,16 +446,9 @@ def _delay(table: dict[str, Any], tau: float, rate: float, horizon: _Horizon) ->
             "needs tau_min (s): the delay jitters uniformly over the whole periods in [tau_min, tau]; or "
             "sequence_file (a .csv or .npy file of n delays in s, one per measurement sample)"
         )
-    tau_max = nonnegative_scalar("tau_max", table.get("tau_max", tau))
-    if tau_max != tau:
-        raise SpecificationError(
-            f"tau_max must equal the scenario's tau = {tau!r} s (the history depth), got {tau_max!r}"
-        )
-    model = DelayModel.jitter(table["tau_min"], tau_max, seed=table.get("seed", 0))
-    low, _ = model.bounds(rate)
-    if low < 1:
-        raise SpecificationError(f"tau_min must be >= 1/rate = {1.0 / rate:g} s, got {model.tau_min!r} s")
-    return model
+    _check_tau_max(table.get("tau_max", tau), tau, rate)
+    low, high = _delay_bounds(tau, rate, table["tau_min"])  # whole periods, 1 <= tau_min <= tau
+    return DelayModel.jitter(low, high, seed=table.get("seed", 0))
 
 
 _FLIGHT_BUILDERS = {"actuator": _actuator, "sensor": _sensor, "disturbance": _disturbance, "delay": _delay}
@@ -610,13 +672,15 @@ def _uncertainty_table(data: dict[str, Any], spacecraft: Spacecraft) -> InertiaU
 
 
 def check_delay(tau: float, rate: float) -> None:
-    """τ · rate must be a whole number of measurement periods (as [`simulate`][mrpctl.simulation.simulate] requires)."""
-    samples = tau * rate
-    if not math.isfinite(samples) or abs(samples - round(samples)) > 1e-9 * max(1.0, abs(samples)):
-        raise SpecificationError(
-            f"tau * rate must be a whole number of measurement periods: tau = {tau!r} s and rate = {rate!r} Hz "
-            f"give {samples!r}; choose tau as a multiple of 1/rate"
-        )
+    """τ · rate must be a whole number of measurement periods (as [`simulate`][mrpctl.simulation.simulate] requires).
+
+    The rule is [delay_samples][mrpctl.loop.delay_samples]'s, the one the engine applies (relative
+    tolerance 1e-9: τ = k · h written in floating point is k periods). A delay beyond 2^53 periods is left
+    to the memory checks, which name the option that fixes it.
+    """
+    if math.isfinite(tau * rate) and tau * rate > 2.0**53:
+        return
+    delay_samples(tau, rate)
 
 
 def shipped_scenarios() -> dict[str, Path]:
@@ -647,23 +711,14 @@ def resolve_scenario(name_or_path: str | Path) -> Path:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read a scenario TOML file (UTF-8), or a shipped scenario by name (see
-    [`resolve_scenario`][mrpctl.scenario.resolve_scenario])."""
+    """Read a scenario TOML file (UTF-8, a byte-order mark allowed), or a shipped scenario by name (see
+    [`resolve_scenario`][mrpctl.scenario.resolve_scenario]).
+
+    A missing file, a folder, a file that is not UTF-8 (its line and column named) or not valid TOML is
+    refused with one [SpecificationError][mrpctl.errors.SpecificationError] naming the file.
+    """
     path = resolve_scenario(path)
-    try:
-        with path.open("rb") as handle:
-            data = tomllib.load(handle)
-    except FileNotFoundError as exc:
-        raise SpecificationError(f"scenario file not found: {path}") from exc
-    except IsADirectoryError as exc:
-        raise SpecificationError(f"scenario {path} is a folder, not a TOML file") from exc
-    except UnicodeDecodeError as exc:
-        raise SpecificationError(
-            f"scenario file {path} is not UTF-8 text (TOML files must be UTF-8): byte {exc.start} "
-            f"is {exc.object[exc.start : exc.start + 1]!r}"
-        ) from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecificationError(f"scenario file {path} is not valid TOML: {exc}") from exc
+    data = read_toml(path, "scenario file")
     return parse_scenario(data, name=path.stem, base=path.parent)
 
 

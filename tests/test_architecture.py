@@ -33,6 +33,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "mrpctl.claims",
             "mrpctl.provenance",
             "mrpctl._compile",
+            "mrpctl._files",
         ),
     ),
     (

@@ -90,7 +90,6 @@ from __future__ import annotations
 import copy
 import hashlib
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -98,13 +97,16 @@ from typing import Any
 
 import numpy as np
 
+from mrpctl._files import read_toml
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
+from mrpctl.loop import delay_samples
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.scenario import (
     RULE_NAMES,
     Scenario,
+    delay_periods,
     delay_sequence,
     delay_values,
     parse_scenario,
@@ -787,14 +789,15 @@ def _flight_options(
     jitter = None
     if "jitter" in table:
         low, high = _interval("flight.jitter", table["jitter"], low=0.0)
-        if abs(high - base.tau) > 1e-12 * max(1.0, base.tau):
+        # compared as whole periods (the engine's rule): k h written in floating point is k periods
+        if delay_periods(high, "flight.jitter tau_max", base.rate) != delay_samples(base.tau, base.rate):
             raise SpecificationError(
                 f"flight.jitter: tau_max must equal tau = {base.tau:g} s (the history depth), got {high:g} s"
             )
-        model = DelayModel.jitter(low, base.tau)
-        model.bounds(base.rate)  # whole numbers of periods, or a SpecificationError naming them
-        if round(low * base.rate) < 1:
+        if delay_periods(low, "flight.jitter tau_min", base.rate) < 1:
             raise SpecificationError(f"flight.jitter: tau_min must be >= 1/rate = {1.0 / base.rate:g} s, got {low:g} s")
+        low = min(low, base.tau)  # tau_min = tau in periods but a rounding above it
+        DelayModel.jitter(low, base.tau).bounds(base.rate)  # as the runs will build it
         jitter = (low, base.tau)
     return FlightOptions(
         actuator=actuator,
@@ -858,13 +861,12 @@ def _check_flight(spec: CampaignSpec) -> None:
 
 def load_campaign(path: str | Path) -> CampaignSpec:
     """Read a campaign TOML file (see ``examples/campaigns/*.toml``); relative names of per-sample files
-    (``flight.disturbance_file``, ``flight.delay_file``) are taken from its folder."""
+    (``flight.disturbance_file``, ``flight.delay_file``) are taken from its folder.
+
+    The file is UTF-8 (a byte-order mark allowed); a missing file, a folder, a file that is not UTF-8 (its
+    line and column named) or not valid TOML is refused with one
+    [SpecificationError][mrpctl.errors.SpecificationError] naming the file.
+    """
     path = Path(path)
-    try:
-        with path.open("rb") as handle:
-            data = tomllib.load(handle)
-    except FileNotFoundError as exc:
-        raise SpecificationError(f"campaign file not found: {path}") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecificationError(f"campaign file {path} is not valid TOML: {exc}") from exc
+    data = read_toml(path, "campaign file")
     return parse_campaign(data, name=path.stem, base=path.parent)
