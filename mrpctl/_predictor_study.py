@@ -26,8 +26,8 @@ from mrpctl.predictor import (
     MarginInterval,
     OnPredicted,
     Predictor,
-    _side,
     inertia_mismatch_margin,
+    margin_side,
     perturbed_spacecraft,
 )
 from mrpctl.simulation import SimulationResult, simulate
@@ -236,8 +236,8 @@ def _pd_margin(gain: np.ndarray, rtol: float) -> MarginInterval:
     def stable(e: float) -> bool:
         return bool(linearized_loop(perturbed_spacecraft(paper.SPACECRAFT, e), gain).delay_margin().margin > TAU)
 
-    upper, upper_capped = _side(stable, 1.0, 10.0, rtol)
-    lower, lower_capped = _side(stable, -1.0, 1.0 - 1e-3, rtol)
+    upper, upper_capped = margin_side(stable, 1.0, 10.0, rtol)
+    lower, lower_capped = margin_side(stable, -1.0, 1.0 - 1e-3, rtol)
     return MarginInterval(lower, upper, lower_capped, upper_capped)
 
 

@@ -50,6 +50,7 @@ __all__ = [
     "PredictorDesign",
     "PredictorStability",
     "StabilityMethod",
+    "StabilityStatus",
     "inertia_mismatch_margin",
     "lifted_spectral_radius",
     "perturbed_spacecraft",
@@ -79,6 +80,18 @@ class StabilityMethod(enum.Enum):
     AXIS_POLYNOMIAL = "axis-polynomial"
 
 
+class StabilityStatus(enum.Enum):
+    """The verdict of [predictor_stability][mrpctl.predictor.predictor_stability]."""
+
+    #: Every root is shown inside the unit circle (sampled) or the crossing count is 0 (continuous).
+    STABLE = "stable"
+    #: A root is shown on or outside the unit circle (sampled), or the crossing count is not 0.
+    UNSTABLE = "unstable"
+    #: Sampled loop: a root lies so close to the unit circle that the floating-point test cannot tell
+    #: which side it is on; ``radius_bounds`` is the interval that contains the spectral radius.
+    UNRESOLVED = "unresolved"
+
+
 @dataclass(frozen=True, eq=False)
 class PredictorStability:
     """Exact stability of the linearised predictor loop for one (model, plant, K, τ, rate).
@@ -86,14 +99,22 @@ class PredictorStability:
     Attributes
     ----------
     stable : bool
-        True when the loop is exponentially stable.
+        True only when the loop is shown exponentially stable (``status`` is STABLE); False for
+        UNSTABLE *and* UNRESOLVED (read ``status`` to tell them apart).
     method : StabilityMethod
     spectral_radius : float
-        Sampled loop: the largest |λ| (dimensionless); ``nan`` for the continuous test.
+        Sampled loop: the largest |λ| (dimensionless; the midpoint of ``radius_bounds`` when only
+        bounds are known); ``nan`` for the continuous test and for the split test without ``radius``.
     tau : float
         Delay τ (s).
     rate : float or None
         Measurement rate (Hz), None for the continuous loop.
+    status : StabilityStatus
+        STABLE, UNSTABLE or UNRESOLVED (default: from ``stable``).
+    radius_bounds : tuple of float or None
+        Sampled loop: an interval (lo, hi) that contains the spectral radius when it was bounded
+        (always when ``status`` is UNRESOLVED; with ``radius`` for the split test; always for the
+        lifted test), None otherwise.
     """
 
     stable: bool
@@ -101,11 +122,33 @@ class PredictorStability:
     spectral_radius: float
     tau: float
     rate: float | None
+    status: StabilityStatus | None = None
+    radius_bounds: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.status is None:
+            object.__setattr__(self, "status", StabilityStatus.STABLE if self.stable else StabilityStatus.UNSTABLE)
+
+    @property
+    def resolved(self) -> bool:
+        """True when the test reached a verdict (STABLE or UNSTABLE)."""
+        return self.status is not StabilityStatus.UNRESOLVED
 
     def __str__(self) -> str:
-        verdict = "stable" if self.stable else "UNSTABLE"
+        verdict = {
+            StabilityStatus.STABLE: "stable",
+            StabilityStatus.UNSTABLE: "UNSTABLE",
+            StabilityStatus.UNRESOLVED: "UNRESOLVED (a root next to the unit circle)",
+        }[self.status or StabilityStatus.UNSTABLE]
         where = "continuous" if self.rate is None else f"sampled at {self.rate:g} Hz"
-        radius = "" if math.isnan(self.spectral_radius) else f", spectral radius {self.spectral_radius:.9f}"
+        if self.radius_bounds is not None and (
+            self.status is StabilityStatus.UNRESOLVED or self.radius_bounds[1] - self.radius_bounds[0] > 1e-9
+        ):
+            radius = f", spectral radius in [{self.radius_bounds[0]:.12f}, {self.radius_bounds[1]:.12f}]"
+        elif not math.isnan(self.spectral_radius):
+            radius = f", spectral radius {self.spectral_radius:.9f}"
+        else:
+            radius = ""
         return f"predictor loop {verdict} at tau = {self.tau:g} s ({where}, {self.method.value}{radius})"
 
 
@@ -117,15 +160,26 @@ class MarginInterval:
     ----------
     lower, upper : float
         Stable for every scanned e in (lower, upper); ``lower`` < 0 < ``upper``. Each end is the stable
-        side of a bracket [stable, unstable] narrower than the relative tolerance, or the search limit.
+        side of its bracket, or the search limit.
     lower_capped, upper_capped : bool
         True when the end is the search limit (still stable there), not a stability boundary.
+    lower_bracket, upper_bracket : tuple of float or None
+        (shown stable, not shown stable): the two e of the final bisection step, the stability boundary
+        between them (width <= ``rtol`` relative); both equal to the limit when capped; None when not
+        computed (a hand-built interval).
+    lower_unresolved, upper_unresolved : bool
+        True when the bracket's outer e was UNRESOLVED (a root within rounding of the unit circle), not
+        shown unstable: the boundary is then within the bracket or within that rounding band beyond it.
     """
 
     lower: float
     upper: float
     lower_capped: bool
     upper_capped: bool
+    lower_bracket: tuple[float, float] | None = None
+    upper_bracket: tuple[float, float] | None = None
+    lower_unresolved: bool = False
+    upper_unresolved: bool = False
 
     @property
     def symmetric(self) -> float:
@@ -133,8 +187,17 @@ class MarginInterval:
         return min(-self.lower, self.upper)
 
     def __str__(self) -> str:
-        lo = f"{self.lower:+.4%}" + (" (limit)" if self.lower_capped else "")
-        hi = f"{self.upper:+.4%}" + (" (limit)" if self.upper_capped else "")
+        def end(value: float, capped: bool, bracket: tuple[float, float] | None, unresolved: bool) -> str:
+            if capped:
+                return f"{value:+.4%} (limit)"
+            if bracket is None:
+                return f"{value:+.4%}"
+            lo, hi = sorted(bracket)
+            note = ", unresolved end" if unresolved else ""
+            return f"{value:+.4%} (boundary in [{lo:+.4%}, {hi:+.4%}]{note})"
+
+        lo = end(self.lower, self.lower_capped, self.lower_bracket, self.lower_unresolved)
+        hi = end(self.upper, self.upper_capped, self.upper_bracket, self.upper_unresolved)
         return f"e in ({lo}, {hi})"
 
 
@@ -411,16 +474,46 @@ def predictor_stability(
     f0, f1, d = sampled_predictor_matrices(model, gain, tau_value, plant=true_plant, rate=rate_value)
     if _splits(f0, f1) and d > 0:
         polys = [_axis_polynomial(f0[np.ix_(ix, ix)], f1[np.ix_(ix, ix)]) for ix in _AXES]
-        if all(p is not None for p in polys):
-            ok = all(_inside(a, c, d, 1.0) == d + 2 for a, c in polys if a is not None and c is not None)
-            rho = (
-                max(_axis_spectral_radius(a, c, d) for a, c in polys if a is not None and c is not None)
-                if radius
-                else math.nan
+        pairs = [(a, c) for a, c in polys if a is not None and c is not None]
+        if len(pairs) == len(polys):
+            counts = [_count_inside(a, c, d, 1.0) for a, c in pairs]
+            bounds: tuple[float, float] | None = None
+            if any(n is not None and n < d + 2 for n in counts):
+                status = StabilityStatus.UNSTABLE
+            elif all(n == d + 2 for n in counts):
+                status = StabilityStatus.STABLE
+            else:
+                status = StabilityStatus.UNRESOLVED
+            if status is StabilityStatus.UNRESOLVED:
+                brackets = [
+                    (0.0, 0.0) if n == d + 2 else _unit_bracket(a, c, d)
+                    for (a, c), n in zip(pairs, counts, strict=True)
+                ]
+                bounds = (max(b[0] for b in brackets), max(b[1] for b in brackets))
+            elif radius:
+                brackets = [_axis_radius_bounds(a, c, d) for a, c in pairs]
+                bounds = (max(b[0] for b in brackets), max(b[1] for b in brackets))
+            rho = math.nan if bounds is None else 0.5 * (bounds[0] + bounds[1])
+            return PredictorStability(
+                status is StabilityStatus.STABLE,
+                StabilityMethod.AXIS_POLYNOMIAL,
+                rho,
+                tau_value,
+                rate_value,
+                status,
+                bounds,
             )
-            return PredictorStability(ok, StabilityMethod.AXIS_POLYNOMIAL, rho, tau_value, rate_value)
-    rho = lifted_spectral_radius(f0, f1, d)
-    return PredictorStability(bool(rho < 1.0), StabilityMethod.LIFTED, float(rho), tau_value, rate_value)
+    rho, bound = _lifted_radius_and_bound(f0, f1, d)
+    bounds = (max(0.0, rho - bound), rho + bound)
+    if bounds[1] < 1.0:
+        status = StabilityStatus.STABLE
+    elif bounds[0] >= 1.0:
+        status = StabilityStatus.UNSTABLE
+    else:
+        status = StabilityStatus.UNRESOLVED
+    return PredictorStability(
+        status is StabilityStatus.STABLE, StabilityMethod.LIFTED, rho, tau_value, rate_value, status, bounds
+    )
 
 
 _AXES = tuple([i, 3 + i] for i in range(3))
@@ -441,23 +534,53 @@ def _splits(f0: np.ndarray, f1: np.ndarray) -> bool:
     return bool(not np.any(f0[~mask]) and not np.any(f1[~mask]))
 
 
-def lifted_spectral_radius(f0: Any, f1: Any, d: int) -> float:
-    """Spectral radius of the lifted matrix of x̂_{k+1} = F₀ x̂_k + F₁ x̂_{k−d} (state [x̂_k; ...; x̂_{k−d}]).
-
-    The block-companion matrix has size n (d + 1); for d = 0 it is F₀ + F₁.
-    """
-    f0 = np.asarray(f0, dtype=float)
-    f1 = np.asarray(f1, dtype=float)
-    d = integer("d", d, minimum=0)
+def _lifted(f0: np.ndarray, f1: np.ndarray, d: int) -> np.ndarray:
     n = f0.shape[0]
     if d == 0:
-        return float(np.max(np.abs(np.linalg.eigvals(f0 + f1))))
+        return f0 + f1
     size = n * (d + 1)
     lifted = np.zeros((size, size))
     lifted[:n, :n] = f0
     lifted[:n, n * d :] = f1
     lifted[n:, : n * d] = np.eye(n * d)
-    return float(np.max(np.abs(np.linalg.eigvals(lifted))))
+    return lifted
+
+
+def lifted_spectral_radius(f0: Any, f1: Any, d: int) -> float:
+    """Spectral radius of the lifted matrix of x̂_{k+1} = F₀ x̂_k + F₁ x̂_{k−d} (state [x̂_k; ...; x̂_{k−d}]).
+
+    The block-companion matrix has size n (d + 1); for d = 0 it is F₀ + F₁. The value is LAPACK's
+    (``numpy.linalg.eigvals``); its error bound is in [predictor_stability][mrpctl.predictor.predictor_stability].
+    """
+    f0 = np.asarray(f0, dtype=float)
+    f1 = np.asarray(f1, dtype=float)
+    d = integer("d", d, minimum=0)
+    return float(np.max(np.abs(np.linalg.eigvals(_lifted(f0, f1, d)))))
+
+
+def _lifted_radius_and_bound(f0: np.ndarray, f1: np.ndarray, d: int) -> tuple[float, float]:
+    """(ρ, δ): the computed spectral radius of the lifted matrix M and a first-order error bound.
+
+    LAPACK's QR algorithm returns the exact eigenvalues of M + E with ‖E‖_F <= p(N) u ‖M‖_F (backward
+    stable; u = 2^-53, N the size; p(N) = N is taken). A simple eigenvalue λ with right and left
+    eigenvectors x, y moves by at most κ(λ) ‖E‖₂ + O(‖E‖²) with κ(λ) = ‖x‖ ‖y‖ / |yᴴ x| (Wilkinson).
+    δ = max over the eigenvalues of the largest moduli of 4 κ(λ) N u ‖M‖_F: first order only (a
+    defective eigenvalue has κ = ∞ and gives δ = ∞, i.e. no claim).
+    """
+
+    m = _lifted(f0, f1, d)
+    w, left, right = scipy.linalg.eig(m, left=True, right=True)
+    moduli = np.abs(w)
+    rho = float(np.max(moduli))
+    size = m.shape[0]
+    scale = 4.0 * size * np.finfo(float).eps / 2.0 * float(np.linalg.norm(m))
+    near = moduli >= rho - 1e-3 * max(rho, 1.0)
+    kappa = []
+    for i in np.flatnonzero(near):
+        x, y = right[:, i], left[:, i]
+        overlap = abs(np.vdot(y, x))
+        kappa.append(math.inf if overlap == 0.0 else float(np.linalg.norm(x) * np.linalg.norm(y) / overlap))
+    return rho, max(kappa) * scale
 
 
 def _axis_polynomial(f0: np.ndarray, f1: np.ndarray) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
@@ -479,41 +602,131 @@ def _axis_polynomial(f0: np.ndarray, f1: np.ndarray) -> tuple[np.ndarray, np.nda
     return a, c
 
 
-def _inside(a: np.ndarray, c: np.ndarray, d: int, rho: float) -> int:
-    """Number of roots of λ^d a(λ) − c(λ) in |λ| < ρ: the winding number of its values on |λ| = ρ.
+#: Total number of points the certified winding count may use on one circle before it gives up.
+_MAX_WINDING_POINTS = 400_000
+_UNIT_ROUNDOFF = np.finfo(float).eps / 2.0
 
-    The values are scaled by λ^{−d} (ρ >= 1) or used as they are (ρ < 1) so that nothing overflows;
-    the θ grid is doubled until every phase step is below π/2 (at most 2^8 · 16 (d + 2) points).
+
+def _count_inside(a: np.ndarray, c: np.ndarray, d: int, rho: float) -> int | None:
+    """Number of roots of λ^d a(λ) − c(λ) in |λ| < ρ, certified, or None when it cannot be certified.
+
+    The count is the winding number of f(θ) = a(λ) − c(λ) λ^{−d} + d (ρ >= 1; f = λ^d a(λ) − c(λ) for
+    ρ < 1) around 0, λ = ρ e^{iθ}. It is certified, not only refined until it looks settled:
+
+    * L bounds |df/dθ| on the circle (from the coefficients' moduli), ε bounds the rounding error of
+      each computed value (16 (d + 2) u (Σ|a_i|ρ^i + Σ|c_i|ρ^i ρ^{∓d}): the phase d θ of λ^{∓d} is
+      computed with absolute error below about 2π d u, the rest with a few u; u = 2^-53);
+    * an arc [θ_i, θ_{i+1}] is accepted when L Δθ < |f_i| − ε: then the true f stays in a disc about
+      f(θ_i) that excludes 0, its phase changes by less than π/2 along the arc and equals the
+      principal argument of f_{i+1}/f_i; arcs that fail are halved (adaptive, only next to a root);
+    * the computed steps differ from the true ones by at most 2 asin(ε/(|f| − ε)) at each end; the
+      count is returned when that total is below π/2 (so rounding the sum to a multiple of 2π is exact).
+
+    None when an arc cannot be accepted within [_MAX_WINDING_POINTS][mrpctl.predictor._MAX_WINDING_POINTS]
+    points: a root lies within about ε/L of the circle.
     """
-    points = 16 * (d + 2)
-    for _ in range(9):
-        theta = np.linspace(0.0, 2.0 * np.pi, points + 1)
+    mod_a, mod_c = np.abs(a), np.abs(c)
+    eps_u = _UNIT_ROUNDOFF
+    if rho >= 1.0:
+        s = rho ** (-d)
+        big_a = mod_a[0] * rho**2 + mod_a[1] * rho + mod_a[2]
+        big_c = (mod_c[0] * rho + mod_c[1]) * s
+        lipschitz = 2.0 * mod_a[0] * rho**2 + mod_a[1] * rho + mod_c[0] * rho * s + d * big_c
+        offset = d
+    else:
+        s = rho**d
+        big_a = (mod_a[0] * rho**2 + mod_a[1] * rho + mod_a[2]) * s
+        big_c = mod_c[0] * rho + mod_c[1]
+        lipschitz = (2.0 * mod_a[0] * rho**2 + mod_a[1] * rho) * s + d * big_a + mod_c[0] * rho
+        offset = 0
+    eps = 16.0 * (d + 2) * eps_u * (big_a + big_c)
+
+    def values(theta: np.ndarray) -> np.ndarray:
         lam = rho * np.exp(1j * theta)
         if rho >= 1.0:
-            values = np.polyval(a, lam) - np.polyval(c, lam) * np.exp(-d * np.log(rho) - 1j * d * theta)
-            offset = d
-        else:
-            values = np.exp(d * np.log(rho) + 1j * d * theta) * np.polyval(a, lam) - np.polyval(c, lam)
-            offset = 0
-        steps = np.angle(values[1:] / values[:-1])
-        if np.all(np.isfinite(steps)) and np.max(np.abs(steps)) < 0.5 * np.pi:
-            return offset + round(float(np.sum(steps)) / (2.0 * np.pi))
-        points *= 2
-    return -1  # a root on (or numerically at) the circle: not strictly inside
+            return np.polyval(a, lam) - np.polyval(c, lam) * np.exp(-d * math.log(rho) - 1j * d * theta)
+        return np.exp(d * math.log(rho) + 1j * d * theta) * np.polyval(a, lam) - np.polyval(c, lam)
+
+    theta = np.linspace(0.0, 2.0 * np.pi, 16 * (d + 2) + 1)
+    f = values(theta)
+    while True:
+        modulus = np.abs(f)
+        if not np.all(np.isfinite(modulus)):
+            return None
+        bad = lipschitz * np.diff(theta) >= modulus[:-1] - eps
+        if not np.any(bad):
+            break
+        if theta.size + int(bad.sum()) > _MAX_WINDING_POINTS:
+            return None
+        middle = 0.5 * (theta[:-1][bad] + theta[1:][bad])
+        new = values(middle)
+        order = np.argsort(np.concatenate((theta, middle)), kind="stable")
+        theta = np.concatenate((theta, middle))[order]
+        f = np.concatenate((f, new))[order]
+    modulus = np.abs(f)
+    phase_error = float(np.sum(2.0 * np.arcsin(np.minimum(1.0, eps / (modulus - eps)))))
+    if phase_error >= 0.5 * np.pi:
+        return None
+    steps = np.angle(f[1:] / f[:-1])
+    return offset + round(float(np.sum(steps)) / (2.0 * np.pi))
 
 
-def _axis_spectral_radius(a: np.ndarray, c: np.ndarray, d: int) -> float:
-    """Largest |λ| of λ^d a(λ) − c(λ), by bisection on ρ of the count of roots in |λ| < ρ (about 1e-5)."""
+def _inside(a: np.ndarray, c: np.ndarray, d: int, rho: float) -> int:
+    """[_count_inside][mrpctl.predictor._count_inside], −1 when it cannot be certified (the old interface)."""
+    count = _count_inside(a, c, d, rho)
+    return -1 if count is None else count
+
+
+def _unit_bracket(a: np.ndarray, c: np.ndarray, d: int) -> tuple[float, float]:
+    """(1 − δ, 1 + δ) with the largest |λ| inside, for the smallest δ = 1e-7 · 10^j (j <= 6) certified on both sides.
+
+    Used when the count on |λ| = 1 itself cannot be certified: the largest root is then within δ of the
+    circle (fewer than d + 2 roots certified in |λ| < 1 − δ, all in |λ| < 1 + δ).
+    """
+    low, high = 0.0, math.inf
+    for j in range(7):
+        delta = 1e-7 * 10.0**j
+        if high == math.inf and _count_inside(a, c, d, 1.0 + delta) == d + 2:
+            high = 1.0 + delta
+        if low == 0.0:
+            inner = _count_inside(a, c, d, 1.0 - delta)
+            if inner is not None and inner < d + 2:
+                low = 1.0 - delta
+        if low > 0.0 and high < math.inf:
+            break
+    return low, high
+
+
+def _axis_radius_bounds(a: np.ndarray, c: np.ndarray, d: int) -> tuple[float, float]:
+    """(lo, hi) with the largest |λ| of λ^d a(λ) − c(λ) in [lo, hi], by bisection on certified counts.
+
+    hi: a radius where all d + 2 roots are certified inside; lo: one where fewer are (or 0). The
+    bisection stops at hi − lo <= 1e-12 hi, or when the counts next to the root cannot be certified
+    (both quarter points tried); at most 200 steps.
+    """
     coefficients = np.concatenate((a, np.zeros(d)))
     coefficients[-2:] -= c
     low, high = 0.0, 1.0 + float(np.max(np.abs(coefficients[1:])))  # Cauchy's bound
-    while high - low > 1e-10:
-        middle = 0.5 * (low + high)
-        if middle > 0.0 and _inside(a, c, d, middle) == d + 2:
+    full = d + 2
+    for _ in range(_MAX_BISECTIONS):
+        if high - low <= 1e-12 * high:
+            break
+        for middle in (0.5 * (low + high), 0.75 * low + 0.25 * high, 0.25 * low + 0.75 * high):
+            count = _count_inside(a, c, d, middle) if middle > 0.0 else 0
+            if count is not None:
+                break
+        else:
+            break
+        if count == full:
             high = middle
         else:
             low = middle
-    return high
+    return low, high
+
+
+def _axis_spectral_radius(a: np.ndarray, c: np.ndarray, d: int) -> float:
+    """Largest |λ| of λ^d a(λ) − c(λ): the upper end of [_axis_radius_bounds][mrpctl.predictor._axis_radius_bounds]."""
+    return _axis_radius_bounds(a, c, d)[1]
 
 
 # ============================================================================ margin
@@ -536,8 +749,13 @@ def perturbed_spacecraft(spacecraft: Spacecraft, e: float, axis: int | None = No
         return Spacecraft(matrix)
 
 
-def _side(stable: Callable[[float], bool], sign: float, end: float, rtol: float) -> tuple[float, bool]:
-    """Scan |e| geometrically from 1e-3 to ``end``; bisect the first [stable, unstable] pair to ``rtol``."""
+def _side_bracket(stable: Callable[[float], bool], sign: float, end: float, rtol: float) -> tuple[float, float, bool]:
+    """(good, bad, capped): scan |e| geometrically from 1e-3 to ``end``, bisect the first [stable, not stable] pair.
+
+    ``good`` is the last |e| shown stable, ``bad`` the first not shown stable beyond it (``bad - good <=
+    rtol bad``, or 200 bisections: the search always terminates); capped: stable up to ``end`` (bad = end).
+    Both are signed.
+    """
     good = 0.0
     magnitude = _SCAN_START
     while True:
@@ -547,7 +765,7 @@ def _side(stable: Callable[[float], bool], sign: float, end: float, rtol: float)
             break
         good = magnitude
         if magnitude >= end:
-            return sign * end, True
+            return sign * end, sign * end, True
         magnitude *= _SCAN_RATIO
     for _ in range(_MAX_BISECTIONS):
         if bad - good <= rtol * bad:
@@ -557,7 +775,13 @@ def _side(stable: Callable[[float], bool], sign: float, end: float, rtol: float)
             good = middle
         else:
             bad = middle
-    return sign * good, False
+    return sign * good, sign * bad, False
+
+
+def margin_side(stable: Callable[[float], bool], sign: float, end: float, rtol: float) -> tuple[float, bool]:
+    """Scan |e| geometrically from 1e-3 to ``end``; bisect the first [stable, unstable] pair to ``rtol``."""
+    good, _, capped = _side_bracket(stable, sign, end, rtol)
+    return good, capped
 
 
 def inertia_mismatch_margin(
@@ -575,9 +799,11 @@ def inertia_mismatch_margin(
     The predictor uses the model ``spacecraft``; the plant's inertia is perturbed uniformly and, when
     ``per_axis``, on one axis at a time. On each side |e| is scanned geometrically (ratio 1.25) from
     1e-3 to the search limit (``e_max`` above, J_plant = 1e-3 J_model below) with the exact test of
-    [`predictor_stability`][mrpctl.predictor.predictor_stability], and the first [stable, unstable] pair is bisected to
-    relative width
-    ``rtol``: the search always terminates (at most ~50 + 200 tests per side). A stable island
+    [`predictor_stability`][mrpctl.predictor.predictor_stability], and the first [stable, unstable] pair is
+    bisected to relative width ``rtol``: the search always terminates (at most ~50 + 200 tests per side).
+    "Stable" means shown stable (status STABLE): an UNRESOLVED test counts as not stable, so each end is a shown-stable e,
+    and each end's bracket (``lower_bracket``, ``upper_bracket``) is the final [stable, not stable]
+    pair, with ``*_unresolved`` set when its outer e was unresolved rather than unstable. A stable island
     narrower than one scan step beyond the first instability is not reported (the answer is the
     interval around 0).
 
@@ -615,16 +841,20 @@ def inertia_mismatch_margin(
     if rate is not None:
         delay_samples(tau_value, rate)
     evaluations = 0
-    cache: dict[tuple[bytes, float], bool] = {}
+    cache: dict[tuple[bytes, float], StabilityStatus] = {}
 
-    def stable_at(e: float, axis: int | None) -> bool:
+    def status_at(e: float, axis: int | None) -> StabilityStatus:
         nonlocal evaluations
         plant = perturbed_spacecraft(model, e, axis)
         key = (plant.inertia.tobytes(), e)
         if key not in cache:
             evaluations += 1
-            cache[key] = predictor_stability(model, gain, tau_value, plant=plant, rate=rate).stable
+            status = predictor_stability(model, gain, tau_value, plant=plant, rate=rate).status
+            cache[key] = StabilityStatus.UNSTABLE if status is None else status
         return cache[key]
+
+    def stable_at(e: float, axis: int | None) -> bool:
+        return status_at(e, axis) is StabilityStatus.STABLE
 
     if not predictor_stability(model, gain, tau_value, rate=rate).stable:
         raise SpecificationError(
@@ -633,9 +863,19 @@ def inertia_mismatch_margin(
         )
 
     def interval(axis: int | None) -> MarginInterval:
-        upper, upper_capped = _side(lambda e: stable_at(e, axis), 1.0, e_max, rtol)
-        lower, lower_capped = _side(lambda e: stable_at(e, axis), -1.0, _NEGATIVE_END, rtol)
-        return MarginInterval(lower, upper, lower_capped, upper_capped)
+        upper, upper_out, upper_capped = _side_bracket(lambda e: stable_at(e, axis), 1.0, e_max, rtol)
+        lower, lower_out, lower_capped = _side_bracket(lambda e: stable_at(e, axis), -1.0, _NEGATIVE_END, rtol)
+        unresolved = StabilityStatus.UNRESOLVED
+        return MarginInterval(
+            lower,
+            upper,
+            lower_capped,
+            upper_capped,
+            (lower, lower_out),
+            (upper, upper_out),
+            not lower_capped and status_at(lower_out, axis) is unresolved,
+            not upper_capped and status_at(upper_out, axis) is unresolved,
+        )
 
     uniform = interval(None)
     axes: tuple[MarginInterval, ...] = ()

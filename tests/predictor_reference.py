@@ -299,7 +299,7 @@ def measure(rate: float = 1000.0, t_final: float = 20.0) -> None:  # pragma: no 
     # error it tolerates (exact delay margin of the perturbed delayed loop > tau).
     from mrpctl import simulate_batch
     from mrpctl.design import linearized_loop, synthesize_pd
-    from mrpctl.predictor import _side, perturbed_spacecraft
+    from mrpctl.predictor import margin_side, perturbed_spacecraft
     from mrpctl.switching import NoSwitching, OnCurrent
 
     baseline = synthesize_pd(paper.SPACECRAFT, 0.5)
@@ -321,7 +321,11 @@ def measure(rate: float = 1000.0, t_final: float = 20.0) -> None:  # pragma: no 
     def delayed_stable(e: float) -> bool:
         return linearized_loop(perturbed_spacecraft(paper.SPACECRAFT, e), k_pd).delay_margin().margin > 0.5
 
-    print("  PD inertia margin", _side(delayed_stable, -1.0, 0.999, 1e-3), _side(delayed_stable, 1.0, 10.0, 1e-3))
+    print(
+        "  PD inertia margin",
+        margin_side(delayed_stable, -1.0, 0.999, 1e-3),
+        margin_side(delayed_stable, 1.0, 10.0, 1e-3),
+    )
     for omega_n in (12.85, 31.925, 3.0):
         gain = pd_gains(paper.SPACECRAFT, zeta=1.0, omega_n=omega_n).K
         margin = inertia_mismatch_margin(paper.SPACECRAFT, gain, 0.5, rate=rate)
