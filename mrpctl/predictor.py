@@ -801,7 +801,8 @@ def inertia_mismatch_margin(
     1e-3 to the search limit (``e_max`` above, J_plant = 1e-3 J_model below) with the exact test of
     [`predictor_stability`][mrpctl.predictor.predictor_stability], and the first [stable, unstable] pair is
     bisected to relative width ``rtol``: the search always terminates (at most ~50 + 200 tests per side).
-    "Stable" means shown stable (status STABLE): an UNRESOLVED test counts as not stable, so each end is a shown-stable e,
+    "Stable" means shown stable (status STABLE): an UNRESOLVED test counts as not stable, so each end is a
+    shown-stable e,
     and each end's bracket (``lower_bracket``, ``upper_bracket``) is the final [stable, not stable]
     pair, with ``*_unresolved`` set when its outer e was unresolved rather than unstable. A stable island
     narrower than one scan step beyond the first instability is not reported (the answer is the
