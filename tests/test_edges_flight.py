@@ -525,7 +525,7 @@ def test_tiny_noise_is_a_tiny_perturbation_and_huge_noise_matches_the_reference(
     assert run.switch_indices.tolist() == ref.logic_switch_samples().tolist()
     assert np.max(np.abs(run.u - ref.u_applied[0])) < 1e-12 * np.max(np.abs(ref.u_applied[0]))
     # the largest accepted 1 sigma still gives finite measurements, the reference's
-    widest = SensorModel(1e150, 0.0, seed=2)
+    widest = SensorModel(math.pi, 0.0, seed=2)
     run = simulate(SC, K, X0, tau=0.01, rule=Hysteretic(0.2), t_final=0.1, sensor=widest)
     ref = reference_loop(SC.inertia, K, X0, rate=1000.0, t_final=0.1, delta=0.2, delays=10, sensors=widest)
     assert not run.diverged and not ref.diverged[0] and run.switch_count > 5

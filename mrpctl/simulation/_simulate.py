@@ -41,6 +41,7 @@ from mrpctl.simulation._engine import (
     rule_key,
     slice_samples,
 )
+from mrpctl.simulation._guards import check_step_rotation
 from mrpctl.simulation._stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft
@@ -467,6 +468,7 @@ def simulate(
     rate = float(rate)
     t_final, n = _samples(t_final, rate)
     substeps = check_substeps(substeps)
+    check_step_rotation(x0, rate, substeps)
     keep = _keep_every(keep_every)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
@@ -687,6 +689,7 @@ def simulate_batch(
     rate = positive_scalar("rate", rate)
     t_final, n = _samples(t_final, rate)
     substeps = check_substeps(substeps)
+    check_step_rotation(states, rate, substeps)
     threads = _threads(threads)
     keep = _keep_every(keep_every) if trajectories else None
     limit = _memory_limit(memory_limit)
