@@ -517,8 +517,8 @@ def test_tiny_noise_is_a_tiny_perturbation_and_huge_noise_matches_the_reference(
     tiny = simulate(SC, K, X0, tau=0.5, rule=Hysteretic(0.0), t_final=1.5, sensor=SensorModel(1e-300, 1e-300, seed=1))
     assert tiny.switch_indices.tolist() == quiet.switch_indices.tolist() == [944]
     assert 0.0 < np.max(np.abs(tiny.sigma - quiet.sigma)) < 1e-290  # noise present, subnormal-safe
-    # 10 rad per axis: rotations of any angle (|theta| > 2 pi included), composed through MRPs
-    loud = SensorModel(10.0, 0.0, seed=2)
+    # pi rad per axis (the largest accepted): rotations of any angle (|theta| > 2 pi included), composed through MRPs
+    loud = SensorModel(math.pi, 0.0, seed=2)
     run = simulate(SC, K, X0, tau=0.01, rule=Hysteretic(0.2), t_final=0.5, sensor=loud)
     ref = reference_loop(SC.inertia, K, X0, rate=1000.0, t_final=0.5, delta=0.2, delays=10, sensors=loud)
     assert run.switch_count > 50 and np.all(np.isfinite(run.u))
