@@ -7,7 +7,7 @@ PYTHON := $(VENV)/bin/python
 STAMP := $(VENV)/.mrpctl-installed
 TEST_STAMP := $(VENV)/.mrpctl-test-installed
 
-.PHONY: demo test check lint typecheck bench clean docs wheel-check
+.PHONY: demo test check lint typecheck bench clean docs wheel-check catalogue
 
 $(PYTHON):
 	python3 -m venv $(VENV)
@@ -54,3 +54,8 @@ docs: $(TEST_STAMP)
 # The wheel installed into a fresh venv outside the source tree; `python -m mrpctl --help` runs from it.
 wheel-check: $(TEST_STAMP)
 	$(BLAS1) MRPCTL_WHEEL_TEST=1 $(PYTHON) -m pytest -q -p no:xdist tests/test_package.py
+
+# The hostile-input catalogue (tests/test_catalogue.py): about 100 cases, each a subprocess with a timeout and a
+# memory cap; minutes, so not part of make test.
+catalogue: $(TEST_STAMP)
+	$(BLAS1) MRPCTL_CATALOGUE=1 $(PYTHON) -m pytest -q -n 2 tests/test_catalogue.py

@@ -10,6 +10,7 @@ __all__ = [
     "InertiaWarning",
     "MrpctlError",
     "SpecificationError",
+    "StepWarning",
 ]
 
 
@@ -39,3 +40,7 @@ class CompilerWarning(UserWarning):
 
 class CacheWarning(UserWarning):
     """A cached compiled library was truncated, corrupt or unchecked: it is deleted and rebuilt."""
+
+
+class StepWarning(UserWarning):
+    """The integration step cannot resolve the motion: the rotation per RK4 step is above 0.1 rad."""

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import enum
 import math
+import os
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -840,7 +841,7 @@ def inertia_mismatch_margin(
     rtol = positive_scalar("rtol", rtol)
     e_max = positive_scalar("e_max", e_max)
     if rate is not None:
-        delay_samples(tau_value, rate)
+        _check_margin_memory(delay_samples(tau_value, rate), rate)
     evaluations = 0
     cache: dict[tuple[bytes, float], StabilityStatus] = {}
 
@@ -895,6 +896,26 @@ def inertia_mismatch_margin(
         else:
             axes = tuple(interval(i) for i in range(3))
     return MismatchMargin(uniform, axes, tau_value, None if rate is None else float(rate), evaluations)
+
+
+def _check_margin_memory(d: int, rate: Any) -> None:
+    """Refuse up front a margin search whose exact tests cannot fit in memory (estimated, a lower bound).
+
+    Each test of a split loop evaluates the axis polynomial of degree d + 2 on a grid of at least
+    16 (d + 2) points of the unit circle (complex values and their phases: >= 32 bytes a point); the
+    lifted test of an unsplit loop needs a matrix of 6 (d + 1) squared doubles, more still.
+    """
+    estimate = 32.0 * 16 * (d + 2)
+    try:
+        available = float(os.sysconf("SC_AVPHYS_PAGES")) * float(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return
+    if estimate > 0.5 * available:
+        raise SpecificationError(
+            f"rate: tau * rate = {d} delay samples; each exact stability test of the margin search needs at "
+            f"least {estimate / 1e9:.3g} GB (half of the {available / 1e9:.3g} GB available is the limit): use a "
+            "lower rate, or rate=None for the continuous loop"
+        )
 
 
 def _is_diag(m: np.ndarray) -> bool:

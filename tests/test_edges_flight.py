@@ -517,15 +517,15 @@ def test_tiny_noise_is_a_tiny_perturbation_and_huge_noise_matches_the_reference(
     tiny = simulate(SC, K, X0, tau=0.5, rule=Hysteretic(0.0), t_final=1.5, sensor=SensorModel(1e-300, 1e-300, seed=1))
     assert tiny.switch_indices.tolist() == quiet.switch_indices.tolist() == [944]
     assert 0.0 < np.max(np.abs(tiny.sigma - quiet.sigma)) < 1e-290  # noise present, subnormal-safe
-    # 10 rad per axis: rotations of any angle (|theta| > 2 pi included), composed through MRPs
-    loud = SensorModel(10.0, 0.0, seed=2)
+    # pi rad per axis (the largest accepted): rotations of any angle (|theta| > 2 pi included), composed through MRPs
+    loud = SensorModel(math.pi, 0.0, seed=2)
     run = simulate(SC, K, X0, tau=0.01, rule=Hysteretic(0.2), t_final=0.5, sensor=loud)
     ref = reference_loop(SC.inertia, K, X0, rate=1000.0, t_final=0.5, delta=0.2, delays=10, sensors=loud)
     assert run.switch_count > 50 and np.all(np.isfinite(run.u))
     assert run.switch_indices.tolist() == ref.logic_switch_samples().tolist()
     assert np.max(np.abs(run.u - ref.u_applied[0])) < 1e-12 * np.max(np.abs(ref.u_applied[0]))
     # the largest accepted 1 sigma still gives finite measurements, the reference's
-    widest = SensorModel(1e150, 0.0, seed=2)
+    widest = SensorModel(math.pi, 0.0, seed=2)
     run = simulate(SC, K, X0, tau=0.01, rule=Hysteretic(0.2), t_final=0.1, sensor=widest)
     ref = reference_loop(SC.inertia, K, X0, rate=1000.0, t_final=0.1, delta=0.2, delays=10, sensors=widest)
     assert not run.diverged and not ref.diverged[0] and run.switch_count > 5

@@ -279,6 +279,10 @@ def max_stable_period(
     return good
 
 
+#: Largest delay (d + 1) h (s) of the sawtooth criterion: its blocks hold (d + 1)² h², finite up to 1.3e154 s.
+_MAX_DELAY = 1e150
+
+
 def _solve_sawtooth(
     a: np.ndarray, a_d: np.ndarray, h: float, d: int, order: int, margin_tol: float, *, precondition: bool = True
 ) -> IntervalCertificate:
@@ -321,6 +325,11 @@ def certify_sampled(
     a, b, k = sampled_system(A, B, K)
     h = positive_scalar("period", period)
     d = integer("delay_samples", delay_samples, minimum=0)
+    if (d + 1) * h > _MAX_DELAY:
+        raise SpecificationError(
+            f"period: (delay_samples + 1) * period = {(d + 1) * h:g} s is above {_MAX_DELAY:g} s: the criterion's "
+            "blocks hold the squared delay, which overflows float64 (NaN in the solver's data) beyond 1.3e154 s"
+        )
     return _solve_sawtooth(
         a, b @ k, h, d, order_value(order), positive_scalar("margin_tol", margin_tol), precondition=precondition
     )

@@ -95,6 +95,9 @@ _POLISH_STEPS = 15
 _NELDER_MEAD_EVALUATIONS = 400
 #: Range searched for ζ when ``zeta=None`` (the lower end is 1 without ``allow_underdamped``).
 _ZETA_RANGE = (0.2, 3.0)
+#: Largest α τ_max of synthesize_lmi: e^{ατ} scales the delayed term; e^36 = 4.3e15 is 1/eps of float64, beyond
+#: which the shifted LMI cannot resolve the other terms (and e^{ατ} overflows from α τ = 709).
+_MAX_DECAY_DELAY = 36.0
 
 
 @functools.lru_cache(maxsize=1)
@@ -801,6 +804,13 @@ def synthesize_lmi(
     margin_tol = positive_scalar("margin_tol", margin_tol)
     robust = any(v is not None for v in (tolerance, product_bound, period, tau_min, rate))
     delays = delay_set(tau, period=period, tau_min=tau_min, rate=rate)
+    if alpha * delays.tau_max > _MAX_DECAY_DELAY:
+        raise SpecificationError(
+            f"decay_rate: alpha * tau_max = {alpha * delays.tau_max:g} is above {_MAX_DECAY_DELAY:g}: the shifted "
+            f"loop's delayed term is scaled by e^(alpha tau) = {math.exp(min(alpha * delays.tau_max, 709.0)):.3g}"
+            f"{'' if alpha * delays.tau_max < 709.0 else ' or more (overflow)'}, beyond float64's precision "
+            "(1/eps = 4.5e15) against the other terms; ask for a smaller decay_rate"
+        )
     poly = None
     if robust:
         poly = inertia_polytope(

@@ -50,8 +50,9 @@ NOISE_REVISION = 2
 #: The stream numbers of the attitude noise, the rate noise and the delay jitter (`stream_key`).
 STREAM_ATTITUDE, STREAM_RATE, STREAM_JITTER = 0, 1, 2
 _DELAY_TOLERANCE = 1e-9
-#: Largest attitude 1σ (rad): |θ|² of σ_θ·N(0, I₃) must stay finite (overflow from |θ| ≈ 1.3e154).
-_MAX_ATTITUDE_NOISE = 1e150
+#: Largest attitude 1σ (rad): π per axis. The error rotation's angle wraps at π, so beyond a 1σ of π the
+#: error is already spread over (nearly) every attitude and a larger number means nothing more.
+_MAX_ATTITUDE_NOISE = math.pi
 #: Largest rate 1σ and gyro bias (rad/s): the divergence bound of the true rate (mrpctl.engines.stats).
 _MAX_RATE_ERROR = 1e6
 
@@ -69,7 +70,7 @@ class SensorModel:
     Parameters
     ----------
     attitude_noise : float
-        σ_θ in [0, 1e150], 1σ per body axis of the attitude error rotation vector (rad). Default 0.
+        σ_θ in [0, π], 1σ per body axis of the attitude error rotation vector (rad). Default 0.
     rate_noise : float
         σ_ω >= 0, 1σ per axis of the white rate noise (rad/s), at most 10⁶ (the divergence bound of
         the rate). Default 0.
@@ -88,9 +89,9 @@ class SensorModel:
         attitude_noise = nonnegative_scalar("attitude_noise", self.attitude_noise)
         if attitude_noise > _MAX_ATTITUDE_NOISE:
             raise SpecificationError(
-                f"attitude_noise must be <= {_MAX_ATTITUDE_NOISE:g} rad, got {attitude_noise:g}: the squared error "
-                "angle |theta|^2 overflows beyond (NaN measurements, which a run would report as divergence); "
-                "a 1 sigma of a few rad already gives an error rotation spread over every angle"
+                f"attitude_noise must be <= pi rad (1 sigma per axis), got {attitude_noise:g}: the error rotation's "
+                "angle wraps at pi, so a 1 sigma beyond pi is physically meaningless (the error is already spread "
+                "over every attitude)"
             )
         object.__setattr__(self, "attitude_noise", attitude_noise)
         rate_noise = nonnegative_scalar("rate_noise", self.rate_noise)

@@ -46,6 +46,7 @@ from mrpctl.loop.options import (
 )
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
+from mrpctl.simulation._guards import check_step_rotation
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
@@ -359,6 +360,7 @@ def simulate(
     rate = float(rate)
     t_final, n = _samples(t_final, rate)
     substeps = check_substeps(substeps)
+    check_step_rotation(x0, rate, substeps)
     keep = _keep_every(keep_every)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
@@ -581,6 +583,7 @@ def simulate_batch(
     rate = positive_scalar("rate", rate)
     t_final, n = _samples(t_final, rate)
     substeps = check_substeps(substeps)
+    check_step_rotation(states, rate, substeps)
     threads = _threads(threads)
     keep = _keep_every(keep_every) if trajectories else None
     limit = _memory_limit(memory_limit)
