@@ -128,3 +128,19 @@ def test_what_the_docs_import_is_public() -> None:
                     assert name in public, f"{path.relative_to(ROOT)} imports {module_name}.{name}, not in __all__"
                     seen += 1
     assert seen > 20
+
+
+def test_every_public_module_has_a_reference_page():
+    """Each module whose dotted name has no private part is rendered by a ``::: module`` line of docs/reference."""
+    named: set[str] = set()
+    for page in (ROOT / "docs" / "reference").rglob("*.md"):
+        named |= set(re.findall(r"^::: *([\w.]+)", page.read_text(encoding="utf-8"), re.MULTILINE))
+    public = []
+    for path in sorted((ROOT / "mrpctl").rglob("*.py")):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        if parts[-1] == "__main__" or any(part.startswith("_") for part in parts):
+            continue
+        public.append(".".join(parts))
+    assert [module for module in public if module not in named] == []

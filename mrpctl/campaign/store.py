@@ -172,6 +172,8 @@ class CampaignStore:
     chunk : int or None
         Runs per chunk. None: the store's (when it exists) or 1000.
 
+    Notes
+    -----
     Opening or creating the store holds the one-writer lock
     ([writer_lock][mrpctl.campaign.integrity.writer_lock]); a caller that writes chunks holds it
     for as long as it writes (``run_campaign`` does).
