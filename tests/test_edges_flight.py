@@ -855,3 +855,9 @@ def test_saved_flight_and_predictor_runs_round_trip_with_their_records(tmp_path)
             assert back.predictor is None
     dataset = flown.to_xarray()
     assert dataset["delay_used"].dims == ("time",) and dataset["sigma_c"].dims == ("time", "axis")
+
+
+@pytest.mark.parametrize("value", [[math.inf, 0.0, 0.0], [math.nan, 0.0, 0.0]])
+def test_a_non_finite_disturbance_is_refused_naming_the_parameter(value):
+    with pytest.raises(SpecificationError, match=r"^disturbance: torque must be finite"):
+        simulate(SC, K, X0, tau=0.01, rule=Hysteretic(0.1), t_final=0.1, disturbance=value)

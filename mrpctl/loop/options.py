@@ -28,6 +28,7 @@ from mrpctl.spacecraft import Spacecraft
 
 __all__ = [
     "NO_FLIGHT_OPTIONS",
+    "as_disturbance",
     "check_predictor",
     "flight_constants",
     "flight_memory",
@@ -38,6 +39,18 @@ __all__ = [
     "predictor_memory",
     "varying_delay",
 ]
+
+
+def as_disturbance(value: Any, name: str = "disturbance") -> Disturbance:
+    """``value`` as a [Disturbance][mrpctl.flight.Disturbance] (a (3,) torque or (n, 3) rows, N m); an error
+    names ``name``, the parameter it came from."""
+    if isinstance(value, Disturbance):
+        return value
+    try:
+        return Disturbance(value)
+    except ValueError as error:
+        message = str(error)
+        raise type(error)(message if message.startswith(name) else f"{name}: {message}") from error
 
 
 def flight_options(
@@ -63,8 +76,8 @@ def flight_constants(actuator: Any, disturbance: Any, sensor: Any) -> tuple[np.n
         return None, Saturation.SCALE
     if actuator is not None and not isinstance(actuator, ActuatorModel):
         raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel or None, got {actuator!r}")
-    if disturbance is not None and not isinstance(disturbance, Disturbance):
-        disturbance = Disturbance(disturbance)
+    if disturbance is not None:
+        disturbance = as_disturbance(disturbance)
     if sensor is not None and not isinstance(sensor, SensorModel):
         raise SpecificationError(f"sensor must be a mrpctl.flight.SensorModel or None, got {sensor!r}")
     options = np.zeros(10)

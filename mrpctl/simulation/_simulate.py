@@ -35,6 +35,7 @@ from mrpctl.flight import (
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.loop.options import (
     NO_FLIGHT_OPTIONS,
+    as_disturbance,
     check_predictor,
     flight_constants,
     flight_memory,
@@ -187,7 +188,7 @@ def _streamed_disturbance(disturbance: Any, n: int, name: str = "disturbance", h
     if disturbance is None:
         return None
     if not isinstance(disturbance, Disturbance):
-        disturbance = Disturbance(disturbance)
+        disturbance = as_disturbance(disturbance, name)
     if disturbance.constant:
         return None
     try:
@@ -614,7 +615,7 @@ def simulate_batch(
     shared = per_run is None
     hint = _SHARED_HINT if shared and isinstance(disturbance, list | tuple) else ""
     if shared and disturbance is not None and not isinstance(disturbance, Disturbance) and checked is None:
-        disturbance = Disturbance(disturbance)  # checked and copied once, shared by the runs
+        disturbance = as_disturbance(disturbance)  # checked and copied once, shared by the runs
     items = [disturbance] * n_runs if per_run is None else per_run
     options_by_run: list[np.ndarray | None] = [None] * n_runs
     streamed_by_run: list[Disturbance | None] = [None] * n_runs
