@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import enum
+import functools
 import logging
 import time
 import warnings
@@ -13,6 +15,8 @@ import scipy.linalg
 
 from mrpctl._validation import finite_array
 from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.model import plant_model
+from mrpctl.spacecraft import Spacecraft
 
 _LOG = logging.getLogger(__name__)
 
@@ -121,3 +125,24 @@ def is_diagonal(m: np.ndarray) -> bool:
     """True when the off-diagonal entries of ``m`` are at most 1e-12 of its largest entry."""
     off = m - np.diag(np.diag(m))
     return bool(np.max(np.abs(off)) <= 1e-12 * max(1e-300, float(np.max(np.abs(m)))))
+
+
+class SynthesisStatus(enum.Enum):
+    """Outcome of a synthesis."""
+
+    #: Gains found, and re-verified by `certify` and the exact margin.
+    SYNTHESIZED = "synthesized and verified"
+    #: The synthesis LMI was feasible but the re-verification of the gains failed.
+    NOT_VERIFIED = "synthesized but not verified"
+    #: No gains found (the LMI is infeasible for every tuning tried).
+    INFEASIBLE = "infeasible"
+    #: The solver failed on every attempt.
+    SOLVER_FAILED = "solver failed"
+
+
+@functools.lru_cache(maxsize=1)
+def axis_a() -> np.ndarray:
+    """A of the normalised per-axis loop (σ, τσ̇) in t/τ, from the one plant model: [[0, 1], [0, 0]]."""
+    plant = plant_model(Spacecraft(np.ones(3)))
+    # The (σ₁, ω₁/4) block of A is [[0, 1], [0, 0]]; in (σ, τσ̇) and t/τ it is the same matrix.
+    return np.array(plant.A[np.ix_((0, 3), (0, 3))], dtype=float)
