@@ -64,6 +64,19 @@ exit codes:
   141  the output pipe was closed (mrpctl ... | head)
 """
 
+VERIFY_EXIT_CODES = """\
+exit codes:
+  0    checked: the loop as flown is VERIFIED (one certificate covers it jointly) and, with tau > 0,
+       at least one LMI criterion certifies the idealised loop at tau
+  1    checked, but not verified: the joint verdict is PARTIAL, NOT_CERTIFIED or UNSTABLE, or no
+       criterion certifies the idealised loop at tau (the output says which and why)
+  2    user error: bad option or scenario, missing file, a request that would not fit
+  130  interrupted (Ctrl-C)
+  141  the output pipe was closed (mrpctl ... | head)
+"""
+#: Exit code of ``verify`` when the checks ran and the loop is not verified (or not stable).
+NOT_VERIFIED = 1
+
 #: Bytes a run keeps per recorded sample: t, σ, ω, u, the switch flag and the engine's output buffers.
 BYTES_PER_SAMPLE = 112
 #: Bytes per delayed sample (the d-sample history block and the ring buffer, 6 doubles each).
@@ -724,8 +737,9 @@ def _design(args: argparse.Namespace) -> int:
     k1, k2 = np.diag(analysis.K1), np.diag(analysis.K2)
     decay = getattr(design, "decay_rate", None)
     written = None
+    written_verdict = None
     if toml_path is not None:
-        _write_design_toml(
+        written_verdict = _write_design_toml(
             toml_path,
             spacecraft,
             K,
@@ -754,6 +768,7 @@ def _design(args: argparse.Namespace) -> int:
                 "exact_delay_margin": design.margin.margin if design.margin is not None else None,
                 "reason": design.reason,
                 "toml": written,
+                "written_verdict": None if written_verdict is None else _joint_json(written_verdict),
             }
         )
         return 0
@@ -771,6 +786,8 @@ def _design(args: argparse.Namespace) -> int:
     if decay is not None:
         print(f"certified decay rate {float(decay):.6g} 1/s")
     if written is not None:
+        if written_verdict is not None:
+            print(written_verdict)
         print(f"scenario written to {written} (run: mrpctl verify {written}; mrpctl simulate {written})")
     return 0
 
@@ -855,6 +872,7 @@ def _flown_checks(
                 f"{source} = {rate:g} Hz: {exc}; or leave the sampled check out (--no-flown)"
             ) from exc
         certified = [certify_sampled(a, b, k, hold, delay_samples=d, order=0) for a, b, k in axes]
+        names = _axis_names(spacecraft, len(axes))
         rows.append(
             {
                 "check": "sampled",
@@ -866,7 +884,11 @@ def _flown_checks(
                 "statuses": [c.status.name for c in certified],
                 "exact_stable": all(e.stable for e in exact),
                 "spectral_radius": max(e.spectral_radius for e in exact),
-                "text": "\n".join([str(e) for e in exact] + [str(c) for c in certified]),
+                "axes": names,
+                "text": "\n".join(
+                    [f"{name}: {e}" for name, e in zip(names, exact, strict=True)]
+                    + [f"{name}: {c}" for name, c in zip(names, certified, strict=True)]
+                ),
             }
         )
     if plan["jitter"] is not None:
@@ -915,6 +937,75 @@ def _flown_checks(
     return rows
 
 
+def _axis_names(spacecraft: Spacecraft, count: int) -> list[str]:
+    """'axis 1 (J = 140 kg m^2)', ... for a loop that splits per axis, else the one coupled 6x6 loop."""
+    if count == 3:
+        return [f"axis {i + 1} (J = {spacecraft.inertia[i][i]:g} kg m^2)" for i in range(3)]
+    return ["coupled 6x6 loop"]
+
+
+def _joint_verdict(
+    args: argparse.Namespace, spacecraft: Spacecraft, gain: np.ndarray, tau: float, scenario: Scenario | None
+) -> Any:
+    """The joint verdict on the loop as flown (:func:`~mrpctl.design.flown.verify_flown`) of :func:`_flown_plan`.
+
+    The lifted checks take 5 inertias per axis and 5 delays of a jitter interval, or only the box ends
+    and the interval's ends when one lifted loop has more than 400 rows (1 kHz with d = 500: 1002 rows,
+    seconds per eigenproblem); the verdict names what it checked.
+    """
+    from mrpctl.design import verify_flown
+
+    plan = _flown_plan(args, tau, scenario)
+    rate = None if plan["sampled"] is None else plan["sampled"][0]
+    tau_min = None if plan["jitter"] is None else plan["jitter"][0]
+    tolerance, bound = (None, 0.0) if plan["inertia"] is None else plan["inertia"][:2]
+    dense = rate is None or 2 * (round(tau * rate) + 1) <= 400
+    return verify_flown(
+        spacecraft,
+        gain,
+        tau,
+        rate=rate,
+        tau_min=tau_min,
+        jitter_rate=args.jitter_rate if tau_min is not None else None,
+        tolerance=tolerance,
+        product_bound=bound,
+        grid=5 if dense else 2,
+        delay_points=5 if dense else 2,
+    )
+
+
+def _joint_json(verdict: Any) -> dict[str, Any]:
+    witness = verdict.witness
+    return {
+        "status": verdict.status.name,
+        "verified": verdict.verified,
+        "flown": verdict.flown,
+        "not_covered": list(verdict.not_covered),
+        "spectral_radius": verdict.spectral_radius,
+        "witness": None
+        if witness is None
+        else {
+            "inertia": np.array(witness.inertia).reshape(3, 3),
+            "delay": witness.delay,
+            "delay_samples": witness.delay_samples,
+            "spectral_radius": witness.spectral_radius,
+            "text": witness.text,
+        },
+        "checks": [
+            {
+                "name": c.name,
+                "kind": c.kind.name,
+                "outcome": c.outcome.name,
+                "joint": c.joint,
+                "covers": c.covers,
+                "spectral_radius": c.spectral_radius,
+                "detail": c.detail,
+            }
+            for c in verdict.checks
+        ],
+    }
+
+
 def _phase_margins(spacecraft: Spacecraft, gain: np.ndarray) -> Any:
     """Per-axis phase margin and crossover (python-control), or None when the axes are coupled."""
     from mrpctl.interop import loop_margins
@@ -949,6 +1040,7 @@ def _verify(args: argparse.Namespace) -> int:
         raise SpecificationError(f"--tau must be finite and >= 0 s, got {tau}")
     # The loop as flown first: a refusal (bad option, lifted system too large) comes before the long searches.
     flown = _flown_checks(args, spacecraft, gain, tau, scenario)
+    joint = _joint_verdict(args, spacecraft, gain, tau, scenario)
     loop = linearized_loop(spacecraft, gain)
     margin = loop.delay_margin()
     rows: list[dict[str, Any]] = []
@@ -969,6 +1061,8 @@ def _verify(args: argparse.Namespace) -> int:
                 }
             )
     margins = _phase_margins(spacecraft, gain)
+    idealised_certified = tau == 0 or any(row["certified"] for row in rows)
+    code = 0 if joint.verified and idealised_certified else NOT_VERIFIED
     if args.json:
         _print_json(
             {
@@ -993,9 +1087,11 @@ def _verify(args: argparse.Namespace) -> int:
                 "undelayed_poles_real": undelayed.poles.real,
                 "undelayed_poles_imag": undelayed.poles.imag,
                 "criteria": rows,
+                "joint": _joint_json(joint),
+                "exit_code": code,
             }
         )
-        return 0
+        return code
     print(f"{loop}; K = {(np.round(gain, 4) + 0.0).tolist()}")
     if tau == 0:
         worst = float(np.max(undelayed.poles.real))
@@ -1005,7 +1101,8 @@ def _verify(args: argparse.Namespace) -> int:
         )
         print(f"exact delay margin: {margin.margin:.6g} s (largest delay this gain tolerates)")
         _print_flown(flown)
-        return 0
+        _print_joint(joint, code)
+        return code
     print(f"exact delay margin: {margin.margin:.6g} s (stable at tau = {tau:g} s: {margin.is_stable(tau)})")
     if margins is not None:
         print(str(margins))
@@ -1015,15 +1112,49 @@ def _verify(args: argparse.Namespace) -> int:
             f"{row['criterion']:<24} {row['status']:<16} {row['max_certified_tau']:>26.6g} "
             f"{row['ratio_to_exact']:>15.4f}"
         )
+    if not idealised_certified:
+        print(f"no criterion of --orders certifies the idealised loop at tau = {tau:g} s")
     _print_flown(flown)
-    return 0
+    _print_joint(joint, code)
+    return code
 
 
 def _print_flown(flown: list[dict[str, Any]]) -> None:
     """The loop-as-flown rows of ``verify``: verdict, where the check comes from, and each certificate."""
+    if flown:
+        print("each part of the loop as flown, separately (the others at their idealised values):")
     for row in flown:
-        print(f"{row['check']} ({row['source']}): {'certified' if row['certified'] else 'NOT certified'}")
+        verdict = "certified" if row["certified"] else "NOT certified"
+        print(f"{row['check']} ({row['source']}): {verdict}{_why_not(row)}")
         print("  " + row["text"].replace("\n", "\n  "))
+
+
+def _why_not(row: dict[str, Any]) -> str:
+    """Why a separate row is NOT certified, in plain words (empty when it is certified)."""
+    if row["certified"]:
+        return ""
+    failed = " or ".join(sorted({s for s in row["statuses"] if s != "CERTIFIED"}))
+    lmi = "the solver gave no usable answer" if failed == "SOLVER_FAILED" else "the LMI found no proof"
+    if row["check"] == "sampled":
+        bad = [name for name, s in zip(row["axes"], row["statuses"], strict=True) if s != "CERTIFIED"]
+        where = ", ".join(bad)
+        if not row["exact_stable"]:
+            return (
+                f": the sampled loop is unstable (largest lifted spectral radius {row['spectral_radius']:.9f} > 1), "
+                f"so no certificate can exist ({where})"
+            )
+        return (
+            f": the exact lifted check finds the sampled loop stable (spectral radius "
+            f"{row['spectral_radius']:.9f} < 1), but {lmi} on {where} (the sampled-data LMI is a sufficient "
+            "condition: stable, not certified)"
+        )
+    return f": {lmi} ({failed}); the LMI is a sufficient condition, so this does not say the loop is unstable"
+
+
+def _print_joint(verdict: Any, code: int) -> None:
+    """The joint verdict on the loop as flown, and the exit code it gives."""
+    print(verdict)
+    print(f"exit code {code}: " + ("verified" if code == 0 else "checked, NOT verified (see above)"))
 
 
 _CSV_HEADER = (
@@ -1467,8 +1598,31 @@ def _write_design_toml(
     status: str,
     options: str,
     summary: str,
-) -> None:
-    """The runnable scenario of ``design --toml``; its comment names the command (``options`` after --tau)."""
+) -> Any:
+    """The runnable scenario of ``design --toml``; its comment names the command (``options`` after --tau).
+
+    The written loop (the nominal spacecraft sampled at ``rate``, d = tau·rate) is verified first
+    (:func:`~mrpctl.design.flown.verify_flown`): the header says "verified" only when that joint
+    verdict is VERIFIED; otherwise it says what holds, and a warning goes to stderr. Returns the verdict.
+    """
+    from mrpctl.design import verify_flown
+
+    verdict = verify_flown(spacecraft, K, float(args.tau), rate=float(rate))
+    if not verdict.verified:
+        what = f"designed for the continuous-time loop; the written {rate:g} Hz loop is {verdict.status.name}"
+        if verdict.witness is not None:
+            what += f" ({verdict.witness})"
+        status = what
+        # The design's own status says "verified" of the continuous-time loop: not of the written one.
+        design = summary.replace("synthesized and verified", "synthesized for the continuous-time loop")
+        summary = f"NOT verified at {rate:g} Hz: {verdict.status.value}. The continuous-time design: {design}"
+        print(
+            f"mrpctl design: warning: the scenario written to {path} is not verified at its rate {rate:g} Hz: "
+            f"{verdict.status.name}" + ("" if verdict.witness is None else f", {verdict.witness}"),
+            file=sys.stderr,
+        )
+    else:
+        summary = f"{summary}; the written loop at {rate:g} Hz (d = {round(args.tau * rate)}) verified jointly"
     comment = (
         f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g}{options}\n"
         f"{summary}\n"
@@ -1487,6 +1641,7 @@ def _write_design_toml(
     )
     with _atomic_output(path) as stream:
         stream.write(scenario_toml(scenario, comment=comment))
+    return verdict
 
 
 def _robust_options(
@@ -1568,8 +1723,8 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     if result.gains is None or result.status is RobustStatus.INFEASIBLE:
         raise SpecificationError(
             f"no robustly certified gains for tau = {args.tau:g} s at zeta = {args.zeta:g}, "
-            f"inertia +-{100 * tolerance:g} % "
-            f"({result.status.value}): {result.reason}; try another --order, --zeta or a smaller --inertia-tolerance"
+            + ("nominal inertia " if tolerance == 0.0 else f"inertia +-{100 * tolerance:g} % ")
+            + f"({result.status.value}): {result.reason}; try another --order, --zeta or a smaller --inertia-tolerance"
         )
     if result.status is RobustStatus.NOT_VERIFIED:
         raise MrpctlError(
@@ -1579,8 +1734,9 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     analysis = analyze_gains(spacecraft, K)
     cert = result.certificate
     written = None
+    written_verdict = None
     if toml_path is not None:
-        _write_design_toml(
+        written_verdict = _write_design_toml(
             toml_path,
             spacecraft,
             K,
@@ -1614,6 +1770,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
                 "exact_check": result.exact_check,
                 "reason": result.reason,
                 "toml": written,
+                "written_verdict": None if written_verdict is None else _joint_json(written_verdict),
             }
         )
         return 0
@@ -1628,6 +1785,8 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
             f"rad/s, zeta = {axis.zeta:.4g} ({_damping_kind(axis.zeta)}) at the nominal inertia"
         )
     if written is not None:
+        if written_verdict is not None:
+            print(written_verdict)
         print(f"scenario written to {written} (run: mrpctl verify {written}; mrpctl simulate {written})")
     return 0
 
@@ -1670,8 +1829,9 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
         )
     K = np.asarray(result.K, dtype=float)
     written = None
+    written_verdict = None
     if toml_path is not None:
-        _write_design_toml(
+        written_verdict = _write_design_toml(
             toml_path,
             spacecraft,
             K,
@@ -1708,6 +1868,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
                 "exact_check": result.exact_check,
                 "reason": result.reason,
                 "toml": written,
+                "written_verdict": None if written_verdict is None else _joint_json(written_verdict),
             }
         )
         return 0
@@ -1724,6 +1885,8 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
     if not analysis.axes:
         print("  axes coupled: K1, K2 are not diagonal")
     if written is not None:
+        if written_verdict is not None:
+            print(written_verdict)
         print(f"scenario written to {written} (run: mrpctl verify {written}; mrpctl simulate {written})")
     return 0
 
@@ -1803,7 +1966,7 @@ def _add_verify(commands: Any) -> None:
         "verify",
         help="LMI verdict per criterion and the exact delay margin",
         formatter_class=_Formatter,
-        epilog=EXIT_CODES,
+        epilog=VERIFY_EXIT_CODES,
     )
     parser.add_argument(
         "scenario", nargs="?", help="scenario TOML or shipped name (else the plant and gain options, or the paper's)"
