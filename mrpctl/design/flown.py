@@ -1,10 +1,11 @@
 """Joint verdicts on the loop as flown: sampled *and* jittery *and* uncertain together.
 
-The flown set is the one a scenario describes: the spacecraft with a gain K, the measurement delay
-τ, optionally the sample rate (zero-order hold, d = τ·rate samples), a jitter interval (the delay of
-each measurement anywhere in [τ_min, τ]; held, the plant sees τ(t) ∈ [τ_min, τ + h)) and an inertia
-box ([inertia_polytope][mrpctl.design.polytope.inertia_polytope]).
-[verify_flown][mrpctl.design.flown.verify_flown] answers for that set as a whole, with two kinds of evidence, each naming exactly what it covers:
+The flown set is the one a scenario describes: the spacecraft with a gain K, the measurement delay τ,
+optionally the sample rate (zero-order hold, d = τ·rate samples), a jitter interval (the delay of each
+measurement anywhere in [τ_min, τ]; held, the plant sees τ(t) ∈ [τ_min, τ + h)) and an inertia box
+([inertia_polytope][mrpctl.design.polytope.inertia_polytope]).
+[verify_flown][mrpctl.design.flown.verify_flown] answers for that set as a whole, with two kinds of evidence,
+each naming exactly what it covers:
 
 - **exact checks**: the lifted discrete-time loop ([sampled_stability][mrpctl.design.sampled.sampled_stability])
   or, unsampled, the exact constant-delay stability intervals
@@ -19,10 +20,10 @@ box ([inertia_polytope][mrpctl.design.polytope.inertia_polytope]).
   affine in the plant or a quadratic form of it with a positive semidefinite weight, so the vertex
   LMIs hold on the convex hull: a joint certificate covers the whole flown set.
 
-The status ([FlownStatus][mrpctl.design.flown.FlownStatus]) is VERIFIED only when one check covers the
-whole flown set jointly; when only separate certificates hold (say, the nominal sampled loop and the
-continuous-time box) it is PARTIAL and
-[FlownVerdict.not_covered][mrpctl.design.flown.FlownVerdict.not_covered] says what no certificate covers; an exact check that finds an instability makes it UNSTABLE with the witness.
+The status ([FlownStatus][mrpctl.design.flown.FlownStatus]) is VERIFIED only when one check covers the whole
+flown set jointly; when only separate certificates hold (say, the nominal sampled loop and the continuous-time
+box) it is PARTIAL and [FlownVerdict.not_covered][mrpctl.design.flown.FlownVerdict.not_covered] says what no
+certificate covers; an exact check that finds an instability makes it UNSTABLE with the witness.
 """
 
 from __future__ import annotations
