@@ -17,7 +17,7 @@ import pytest
 from cli_assertions import one_line_error as _one_line_error
 
 from mrpctl import __version__, paper
-from mrpctl.cli import EXIT_BROKEN_PIPE, EXIT_DIVERGED, USER_ERROR, main
+from mrpctl.cli import EXIT_BROKEN_PIPE, EXIT_DIVERGED, NOT_VERIFIED, USER_ERROR, main
 from mrpctl.scenario import load_scenario, shipped_scenarios
 from mrpctl.switching import BoundaryLayer
 
@@ -176,7 +176,9 @@ def test_verify_prints_phase_margins(capsys: pytest.CaptureFixture[str]) -> None
     assert np.allclose(implied, [m["delay_margin_s"] for m in out["phase_margins"]], rtol=1e-12)
     assert min(implied) == pytest.approx(out["exact_delay_margin"], rel=1e-8)
     # Coupled axes have no per-axis phase margin: reported as null, not an error.
-    assert main(["verify", "--K", *map(str, np.arange(1.0, 19.0) * -1.0), "--orders", "1", "--json"]) == 0
+    assert (
+        main(["verify", "--K", *map(str, np.arange(1.0, 19.0) * -1.0), "--orders", "1", "--json"]) == NOT_VERIFIED
+    )  # checked: not stable, so exit 1
     assert json.loads(capsys.readouterr().out)["phase_margins"] is None
 
 
@@ -194,7 +196,9 @@ def test_verify_the_loop_as_flown(capsys: pytest.CaptureFixture[str]) -> None:
     assert flown["sampled"]["exact_stable"] and flown["sampled"]["certified"]
     assert flown["sampled"]["spectral_radius"] == max(e.spectral_radius for e in exact) < 1.0
     # Beyond the exact limit nothing is certified: at tau = 1.6 s the continuous loop is unstable (margin 1.5555 s).
-    assert main(["verify", "--tau", "1.6", "--orders", "1", "--json", "--sampled", "100"]) == 0
+    assert (
+        main(["verify", "--tau", "1.6", "--orders", "1", "--json", "--sampled", "100"]) == NOT_VERIFIED
+    )  # checked: not stable, so exit 1
     beyond = json.loads(capsys.readouterr().out)["flown"][0]
     assert not beyond["exact_stable"] and not beyond["certified"]
     assert main(["verify", "--jitter-rate", "0.5"]) == USER_ERROR
@@ -204,7 +208,9 @@ def test_verify_the_loop_as_flown(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_verify_beyond_the_margin_is_not_certified(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["verify", "--inertia", "140", "100", "80", "--tau", "2.0", "--orders", "1"]) == 0
+    assert (
+        main(["verify", "--inertia", "140", "100", "80", "--tau", "2.0", "--orders", "1"]) == NOT_VERIFIED
+    )  # checked: not stable, so exit 1
     out = capsys.readouterr().out
     assert "stable at tau = 2 s: False" in out and "NOT_CERTIFIED" in out
 

@@ -21,7 +21,7 @@ import scipy.linalg
 from cli_assertions import one_line_error as _one_line_error
 
 from mrpctl import paper
-from mrpctl.cli import USER_ERROR, main
+from mrpctl.cli import NOT_VERIFIED, USER_ERROR, main
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import DelayModel
 from mrpctl.scenario import InertiaUncertainty, load_scenario, parse_scenario, scenario_toml
@@ -56,8 +56,8 @@ def _write(path: Path, **changes: object) -> Path:
     return path
 
 
-def _flown(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, dict[str, object]]:
-    assert main(["verify", *argv, "--orders", "1", "--json"]) == 0
+def _flown(capsys: pytest.CaptureFixture[str], *argv: str, code: int = 0) -> dict[str, dict[str, object]]:
+    assert main(["verify", *argv, "--orders", "1", "--json"]) == code
     return {row["check"]: row for row in json.loads(capsys.readouterr().out)["flown"]}
 
 
@@ -126,7 +126,7 @@ def test_options_override_the_scenario(tmp_path: Path, capsys: pytest.CaptureFix
 def test_beyond_the_exact_limits_nothing_is_certified(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """tau = 1.6 s is past the exact margin (1.5555 s): the sampled and jitter rows fail, as the exact check."""
     path = _write(tmp_path / "far.toml", tau=1.6, rate=100.0, delay=DelayModel.jitter(1.0, 1.6, seed=2))
-    flown = _flown(capsys, str(path))
+    flown = _flown(capsys, str(path), code=NOT_VERIFIED)
     assert flown["sampled"]["exact_stable"] is False and flown["sampled"]["certified"] is False
     assert _lifted_radius(paper.INERTIA[2], paper.GAIN_SIGMA, paper.GAIN_OMEGA, 0.01, 160) > 1.0
     assert flown["jitter"]["certified"] is False
@@ -134,7 +134,7 @@ def test_beyond_the_exact_limits_nothing_is_certified(tmp_path: Path, capsys: py
     # at J3 (1 - 0.9) the closed-form margin is below 0.5 s.
     assert _axis_margin(0.1 * paper.INERTIA[2], paper.GAIN_SIGMA, paper.GAIN_OMEGA) < 0.5
     wide = _write(tmp_path / "wide.toml", tau=0.5, rate=100.0, delay=None, uncertainty=InertiaUncertainty(0.9))
-    assert _flown(capsys, str(wide))["inertia"]["certified"] is False
+    assert _flown(capsys, str(wide), code=NOT_VERIFIED)["inertia"]["certified"] is False
 
 
 def test_tau_zero_scenario_still_checks_the_sampled_loop(capsys: pytest.CaptureFixture[str]) -> None:

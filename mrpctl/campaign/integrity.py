@@ -20,13 +20,12 @@ changed byte, names the file, and leaves the chunk files (and so the campaign ha
 A store written before the records existed (no ``sha256`` folder) is read as before, with the note
 that it cannot be verified; such a store is resumed without records (no partial verification).
 
-**One writer.** [`writer_lock`][mrpctl.campaign.integrity.writer_lock] takes ``fcntl.flock`` on ``out/campaign.lock``
-before the first
-byte of the store is written and holds it until the run ends (normally, by an exception or by
-Ctrl-C); the kernel releases it when the process dies, so a lock file left by a process that is gone
-(a stale lock) is simply taken over. The file holds the holder's host, pid, start time and command,
-which the refusal quotes. On a network file system the lock is as good as its ``flock`` (Linux NFS
-v4 maps it to a byte-range lock).
+**One writer.** [writer_lock][mrpctl.campaign.integrity.writer_lock] takes ``fcntl.flock`` on
+``out/campaign.lock`` before the first byte of the store is written and holds it until the run ends (normally,
+by an exception or by Ctrl-C); the kernel releases it when the process dies, so a lock file left by a process
+that is gone (a stale lock) is simply taken over. The file holds the holder's host, pid, start time and
+command, which the refusal quotes. On a network file system the lock is as good as its ``flock`` (Linux NFS v4
+maps it to a byte-range lock).
 """
 
 from __future__ import annotations
@@ -258,7 +257,7 @@ class ChunkDamage:
 
 @dataclass(frozen=True)
 class StoreCheck:
-    """What [`check_store`][mrpctl.campaign.integrity.check_store] found.
+    """What [check_store][mrpctl.campaign.integrity.check_store] found.
 
     Attributes
     ----------

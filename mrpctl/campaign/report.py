@@ -270,7 +270,7 @@ def report(
     """Summarise a campaign's complete runs (a results folder or its dataset).
 
     ``out`` is the folder written into the replay commands (default: ``source`` when it is a path).
-    A folder is checked first ([`open_campaign`][mrpctl.campaign.open_campaign]): a damaged chunk raises
+    A folder is checked first ([open_campaign][mrpctl.campaign.store.open_campaign]): a damaged chunk raises
     ``StoreDamagedError`` naming it, unless ``intact_only``, which reports over the intact runs and lists
     the damaged chunks in ``integrity`` (and in the table).
     """
@@ -420,7 +420,7 @@ def _write_text(path: Path, text: str) -> None:
 
 def write_report(out: str | Path, *, worst: int = 10, intact_only: bool = False) -> tuple[CampaignReport, list[Path]]:
     """Write ``out/report/``: report.md (the table), summary.json (strict JSON: NaN and infinities are
-    ``null``) and one PNG per figure. ``intact_only``: as in [`report`][mrpctl.campaign.report.report]."""
+    ``null``) and one PNG per figure. ``intact_only``: as in [report][mrpctl.campaign.report.report]."""
     out = Path(out)
     dataset = open_campaign(out, intact_only=intact_only)
     result = report(dataset, worst=worst, out=out)

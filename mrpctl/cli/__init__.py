@@ -18,14 +18,26 @@ from mrpctl.cli.common import (
     EXIT_CODES,
     EXIT_DIVERGED,
     EXIT_INTERRUPTED,
+    NOT_VERIFIED,
     USER_ERROR,
+    VERIFY_EXIT_CODES,
     Formatter,
     Parser,
     run_command,
 )
 from mrpctl.provenance import mrpctl_version
 
-__all__ = ["EXIT_BROKEN_PIPE", "EXIT_CODES", "EXIT_DIVERGED", "EXIT_INTERRUPTED", "USER_ERROR", "build_parser", "main"]
+__all__ = [
+    "EXIT_BROKEN_PIPE",
+    "EXIT_CODES",
+    "EXIT_DIVERGED",
+    "EXIT_INTERRUPTED",
+    "NOT_VERIFIED",
+    "USER_ERROR",
+    "VERIFY_EXIT_CODES",
+    "build_parser",
+    "main",
+]
 
 
 #: The subcommands in the order of ``mrpctl --help``; each adds its parser to the subparsers object.

@@ -22,6 +22,7 @@ from typing import IO, Any, NoReturn, TextIO
 
 import numpy as np
 
+from mrpctl.design import FlownVerdict
 from mrpctl.errors import MrpctlError, SpecificationError
 from mrpctl.scenario import RULE_NAMES
 
@@ -30,7 +31,9 @@ __all__ = [
     "EXIT_CODES",
     "EXIT_DIVERGED",
     "EXIT_INTERRUPTED",
+    "NOT_VERIFIED",
     "USER_ERROR",
+    "VERIFY_EXIT_CODES",
     "Formatter",
     "Parser",
     "add_flight_options",
@@ -40,6 +43,7 @@ __all__ = [
     "add_run_options",
     "atomic_output",
     "check_plot_path",
+    "joint_json",
     "jsonable",
     "options_given",
     "print_json",
@@ -51,6 +55,8 @@ __all__ = [
 
 #: Exit code of a run that diverged when ``--fail-on-divergence`` was given.
 EXIT_DIVERGED = 1
+#: Exit code of ``verify`` when the checks ran and the loop is not verified (or not stable).
+NOT_VERIFIED = 1
 #: Exit code for a user error (bad input, missing file, a request that would not fit): one line, no traceback.
 USER_ERROR = 2
 #: Exit code after Ctrl-C (128 + SIGINT, the shell's convention).
@@ -65,6 +71,17 @@ exit codes:
   1    a run diverged and --fail-on-divergence was given
   2    user error: bad option or scenario, missing file, no certified gains, a request that would not fit
   130  interrupted (Ctrl-C); no half-written output file is left
+  141  the output pipe was closed (mrpctl ... | head)
+"""
+
+VERIFY_EXIT_CODES = """\
+exit codes:
+  0    checked: the loop as flown is VERIFIED (one certificate covers it jointly) and, with tau > 0,
+       at least one LMI criterion certifies the idealised loop at tau
+  1    checked, but not verified: the joint verdict is PARTIAL, NOT_CERTIFIED or UNSTABLE, or no
+       criterion certifies the idealised loop at tau (the output says which and why)
+  2    user error: bad option or scenario, missing file, a request that would not fit
+  130  interrupted (Ctrl-C)
   141  the output pipe was closed (mrpctl ... | head)
 """
 
@@ -282,6 +299,39 @@ def jsonable(value: Any) -> Any:
     if value is None or isinstance(value, str):
         return value
     return str(value)
+
+
+def joint_json(verdict: FlownVerdict) -> dict[str, Any]:
+    """The JSON of a joint verdict on the loop as flown (``verify``'s ``joint``, ``design``'s ``written_verdict``)."""
+    witness = verdict.witness
+    return {
+        "status": verdict.status.name,
+        "verified": verdict.verified,
+        "flown": verdict.flown,
+        "not_covered": list(verdict.not_covered),
+        "spectral_radius": verdict.spectral_radius,
+        "witness": None
+        if witness is None
+        else {
+            "inertia": np.array(witness.inertia).reshape(3, 3),
+            "delay": witness.delay,
+            "delay_samples": witness.delay_samples,
+            "spectral_radius": witness.spectral_radius,
+            "text": witness.text,
+        },
+        "checks": [
+            {
+                "name": c.name,
+                "kind": c.kind.name,
+                "outcome": c.outcome.name,
+                "joint": c.joint,
+                "covers": c.covers,
+                "spectral_radius": c.spectral_radius,
+                "detail": c.detail,
+            }
+            for c in verdict.checks
+        ],
+    }
 
 
 def print_json(payload: dict[str, Any]) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -19,11 +20,12 @@ from mrpctl.cli.common import (
     add_json,
     add_rule_options,
     atomic_output,
+    joint_json,
     print_json,
     refuse_existing,
 )
 from mrpctl.cli.overrides import paper_base, spacecraft_from
-from mrpctl.design import SynthesisStatus, analyze_gains, synthesize_lmi
+from mrpctl.design import FlownVerdict, SynthesisStatus, analyze_gains, synthesize_lmi, verify_flown
 from mrpctl.design.robust import RobustPDSynthesis, RobustStatus
 from mrpctl.errors import MrpctlError, SpecificationError
 from mrpctl.scenario import check_delay, rule_from_name, scenario_toml
@@ -89,8 +91,9 @@ def _design(args: argparse.Namespace) -> int:
     k1, k2 = np.diag(analysis.K1), np.diag(analysis.K2)
     decay = getattr(design, "decay_rate", None)
     written = None
+    written_verdict = None
     if toml_path is not None:
-        _write_design_toml(
+        written_verdict = _write_design_toml(
             toml_path,
             spacecraft,
             K,
@@ -119,6 +122,7 @@ def _design(args: argparse.Namespace) -> int:
                 "exact_delay_margin": design.margin.margin if design.margin is not None else None,
                 "reason": design.reason,
                 "toml": written,
+                "written_verdict": None if written_verdict is None else joint_json(written_verdict),
             }
         )
         return 0
@@ -136,6 +140,8 @@ def _design(args: argparse.Namespace) -> int:
     if decay is not None:
         print(f"certified decay rate {float(decay):.6g} 1/s")
     if written is not None:
+        if written_verdict is not None:
+            print(written_verdict)
         print(f"scenario written to {written} (run: mrpctl verify {written}; mrpctl simulate {written})")
     return 0
 
@@ -149,8 +155,29 @@ def _write_design_toml(
     status: str,
     options: str,
     summary: str,
-) -> None:
-    """The runnable scenario of ``design --toml``; its comment names the command (``options`` after --tau)."""
+) -> FlownVerdict:
+    """The runnable scenario of ``design --toml``; its comment names the command (``options`` after --tau).
+
+    The written loop (the nominal spacecraft sampled at ``rate``, d = tau·rate) is verified first
+    ([verify_flown][mrpctl.design.flown.verify_flown]): the header says "verified" only when that joint
+    verdict is VERIFIED; otherwise it says what holds, and a warning goes to stderr. Returns the verdict.
+    """
+    verdict = verify_flown(spacecraft, K, float(args.tau), rate=float(rate))
+    if not verdict.verified:
+        what = f"designed for the continuous-time loop; the written {rate:g} Hz loop is {verdict.status.name}"
+        if verdict.witness is not None:
+            what += f" ({verdict.witness})"
+        status = what
+        # The design's own status says "verified" of the continuous-time loop: not of the written one.
+        design = summary.replace("synthesized and verified", "synthesized for the continuous-time loop")
+        summary = f"NOT verified at {rate:g} Hz: {verdict.status.value}. The continuous-time design: {design}"
+        print(
+            f"mrpctl design: warning: the scenario written to {path} is not verified at its rate {rate:g} Hz: "
+            f"{verdict.status.name}" + ("" if verdict.witness is None else f", {verdict.witness}"),
+            file=sys.stderr,
+        )
+    else:
+        summary = f"{summary}; the written loop at {rate:g} Hz (d = {round(args.tau * rate)}) verified jointly"
     comment = (
         f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g}{options}\n"
         f"{summary}\n"
@@ -169,6 +196,7 @@ def _write_design_toml(
     )
     with atomic_output(path) as stream:
         stream.write(scenario_toml(scenario, comment=comment))
+    return verdict
 
 
 def _robust_options(
@@ -247,8 +275,8 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     if result.gains is None or result.status is RobustStatus.INFEASIBLE:
         raise SpecificationError(
             f"no robustly certified gains for tau = {args.tau:g} s at zeta = {args.zeta:g}, "
-            f"inertia +-{100 * tolerance:g} % "
-            f"({result.status.value}): {result.reason}; try another --order, --zeta or a smaller --inertia-tolerance"
+            + ("nominal inertia " if tolerance == 0.0 else f"inertia +-{100 * tolerance:g} % ")
+            + f"({result.status.value}): {result.reason}; try another --order, --zeta or a smaller --inertia-tolerance"
         )
     if result.status is RobustStatus.NOT_VERIFIED:
         raise MrpctlError(
@@ -258,8 +286,9 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
     analysis = analyze_gains(spacecraft, K)
     cert = result.certificate
     written = None
+    written_verdict = None
     if toml_path is not None:
-        _write_design_toml(
+        written_verdict = _write_design_toml(
             toml_path,
             spacecraft,
             K,
@@ -293,6 +322,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
                 "exact_check": result.exact_check,
                 "reason": result.reason,
                 "toml": written,
+                "written_verdict": None if written_verdict is None else joint_json(written_verdict),
             }
         )
         return 0
@@ -307,6 +337,8 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
             f"rad/s, zeta = {axis.zeta:.4g} ({_damping_kind(axis.zeta)}) at the nominal inertia"
         )
     if written is not None:
+        if written_verdict is not None:
+            print(written_verdict)
         print(f"scenario written to {written} (run: mrpctl verify {written}; mrpctl simulate {written})")
     return 0
 
@@ -347,8 +379,9 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
         )
     K = np.asarray(result.K, dtype=float)
     written = None
+    written_verdict = None
     if toml_path is not None:
-        _write_design_toml(
+        written_verdict = _write_design_toml(
             toml_path,
             spacecraft,
             K,
@@ -385,6 +418,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
                 "exact_check": result.exact_check,
                 "reason": result.reason,
                 "toml": written,
+                "written_verdict": None if written_verdict is None else joint_json(written_verdict),
             }
         )
         return 0
@@ -401,6 +435,8 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
     if not analysis.axes:
         print("  axes coupled: K1, K2 are not diagonal")
     if written is not None:
+        if written_verdict is not None:
+            print(written_verdict)
         print(f"scenario written to {written} (run: mrpctl verify {written}; mrpctl simulate {written})")
     return 0
 

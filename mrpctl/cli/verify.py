@@ -11,9 +11,19 @@ import numpy as np
 
 from mrpctl import paper
 from mrpctl._validation import nonnegative_scalar, positive_scalar
-from mrpctl.cli.common import EXIT_CODES, Formatter, add_json, add_plant_options, options_given, print_json
+from mrpctl.cli.common import (
+    NOT_VERIFIED,
+    VERIFY_EXIT_CODES,
+    Formatter,
+    add_json,
+    add_plant_options,
+    joint_json,
+    options_given,
+    print_json,
+)
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
 from mrpctl.design import (
+    FlownVerdict,
     analyze_gains,
     certify_interval,
     certify_polytope,
@@ -23,6 +33,7 @@ from mrpctl.design import (
     linearized_loop,
     sampled_stability,
     spacecraft_axes,
+    verify_flown,
 )
 from mrpctl.design.interval import rate_value
 from mrpctl.errors import DimensionError, SpecificationError
@@ -102,6 +113,7 @@ def _flown_checks(
                 f"{source} = {rate:g} Hz: {exc}; or leave the sampled check out (--no-flown)"
             ) from exc
         certified = [certify_sampled(a, b, k, hold, delay_samples=d, order=0) for a, b, k in axes]
+        names = _axis_names(spacecraft, len(axes))
         rows.append(
             {
                 "check": "sampled",
@@ -113,7 +125,11 @@ def _flown_checks(
                 "statuses": [c.status.name for c in certified],
                 "exact_stable": all(e.stable for e in exact),
                 "spectral_radius": max(e.spectral_radius for e in exact),
-                "text": "\n".join([str(e) for e in exact] + [str(c) for c in certified]),
+                "axes": names,
+                "text": "\n".join(
+                    [f"{name}: {e}" for name, e in zip(names, exact, strict=True)]
+                    + [f"{name}: {c}" for name, c in zip(names, certified, strict=True)]
+                ),
             }
         )
     if plan["jitter"] is not None:
@@ -162,6 +178,41 @@ def _flown_checks(
     return rows
 
 
+def _axis_names(spacecraft: Spacecraft, count: int) -> list[str]:
+    """'axis 1 (J = 140 kg m^2)', ... for a loop that splits per axis, else the one coupled 6x6 loop."""
+    if count == 3:
+        return [f"axis {i + 1} (J = {spacecraft.inertia[i][i]:g} kg m^2)" for i in range(3)]
+    return ["coupled 6x6 loop"]
+
+
+def _joint_verdict(
+    args: argparse.Namespace, spacecraft: Spacecraft, gain: np.ndarray, tau: float, scenario: Scenario | None
+) -> FlownVerdict:
+    """The joint verdict on the loop as flown ([verify_flown][mrpctl.design.flown.verify_flown]) of `_flown_plan`.
+
+    The lifted checks take 5 inertias per axis and 5 delays of a jitter interval, or only the box ends
+    and the interval's ends when one lifted loop has more than 400 rows (1 kHz with d = 500: 1002 rows,
+    seconds per eigenproblem); the verdict names what it checked.
+    """
+    plan = _flown_plan(args, tau, scenario)
+    rate = None if plan["sampled"] is None else plan["sampled"][0]
+    tau_min = None if plan["jitter"] is None else plan["jitter"][0]
+    tolerance, bound = (None, 0.0) if plan["inertia"] is None else plan["inertia"][:2]
+    dense = rate is None or 2 * (round(tau * rate) + 1) <= 400
+    return verify_flown(
+        spacecraft,
+        gain,
+        tau,
+        rate=rate,
+        tau_min=tau_min,
+        jitter_rate=args.jitter_rate if tau_min is not None else None,
+        tolerance=tolerance,
+        product_bound=bound,
+        grid=5 if dense else 2,
+        delay_points=5 if dense else 2,
+    )
+
+
 def _phase_margins(spacecraft: Spacecraft, gain: np.ndarray) -> Any:
     """Per-axis phase margin and crossover (python-control), or None when the axes are coupled."""
     # deferred: python-control and matplotlib (through mrpctl.interop, about 3.5 s to import), only for verify
@@ -195,6 +246,7 @@ def _verify(args: argparse.Namespace) -> int:
         raise SpecificationError(f"--tau must be finite and >= 0 s, got {tau}")
     # The loop as flown first: a refusal (bad option, lifted system too large) comes before the long searches.
     flown = _flown_checks(args, spacecraft, gain, tau, scenario)
+    joint = _joint_verdict(args, spacecraft, gain, tau, scenario)
     loop = linearized_loop(spacecraft, gain)
     margin = loop.delay_margin()
     rows: list[dict[str, Any]] = []
@@ -215,6 +267,8 @@ def _verify(args: argparse.Namespace) -> int:
                 }
             )
     margins = _phase_margins(spacecraft, gain)
+    idealised_certified = tau == 0 or any(row["certified"] for row in rows)
+    code = 0 if joint.verified and idealised_certified else NOT_VERIFIED
     if args.json:
         print_json(
             {
@@ -239,9 +293,11 @@ def _verify(args: argparse.Namespace) -> int:
                 "undelayed_poles_real": undelayed.poles.real,
                 "undelayed_poles_imag": undelayed.poles.imag,
                 "criteria": rows,
+                "joint": joint_json(joint),
+                "exit_code": code,
             }
         )
-        return 0
+        return code
     print(f"{loop}; K = {(np.round(gain, 4) + 0.0).tolist()}")
     if tau == 0:
         worst = float(np.max(undelayed.poles.real))
@@ -251,7 +307,8 @@ def _verify(args: argparse.Namespace) -> int:
         )
         print(f"exact delay margin: {margin.margin:.6g} s (largest delay this gain tolerates)")
         _print_flown(flown)
-        return 0
+        _print_joint(joint, code)
+        return code
     print(f"exact delay margin: {margin.margin:.6g} s (stable at tau = {tau:g} s: {margin.is_stable(tau)})")
     if margins is not None:
         print(str(margins))
@@ -261,15 +318,49 @@ def _verify(args: argparse.Namespace) -> int:
             f"{row['criterion']:<24} {row['status']:<16} {row['max_certified_tau']:>26.6g} "
             f"{row['ratio_to_exact']:>15.4f}"
         )
+    if not idealised_certified:
+        print(f"no criterion of --orders certifies the idealised loop at tau = {tau:g} s")
     _print_flown(flown)
-    return 0
+    _print_joint(joint, code)
+    return code
 
 
 def _print_flown(flown: list[dict[str, Any]]) -> None:
     """The loop-as-flown rows of ``verify``: verdict, where the check comes from, and each certificate."""
+    if flown:
+        print("each part of the loop as flown, separately (the others at their idealised values):")
     for row in flown:
-        print(f"{row['check']} ({row['source']}): {'certified' if row['certified'] else 'NOT certified'}")
+        verdict = "certified" if row["certified"] else "NOT certified"
+        print(f"{row['check']} ({row['source']}): {verdict}{_why_not(row)}")
         print("  " + row["text"].replace("\n", "\n  "))
+
+
+def _why_not(row: dict[str, Any]) -> str:
+    """Why a separate row is NOT certified, in plain words (empty when it is certified)."""
+    if row["certified"]:
+        return ""
+    failed = " or ".join(sorted({s for s in row["statuses"] if s != "CERTIFIED"}))
+    lmi = "the solver gave no usable answer" if failed == "SOLVER_FAILED" else "the LMI found no proof"
+    if row["check"] == "sampled":
+        bad = [name for name, s in zip(row["axes"], row["statuses"], strict=True) if s != "CERTIFIED"]
+        where = ", ".join(bad)
+        if not row["exact_stable"]:
+            return (
+                f": the sampled loop is unstable (largest lifted spectral radius {row['spectral_radius']:.9f} > 1), "
+                f"so no certificate can exist ({where})"
+            )
+        return (
+            f": the exact lifted check finds the sampled loop stable (spectral radius "
+            f"{row['spectral_radius']:.9f} < 1), but {lmi} on {where} (the sampled-data LMI is a sufficient "
+            "condition: stable, not certified)"
+        )
+    return f": {lmi} ({failed}); the LMI is a sufficient condition, so this does not say the loop is unstable"
+
+
+def _print_joint(verdict: FlownVerdict, code: int) -> None:
+    """The joint verdict on the loop as flown, and the exit code it gives."""
+    print(verdict)
+    print(f"exit code {code}: " + ("verified" if code == 0 else "checked, NOT verified (see above)"))
 
 
 def add_parser(commands: Any) -> None:
@@ -277,7 +368,7 @@ def add_parser(commands: Any) -> None:
         "verify",
         help="LMI verdict per criterion and the exact delay margin",
         formatter_class=Formatter,
-        epilog=EXIT_CODES,
+        epilog=VERIFY_EXIT_CODES,
     )
     parser.add_argument(
         "scenario", nargs="?", help="scenario TOML or shipped name (else the plant and gain options, or the paper's)"

@@ -6,6 +6,15 @@ so ``import mrpctl.design`` is cheap.
 
 from __future__ import annotations
 
+from mrpctl.design.flown import (
+    CheckKind,
+    CheckOutcome,
+    FlownCheck,
+    FlownStatus,
+    FlownVerdict,
+    Witness,
+    verify_flown,
+)
 from mrpctl.design.gains import AxisDamping, GainAnalysis, PDGains, analyze_gains, pd_gains
 from mrpctl.design.interval import (
     DelayRate,
@@ -66,11 +75,16 @@ __all__ = [
     "BlockMargin",
     "Certificate",
     "CertificateStatus",
+    "CheckKind",
+    "CheckOutcome",
     "Crossing",
     "DelayCertification",
     "DelayMargin",
     "DelayModel",
     "DelayRate",
+    "FlownCheck",
+    "FlownStatus",
+    "FlownVerdict",
     "Functional",
     "GainAnalysis",
     "InertiaPolytope",
@@ -91,6 +105,7 @@ __all__ = [
     "SampledStability",
     "SearchStatus",
     "SynthesisStatus",
+    "Witness",
     "analyze_gains",
     "certify",
     "certify_interval",
@@ -120,4 +135,5 @@ __all__ = [
     "synthesize_lmi",
     "synthesize_pd",
     "synthesize_robust_pd",
+    "verify_flown",
 ]

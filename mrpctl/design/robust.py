@@ -95,7 +95,7 @@ class RobustPDSynthesis:
     def __str__(self) -> str:
         return (
             f"robust PD ({self.model.value}, tau in [{self.tau_min:.6g}, {self.tau_max:.6g}] s, "
-            f"inertia +/-{100 * self.tolerance:g} %): {self.status.value}; omega_n = {self.omega_n:.6g} rad/s "
+            f"{_inertia_words(self.tolerance)}): {self.status.value}; omega_n = {self.omega_n:.6g} rad/s "
             f"({self.solves} certificates)\n  {self.exact_check}\n  {self.reason}"
         )
 
@@ -284,6 +284,11 @@ def delay_set(
             raise SpecificationError(f"tau_min must not exceed tau, got [{lo}, {tau}]")
         return DelaySet(DelayModel.INTERVAL, lo, tau, rate_v)
     return DelaySet(DelayModel.CONSTANT, tau, tau, DelayRate.unknown())
+
+
+def _inertia_words(tolerance: float) -> str:
+    """'inertia +/-20 %', or 'nominal inertia' for tolerance 0 (not '+/-0 %')."""
+    return "nominal inertia" if tolerance == 0.0 else f"inertia +/-{100 * tolerance:g} %"
 
 
 def _failed(count: int) -> str:

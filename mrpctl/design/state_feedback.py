@@ -138,7 +138,12 @@ class LMISynthesis:
         if self.robust:
             span = f"{self.model.value}, tau in [{self.tau_min:.6g}, {self.tau_max:.6g}] s"
             lines.append(
-                f"  robust: {span}, inertia +/-{100 * self.tolerance:g} %, |J_ij| <= {self.product_bound:g} kg m^2"
+                f"  robust: {span}, "
+                + (
+                    "nominal inertia"
+                    if self.tolerance == 0.0 and self.product_bound == 0.0
+                    else f"inertia +/-{100 * self.tolerance:g} %, |J_ij| <= {self.product_bound:g} kg m^2"
+                )
             )
             if self.exact_check:
                 lines.append(f"  {self.exact_check}")
