@@ -3,7 +3,7 @@
 The 60 s DelayAware tumbling batch of ``bench/vector.py`` (the paper's spacecraft and gain,
 tau = 0.5 s, 1 kHz, attitudes uniform on SO(3), |omega| <= 5 rad/s). For W in (4, 8, 16) and the
 ISA flags ``-mavx2`` (explicit) or ``-march=native`` resolved by the compiler
-(:func:`mrpctl.engines.lanes.native_isa_flags`: the flags that key the compile cache), the lane
+(:func:`mrpctl.engines.isa.native_isa_flags`: the flags that key the compile cache), the lane
 engine alone (``simulate_lanes``), each variant checked bit for bit against the scalar engine on
 16 runs; the hand-written structure-of-arrays loop of ``bench/vector.py`` (W = 8, the same
 flags) as the yardstick. Table 1: CPU time on one thread (the least disturbed by other jobs);
@@ -29,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import vector
 
 from mrpctl import paper
+from mrpctl.engines import isa as host_isa
 from mrpctl.engines import lanes as _vectorize
 from mrpctl.engines import scalar as _engine
 from mrpctl.loop import core_function, delay_samples, inertia_input
@@ -61,7 +62,7 @@ def main() -> None:
             for i in range(checked)
         ]
     )  # fmt: skip
-    native = _vectorize.native_isa_flags()
+    native = host_isa.native_isa_flags()
     isas = {"-mavx2": ("-mavx2",), "native": native} if native else {"-mavx2": ("-mavx2",)}
     default_isa = _vectorize.host_isa_flags()
     engines: dict[str, _vectorize.LaneEngine] = {}

@@ -160,7 +160,7 @@ def test_readme_delay_compensation_example(capsys: pytest.CaptureFixture[str]) -
     scope: dict[str, object] = {}
     exec(compile(code, "README.md", "exec"), scope)
     out = capsys.readouterr().out
-    assert "+/-19.9020%" in out
+    assert "+/-19.9185%" in out
     run = scope["run"]
     assert run.converged and run.switch_count == 0  # type: ignore[attr-defined]
     assert f"settling time {run.settling_time:.3f} s" in out and round(run.settling_time, 3) == 3.003  # type: ignore[attr-defined]

@@ -270,7 +270,7 @@ BAD_TOML = [
     ("delay", "tau_min", 0.0, r"\[delay\] tau_min must be >= 1/rate"),
     ("delay", "tau_min", -0.1, r"\[delay\] tau_min must be >= 0"),
     ("delay", "tau_min", 0.6, r"\[delay\] tau_max must be >= tau_min"),
-    ("delay", "tau_min", 0.4505, r"\[delay\] tau_min, tau_max must be whole numbers"),
+    ("delay", "tau_min", 0.4505, r"\[delay\] tau_min: delays must be whole numbers of measurement periods"),
     ("delay", "tau_max", 0.4, r"\[delay\] tau_max must equal the scenario's tau"),
     ("rule", "alpha", 1e200, r"\[rule\] alpha .* too large"),  # was OverflowError
     ("rule", "alpha", [1.2], r"\[rule\] alpha must be a real number"),

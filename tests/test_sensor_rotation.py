@@ -17,11 +17,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mrpctl import mrp
-from mrpctl.flight import (
-    _tan_quarter_ratio_expr,
-    measurement_function,
-    rotation_vector_to_mrp_expr,
-)
+from mrpctl.flight import measurement_function, rotation_vector_to_mrp_expr
+from mrpctl.flight.expressions import _tan_quarter_ratio_expr
 
 RNG_SEED = 20261202
 #: Largest error of the main path (Φ <= π, Cephes' rational), in ulps of the exact factor (measured: 0.86).

@@ -144,7 +144,7 @@ def test_the_virtual_machine_runs_noise_and_bias_bit_for_bit_and_refuses_jitter_
 def test_native_flags_are_this_cpu_s_fingerprint_and_key_the_cache_per_cpu(tmp_path):
     if _compile.find_compiler() is None:
         pytest.skip("no C compiler")
-    flags = _vectorize.native_isa_flags()
+    flags = isa.native_isa_flags()
     if not flags:
         pytest.skip("this compiler does not resolve -march=native")
     assert "-march=native" not in flags and any(flag.startswith("-march=") for flag in flags)

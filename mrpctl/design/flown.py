@@ -22,7 +22,7 @@ each naming exactly what it covers:
 
 The status ([FlownStatus][mrpctl.design.flown.FlownStatus]) is VERIFIED only when one check covers the whole
 flown set jointly; when only separate certificates hold (say, the nominal sampled loop and the continuous-time
-box) it is PARTIAL and [FlownVerdict.not_covered][mrpctl.design.flown.FlownVerdict.not_covered] says what no
+box) it is PARTIAL and ``FlownVerdict.not_covered`` says what no
 certificate covers; an exact check that finds an instability makes it UNSTABLE with the witness.
 """
 
