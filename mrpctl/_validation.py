@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -130,3 +131,15 @@ def integer(name: str, value: Any, *, minimum: int | None = None, maximum: int |
     if maximum is not None and number > maximum:
         raise SpecificationError(f"{name} must be <= {maximum}, got {number}")
     return number
+
+
+def available_memory() -> int | None:
+    """Bytes of physical memory available now (``os.sysconf``), None where the system does not say.
+
+    The one reading behind the up-front memory refusals of `simulate`, `simulate_batch`, the lanes and the
+    predictor's margin search.
+    """
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None

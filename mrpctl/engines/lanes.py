@@ -61,6 +61,7 @@ import casadi as ca
 import numpy as np
 
 from mrpctl import _compile
+from mrpctl._validation import available_memory as _available_memory  # patched by tests as lanes._available_memory
 from mrpctl._validation import integer
 from mrpctl.engines.isa import host_isa_flags
 from mrpctl.engines.lane_code import LaneProgram, emit_lanes
@@ -516,14 +517,6 @@ def _threads(threads: int | None) -> int:
     if threads is None:
         return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return integer("threads", threads, minimum=1)
-
-
-def _available_memory() -> int | None:
-    """Bytes of physical memory available now (None where the system does not say)."""
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, OSError, ValueError):
-        return None
 
 
 def _pool_map(task: Callable[[int], Any], count: int, threads: int) -> None:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import enum
 import math
-import os
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -15,7 +14,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from mrpctl._validation import finite_scalar, integer, positive_scalar, readonly
+from mrpctl._validation import available_memory, finite_scalar, integer, positive_scalar, readonly
 from mrpctl.clock import delay_samples
 from mrpctl.design import delay_margin, pd_gains
 from mrpctl.errors import InertiaWarning, SpecificationError
@@ -805,9 +804,8 @@ def _check_margin_memory(d: int, rate: Any) -> None:
     lifted test of an unsplit loop needs a matrix of 6 (d + 1) squared doubles, more still.
     """
     estimate = 32.0 * 16 * (d + 2)
-    try:
-        available = float(os.sysconf("SC_AVPHYS_PAGES")) * float(os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, ValueError, OSError):
+    available = available_memory()
+    if available is None:
         return
     if estimate > 0.5 * available:
         raise SpecificationError(

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._compile import find_compiler
-from mrpctl._validation import finite_array, integer, positive_scalar, readonly
+from mrpctl._validation import available_memory, finite_array, integer, positive_scalar, readonly
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.engines.common import RunOutput
 from mrpctl.engines.lanes import DEFAULT_WIDTH
@@ -117,14 +117,6 @@ def _keep_every(keep_every: Any) -> int | None:
     if keep_every is None:
         return None
     return integer("keep_every", keep_every, minimum=1)
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available now (os.sysconf), None where it cannot be read."""
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, ValueError, OSError):
-        return None
 
 
 def _memory_limit(memory_limit: Any) -> float:
