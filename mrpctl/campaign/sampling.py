@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import integer, sealed
+from mrpctl.campaign.distributions import Distribution
 from mrpctl.campaign.spec import AttitudeDispersion, CampaignSpec, FlightOptions
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import Hysteretic
@@ -250,15 +251,10 @@ def run_inputs(spec: CampaignSpec, start: int, stop: int | None = None) -> RunIn
         sigma0 = _attitude(spec.attitude, quaternion_normals, axis_normals, angle_quantile)
     omega0 = np.tile(base_omega, (n, 1))
     if spec.rate is not None:
-        low, high = spec.rate.magnitude
-        omega0 = omega0 + (low + (high - low) * rate_quantile)[:, None] * _unit(rate_normals)
+        omega0 = omega0 + spec.rate.magnitude.quantile(rate_quantile)[:, None] * _unit(rate_normals)
     grid = _tau_grid(spec)
     tau = grid[np.minimum((tau_quantile * len(grid)).astype(np.int64), len(grid) - 1)]
-    if spec.gains is None:
-        gain_scale = np.ones(n)
-    else:
-        low, high = spec.gains.scale
-        gain_scale = low + (high - low) * gain_quantile
+    gain_scale = np.ones(n) if spec.gains is None else spec.gains.scale.quantile(gain_quantile)
     rule_all = index_all % rules
     return RunInputs(
         index=sealed(index_all),
@@ -295,11 +291,11 @@ def _flight_draws(spec: CampaignSpec, cases: np.ndarray) -> tuple[np.ndarray, np
     return draws, seeds
 
 
-def _uniform(interval: tuple[float, float] | None, quantile: np.ndarray, base: float) -> np.ndarray:
-    if interval is None:
+def _uniform(distribution: Distribution | None, quantile: np.ndarray, base: float) -> np.ndarray:
+    """The draws of ``distribution`` at the variates (its quantile function), or ``base`` without one."""
+    if distribution is None:
         return np.full(len(quantile), base)
-    low, high = interval
-    return low + (high - low) * quantile
+    return distribution.quantile(quantile)
 
 
 def _flight_values(spec: CampaignSpec, rule: np.ndarray, flight: tuple[np.ndarray, np.ndarray]) -> dict[str, Any]:

@@ -67,6 +67,12 @@ and their dispersions::
     rate_noise = [0.0, 1e-4]        # rad/s, uniform
     gyro_bias = [0.0, 1e-3]         # rad/s, magnitude uniform, direction uniform, added to [flight] gyro_bias
 
+A pair [low, high] is a uniform draw; every scalar dispersion above except the attitude's angle and τ's
+grid may instead be a normal or truncated normal, e.g. ``scale = {distribution = "normal", mean = 1.0,
+std = 0.05}`` or ``magnitude = {distribution = "truncnorm", mean = 0.02, std = 0.01, low = 0.0, high = 0.05}``
+([`mrpctl.campaign.distributions`][mrpctl.campaign.distributions]); a quantity with a bound (a magnitude or a
+noise >= 0, a torque limit > 0, δ < 1) refuses a normal, whose draws could cross it.
+
 Each run's noise and jitter streams are seeded from (seed, case)
 ([`mrpctl.campaign.sampling`][mrpctl.campaign.sampling]).
 
@@ -99,6 +105,7 @@ import numpy as np
 
 from mrpctl._files import read_toml
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
+from mrpctl.campaign.distributions import Distribution, parse_distribution
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
 from mrpctl.loop import delay_samples
@@ -220,9 +227,10 @@ class AttitudeDispersion:
 
 @dataclass(frozen=True)
 class RateDispersion:
-    """Body rate added to the base ω: direction uniform on the unit sphere, magnitude uniform (rad/s)."""
+    """Body rate added to the base ω: direction uniform on the unit sphere, magnitude drawn from ``magnitude``
+    (rad/s; uniform, or a truncated normal on [0, ∞) or within it)."""
 
-    magnitude: tuple[float, float]
+    magnitude: Distribution
 
 
 @dataclass(frozen=True)
@@ -258,9 +266,9 @@ class TauDispersion:
 
 @dataclass(frozen=True)
 class GainDispersion:
-    """Gain scale s uniform in [low, high]: K = s K_base."""
+    """Gain scale s drawn from ``scale`` (uniform, normal or truncated normal): K = s K_base."""
 
-    scale: tuple[float, float]
+    scale: Distribution
 
 
 def rule_label(rule: SwitchingRule) -> str:
@@ -434,24 +442,27 @@ class FlightDispersion:
 
     Attributes
     ----------
-    delta : tuple of float or None
-        δ of the hysteretic rule, uniform in [low, high] ⊂ [0, 1).
-    u_max : tuple of float or None
-        Per-axis torque limit (the same on the three axes), uniform in [low, high] (N m), low > 0.
-    disturbance : tuple of float or None
-        Magnitude of a torque added to the base w, uniform (N m); direction uniform on the sphere.
-    attitude_noise, rate_noise : tuple of float or None
-        1σ of the sensor noises, uniform (rad; rad/s).
-    gyro_bias : tuple of float or None
-        Magnitude of a bias added to the base bias, uniform (rad/s); direction uniform on the sphere.
+    delta : Distribution or None
+        δ of the hysteretic rule, drawn within [0, 1).
+    u_max : Distribution or None
+        Per-axis torque limit (the same on the three axes), drawn within (0, ∞) (N m).
+    disturbance : Distribution or None
+        Magnitude of a torque added to the base w, drawn within [0, ∞) (N m); direction uniform on the sphere.
+    attitude_noise, rate_noise : Distribution or None
+        1σ of the sensor noises, drawn within [0, ∞) (rad; rad/s).
+    gyro_bias : Distribution or None
+        Magnitude of a bias added to the base bias, drawn within [0, ∞) (rad/s); direction uniform on the sphere.
+
+    Each is uniform (a pair [low, high] in the file), normal or truncated normal
+    ([`mrpctl.campaign.distributions`][mrpctl.campaign.distributions]).
     """
 
-    delta: tuple[float, float] | None = None
-    u_max: tuple[float, float] | None = None
-    disturbance: tuple[float, float] | None = None
-    attitude_noise: tuple[float, float] | None = None
-    rate_noise: tuple[float, float] | None = None
-    gyro_bias: tuple[float, float] | None = None
+    delta: Distribution | None = None
+    u_max: Distribution | None = None
+    disturbance: Distribution | None = None
+    attitude_noise: Distribution | None = None
+    rate_noise: Distribution | None = None
+    gyro_bias: Distribution | None = None
 
     @property
     def any(self) -> bool:
@@ -528,7 +539,7 @@ class CampaignSpec:
         """True when a run has sensor attitude noise (its numbers depend on `NOISE_REVISION`)."""
         dispersed = self.flight_dispersion.attitude_noise
         return (self.flight is not None and self.flight.attitude_noise > 0) or (
-            dispersed is not None and dispersed[1] > 0
+            dispersed is not None and dispersed.support[1] > 0
         )
 
     @property
@@ -616,7 +627,7 @@ def parse_campaign(
     if "rate" in tables:
         if "magnitude" not in tables["rate"]:
             raise SpecificationError("[dispersions.rate] needs magnitude = [low, high] (rad/s)")
-        rate = RateDispersion(_interval("rate.magnitude", tables["rate"]["magnitude"], low=0.0))
+        rate = RateDispersion(parse_distribution("rate.magnitude", tables["rate"]["magnitude"], low=0.0))
     inertia = None
     if "inertia" in tables:
         table = tables["inertia"]
@@ -645,7 +656,7 @@ def parse_campaign(
     if "gains" in tables:
         if "scale" not in tables["gains"]:
             raise SpecificationError("[dispersions.gains] needs scale = [low, high]")
-        gains = GainDispersion(_interval("gains.scale", tables["gains"]["scale"]))
+        gains = GainDispersion(parse_distribution("gains.scale", tables["gains"]["scale"]))
     rules = None
     if "rule" in tables:
         listed = tables["rule"].get("rules")
@@ -813,28 +824,26 @@ def _flight_options(
 
 
 def _flight_dispersion(tables: dict[str, dict[str, Any]]) -> FlightDispersion:
-    values: dict[str, tuple[float, float]] = {}
+    values: dict[str, Distribution] = {}
     if "hysteresis" in tables:
         if "delta" not in tables["hysteresis"]:
-            raise SpecificationError("[dispersions.hysteresis] needs delta = [low, high]")
-        low, high = _interval("hysteresis.delta", tables["hysteresis"]["delta"], low=0.0)
-        if high >= 1.0:
-            raise SpecificationError(f"hysteresis.delta must lie in [0, 1), got [{low:g}, {high:g}]")
-        values["delta"] = (low, high)
+            raise SpecificationError("[dispersions.hysteresis] needs delta = [low, high] or a distribution table")
+        values["delta"] = parse_distribution(
+            "hysteresis.delta", tables["hysteresis"]["delta"], low=0.0, high=1.0, high_open=True
+        )
     if "actuator" in tables:
         if "u_max" not in tables["actuator"]:
-            raise SpecificationError("[dispersions.actuator] needs u_max = [low, high] (N m)")
-        low, high = _interval("actuator.u_max", tables["actuator"]["u_max"], low=0.0)
-        if low <= 0.0:
-            raise SpecificationError(f"actuator.u_max: the torque limit must be > 0, got low = {low:g} N m")
-        values["u_max"] = (low, high)
+            raise SpecificationError("[dispersions.actuator] needs u_max = [low, high] (N m) or a distribution table")
+        values["u_max"] = parse_distribution("actuator.u_max", tables["actuator"]["u_max"], low=0.0, low_open=True)
     if "disturbance" in tables:
         if "magnitude" not in tables["disturbance"]:
-            raise SpecificationError("[dispersions.disturbance] needs magnitude = [low, high] (N m)")
-        values["disturbance"] = _interval("disturbance.magnitude", tables["disturbance"]["magnitude"], low=0.0)
+            raise SpecificationError(
+                "[dispersions.disturbance] needs magnitude = [low, high] (N m) or a distribution table"
+            )
+        values["disturbance"] = parse_distribution("disturbance.magnitude", tables["disturbance"]["magnitude"], low=0.0)
     for key in ("attitude_noise", "rate_noise", "gyro_bias"):
         if key in tables.get("sensor", {}):
-            values[key] = _interval(f"sensor.{key}", tables["sensor"][key], low=0.0)
+            values[key] = parse_distribution(f"sensor.{key}", tables["sensor"][key], low=0.0)
     return FlightDispersion(**values)
 
 
