@@ -56,7 +56,14 @@ HEAVY = {"cvxpy", "xarray", "zarr", "pandas", "matplotlib", "control", "dask", "
 #: mrpctl modules that import a heavy dependency at their top, and so may be imported where they are used:
 #: the figures (matplotlib), the campaign store, runner and report (xarray, zarr, Dask, matplotlib) and the
 #: python-control bridge.
-HEAVY_OWN = {"mrpctl.plots", "mrpctl.campaign.run", "mrpctl.campaign.store", "mrpctl.campaign.report", "mrpctl.interop"}
+HEAVY_OWN = {
+    "mrpctl.plots",
+    "mrpctl.campaign.run",
+    "mrpctl.campaign.store",
+    "mrpctl.campaign.report",
+    "mrpctl.campaign.trajectories",
+    "mrpctl.interop",
+}
 
 
 def _module(path: Path) -> str:

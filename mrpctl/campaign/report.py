@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import xarray as xr
-from scipy.stats import beta, norm
+from scipy.stats import binomtest
 
 from mrpctl._validation import integer
 from mrpctl.campaign._task import run_models, simulate_chunk
@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from mrpctl.simulation import SimulationResult
 
 __all__ = [
+    "WORST_CRITERION",
     "CampaignReport",
     "ReplayResult",
     "RuleSummary",
@@ -48,35 +49,28 @@ __all__ = [
     "write_report",
 ]
 
-#: Two-sided 95 % standard normal quantile.
-_Z95 = 1.959963984540054
+
+def _proportion_ci(successes: int, trials: int, confidence: float, method: str) -> tuple[float, float]:
+    if trials == 0:
+        return 0.0, 1.0
+    ci = binomtest(int(successes), int(trials)).proportion_ci(confidence_level=confidence, method=method)
+    return float(ci.low), float(ci.high)
 
 
 def wilson_interval(successes: int, trials: int, *, confidence: float = 0.95) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion (Wilson 1927).
+    """Wilson score interval of a binomial proportion (Wilson 1927), from ``scipy.stats.binomtest``.
 
     Returns (0, 1) when there are no trials.
     """
-    if trials == 0:
-        return 0.0, 1.0
-
-    z = float(norm.ppf(0.5 + confidence / 2.0)) if confidence != 0.95 else _Z95
-    p = successes / trials
-    denominator = 1.0 + z * z / trials
-    centre = (p + z * z / (2.0 * trials)) / denominator
-    half = z * math.sqrt(p * (1.0 - p) / trials + z * z / (4.0 * trials * trials)) / denominator
-    return max(0.0, centre - half), min(1.0, centre + half)
+    return _proportion_ci(successes, trials, confidence, "wilson")
 
 
 def clopper_pearson_interval(successes: int, trials: int, *, confidence: float = 0.95) -> tuple[float, float]:
-    """Exact (Clopper–Pearson 1934) interval of a binomial proportion, from the beta quantiles."""
-    if trials == 0:
-        return 0.0, 1.0
+    """Exact (Clopper–Pearson 1934) interval of a binomial proportion, from ``scipy.stats.binomtest``.
 
-    alpha = 1.0 - confidence
-    low = 0.0 if successes == 0 else float(beta.ppf(alpha / 2.0, successes, trials - successes + 1))
-    high = 1.0 if successes == trials else float(beta.ppf(1.0 - alpha / 2.0, successes + 1, trials - successes))
-    return low, high
+    Returns (0, 1) when there are no trials.
+    """
+    return _proportion_ci(successes, trials, confidence, "exact")
 
 
 @dataclass(frozen=True)
@@ -122,6 +116,13 @@ class WorstCase:
     rule: str = ""
 
 
+#: How the worst runs are ordered (most severe first), as the report states it.
+WORST_CRITERION = (
+    "most severe first: diverged, then not settled by the end of the run (more switches first), "
+    "then settled, slowest to settle first"
+)
+
+
 @dataclass(frozen=True, eq=False)
 class CampaignReport:
     """Summary of a campaign's complete runs.
@@ -145,7 +146,7 @@ class CampaignReport:
     peak_torque_max : float
         Largest peak torque (N m), NaN when not computed.
     worst : tuple of WorstCase
-        The worst runs: diverged, then not settled, then the slowest to settle.
+        The worst runs in the order of `WORST_CRITERION`.
     """
 
     name: str
@@ -179,6 +180,7 @@ class CampaignReport:
             "settling_time_s": self.settling_quantiles,
             "switch_count": self.switch_quantiles,
             "peak_torque_max_Nm": None if math.isnan(self.peak_torque_max) else self.peak_torque_max,
+            "worst_criterion": WORST_CRITERION,
             "worst": [case.__dict__ for case in self.worst],
             "by_rule": [{**entry.__dict__, "wilson": list(entry.wilson)} for entry in self.by_rule],
             "integrity": self.integrity,
@@ -223,7 +225,7 @@ class CampaignReport:
                     f"{r.switch_quantiles['median']:>10.4g} {r.switch_quantiles['max']:>10.4g}"
                 )
         lines += [
-            "  worst cases:",
+            f"  worst cases ({WORST_CRITERION}):",
             f"    {'run':>8} {'rule':<20} {'reason':<12} {'settling_s':>10} {'switches':>8} {'max|sigma|':>10} "
             f"{'angle_deg':>9} {'rate_rad/s':>10}  replay",
         ]

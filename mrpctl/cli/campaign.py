@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -69,11 +70,27 @@ def _run(args: argparse.Namespace) -> int:
 
 def _report(args: argparse.Namespace) -> int:
     # deferred: xarray and zarr (through the campaign store), only for campaign report
-    from mrpctl.campaign.report import write_report
+    from mrpctl.campaign.report import strict_json, write_report
+    from mrpctl.campaign.trajectories import store_trajectories, trajectory_runs
 
-    summary, paths = write_report(args.out, worst=args.worst, intact_only=args.intact_only)
+    worst = max(args.worst, args.trajectories)
+    summary, paths = write_report(args.out, worst=worst, intact_only=args.intact_only)
+    runs = trajectory_runs(summary, args.trajectories, args.trajectory_run or ())
+    stored = store_trajectories(args.out, runs) if runs else None
+    if args.json:
+        document = strict_json(summary.summary())
+        document["files"] = [str(path) for path in paths]
+        if stored is not None:
+            document["trajectories"] = [
+                {"run": run, "file": str(path), "sha256": digest}
+                for run, path, digest in zip(stored.runs, stored.files, stored.sha256, strict=True)
+            ]
+        print(json.dumps(document, indent=2, allow_nan=False))
+        return 0
     print(summary)
     print(f"report.md, summary.json and {len(paths) - 2} figures written to {paths[0].parent}")
+    if stored is not None:
+        print(stored)
     return 0
 
 
@@ -108,6 +125,23 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     report = commands.add_parser("report", help="table and figures of a campaign's complete runs")
     report.add_argument("out", type=Path, help="results folder")
     report.add_argument("--worst", type=int, default=10, help="worst cases to list (default 10)")
+    report.add_argument(
+        "--json", action="store_true", help="print the summary as JSON (strict: NaN is null) instead of the table"
+    )
+    report.add_argument(
+        "--trajectories",
+        type=int,
+        default=0,
+        metavar="N",
+        help="replay the N worst runs and keep their trajectories in OUT/trajectories (checksummed)",
+    )
+    report.add_argument(
+        "--trajectory-run",
+        type=int,
+        action="append",
+        metavar="RUN",
+        help="also keep the trajectory of this run (repeatable)",
+    )
     report.add_argument(
         "--intact-only", action="store_true", help="report over the intact runs of a damaged store and list the rest"
     )
