@@ -1,6 +1,7 @@
-"""The counter-based random streams (mrpctl/engines/noise.c and its NumPy mirror in mrpctl.flight).
+"""The counter-based random streams: mrpctl/engines/noise.c, the package's one generator (mrpctl.flight.streams
+calls it), against the independent NumPy reimplementation of tests/noise_reference.py.
 
-The C generator and the NumPy mirror must give the same bits for every value (compared on >= 10^6
+The C generator and the NumPy reference must give the same bits for every value (compared on >= 10^6
 normals over several seeds and slicings); the normals must be standard normal (Kolmogorov-Smirnov
 and chi-square against scipy.stats.norm, the tail beyond 3.5 sigma) and the streams uncorrelated.
 """
@@ -12,13 +13,14 @@ import itertools
 import math
 from importlib import resources
 
+import noise_reference as reference
 import numpy as np
 import pytest
 from scipy import stats
 
 from mrpctl import _compile, flight
 from mrpctl.errors import SpecificationError
-from mrpctl.flight import STREAM_ATTITUDE, STREAM_JITTER, STREAM_RATE, DelayModel, SensorModel, stream_key, streams
+from mrpctl.flight import STREAM_ATTITUDE, STREAM_JITTER, STREAM_RATE, DelayModel, SensorModel, stream_key
 
 MILLION = 1_000_000
 
@@ -58,8 +60,8 @@ def _bits(values: np.ndarray) -> np.ndarray:
 
 # ============================================================================ one source of bits
 def test_the_tables_in_the_c_source_are_the_documented_recursion_bit_for_bit():
-    x, f = streams._ziggurat_tables()
-    table_x, table_f = streams._c_tables()
+    x, f = reference._ziggurat_tables()
+    table_x, table_f = reference._c_tables()
     assert np.array_equal(_bits(np.array(x)), _bits(table_x)) and np.array_equal(_bits(np.array(f)), _bits(table_f))
     assert table_x[1] == 3.6541528853610088 and table_x[256] == 0.0 and table_f[256] == 1.0
     assert np.all(np.diff(table_x) < 0) and np.all(np.diff(table_f) > 0)
@@ -75,7 +77,7 @@ def test_the_prescaled_table_is_x_times_two_to_the_minus_53_exactly():
     text = resources.files("mrpctl").joinpath("engines", "noise.c").read_text(encoding="utf-8")
     body = text.split("mrpctl_zig_xs[256] = {", 1)[1].split("}", 1)[0]
     scaled = np.array([float.fromhex(item) for item in body.replace("\n", " ").split(",") if item.strip()])
-    table_x, _ = streams._c_tables()
+    table_x, _ = reference._c_tables()
     assert scaled.shape == (256,)
     assert np.array_equal(_bits(scaled), _bits(np.ldexp(table_x[:256], -53)))
     # the product is the same real number as the documented ((h >> 11) 2^-53) X[i]: the same rounding
@@ -86,8 +88,8 @@ def test_the_prescaled_table_is_x_times_two_to_the_minus_53_exactly():
 
 def test_mix64_is_splitmix64():
     """The first outputs of SplitMix64 seeded with 0 (the reference sequence of Vigna's splitmix64.c)."""
-    assert [streams._value(0, i) for i in range(3)] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F]
-    assert streams._values(0, np.arange(3, dtype=np.uint64)).tolist() == [streams._value(0, i) for i in range(3)]
+    assert [reference.value(0, i) for i in range(3)] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F]
+    assert reference.values(0, np.arange(3, dtype=np.uint64)).tolist() == [reference.value(0, i) for i in range(3)]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 20261201, 2**64 - 1])
@@ -95,7 +97,9 @@ def test_c_and_numpy_give_the_same_million_normals_bit_for_bit(c_fill, seed):
     normals, _ = c_fill
     key = stream_key(seed, STREAM_ATTITUDE)
     start = 12345 if seed else 0
-    expected = flight.stream_normals(key, start, start + MILLION // 4)
+    assert key == reference.stream_key(seed, STREAM_ATTITUDE)
+    expected = reference.stream_normals(key, start, start + MILLION // 4)
+    assert np.array_equal(_bits(flight.stream_normals(key, start, start + MILLION // 4)), _bits(expected))
     assert np.array_equal(_bits(normals(key, start, MILLION // 4)), _bits(expected))
     # any slicing of the C calls gives the same values
     cuts = [start, start + 1, start + 999, start + 70_001, start + MILLION // 4]
@@ -107,7 +111,7 @@ def test_c_and_numpy_agree_in_the_tail_and_with_a_scale(c_fill):
     """Every rejected value (wedge or tail) of 10^6 draws goes through the scalar math.exp/math.log path."""
     normals, _ = c_fill
     key = stream_key(3, STREAM_RATE)
-    values = flight.stream_normals(key, 0, MILLION)
+    values = reference.stream_normals(key, 0, MILLION)
     assert np.sum(np.abs(values) > 3.6541528853610088) > 100  # tail samples were drawn and compared
     assert np.array_equal(_bits(normals(key, 0, MILLION)), _bits(values))
     assert np.array_equal(_bits(normals(key, 0, 1000, 0.01)), _bits(0.01 * values[:1000]))
@@ -127,14 +131,22 @@ def test_sensor_noise_rows_are_the_streams_in_any_slicing(c_fill):
         assert np.array_equal(rows[:, 0:3], attitude[a:b]) and np.array_equal(rows[:, 3:6], rate[a:b])
 
 
-def test_the_compiled_noise_rows_of_the_lane_engine_are_the_numpy_mirror_s():
+def test_the_noise_rows_of_the_engines_are_the_reference_s():
     from mrpctl.engines.scalar import noise_rows
 
     if _compile.find_compiler() is None:
         pytest.skip("no C compiler")
     for sensor in (SensorModel(attitude_noise=0.01, rate_noise=2e-4, seed=5), SensorModel(rate_noise=1e-3, seed=1)):
         for a, b in ((0, 5000), (4999, 70_000)):
-            assert np.array_equal(_bits(noise_rows(sensor, a, b)), _bits(sensor.noise_rows(a, b)))
+            expected = np.hstack(
+                [
+                    reference.stream_normal_rows(sensor.seed, stream, a, b, scale=sigma)
+                    if sigma > 0
+                    else np.zeros((b - a, 3))
+                    for stream, sigma in ((STREAM_ATTITUDE, sensor.attitude_noise), (STREAM_RATE, sensor.rate_noise))
+                ]
+            )
+            assert np.array_equal(_bits(noise_rows(sensor, a, b)), _bits(expected))
 
 
 def test_jitter_integers_c_and_numpy_agree_and_are_uniform(c_fill):
@@ -144,6 +156,7 @@ def test_jitter_integers_c_and_numpy_agree_and_are_uniform(c_fill):
     n = 200_000
     values = model.samples(1000.0, 0, n)
     assert np.array_equal(integers(key, 0, n, 10, 50), values)
+    assert np.array_equal(reference.stream_integers(4, STREAM_JITTER, 0, n, 10, 50), values)
     assert np.array_equal(np.concatenate((model.samples(1000.0, 0, 777), model.samples(1000.0, 777, n))), values)
     counts = np.bincount(values - 10, minlength=41)
     assert values.min() == 10 and values.max() == 50 and counts.size == 41

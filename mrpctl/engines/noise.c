@@ -1,11 +1,12 @@
 /* mrpctl: the counter-based random streams of the flight loop (sensor noise, delay jitter).
  *
- * Included (as text, in front of the horizon driver) by mrpctl/engines/scalar_driver.c's engine and
- * mirrored exactly, bit for bit, in NumPy by mrpctl/flight.py (_stream_normals, _stream_integers);
- * the two are tested against each other on >= 1e6 values (tests/test_flight_noise.py).
+ * Included (as text, in front of the horizon driver) by mrpctl/engines/scalar_driver.c's engine, and
+ * compiled alone as the one generator of the package's Python side (mrpctl.flight.streams calls
+ * mrpctl_stream_key and mrpctl_stream_fill). The tests hold an independent NumPy reimplementation
+ * (tests/noise_reference.py) and compare the two bit for bit on >= 1e6 values (tests/test_flight_noise.py).
  *
- * Value number idx of a stream with key K (K = mrpctl.flight._stream_key(seed, stream), computed in
- * Python) is the SplitMix64 output (Steele, Lea and Flood 2014, "Fast splittable pseudorandom number
+ * Value number idx of a stream with key K (K = mrpctl_stream_key(seed, stream) below, which
+ * mrpctl.flight.stream_key calls) is the SplitMix64 output (Steele, Lea and Flood 2014, "Fast splittable pseudorandom number
  * generators"; the finaliser is Stafford's Mix13):
  *     z = K + (idx + 1) * 0x9E3779B97F4A7C15 (mod 2^64), value = mix13(z),
  * so a value depends only on (K, idx): never on slicing, lanes or threads.
@@ -21,9 +22,8 @@
  * next attempt. The caps (attempt 63 and tail try 30 accept their candidate) only make the loops
  * finite: reaching them has probability below 1e-100. The tables X (257: X[0] = v / f(r), X[1] = r,
  * X[i+1] = sqrt(-2 log(v / X[i] + f(X[i]))), X[256] = 0) and F = exp(-X^2/2) (F[256] = 1) were
- * computed once in Python float64 with math.exp / math.log (mrpctl.flight._ziggurat_tables, which
- * the tests compare with these literals) and are written as exact hex-float literals; NumPy reads
- * them from this file, so both use the same bits. exp and log are the libm's (the NumPy mirror calls
+ * computed once in Python float64 with math.exp / math.log (tests/noise_reference.py recomputes them
+ * and compares them with these literals) and are written as exact hex-float literals. exp and log are the libm's (the tests' NumPy reference calls
  * Python's math.exp / math.log, the same libm, in a scalar loop over the few rejected values), and
  * the driver is compiled with -ffp-contract=off (no fused multiply-add).
  *
@@ -346,4 +346,11 @@ __attribute__((visibility("default"))) void mrpctl_stream_fill(unsigned long lon
     if (integers) *target = (double)mrpctl_stream_integer(key, (uint64_t)(n0 + i), lo, hi);
     else *target = scale > 0.0 ? scale * mrpctl_stream_normal(key, (uint64_t)(n0 + i)) : 0.0;
   }
+}
+
+/* The 64-bit key of stream `stream` (0 attitude, 1 rate, 2 jitter) of `seed`:
+ * mix13(mix13(seed + 0x9E3779B97F4A7C15) + (stream + 1) 0xD1B54A32D192ED03) (mod 2^64). */
+__attribute__((visibility("default"))) unsigned long long mrpctl_stream_key(unsigned long long seed,
+                                                                            unsigned long long stream) {
+  return mrpctl_mix13(mrpctl_mix13(seed + UINT64_C(0x9E3779B97F4A7C15)) + (stream + 1u) * UINT64_C(0xD1B54A32D192ED03));
 }

@@ -33,8 +33,6 @@ from mrpctl._compile import (
     CompiledFunction,
     address,
     compile_function,
-    compile_source,
-    find_compiler,
 )
 from mrpctl.engines.common import RunOutput, Workspace
 from mrpctl.engines.libm import inline_min_max
@@ -143,44 +141,10 @@ _NO_NOISE = np.zeros(NOISE_SIZE)
 _ROTATION_IN_DRIVER = True
 
 
-_NOISE_FILL: list[Any] = []  # mrpctl_stream_fill of noise.c compiled alone (loaded once), or None
-_NOISE_FILL_LOCK = threading.Lock()
-
-
-def _noise_fill() -> Any:
-    """``mrpctl_stream_fill`` of ``noise.c`` (compiled once, cached on disk), or None without a compiler."""
-    with _NOISE_FILL_LOCK:
-        if not _NOISE_FILL:
-            fill = None
-            if find_compiler() is not None:
-                code = resources.files("mrpctl.engines").joinpath("noise.c").read_text(encoding="utf-8")
-                library = ctypes.CDLL(str(compile_source(code, "mrpctl_noise", flags=SIMULATION_FLAGS)))
-                fill = library.mrpctl_stream_fill
-                fill.restype = None
-                fill.argtypes = [ctypes.c_ulonglong, ctypes.c_longlong, ctypes.c_longlong, ctypes.c_double]
-                fill.argtypes += [
-                    ctypes.c_int,
-                    ctypes.c_longlong,
-                    ctypes.c_longlong,
-                    ctypes.c_void_p,
-                    ctypes.c_longlong,
-                ]
-            _NOISE_FILL.append(fill)
-        return _NOISE_FILL[0]
-
-
 def noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
-    """[`SensorModel.noise_rows`][mrpctl.flight.SensorModel.noise_rows] (k1 − k0, 6) drawn by the C code of ``noise.c``
-    (the same bits, ≈ 15×
-    faster than its NumPy mirror); the NumPy mirror when there is no C compiler."""
-    fill = _noise_fill()
-    if fill is None:
-        return sensor.noise_rows(k0, k1)
-    rows = np.empty((k1 - k0, NOISE_SIZE))
-    for column, sigma, stream in ((0, sensor.attitude_noise, STREAM_ATTITUDE), (3, sensor.rate_noise, STREAM_RATE)):
-        target = rows.ctypes.data + 8 * column
-        fill(stream_key(sensor.seed, stream), 3 * k0, 3 * (k1 - k0), sigma, 0, 0, 0, target, NOISE_SIZE)
-    return rows
+    """[`SensorModel.noise_rows`][mrpctl.flight.SensorModel.noise_rows] (k1 − k0, 6): the rows the engines read,
+    drawn by the C code of ``noise.c`` (the one generator: [`mrpctl.flight.streams`][mrpctl.flight.streams])."""
+    return sensor.noise_rows(k0, k1)
 
 
 def slice_samples(substeps: int) -> int:

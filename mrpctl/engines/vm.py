@@ -168,7 +168,7 @@ class VirtualMachineEngine:
         if self.flight:
             memory0 = flight_memory(x0, np.ascontiguousarray(history, dtype=float), self.d)  # type: ignore[assignment]
             constants.append(NO_FLIGHT_OPTIONS if flight_options is None else flight_options)
-        if self.sensor:  # the noise of every sample of the chain: the NumPy mirror of the compiled driver's
+        if self.sensor:  # the noise of every sample of the chain: noise.c's numbers, as the compiled driver's
             padded = self.blocks(n) * self.block_samples
             noise = np.zeros((padded, STATE_SIZE)) if sensor is None else sensor.noise_rows(0, padded)
             constants.append(np.ascontiguousarray(noise.T))

@@ -1,19 +1,26 @@
-"""Seeded random streams of the loop as flown: counter-based SplitMix64 values and a 53-bit ziggurat,
-a NumPy mirror of ``mrpctl/engines/noise.c``; every number depends only on (seed, stream, sample index)."""
+"""Seeded random streams of the loop as flown: counter-based SplitMix64 values and a 53-bit ziggurat.
+
+One generator: the C code of ``mrpctl/engines/noise.c`` (read its header for the algorithm), compiled
+alone once (cached on disk like every compiled engine) and called here through ctypes; the compiled
+engines include the same file. Every number depends only on (seed, stream, sample index): never on
+slicing, lanes or threads. The tests check it bit for bit against an independent NumPy reimplementation.
+"""
 
 from __future__ import annotations
 
-import math
-from functools import lru_cache
+import ctypes
+import threading
 from importlib import resources
 from typing import Any
 
 import numpy as np
 
+from mrpctl._compile import SIMULATION_FLAGS, compile_source, find_compiler
 from mrpctl._validation import integer
-from mrpctl.errors import SpecificationError
+from mrpctl.errors import MrpctlError, SpecificationError
 
 __all__ = [
+    "noise_library",
     "sample_slice",
     "stream_integers",
     "stream_key",
@@ -22,130 +29,65 @@ __all__ = [
     "stream_seed",
 ]
 
-# The NumPy mirror of mrpctl/engines/noise.c (read that file's header: SplitMix64 values of
-# (key, idx), a 256-layer ziggurat on them); the C driver generates the same bits per sample.
 _MASK64 = (1 << 64) - 1
-_GAMMA = 0x9E3779B97F4A7C15
-_ZIG_LAYERS = 256
-_ZIG_R = 3.6541528853610088
-_ATTEMPTS, _TAIL_TRIES = 64, 31  # the C loops' caps: attempt 63, tail try 30 accept their candidate
-_TWO_M53 = 2.0**-53
+_LIBRARY: list[Any] = []
+_LOCK = threading.Lock()
 
 
-def _mix64(z: int) -> int:
-    """Stafford's Mix13, the SplitMix64 finaliser, on a Python int (mod 2^64)."""
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
-    return z ^ (z >> 31)
+def noise_library() -> Any:
+    """``noise.c`` compiled alone (once per process; the library is cached on disk), as a ``ctypes.CDLL``.
+
+    Its ``mrpctl_stream_fill(key, n0, count, scale, integers, lo, hi, out, row_stride)`` writes value
+    i < count (normal or jitter number n0 + i) to ``out[(i / 3) row_stride + i % 3]``, and
+    ``mrpctl_stream_key(seed, stream)`` is a stream's key.
+
+    Raises
+    ------
+    MrpctlError
+        Without a C compiler (the streams, like the engines, are compiled C).
+    """
+    with _LOCK:
+        if not _LIBRARY:
+            if find_compiler() is None:
+                raise MrpctlError(
+                    "the sensor noise and delay jitter streams are compiled C (mrpctl/engines/noise.c): "
+                    "install gcc or cc, or set CC"
+                )
+            code = resources.files("mrpctl").joinpath("engines", "noise.c").read_text(encoding="utf-8")
+            library = ctypes.CDLL(str(compile_source(code, "mrpctl_noise", flags=SIMULATION_FLAGS)))
+            library.mrpctl_stream_fill.restype = None
+            library.mrpctl_stream_fill.argtypes = [
+                ctypes.c_ulonglong,
+                ctypes.c_longlong,
+                ctypes.c_longlong,
+                ctypes.c_double,
+                ctypes.c_int,
+                ctypes.c_longlong,
+                ctypes.c_longlong,
+                ctypes.c_void_p,
+                ctypes.c_longlong,
+            ]
+            library.mrpctl_stream_key.restype = ctypes.c_ulonglong
+            library.mrpctl_stream_key.argtypes = [ctypes.c_ulonglong, ctypes.c_ulonglong]
+            _LIBRARY.append(library)
+        return _LIBRARY[0]
 
 
 def stream_key(seed: int, stream: int) -> int:
-    """The 64-bit key of one stream (0 attitude, 1 rate, 2 jitter) of ``seed`` (< 2^64)."""
-    return _mix64((_mix64((seed + _GAMMA) & _MASK64) + (stream + 1) * 0xD1B54A32D192ED03) & _MASK64)
-
-
-def _value(key: int, idx: int) -> int:
-    """Value number idx of the stream with ``key`` (scalar, Python ints)."""
-    return _mix64((key + (idx + 1) * _GAMMA) & _MASK64)
-
-
-def _values(key: int, idx: np.ndarray) -> np.ndarray:
-    """`_value` of a uint64 array of indices (uint64 arithmetic wraps mod 2^64)."""
-    z = (idx + np.uint64(1)) * np.uint64(_GAMMA) + np.uint64(key)
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
-
-
-def _ziggurat_tables() -> tuple[list[float], list[float]]:
-    """X (257) and F = exp(−X²/2) of the 256-layer ziggurat, computed in float64 as documented in noise.c."""
-    r = _ZIG_R
-    v = r * math.exp(-0.5 * r * r) + math.sqrt(math.pi / 2.0) * math.erfc(r / math.sqrt(2.0))
-    x = [0.0] * (_ZIG_LAYERS + 1)
-    x[0], x[1] = v / math.exp(-0.5 * r * r), r
-    for i in range(1, _ZIG_LAYERS - 1):
-        x[i + 1] = math.sqrt(-2.0 * math.log(v / x[i] + math.exp(-0.5 * x[i] * x[i])))
-    f = [math.exp(-0.5 * value * value) for value in x]
-    f[_ZIG_LAYERS] = 1.0
-    return x, f
-
-
-@lru_cache(maxsize=1)
-def _c_tables() -> tuple[np.ndarray, np.ndarray]:
-    """The tables as written in mrpctl/engines/noise.c (hex-float literals): the bits both sides use."""
-
-    text = resources.files("mrpctl").joinpath("engines", "noise.c").read_text(encoding="utf-8")
-    tables = []
-    for name in ("mrpctl_zig_x", "mrpctl_zig_f"):
-        body = text.split(f"{name}[{_ZIG_LAYERS + 1}] = {{", 1)[1].split("}", 1)[0]
-        values = [float.fromhex(item) for item in body.replace("\n", " ").split(",") if item.strip()]
-        if len(values) != _ZIG_LAYERS + 1:
-            raise RuntimeError(f"noise.c: {name} has {len(values)} entries, expected {_ZIG_LAYERS + 1}")
-        tables.append(np.array(values))
-    return tables[0], tables[1]
-
-
-def _normal_slow(key: int, n: int, table_x: np.ndarray, table_f: np.ndarray) -> float:
-    """Normal number n by the C code's loop, in Python floats (math.exp / math.log: the same libm)."""
-    r = float(table_x[1])
-    for attempt in range(_ATTEMPTS):
-        base = (n << 12) | (attempt << 6)
-        h = _value(key, base)
-        i, negative = h & 255, (h >> 8) & 1
-        x = float(h >> 11) * _TWO_M53 * float(table_x[i])
-        if x < table_x[i + 1]:
-            return -x if negative else x
-        if i == 0:
-            for t in range(_TAIL_TRIES):
-                u1 = float((_value(key, base | (2 * t + 1)) >> 11) + 1) * _TWO_M53
-                u2 = float((_value(key, base | (2 * t + 2)) >> 11) + 1) * _TWO_M53
-                xt = -math.log(u1) / r
-                y = -math.log(u2)
-                if y + y > xt * xt or t == _TAIL_TRIES - 1:
-                    x = r + xt
-                    return -x if negative else x
-        else:
-            u2 = float(_value(key, base | 1) >> 11) * _TWO_M53
-            f_i, f_next = float(table_f[i]), float(table_f[i + 1])
-            if f_i + u2 * (f_next - f_i) < math.exp(-0.5 * x * x) or attempt == _ATTEMPTS - 1:
-                return -x if negative else x
-    raise AssertionError("unreachable: the last attempt accepts")  # pragma: no cover
+    """The 64-bit key of one stream (0 attitude, 1 rate, 2 jitter) of ``seed`` (< 2^64), from noise.c."""
+    seed = integer("seed", seed, minimum=0, maximum=_MASK64)
+    stream = integer("stream", stream, minimum=0, maximum=_MASK64 - 1)
+    return int(noise_library().mrpctl_stream_key(seed, stream))
 
 
 def stream_normals(key: int, n0: int, n1: int) -> np.ndarray:
-    """Standard normal numbers n0 … n1 − 1 of the stream with ``key``, as the C code draws them (float64).
-
-    Vectorised over the values attempt by attempt (the C loop of each value, in the same
-    arithmetic); the exponentials of the wedge tests are Python's ``math.exp`` (the libm's, as in
-    the C code: NumPy's own exp may differ in the last bit) and the tail, about 4 values in 10⁴,
-    runs the C loop value by value (`_normal_slow`, ``math.log``).
-    """
-    table_x, table_f = _c_tables()
+    """Standard normal numbers n0 … n1 − 1 of the stream with ``key`` (float64), drawn by noise.c."""
+    key = integer("key", key, minimum=0, maximum=_MASK64)
+    n0 = integer("n0", n0, minimum=0)
+    n1 = integer("n1", n1, minimum=n0)
     out = np.empty(n1 - n0)
-    pending = np.arange(n1 - n0, dtype=np.int64)
-    counters = np.arange(n0, n1, dtype=np.uint64) << np.uint64(12)
-    for attempt in range(_ATTEMPTS - 1):  # the last attempt (never reached in practice) is _normal_slow's
-        if pending.size == 0:
-            break
-        base = counters[pending] | np.uint64(attempt << 6)
-        h = _values(key, base)
-        layer = (h & np.uint64(255)).astype(np.intp)
-        x = (h >> np.uint64(11)).astype(np.float64) * _TWO_M53 * table_x[layer]
-        signed = np.where((h & np.uint64(256)) != 0, -x, x)
-        accept = x < table_x[layer + 1]
-        wedge = np.flatnonzero(~accept & (layer != 0))
-        if wedge.size:
-            wx, wi = x[wedge], layer[wedge]
-            u2 = (_values(key, base[wedge] | np.uint64(1)) >> np.uint64(11)).astype(np.float64) * _TWO_M53
-            height = table_f[wi] + u2 * (table_f[wi + 1] - table_f[wi])
-            density = np.array([math.exp(value) for value in (-0.5 * wx * wx).tolist()])
-            accept[wedge] = height < density
-        out[pending[accept]] = signed[accept]
-        for position in pending[~accept & (layer == 0)].tolist():  # the tail: its own loop, value by value
-            out[position] = _normal_slow(key, n0 + position, table_x, table_f)
-        pending = pending[~accept & (layer != 0)]
-    for position in pending.tolist():
-        out[position] = _normal_slow(key, n0 + position, table_x, table_f)
+    if n1 > n0:
+        noise_library().mrpctl_stream_fill(key, n0, n1 - n0, 1.0, 0, 0, 0, out.ctypes.data, 3)
     return out
 
 
@@ -155,14 +97,28 @@ def stream_normal_rows(
     """(k1 − k0, 3) standard normals of samples k0 … k1 − 1 of one stream, times ``scale``.
 
     Component c of sample k is normal number 3k + c of the stream's key
-    ([`stream_normals`][mrpctl.flight.stream_normals]),
-    written into ``out`` (any (k1 − k0, 3) float64 view, e.g. three columns of a wider array);
-    ``scale * value`` is the C driver's product.
+    ([`stream_normals`][mrpctl.flight.stream_normals]), written into ``out`` (any (k1 − k0, 3) float64
+    view, e.g. three columns of a wider array); ``scale * value`` is the C driver's product (scale 0:
+    exact zeros).
     """
-    out = np.empty((k1 - k0, 3)) if out is None else out
-    values = stream_normals(stream_key(seed, stream), 3 * k0, 3 * k1).reshape(k1 - k0, 3)
-    np.multiply(values, scale, out=out)
-    return out
+    rows = k1 - k0
+    target = out if out is not None else np.empty((rows, 3))
+    direct = (
+        target.dtype == np.float64
+        and target.shape == (rows, 3)
+        and target.strides[1] == 8
+        and target.strides[0] % 8 == 0
+        and target.strides[0] >= 24
+        and target.flags.writeable
+    )
+    work = target if direct else np.empty((rows, 3))
+    if rows > 0:
+        noise_library().mrpctl_stream_fill(
+            stream_key(seed, stream), 3 * k0, 3 * rows, float(scale), 0, 0, 0, work.ctypes.data, work.strides[0] // 8
+        )
+    if not direct:
+        target[...] = work
+    return target
 
 
 def stream_integers(seed: int, stream: int, k0: int, k1: int, low: int, high: int) -> np.ndarray:
@@ -170,15 +126,19 @@ def stream_integers(seed: int, stream: int, k0: int, k1: int, low: int, high: in
     count = high - low + 1
     if not 0 < count <= 2**32:
         raise SpecificationError(f"the jitter range [{low}, {high}] must hold 1 to 2^32 whole periods")
-    h = _values(stream_key(seed, stream), np.arange(k0, k1, dtype=np.uint64) << np.uint64(12))
-    return low + (((h >> np.uint64(32)) * np.uint64(count)) >> np.uint64(32)).astype(np.int64)
+    out = np.empty(k1 - k0)
+    if k1 > k0:
+        noise_library().mrpctl_stream_fill(stream_key(seed, stream), k0, k1 - k0, 0.0, 1, low, high, out.ctypes.data, 3)
+    return out.astype(np.int64)
 
 
 def sample_slice(k0: Any, k1: Any) -> tuple[int, int]:
+    """(k0, k1) checked: whole numbers with 0 <= k0 <= k1."""
     start = integer("k0", k0, minimum=0)
     stop = integer("k1", k1, minimum=start)
     return start, stop
 
 
 def stream_seed(seed: Any) -> int:
+    """``seed`` checked: a whole number in [0, 2^64)."""
     return integer("seed", seed, minimum=0, maximum=_MASK64)
