@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import logging
 import os
 import secrets
 from collections.abc import Callable, Iterator
+from concurrent.futures import CancelledError
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,9 +21,9 @@ from mrpctl.campaign._task import chunk_on_worker, simulate_chunk
 from mrpctl.campaign.integrity import writer_lock
 from mrpctl.campaign.spec import CampaignSpec
 from mrpctl.campaign.store import CampaignStore
-from mrpctl.errors import SpecificationError
+from mrpctl.errors import MrpctlError, SpecificationError
 
-__all__ = ["CampaignRun", "run_campaign", "simulate_chunk"]
+__all__ = ["CampaignRun", "SchedulerLostError", "run_campaign", "simulate_chunk"]
 
 logger = logging.getLogger(__name__)
 
@@ -31,6 +33,37 @@ LOCAL_CLUSTER_CONFIG: dict[str, Any] = {
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "1s",
 }
+
+
+class SchedulerLostError(MrpctlError):
+    """The Dask scheduler could not be reached, or was lost mid-way; every chunk stored before stays in the store.
+
+    Attributes
+    ----------
+    out : pathlib.Path
+        The results folder (resumable: a second call runs only the chunks not stored).
+    scheduler : str
+        The scheduler's address.
+    stored, todo : int
+        Chunks this call stored before the loss; chunks it had to run.
+    cause : str
+        What happened ("was lost (CancelledError)", "could not be reached (OSError)").
+    """
+
+    def __init__(
+        self, out: Path, scheduler: str, stored: int, todo: int, cause: str, resume: str | None = None
+    ) -> None:
+        self.out, self.scheduler, self.stored, self.todo, self.cause = out, scheduler, stored, todo, cause
+        resume = resume or f"mrpctl campaign run CAMPAIGN.toml --out {out} (add --scheduler ADDRESS for a cluster)"
+        super().__init__(
+            f"the Dask scheduler {scheduler} {cause} after {stored} of {todo} chunk(s) were stored; "
+            f"the store {out} keeps them: resume with {resume}"
+        )
+
+
+class _Lost(Exception):
+    """Raised inside the Dask loop: the scheduler is gone (why, as a phrase)."""
+
 
 #: Called after each chunk is durably stored: (chunk index, first run, stop run).
 ChunkCallback = Callable[[int, int, int], None]
@@ -121,6 +154,8 @@ def _local(spec: CampaignSpec, store: CampaignStore, todo: list[int], threads: i
 def _dask(
     spec: CampaignSpec, store: CampaignStore, todo: list[int], scheduler: str, workers: int | None
 ) -> Iterator[tuple[int, Any]]:
+    if not todo:  # nothing to run: no connection to the cluster
+        return
     # one attempt per call: a resumed campaign never receives a result the cluster kept from an earlier call
     token, attempt = campaign_token(spec, store.out), secrets.token_hex(4)
     # deferred: Dask, only for a Dask campaign or a store read lazily
@@ -142,29 +177,38 @@ def _dask(
                 dashboard_address=None,
                 memory_limit=0,
             )
-        client = Client(cluster)
+        client = Client(cluster, set_as_default=False)
     else:
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise _Lost(f"could not be reached ({type(exc).__name__})") from None
     try:
         slots = 2 * max(1, len(client.scheduler_info().get("workers", {})) or 1)
         pending = iter(todo)
-        futures = as_completed()
 
-        def submit(index: int) -> None:  # the chunk's task: the spec's text and its files' numbers
+        def submit(index: int) -> Any:  # the chunk's task: the spec's text and its files' numbers
             start, stop = store.bounds(index)
             task = (spec.source, spec.base.name, start, stop, spec.files)
-            futures.add(client.submit(chunk_on_worker, *task, key=task_key(token, attempt, index), pure=False))
+            return client.submit(chunk_on_worker, *task, key=task_key(token, attempt, index), pure=False)
 
-        for index in pending:
-            submit(index)
-            if futures.count() >= slots:
-                break
+        # the client is not the process's default (set_as_default=False: a campaign leaves the caller's Dask
+        # scheduler as it was), so as_completed is given its event loop
+        first = [submit(index) for index in itertools.islice(pending, slots)]
+        futures = as_completed(first, loop=client.loop)
+        del first
         for future in futures:
-            yield int(str(future.key).rsplit("-", 1)[1]), future.result()
+            try:
+                values = future.result()
+            except (CancelledError, OSError, TimeoutError) as exc:
+                if future.status == "error":  # the task's own error: raised as it is
+                    raise
+                raise _Lost(f"was lost ({type(exc).__name__})") from None
+            yield int(str(future.key).rsplit("-", 1)[1]), values
             del future
             following = next(pending, None)
             if following is not None:
-                submit(following)
+                futures.add(submit(following))
     finally:
         client.close()
         if cluster is not None:
@@ -261,6 +305,8 @@ def _run_locked(
             runs += stop - start
             if on_chunk is not None:
                 on_chunk(index, start, stop)
+    except _Lost as lost:
+        raise SchedulerLostError(Path(out), str(scheduler), simulated, len(todo), str(lost)) from None
     finally:
         close = getattr(source, "close", None)
         if close is not None:

@@ -346,12 +346,18 @@ def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: b
             done = np.repeat(np.asarray(check.intact, dtype=bool), runs_per_chunk)[:count]
             selected = selected.isel(run=np.flatnonzero(done))
         try:
-            dataset = selected.load()
+            # this process's threads, whatever Dask scheduler the caller has set as its default (a closed
+            # distributed Client left as the default would otherwise fail the read)
+            dataset = selected.load(scheduler="threads")
         except Exception as exc:
+            why = (
+                "every chunk matches its checksum record, so the files are as written and the reading failed"
+                if check.verified
+                else "it was written without checksum records, so the damaged chunk cannot be named; run the "
+                "campaign again into a new --out"
+            )
             raise integrity.StoreDamagedError(
-                f"out: the campaign store {path} cannot be read ({type(exc).__name__}: {exc}); it was written "
-                "without checksum records, so the damaged chunk cannot be named; run the campaign again into a new "
-                "--out"
+                f"out: the campaign store {path} cannot be read ({type(exc).__name__}: {exc}); {why}"
             ) from None
     note = {
         "verified": check.verified,

@@ -23,7 +23,7 @@ MISMATCH = 1
 
 def _run(args: argparse.Namespace) -> int:
     # deferred: xarray and zarr (through the campaign store), only for campaign run
-    from mrpctl.campaign.run import run_campaign
+    from mrpctl.campaign.run import SchedulerLostError, run_campaign
     from mrpctl.campaign.store import CampaignStore
 
     spec = load_campaign(args.spec)
@@ -56,6 +56,10 @@ def _run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
+    except SchedulerLostError as lost:
+        bar.close()
+        resume = f"mrpctl campaign run {args.spec} --out {args.out} --scheduler {args.scheduler}"
+        raise SchedulerLostError(lost.out, lost.scheduler, lost.stored, lost.todo, lost.cause, resume) from None
     bar.close()
     print(result)
     if args.report:
