@@ -22,6 +22,7 @@ import xarray as xr
 from mrpctl.campaign import open_campaign, run_campaign
 from mrpctl.campaign.run import SchedulerLostError
 from mrpctl.campaign.spec import parse_campaign
+from mrpctl.errors import SpecificationError
 
 pytestmark = pytest.mark.xdist_group("cluster")
 
@@ -207,3 +208,18 @@ def test_an_unreachable_scheduler_is_one_line_on_the_command_line(tmp_path, caps
     err = capsys.readouterr().err
     assert err.startswith("mrpctl: error:") and err.count("\n") == 1, err
     assert "could not be reached" in err and f"--out {tmp_path / 'o'} --scheduler {address}" in err
+
+
+def test_an_object_store_url_for_the_store_is_refused():
+    with pytest.raises(SpecificationError, match="out: s3://bucket/x is a URL"):
+        run_campaign(_spec("url", 1), "s3://bucket/x")
+
+
+def test_an_object_store_url_is_refused_on_the_command_line(tmp_path, capsys):
+    from mrpctl.cli import main
+
+    with pytest.raises(SystemExit) as stop:
+        main(["campaign", "run", str(tmp_path / "c.toml"), "--out", "s3://bucket/x"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "s3://bucket/x is a URL" in err and err.count("\n") == 1, err

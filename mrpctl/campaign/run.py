@@ -268,6 +268,11 @@ def run_campaign(
     StoreDamagedError
         If a file written at the store's creation is damaged (a damaged *chunk* is simulated again).
     """
+    if "://" in str(out):
+        raise SpecificationError(
+            f"out: {out} is a URL; the store is a folder of this machine (only this process writes it, the "
+            "workers send their chunks back), so give a local or mounted path"
+        )
     if chunk is not None:
         chunk = integer("chunk", chunk, minimum=1)
     if workers is not None:

@@ -109,6 +109,15 @@ def _replay(args: argparse.Namespace) -> int:
     return 0 if result.matches and result.damage is None else MISMATCH
 
 
+def _folder(text: str) -> Path:
+    """A results folder of this machine (a URL is refused: only this process writes the store)."""
+    if "://" in text:
+        raise argparse.ArgumentTypeError(
+            f"{text} is a URL; the store is a folder of this machine (the workers send their chunks back)"
+        )
+    return Path(text)
+
+
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add ``campaign`` with its ``run``, ``report`` and ``replay`` sub-commands to ``subparsers``."""
     campaign = subparsers.add_parser("campaign", help="Monte Carlo campaigns: run (resumable), report, replay")
@@ -116,7 +125,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
     run = commands.add_parser("run", help="run or resume a campaign into a Zarr store")
     run.add_argument("spec", type=Path, help="campaign TOML (see examples/campaigns)")
-    run.add_argument("--out", type=Path, required=True, help="results folder (resumed when it exists)")
+    run.add_argument("--out", type=_folder, required=True, help="results folder (resumed when it exists)")
     run.add_argument("--chunk", type=int, help="runs per chunk for a new store (default 1000)")
     run.add_argument(
         "--scheduler",
