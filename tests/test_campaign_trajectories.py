@@ -99,3 +99,22 @@ def test_the_table_names_the_criterion_and_the_files(store, capsys):
 def test_bad_trajectory_requests_are_one_line(store, capsys, argv, needle):
     assert main(["campaign", "report", str(store), *argv]) == 2
     one_line_error(capsys, needle)
+
+
+def test_progress_reports_runs_rate_and_failures_as_the_store_holds_them(tmp_path):
+    from mrpctl.campaign.run import CampaignProgress
+
+    states: list[CampaignProgress] = []
+    spec = parse_campaign(copy.deepcopy(SPEC))
+    result = run_campaign(spec, tmp_path / "p", chunk=3, threads=1, on_progress=states.append)
+    assert result.complete and [s.stored for s in states] == [3, 6, 8]
+    dataset = open_campaign(tmp_path / "p")
+    last = states[-1]
+    assert last.count == 8 and last.simulated == 8
+    assert last.diverged == int(dataset["diverged"].sum())
+    assert last.not_settled == int((~dataset["converged"].values.astype(bool)).sum())
+    assert last.runs_per_second > 0 and last.eta == 0.0
+    assert "8/8 runs stored" in str(last)
+    # a resumed call counts the stored runs of before and simulates nothing
+    again: list[CampaignProgress] = []
+    assert run_campaign(spec, tmp_path / "p", on_progress=again.append).already_complete == 3 and again == []

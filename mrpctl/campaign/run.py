@@ -6,8 +6,10 @@ import hashlib
 import itertools
 import json
 import logging
+import math
 import os
 import secrets
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import CancelledError
 from dataclasses import dataclass
@@ -23,7 +25,7 @@ from mrpctl.campaign.spec import CampaignSpec
 from mrpctl.campaign.store import CampaignStore
 from mrpctl.errors import MrpctlError, SpecificationError
 
-__all__ = ["CampaignRun", "SchedulerLostError", "run_campaign", "simulate_chunk"]
+__all__ = ["CampaignProgress", "CampaignRun", "SchedulerLostError", "run_campaign", "simulate_chunk"]
 
 logger = logging.getLogger(__name__)
 
@@ -64,6 +66,51 @@ class SchedulerLostError(MrpctlError):
 class _Lost(Exception):
     """Raised inside the Dask loop: the scheduler is gone (why, as a phrase)."""
 
+
+@dataclass(frozen=True)
+class CampaignProgress:
+    """Where a running campaign stands, after a chunk is durably stored.
+
+    Attributes
+    ----------
+    stored, count : int
+        Runs in the store now (those of earlier calls included); runs in the campaign.
+    simulated : int
+        Runs this call simulated.
+    diverged, not_settled : int
+        Of the runs this call simulated: diverged; not settled by the end of the run (diverged included).
+    elapsed : float
+        Seconds since this call started simulating.
+    """
+
+    stored: int
+    count: int
+    simulated: int
+    diverged: int
+    not_settled: int
+    elapsed: float
+
+    @property
+    def runs_per_second(self) -> float:
+        """Runs simulated per second by this call (NaN before the first chunk)."""
+        return self.simulated / self.elapsed if self.elapsed > 0 and self.simulated else math.nan
+
+    @property
+    def eta(self) -> float:
+        """Seconds left at this call's rate (NaN before the first chunk)."""
+        rate = self.runs_per_second
+        return (self.count - self.stored) / rate if rate == rate and rate > 0 else math.nan
+
+    def __str__(self) -> str:
+        return (
+            f"{self.stored}/{self.count} runs stored, {self.runs_per_second:.4g} runs/s, "
+            f"{self.eta:.4g} s left; of {self.simulated} simulated: {self.diverged} diverged, "
+            f"{self.not_settled} not settled"
+        )
+
+
+#: Called after each chunk is durably stored with where the campaign stands.
+ProgressCallback = Callable[[CampaignProgress], None]
 
 #: Called after each chunk is durably stored: (chunk index, first run, stop run).
 ChunkCallback = Callable[[int, int, int], None]
@@ -224,6 +271,7 @@ def run_campaign(
     workers: int | None = None,
     threads: int | None = None,
     on_chunk: ChunkCallback | None = None,
+    on_progress: ProgressCallback | None = None,
 ) -> CampaignRun:
     """Run (or resume) a campaign into ``out/campaign.zarr``.
 
@@ -254,6 +302,9 @@ def run_campaign(
     on_chunk : callable, optional
         ``on_chunk(index, start, stop)`` after each chunk is stored (progress bars; an
         exception raised there stops the campaign, which resumes later).
+    on_progress : callable, optional
+        ``on_progress(CampaignProgress)`` after each chunk is stored: runs stored, runs/s, time left,
+        and the failures (diverged, not settled) so far.
 
     Returns
     -------
@@ -280,7 +331,7 @@ def run_campaign(
     if scheduler is not None and scheduler != "local" and "://" not in scheduler:
         raise SpecificationError(f"scheduler must be 'local' or an address such as tcp://host:8786, got {scheduler!r}")
     with writer_lock(out):
-        return _run_locked(spec, out, chunk, scheduler, workers, threads, on_chunk)
+        return _run_locked(spec, out, chunk, scheduler, workers, threads, on_chunk, on_progress)
 
 
 def _run_locked(
@@ -291,6 +342,7 @@ def _run_locked(
     workers: int | None,
     threads: int | None,
     on_chunk: ChunkCallback | None,
+    on_progress: ProgressCallback | None = None,
 ) -> CampaignRun:
     store = CampaignStore(out, spec, chunk)
     complete = store.complete()
@@ -300,7 +352,9 @@ def _run_locked(
     todo = [int(i) for i in np.flatnonzero(~complete)]
     already = int(complete.sum())
     logger.info("campaign %s: %d of %d chunks to run", spec.base.name, len(todo), store.chunks)
-    runs = simulated = 0
+    runs = simulated = diverged = not_settled = 0
+    stored = sum(store.bounds(i)[1] - store.bounds(i)[0] for i in range(store.chunks) if complete[i])
+    started = time.monotonic()
     source = _local(spec, store, todo, threads) if scheduler is None else _dask(spec, store, todo, scheduler, workers)
     try:
         for index, values in source:
@@ -308,8 +362,15 @@ def _run_locked(
             start, stop = store.bounds(index)
             simulated += 1
             runs += stop - start
+            stored += stop - start
+            diverged += int(np.count_nonzero(values["diverged"]))
+            not_settled += int(np.count_nonzero(~np.asarray(values["converged"], dtype=bool)))
             if on_chunk is not None:
                 on_chunk(index, start, stop)
+            if on_progress is not None:
+                on_progress(
+                    CampaignProgress(stored, spec.count, runs, diverged, not_settled, time.monotonic() - started)
+                )
     except _Lost as lost:
         raise SchedulerLostError(Path(out), str(scheduler), simulated, len(todo), str(lost)) from None
     finally:

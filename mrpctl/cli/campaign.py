@@ -44,9 +44,18 @@ def _run(args: argparse.Namespace) -> int:
     def progress(index: int, start: int, stop: int) -> None:
         bar.update(stop - start)
 
+    def failures(state: Any) -> None:  # the runs/s and the time left are tqdm's own
+        bar.set_postfix(diverged=state.diverged, not_settled=state.not_settled, refresh=False)
+
     try:
         result = run_campaign(
-            spec, args.out, chunk=args.chunk, scheduler=args.scheduler, workers=args.workers, on_chunk=progress
+            spec,
+            args.out,
+            chunk=args.chunk,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            on_chunk=progress,
+            on_progress=failures,
         )
     except KeyboardInterrupt:
         bar.close()
