@@ -48,9 +48,11 @@ from mrpctl.loop.options import (
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._guards import check_step_rotation
+from mrpctl.simulation._wheels import check_wheel_run, run_wheels, wheel_result, wheel_run_bytes
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 #: At most this many switch instants are kept per run when ``keep_every != 1`` (16 MB);
 #: the count, the first and the last switch stay exact.
@@ -268,6 +270,7 @@ def simulate(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    wheels: WheelCluster | None = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -333,6 +336,13 @@ def simulate(
         the applied torque), ``disturbance`` (constant or per sample; the plant's only) and ``sensor``;
         needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
+    wheels : mrpctl.wheels.WheelCluster, keyword-only
+        Fly the body torque on this reaction-wheel cluster (``design/wheels.md``): the command u_c = K x
+        is allocated to the wheels' motor torques, each clipped to its torque limit and cut at its speed
+        limit, and the wheel speeds are states of the plant (J is the whole spacecraft's inertia, wheels
+        included). With ``rule=Hysteretic(...)`` only, without ``actuator`` and ``predictor``; takes
+        ``disturbance``, ``sensor`` and ``delay``; needs a C compiler. The result's ``wheels``
+        ([`WheelRecord`][mrpctl.simulation.results.WheelRecord]) has the wheel speeds and metrics.
 
     Returns
     -------
@@ -349,6 +359,8 @@ def simulate(
     gain = gain_matrix(K)
     x0 = finite_array("x0", x0, (STATE_SIZE,))
     rule = check_rule(rule)
+    if wheels is not None:
+        wheels = check_wheel_run(wheels, spacecraft, rule, actuator=actuator, predictor=predictor)
     d = delay_samples(tau, rate)
     rate = float(rate)
     t_final, n = _samples(t_final, rate)
@@ -370,12 +382,38 @@ def simulate(
     width = 1 if checked is None else 2
     records = checked is None and isinstance(rule, Hysteretic)
     _check_memory(
-        run_bytes(n, keep, flight=records) + workspace_bytes(n, d, substeps, width) + jitter_bytes(varying, d),
+        run_bytes(n, keep, flight=records)
+        + workspace_bytes(n, d, substeps, width)
+        + jitter_bytes(varying, d)
+        + (0 if wheels is None or keep is None else wheel_run_bytes((n - 1) // keep + 1, wheels)),
         limit,
         t_final=t_final,
         keep_every=keep,
     )
 
+    if wheels is not None:
+        output = run_wheels(
+            spacecraft=spacecraft,
+            wheels=wheels,
+            rule=rule,
+            d=d,
+            rate=rate,
+            substeps=substeps,
+            n=n,
+            x0=x0,
+            history_rows=history_rows,
+            gain=gain,
+            keep=keep,
+            disturbance=disturbance,
+            streamed=streamed,
+            sensor=sensor,
+            varying=varying,
+            stop=None if progress is None else (lambda done: bool(progress(done, n)) and False),
+            switch_limit=n if keep == 1 else SWITCH_LIMIT,
+        )
+        flown = assemble_run(output, n=n, keep_every=keep, common=_common(spacecraft, gain, tau, rate, d, rule,
+                             history_value, substeps, t_final, x0, None))
+        return wheel_result(flown, output, wheels, rate=rate)
     found = engine(
         spacecraft,
         rule,
@@ -430,6 +468,34 @@ def simulate(
         predictor=checked,
     )
     return assemble_run(output, n=n, keep_every=keep, common=common)
+
+
+def _common(
+    spacecraft: Spacecraft,
+    gain: np.ndarray,
+    tau: float,
+    rate: float,
+    d: int,
+    rule: SwitchingRule,
+    history: Any,
+    substeps: int,
+    t_final: float,
+    x0: np.ndarray,
+    predictor: Any,
+) -> dict[str, Any]:
+    return dict(
+        spacecraft=spacecraft,
+        K=readonly(gain),
+        tau=float(tau),
+        rate=rate,
+        delay_samples=d,
+        rule=rule,
+        history=history,
+        substeps=substeps,
+        t_final=t_final,
+        x0=readonly(x0),
+        predictor=predictor,
+    )
 
 
 # ======================================================================= batches

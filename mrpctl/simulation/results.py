@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     import xarray as xr
 
 __all__ = [
+    "WheelRecord",
     "AXES",
     "FLIGHT_RECORDS",
     "STATE",
@@ -51,6 +52,42 @@ class _Conversions:
     def to_pandas(self) -> Any:
         """The result as a ``pandas.DataFrame`` (`mrpctl.data.to_pandas`)."""
         return to_pandas(self)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True, eq=False)
+class WheelRecord:
+    """The wheels of one run on a [`WheelCluster`][mrpctl.wheels.WheelCluster].
+
+    Attributes
+    ----------
+    cluster : WheelCluster
+        The wheels flown.
+    speeds : numpy.ndarray
+        (m, N) wheel speeds Ω_i at the kept samples (rad/s, relative to the body).
+    motor_torque : numpy.ndarray
+        (m, N) motor torques u_s,i held over [t_k, t_{k+1}) (N m, after the torque clip and the speed cut).
+    final_speeds : numpy.ndarray
+        (N,) Ω_i at the end of the run (after its last sample's period).
+    peak_speed : numpy.ndarray
+        (N,) max_k |Ω_i(t_k)| over every sample (rad/s).
+    torque_limited_time, speed_limited_time : numpy.ndarray
+        (N,) time each wheel's motor torque was clipped to its u_max,i, or cut by its speed limit
+        (s: samples × period, over every sample).
+    peak_momentum : float
+        max_k |Gs diag(Js) Ω(t_k)| (N m s), the largest momentum the wheels stored in the body frame.
+    worst_wheel : int
+        The wheel with the largest peak |Ω_i|/Ω_max,i (index from 0).
+    """
+
+    cluster: Any = field(repr=False)
+    speeds: np.ndarray = field(repr=False)
+    motor_torque: np.ndarray = field(repr=False)
+    final_speeds: np.ndarray
+    peak_speed: np.ndarray
+    torque_limited_time: np.ndarray
+    speed_limited_time: np.ndarray
+    peak_momentum: float
+    worst_wheel: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,6 +155,10 @@ class SimulationResult(_Conversions):
     predictor : mrpctl.Predictor or None
         The predictor controller of the run (the flight-loop fields above are then reported too);
         None for the plain delayed law.
+    wheels : WheelRecord or None
+        A run on a reaction-wheel cluster (``simulate(..., wheels=...)``): the wheel speeds, motor
+        torques and wheel metrics; ``u`` is then the body torque of the motors −Gs u_s and
+        ``saturated_fraction`` the fraction of samples with a wheel at its torque limit. None otherwise.
     spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
         The inputs of the run.
     """
@@ -155,6 +196,7 @@ class SimulationResult(_Conversions):
     sigma_c: np.ndarray | None = field(default=None, repr=False)
     delay_used: np.ndarray | None = field(default=None, repr=False)
     command: np.ndarray | None = field(default=None, repr=False)
+    wheels: WheelRecord | None = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
