@@ -25,8 +25,8 @@ import casadi as ca
 import numpy as np
 
 from mrpctl._validation import finite_array, readonly
-from mrpctl.mrp import b_matrix_expr, skew_expr
 from mrpctl.errors import SpecificationError
+from mrpctl.mrp import b_matrix_expr, skew_expr
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.wheels import WheelCluster
 

@@ -166,7 +166,12 @@ class WheelCluster:
 
     @classmethod
     def pyramid(
-        cls, spin_inertia: Any, torque_limit: Any, speed_limit: Any, *, elevation: float = np.arctan(1 / np.sqrt(2)),
+        cls,
+        spin_inertia: Any,
+        torque_limit: Any,
+        speed_limit: Any,
+        *,
+        elevation: float = np.arctan(1 / np.sqrt(2)),
         **options: Any,
     ) -> WheelCluster:
         """Four wheels in a pyramid about the body z axis: g_i = (cos β cos φ_i, cos β sin φ_i, sin β),

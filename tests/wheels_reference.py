@@ -44,11 +44,8 @@ def _friction(wheels: Wheels, speeds: np.ndarray) -> np.ndarray:
     out = np.empty_like(speeds)
     for i, s in enumerate(speeds):
         c, f, lc = wheels.viscous[i], wheels.coulomb[i], wheels.cycle[i]
-        if abs(s) < lc:
-            force = (f + c * lc) / lc * s
-        else:
-            force = f * (1.0 if s > 0 else (-1.0 if s < 0 else 0.0)) + c * s
-        out[i] = -force
+        sign = 1.0 if s > 0 else (-1.0 if s < 0 else 0.0)
+        out[i] = -((f + c * lc) / lc * s if abs(s) < lc else f * sign + c * s)
     return out
 
 
@@ -123,8 +120,17 @@ class WheelRun:
 
 
 def wheel_loop(
-    inertia, K, x0, wheels: Wheels, *, rate: float, t_final: float, d: int, delta: float = 0.0,
-    substeps: int = 1, disturbance=None,
+    inertia,
+    K,
+    x0,
+    wheels: Wheels,
+    *,
+    rate: float,
+    t_final: float,
+    d: int,
+    delta: float = 0.0,
+    substeps: int = 1,
+    disturbance=None,
 ) -> WheelRun:
     """One run (module docstring); x0 = [σ; ω/4]."""
     inertia = np.asarray(inertia, dtype=float)
@@ -138,14 +144,14 @@ def wheel_loop(
     h = 1.0
     q_prev = None
     out = {key: [] for key in ("sigma", "omega", "speeds", "motor", "body", "command", "tl", "sl")}
-    for k in range(n):
+    for _ in range(n):
         sigma = state[0:3]
         s2 = sigma @ sigma
         if s2 >= 1.0:
             state = state.copy()
             state[0:3] = -sigma / s2
         sigma, omega, speeds = state[0:3], state[3:6], state[6:]
-        ring = ring[1:] + [(_quaternion(sigma), omega.copy())]
+        ring = [*ring[1:], (_quaternion(sigma), omega.copy())]
         q_used, w_used = ring[0]
         if q_prev is None:
             q_prev = q_used
@@ -157,15 +163,26 @@ def wheel_loop(
         command = np.asarray(K) @ np.concatenate((sigma_c, w_used / 4.0))
         motor, tl, sl = allocate(wheels, command, w_used, speeds, inertia)
         for key, value in (
-            ("sigma", sigma), ("omega", omega), ("speeds", speeds), ("motor", motor),
-            ("body", -(wheels.axes @ motor)), ("command", command), ("tl", tl), ("sl", sl),
+            ("sigma", sigma),
+            ("omega", omega),
+            ("speeds", speeds),
+            ("motor", motor),
+            ("body", -(wheels.axes @ motor)),
+            ("command", command),
+            ("tl", tl),
+            ("sl", sl),
         ):
             out[key].append(np.array(value, dtype=float))
         state = rk4(state, motor, w, dt, substeps, inertia, wheels)
     arrays = {key: np.array(value) for key, value in out.items()}
     return WheelRun(
-        sigma=arrays["sigma"], omega=arrays["omega"], speeds=arrays["speeds"].reshape(n, count),
-        motor=arrays["motor"].reshape(n, count), body=arrays["body"], command=arrays["command"],
-        torque_limited=arrays["tl"].reshape(n, count), speed_limited=arrays["sl"].reshape(n, count),
+        sigma=arrays["sigma"],
+        omega=arrays["omega"],
+        speeds=arrays["speeds"].reshape(n, count),
+        motor=arrays["motor"].reshape(n, count),
+        body=arrays["body"],
+        command=arrays["command"],
+        torque_limited=arrays["tl"].reshape(n, count),
+        speed_limited=arrays["sl"].reshape(n, count),
         final_speeds=state[6:],
     )

@@ -111,6 +111,7 @@ __all__ = [
     "rule_key",
     "short_history",
     "slice_samples",
+    "wheel_engine",
 ]
 
 #: Samples per C call: Ctrl-C and the batch's stop flag are seen between slices (about
@@ -686,7 +687,6 @@ def engine(
     limited: bool = True,
     disturbed: bool = True,
     torque_input: bool = False,
-    wheels: WheelCluster | None = None,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
@@ -697,12 +697,8 @@ def engine(
     predictor needs a C compiler. The flight
     sample (``rule`` a [`Hysteretic`][mrpctl.flight.Hysteretic]) is specialised the same way, with a
     sensor port when ``sensor``, the actuator when ``limited`` and the disturbance add when
-    ``disturbed`` (`flight_structure` of a run's constants; one library per structure). ``wheels``: the flight
-    sample on that wheel cluster ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; its J and the
-    cluster are constants of the library, which needs a C compiler).
+    ``disturbed`` (`flight_structure` of a run's constants; one library per structure).
     """
-    if wheels is not None:
-        return _wheel_engine(spacecraft, rule, d, period, substeps, sensor, disturbed, torque_input, wheels)
     model = None if predictor is None else inertia_input(predictor)
     flight = isinstance(rule, Hysteretic)
     if not flight and model is None:
@@ -744,17 +740,21 @@ def engine(
         return found
 
 
-def _wheel_engine(
+def wheel_engine(
     spacecraft: Spacecraft,
     rule: SwitchingRule,
     d: int,
     period: float,
     substeps: int,
-    sensor: bool,
-    disturbed: bool,
-    torque_input: bool,
+    *,
     wheels: WheelCluster,
+    sensor: bool = False,
+    disturbed: bool = True,
+    torque_input: bool = False,
 ) -> Engine:
+    """The compiled engine of the flight sample on a wheel cluster, cached
+    ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; J and the cluster are constants of the
+    library, so one library per spacecraft inertia and cluster). Needs a C compiler (CodegenError without)."""
     key = ("wheels", wheels.key(), spacecraft.inertia.tobytes(), d, period, substeps, sensor, disturbed, torque_input)
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
@@ -772,7 +772,9 @@ def _wheel_engine(
                 wheels=wheels,
             )
             if not found.compiled_code:
-                raise CodegenError("wheels: the wheel cluster needs the compiled engine (a C compiler: gcc or cc, or CC)")
+                raise CodegenError(
+                    "wheels: the wheel cluster needs the compiled engine (a C compiler: gcc or cc, or CC)"
+                )
             _ENGINES[key] = found
         return found
 

@@ -411,8 +411,12 @@ def simulate(
             stop=None if progress is None else (lambda done: bool(progress(done, n)) and False),
             switch_limit=n if keep == 1 else SWITCH_LIMIT,
         )
-        flown = assemble_run(output, n=n, keep_every=keep, common=_common(spacecraft, gain, tau, rate, d, rule,
-                             history_value, substeps, t_final, x0, None))
+        flown = assemble_run(
+            output,
+            n=n,
+            keep_every=keep,
+            common=_common(spacecraft, gain, tau, rate, d, rule, history_value, substeps, t_final, x0, None),
+        )
         return wheel_result(flown, output, wheels, rate=rate)
     found = engine(
         spacecraft,

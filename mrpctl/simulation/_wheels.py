@@ -8,12 +8,13 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import finite_array, readonly, sealed
-from mrpctl.engines.scalar import engine
-from mrpctl.errors import CodegenError, SpecificationError
+from mrpctl.engines.scalar import wheel_engine
+from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE, Hysteretic
 from mrpctl.loop.options import flight_options, flight_structure
 from mrpctl.model import wheel_hub_inertia
 from mrpctl.simulation.results import SimulationResult, WheelRecord
+from mrpctl.switching import SwitchingRule
 from mrpctl.wheels import WheelCluster
 
 __all__: list[str] = []
@@ -22,9 +23,7 @@ __all__: list[str] = []
 _BYTES_PER_WHEEL = 32
 
 
-def check_wheel_run(
-    wheels: Any, spacecraft: Any, rule: Any, *, actuator: Any, predictor: Any
-) -> WheelCluster:
+def check_wheel_run(wheels: Any, spacecraft: Any, rule: Any, *, actuator: Any, predictor: Any) -> WheelCluster:
     """The wheel cluster of a run, or a SpecificationError naming what to use instead."""
     if not isinstance(wheels, WheelCluster):
         raise SpecificationError(f"wheels must be a mrpctl.wheels.WheelCluster, got {type(wheels).__name__}")
@@ -56,7 +55,7 @@ def run_wheels(
     *,
     spacecraft: Any,
     wheels: WheelCluster,
-    rule: Hysteretic,
+    rule: SwitchingRule,
     d: int,
     rate: float,
     substeps: int,
@@ -75,7 +74,7 @@ def run_wheels(
     """Run the wheel engine: (output of the engine, its structure), the caller assembles the result."""
     options, _ = flight_options(rule, None, disturbance, sensor)
     structure = flight_structure(options, sensor)
-    found = engine(
+    found = wheel_engine(
         spacecraft,
         rule,
         d,
@@ -86,8 +85,6 @@ def run_wheels(
         torque_input=streamed is not None,
         wheels=wheels,
     )
-    if not found.compiled_code:  # pragma: no cover - the engine refuses first
-        raise CodegenError("wheels: the wheel cluster needs the compiled engine")
     return found.run(
         x0,
         0.0,

@@ -28,12 +28,12 @@ if TYPE_CHECKING:
     import xarray as xr
 
 __all__ = [
-    "WheelRecord",
     "AXES",
     "FLIGHT_RECORDS",
     "STATE",
     "BatchResult",
     "SimulationResult",
+    "WheelRecord",
     "rule_fields",
     "to_pandas",
     "to_xarray",
