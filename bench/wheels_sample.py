@@ -78,9 +78,7 @@ def _cpu() -> str:
 
 def _case(**options: object) -> Callable[[], object]:
     def call() -> object:
-        return simulate(
-            SPACECRAFT, K, X0, tau=TAU, rule=RULE, t_final=T_FINAL, rate=RATE, keep_every=None, **options
-        )  # type: ignore[arg-type]
+        return simulate(SPACECRAFT, K, X0, tau=TAU, rule=RULE, t_final=T_FINAL, rate=RATE, keep_every=None, **options)  # type: ignore[arg-type]
 
     return call
 
