@@ -31,7 +31,13 @@ from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent
 from mrpctl.wheels import WheelCluster, allocation_matrix, null_space_projector, wheel_memory_size
 
-__all__ = ["wheel_allocation_function", "wheel_core_function", "wheel_memory", "wheel_step_function"]
+__all__ = [
+    "wheel_allocation_function",
+    "wheel_controller_function",
+    "wheel_core_function",
+    "wheel_memory",
+    "wheel_step_function",
+]
 
 
 def wheel_step_function(spacecraft: Spacecraft, wheels: WheelCluster, period: float, substeps: int) -> ca.Function:
@@ -99,6 +105,37 @@ def wheel_allocation_function(spacecraft: Spacecraft, wheels: WheelCluster) -> c
         [motor, body, ca.if_else(torque_limited, 1.0, 0.0), ca.if_else(speed_limited, 1.0, 0.0)],
         ["command", "omega", "speeds"],
         ["motor", "body", "torque_limited", "speed_limited"],
+    )
+
+
+def wheel_controller_function(spacecraft: Spacecraft, wheels: WheelCluster) -> ca.Function:
+    """``wheel_controller(x_meas, memory, speeds, K, parameters) -> (motor, body, memory_next, command,
+    torque_limited, speed_limited)`` (pure SX): the flight software of the wheel loop, once per sample.
+
+    From the delayed measurement ``x_meas`` = [σ̃; ω̃/4] (the controller takes its short set), the
+    controller memory (h, c, σ̃_prev) (5), the wheel speeds Ω_k (N, rad/s), the gain K (3 × 6, N m) and
+    ``parameters`` = (δ,): the MRP set selection of [`Hysteretic`][mrpctl.flight.Hysteretic], u_c =
+    K [σ_c; ω̃/4] (``command``, N m) and the allocation of
+    [`wheel_allocation_function`][mrpctl.loop.wheels.wheel_allocation_function]: ``motor`` the wheel motor
+    torques u_s (N m, clipped and speed-cut), ``body`` = −Gs u_s. The same expressions as the controller
+    part of [`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function].
+    """
+    allocation = wheel_allocation_function(spacecraft, wheels)
+    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
+    memory = ca.SX.sym("memory", 5)
+    speeds = ca.SX.sym("speeds", wheels.count)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    sigma_seen = short_expr(x_meas[0:3])
+    h_next, c_next, sigma_c, _ = selection_function()(memory[0], memory[1], sigma_seen, memory[2:5], parameters[0])
+    command = gain @ ca.vertcat(sigma_c, x_meas[3:6])
+    motor, body, torque_limited, speed_limited = allocation(command, 4 * x_meas[3:6], speeds)
+    return ca.Function(
+        "wheel_controller",
+        [x_meas, memory, speeds, gain, parameters],
+        [motor, body, ca.vertcat(h_next, c_next, sigma_seen), command, torque_limited, speed_limited],
+        ["x_meas", "memory", "speeds", "K", "parameters"],
+        ["motor", "body", "memory_next", "command", "torque_limited", "speed_limited"],
     )
 
 
