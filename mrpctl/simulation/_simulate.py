@@ -19,7 +19,7 @@ from mrpctl._validation import available_memory, finite_array, integer, positive
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.engines.common import RunOutput
 from mrpctl.engines.lanes import DEFAULT_WIDTH
-from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples
+from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples, wheel_engine
 from mrpctl.engines.stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import (
@@ -48,7 +48,7 @@ from mrpctl.loop.options import (
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._guards import check_step_rotation
-from mrpctl.simulation._wheels import check_wheel_run, run_wheels, wheel_result, wheel_run_bytes
+from mrpctl.simulation._wheels import check_wheel_run, run_wheels, wheel_record, wheel_result, wheel_run_bytes
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
@@ -536,6 +536,7 @@ def simulate_batch(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    wheels: WheelCluster | None = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -603,6 +604,10 @@ def simulate_batch(
         thread
         pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
         (shared or per run), each run streaming its own rows.
+    wheels : mrpctl.wheels.WheelCluster, keyword-only
+        Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
+        no ``actuator``, no ``predictor``): the runs take the scalar engine on the thread pool, and the result's
+        ``wheels`` holds each run's wheel metrics (and, with ``trajectories``, its wheel speeds and torques).
 
     Returns
     -------
@@ -643,6 +648,9 @@ def simulate_batch(
     delays = np.broadcast_to(delays, (n_runs,))
     rules = rules * n_runs if len(rules) == 1 else rules
     crafts = crafts * n_runs if len(crafts) == 1 else crafts
+    if wheels is not None:
+        for pair in {(id(c), id(r)): (c, r) for c, r in zip(crafts, rules, strict=True)}.values():
+            wheels = check_wheel_run(wheels, pair[0], pair[1], actuator=actuator, predictor=predictor)
     rate = positive_scalar("rate", rate)
     t_final, n = _samples(t_final, rate)
     substeps = check_substeps(substeps)
@@ -731,7 +739,7 @@ def simulate_batch(
     any_flight = checked is not None or any(isinstance(one, Hysteretic) for one in rules)
     flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
-    if not trajectories and _LANES and checked is None and find_compiler() is not None:
+    if not trajectories and _LANES and checked is None and wheels is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -757,6 +765,18 @@ def simulate_batch(
         structure = _structure(checked, options_by_run[i], sensor, actuator)
         torque_input = streamed_by_run[i] is not None
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input)
+        if key not in by_structure and wheels is not None:
+            by_structure[key] = wheel_engine(
+                crafts[i],
+                rules[i],
+                samples_by_run[i],
+                1.0 / rate,
+                substeps,
+                wheels=wheels,
+                sensor=structure["sensor"],
+                disturbed=structure["disturbed"],
+                torque_input=torque_input,
+            )
         if key not in by_structure:
             by_structure[key] = engine(
                 crafts[i],
@@ -853,12 +873,21 @@ def simulate_batch(
                     ),
                 )
             )
+    wheel_records = None
+    if wheels is not None:
+        cluster = wheels
+        if runs is not None:
+            runs = [wheel_result(run, outputs[i], cluster, rate=rate) for i, run in enumerate(runs)]
+            wheel_records = tuple(run.wheels for run in runs if run.wheels is not None)
+        else:
+            wheel_records = tuple(wheel_record(output, cluster, rate=rate, kept=0) for output in outputs)
     return assemble_batch(
         stats,
         n=n,
         rate=rate,
         runs=runs,
         flight_memory=flight_rows,
+        wheels=wheel_records,
         common=dict(
             x0=readonly(states),
             K=readonly(gains),

@@ -105,21 +105,17 @@ def run_wheels(
     )
 
 
-def wheel_result(result: SimulationResult, output: Any, wheels: WheelCluster, *, rate: float) -> SimulationResult:
-    """``result`` with the wheel fields (`WheelRecord`) and the flight fields read from the wheel memory."""
+def wheel_record(output: Any, wheels: WheelCluster, *, rate: float, kept: int) -> WheelRecord:
+    """The `WheelRecord` of an engine's run output (``kept`` samples of its records)."""
     count = wheels.count
-    memory = finite_array("memory", output.memory)
-    start = FLIGHT_MEMORY_SIZE
-    part = memory[start:]
-    valid = max(result.samples, 1)
-    kept = result.t.shape[0]
+    part = finite_array("memory", output.memory)[FLIGHT_MEMORY_SIZE:]
     if output.records is not None and kept:
         speeds = output.records[:kept, 7 : 7 + count]
         motor = output.records[:kept, 7 + count : 7 + 2 * count]
     else:
         speeds = motor = np.zeros((0, count))
     peak = part[count : 2 * count]
-    record = WheelRecord(
+    return WheelRecord(
         cluster=wheels,
         speeds=sealed(np.array(speeds)),
         motor_torque=sealed(np.array(motor)),
@@ -130,6 +126,13 @@ def wheel_result(result: SimulationResult, output: Any, wheels: WheelCluster, *,
         peak_momentum=float(part[4 * count]),
         worst_wheel=int(np.argmax(peak / wheels.speed_limit)),
     )
+
+
+def wheel_result(result: SimulationResult, output: Any, wheels: WheelCluster, *, rate: float) -> SimulationResult:
+    """``result`` with the wheel fields (`WheelRecord`) and the flight fields read from the wheel memory."""
+    memory = finite_array("memory", output.memory)
+    valid = max(result.samples, 1)
+    record = wheel_record(output, wheels, rate=rate, kept=result.t.shape[0])
     return dataclasses.replace(
         result,
         saturated_fraction=float(memory[5]) / valid,

@@ -370,6 +370,9 @@ class BatchResult(_Conversions):
         (N m), before the actuator limits (NaN rows for runs of another rule); None otherwise.
     runs : tuple of SimulationResult or None
         The full runs when ``trajectories=True`` was asked for.
+    wheels : tuple of WheelRecord or None
+        Runs on a wheel cluster (``wheels=...``): each run's `WheelRecord` (its ``speeds`` and
+        ``motor_torque`` empty without ``trajectories``); None otherwise.
     rate, t_final, substeps, history
         The shared inputs.
     """
@@ -395,6 +398,7 @@ class BatchResult(_Conversions):
     runs: tuple[SimulationResult, ...] | None = field(default=None, repr=False)
     saturated_fraction: np.ndarray | None = field(default=None, repr=False)
     peak_command: np.ndarray | None = field(default=None, repr=False)
+    wheels: tuple[WheelRecord, ...] | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.switch_count)
@@ -417,7 +421,7 @@ class BatchResult(_Conversions):
                 raise SpecificationError(
                     "batches: every batch must share rate, t_final, substeps and history to be concatenated"
                 )
-        arrays = {
+        arrays: dict[str, Any] = {
             name: readonly(np.concatenate([getattr(b, name) for b in batches]), getattr(first, name).dtype)
             for name in _BATCH_ARRAYS
         }
@@ -430,9 +434,13 @@ class BatchResult(_Conversions):
                 np.concatenate([_or_nan(b.saturated_fraction, (len(b),)) for b in batches])
             )
             flight["peak_command"] = readonly(np.concatenate([_or_nan(b.peak_command, (len(b), 4)) for b in batches]))
+        wheels = None
+        if all(b.wheels is not None for b in batches):
+            wheels = tuple(record for b in batches for record in (b.wheels or ()))
         return cls(
             **flight,
             **arrays,
+            wheels=wheels,
             rules=tuple(rule for b in batches for rule in b.rules),
             rate=first.rate,
             t_final=first.t_final,
@@ -480,6 +488,7 @@ def assemble_batch(
     common: dict[str, Any],
     runs: list[SimulationResult] | None,
     flight_memory: np.ndarray | None = None,
+    wheels: tuple[WheelRecord, ...] | None = None,
 ) -> BatchResult:
     """The [`BatchResult`][mrpctl.BatchResult] from the (N, stats) rows of the runs (and the (N, 10) flight
     memories after the runs: n_sat at 5, peak |u_c,i| at 6:9, peak |u_c| at 9; NaN rows for
@@ -509,6 +518,7 @@ def assemble_batch(
         peak_torque=readonly([m.peak_torque for m in metrics]),
         rate=rate,
         runs=tuple(runs) if runs is not None else None,
+        wheels=wheels,
         **common,
     )
 
