@@ -5,10 +5,10 @@ The same loop on both sides at tau = 0: at t_k the spacecraft has been integrate
 the tracking error (inertial, zero reference), mrpFeedback and rwMotorTorque run on the state at t_k, and the
 wheel effector takes the new motor torques (clipped to u_max) for [t_k, t_{k+1}]: mrpctl's zero-order hold.
 Basilisk runs a task's modules from the highest priority down, so the spacecraft has the highest priority and
-the wheel effector the lowest (the task order of the paper cross-check in ``test_interop.py``). The run stays
-below the wheels' speed limit and |σ| < 1 (Basilisk reads Ω for its speed test where its integrator left it,
-and switches σ at |σ| > 1 inside the integration, mrpctl at its samples): those two are checked in
-``test_wheels.py`` against the reference loop instead.
+the wheel effector the lowest (the task order of the paper cross-check in ``test_interop.py``). Basilisk's
+speed test reads Ω(t_k) (its spacecraft's postIntegration refreshes the effectors' states), as mrpctl's does.
+The run stays below |σ| = 1 (Basilisk switches σ after an integration when |σ| > 1, mrpctl at its samples when
+|σ|² >= 1) and below the speed limit; the speed cut is checked in ``test_wheels.py`` against the reference loop.
 """
 
 from __future__ import annotations
