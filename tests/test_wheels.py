@@ -397,3 +397,34 @@ def test_simulate_batch_on_wheels_equals_simulate_run_by_run() -> None:
                 np.testing.assert_array_equal(each.sigma, single.sigma)
     with pytest.raises(SpecificationError, match="Hysteretic"):
         simulate_batch(CUBESAT, K, x0, tau=0.2, rule=OnDelayed(), t_final=1.0, rate=10.0, wheels=wheels)
+
+
+def test_wheel_loop_with_a_sensor_and_a_per_sample_disturbance_matches_the_reference() -> None:
+    """Attitude and rate noise, a gyro bias (the noise samples are data for the reference) and a torque per sample."""
+    from mrpctl.flight import SensorModel
+
+    spacecraft = Spacecraft(J_FULL)
+    wheels = WheelCluster.pyramid(2e-4, 5e-3, 300.0, speeds=[10.0, -20.0, 30.0, 5.0], gyroscopic=True)
+    K = gain_from_pd(spacecraft, -0.04 * np.ones(3), -0.4 * np.ones(3))
+    x0 = state([0.5, -0.6, 0.4], [0.03, 0.02, -0.04])
+    rate, t_final, n = 10.0, 50.0, 501
+    sensor = SensorModel(attitude_noise=0.01, rate_noise=1e-3, gyro_bias=[1e-3, -2e-3, 5e-4], seed=4)
+    torque = 1e-5 * np.sin(np.arange(n)[:, None] * np.array([0.1, 0.2, 0.3]))
+    result = simulate(
+        spacecraft, K, x0, tau=0.2, rule=Hysteretic(0.1), t_final=t_final, rate=rate, wheels=wheels,
+        sensor=sensor, disturbance=torque,
+    )  # fmt: skip
+    reference = wheel_loop(
+        J_FULL, K, x0, _reference_wheels(wheels), rate=rate, t_final=t_final, d=2, delta=0.1,
+        disturbance=torque, noise=sensor.noise(0, n), bias=sensor.gyro_bias,
+    )  # fmt: skip
+    assert result.wheels is not None
+    for ours, theirs in (
+        (result.sigma, reference.sigma),
+        (result.omega, reference.omega),
+        (result.wheels.speeds, reference.speeds),
+        (result.wheels.motor_torque, reference.motor),
+        (result.command, reference.command),
+    ):
+        assert _relative(ours, theirs) <= 1e-12
+    assert np.any(reference.torque_limited)

@@ -8,7 +8,9 @@ sample, with explicit per-wheel loops where the engine uses matrices:
   wheels: Ω̇_i = (u_i + τ_f,i)/Js,i − g_i·ω̇; friction τ_f,i = −(f_c sgn Ω_i + c Ω_i), linear through zero
   below ω_lc; σ̇ = ¼ ((1 − σ²) ω + 2 σ × ω + 2 σ (σ·ω)); RK4 with the torques held (ZOH);
 * plant bookkeeping: σ_k → −σ_k/|σ_k|² when |σ_k|² >= 1;
-* delay: a ring of the last d + 1 measurements, the history before t = 0 the initial state;
+* sensor (optional): β̃ = β(θ_k) ⊗ β(σ_k) (Hamilton product, scalar first), made canonical, ω̃ = ω + b + η_k,
+  with the noise samples θ_k, η_k given as data;
+* delay: a ring of the last d + 1 measurements, the history before t = 0 the initial state (noise-free);
 * controller: quaternion sign continuity, the hysteresis h ← −h when h q̂₀ < −δ, σ_c = h q̂_v/(1 + h q̂₀),
   u_c = K [σ_c; ω_used/4] (+ ω × (J ω + Σ g_i Js,i (g_i·ω + Ω_i)) with the gyroscopic term); the wheel
   speeds read are those of the sample instant;
@@ -100,6 +102,20 @@ def allocate(wheels: Wheels, command: np.ndarray, omega: np.ndarray, speeds: np.
     return u, torque_limited, speed_limited
 
 
+def _rotation(theta: np.ndarray) -> np.ndarray:
+    angle = float(np.sqrt(theta @ theta))
+    if angle == 0.0:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    return np.concatenate(((np.cos(angle / 2.0),), np.sin(angle / 2.0) / angle * theta))
+
+
+def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The quaternion of [FN] = [FB(a)][BN(b)] (scalar first)."""
+    scalar = a[0] * b[0] - a[1:] @ b[1:]
+    vector = a[0] * b[1:] + b[0] * a[1:] - np.cross(a[1:], b[1:])
+    return np.concatenate(((scalar,), vector))
+
+
 def _quaternion(sigma: np.ndarray) -> np.ndarray:
     s2 = sigma @ sigma
     q = np.concatenate((((1.0 - s2) / (1.0 + s2),), 2.0 * sigma / (1.0 + s2)))
@@ -131,27 +147,37 @@ def wheel_loop(
     delta: float = 0.0,
     substeps: int = 1,
     disturbance=None,
+    noise=None,
+    bias=None,
 ) -> WheelRun:
-    """One run (module docstring); x0 = [σ; ω/4]."""
+    """One run (module docstring); x0 = [σ; ω/4]; ``noise`` = (θ (n, 3), η (n, 3)) and ``bias`` (3,) of a sensor;
+    ``disturbance`` (3,) or one row per sample (n, 3)."""
     inertia = np.asarray(inertia, dtype=float)
     x0 = np.asarray(x0, dtype=float)
     n = math.floor(t_final * rate + 1e-9) + 1
     dt = 1.0 / rate / substeps
-    w = np.zeros(3) if disturbance is None else np.asarray(disturbance, dtype=float)
+    w_all = np.zeros(3) if disturbance is None else np.asarray(disturbance, dtype=float)
+    gyro = np.zeros(3) if bias is None else np.asarray(bias, dtype=float)
     count = wheels.axes.shape[1]
     state = np.concatenate((x0[0:3], 4.0 * x0[3:6], wheels.speeds))
     ring = [(_quaternion(x0[0:3]), 4.0 * x0[3:6])] * (d + 1)
     h = 1.0
     q_prev = None
     out = {key: [] for key in ("sigma", "omega", "speeds", "motor", "body", "command", "tl", "sl")}
-    for _ in range(n):
+    for k in range(n):
+        w = w_all if w_all.ndim == 1 else w_all[k]
         sigma = state[0:3]
         s2 = sigma @ sigma
         if s2 >= 1.0:
             state = state.copy()
             state[0:3] = -sigma / s2
         sigma, omega, speeds = state[0:3], state[3:6], state[6:]
-        ring = [*ring[1:], (_quaternion(sigma), omega.copy())]
+        q_meas, w_meas = _quaternion(sigma), omega.copy()
+        if noise is not None:
+            q_meas = _compose(_rotation(noise[0][k]), q_meas)
+            q_meas = -q_meas if q_meas[0] < 0 else q_meas
+            w_meas = omega + gyro + noise[1][k]
+        ring = [*ring[1:], (q_meas, w_meas)]
         q_used, w_used = ring[0]
         if q_prev is None:
             q_prev = q_used
