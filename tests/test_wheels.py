@@ -428,3 +428,20 @@ def test_wheel_loop_with_a_sensor_and_a_per_sample_disturbance_matches_the_refer
     ):
         assert _relative(ours, theirs) <= 1e-12
     assert np.any(reference.torque_limited)
+
+
+def test_progress_is_called_and_its_exception_stops_the_wheel_run() -> None:
+    wheels = WheelCluster.orthogonal(1e-4, 5e-3, 600.0)
+    K = gain_from_pd(CUBESAT, -0.04 * np.ones(3), -0.4 * np.ones(3))
+    x0 = state([0.1, 0.0, 0.0], [0.0, 0.0, 0.0])
+    seen: list[tuple[int, int]] = []
+    simulate(CUBESAT, K, x0, tau=0.2, rule=Hysteretic(0.1), t_final=2.0, rate=10.0, wheels=wheels,
+             progress=lambda done, total: seen.append((done, total)))  # fmt: skip
+    assert seen == [(21, 21)]
+
+    def interrupt(done: int, total: int) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        simulate(CUBESAT, K, x0, tau=0.2, rule=Hysteretic(0.1), t_final=2.0, rate=10.0, wheels=wheels,
+                 progress=interrupt)  # fmt: skip

@@ -48,7 +48,14 @@ from mrpctl.loop.options import (
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._guards import check_step_rotation
-from mrpctl.simulation._wheels import check_wheel_run, run_wheels, wheel_record, wheel_result, wheel_run_bytes
+from mrpctl.simulation._wheels import (
+    check_wheel_run,
+    progress_stop,
+    run_wheels,
+    wheel_record,
+    wheel_result,
+    wheel_run_bytes,
+)
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
@@ -408,7 +415,7 @@ def simulate(
             streamed=streamed,
             sensor=sensor,
             varying=varying,
-            stop=None if progress is None else (lambda done: bool(progress(done, n)) and False),
+            stop=progress_stop(progress, n),
             switch_limit=n if keep == 1 else SWITCH_LIMIT,
         )
         flown = assemble_run(

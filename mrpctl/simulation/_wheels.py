@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,19 @@ def check_wheel_run(wheels: Any, spacecraft: Any, rule: Any, *, actuator: Any, p
         )
     wheel_hub_inertia(spacecraft, wheels)  # J − Gs diag(Js) Gsᵀ positive definite, or the error naming spin_inertia
     return wheels
+
+
+def progress_stop(progress: Callable[[int, int], Any] | None, n: int) -> Callable[[int], bool] | None:
+    """The engine's ``stop`` of ``simulate``'s ``progress``: reports the samples done, never stops the run itself
+    (an exception raised by ``progress`` propagates)."""
+    if progress is None:
+        return None
+
+    def stop(done: int) -> bool:
+        progress(done, n)
+        return False
+
+    return stop
 
 
 def wheel_run_bytes(kept: int, wheels: WheelCluster) -> int:
