@@ -368,27 +368,41 @@ def test_predictor_with_wheels_is_refused() -> None:
         )
 
 
-def test_simulate_batch_on_wheels_equals_simulate_run_by_run() -> None:
+@pytest.mark.parametrize("noisy", [False, True])
+def test_simulate_batch_on_wheels_equals_simulate_run_by_run(noisy: bool) -> None:
+    """Metrics only (the lane engine, W runs per C call) and with trajectories (the scalar engine's thread pool):
+    each run bit for bit simulate's."""
     from mrpctl import simulate_batch
+    from mrpctl._compile import find_compiler
+    from mrpctl.engines import lanes
+    from mrpctl.flight import SensorModel
 
-    wheels = WheelCluster.pyramid(2e-4, 5e-3, 300.0, speeds=[10.0, -20.0, 30.0, 5.0], viscous=1e-7)
+    wheels = WheelCluster.pyramid(
+        2e-4, 5e-3, 300.0, speeds=[10.0, -20.0, 30.0, 5.0], viscous=1e-7, coulomb=1e-5, null_gain=0.02,
+        gyroscopic=True,
+    )  # fmt: skip
+    sensor = SensorModel(attitude_noise=1e-3, rate_noise=1e-4, gyro_bias=[1e-4, 0.0, 0.0], seed=3) if noisy else None
     K = gain_from_pd(CUBESAT, -0.04 * np.ones(3), -0.4 * np.ones(3))
     x0 = state(
         [[0.5, -0.6, 0.4], [0.1, 0.2, -0.3], [-0.8, 0.1, 0.0]], [[0.03, 0.02, -0.04], [0.0, 0.0, 0.0], [0.0, 0.05, 0.0]]
     )
-    run = dict(tau=0.2, rule=Hysteretic(0.1), t_final=40.0, rate=10.0, wheels=wheels)
+    run = dict(tau=0.2, rule=Hysteretic(0.1), t_final=40.0, rate=10.0, wheels=wheels, sensor=sensor)
     singles = [simulate(CUBESAT, K, x, **run) for x in x0]
     for trajectories in (False, True):
         batch = simulate_batch(CUBESAT, K, x0, trajectories=trajectories, threads=2, **run)
+        if not trajectories and find_compiler() is not None:
+            assert any(key[0] == "wheels" for key in lanes._ENGINES)  # the lane engine ran them
         assert batch.wheels is not None and len(batch.wheels) == 3
         for single, record, settled in zip(singles, batch.wheels, batch.settling_time, strict=True):
             assert single.wheels is not None
             np.testing.assert_array_equal(record.peak_speed, single.wheels.peak_speed)
             np.testing.assert_array_equal(record.final_speeds, single.wheels.final_speeds)
             np.testing.assert_array_equal(record.torque_limited_time, single.wheels.torque_limited_time)
+            np.testing.assert_array_equal(record.speed_limited_time, single.wheels.speed_limited_time)
             assert record.peak_momentum == single.wheels.peak_momentum
             assert (settled == single.settling_time) or (np.isnan(settled) and single.settling_time is None)
         np.testing.assert_array_equal(batch.saturated_fraction, [s.saturated_fraction for s in singles])
+        np.testing.assert_array_equal(batch.max_sigma, [s.max_sigma for s in singles])
         if trajectories:
             assert batch.runs is not None
             for single, each in zip(singles, batch.runs, strict=True):

@@ -45,6 +45,7 @@ from mrpctl.loop.options import (
     predictor_disturbance,
     varying_delay,
 )
+from mrpctl.loop.wheels import wheel_memory
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._guards import check_step_rotation
@@ -746,7 +747,8 @@ def simulate_batch(
     any_flight = checked is not None or any(isinstance(one, Hysteretic) for one in rules)
     flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
-    if not trajectories and _LANES and checked is None and wheels is None and find_compiler() is not None:
+    wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
+    if not trajectories and _LANES and checked is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -764,6 +766,7 @@ def simulate_batch(
             progress=progress,
             flight=(options_by_run, saturation, sensor, varying),
             torques=(streamed_by_run, shared),
+            wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -854,6 +857,8 @@ def simulate_batch(
             stats[i] = output.stats
             if flight_rows is not None and output.memory is not None and output.memory.size >= FLIGHT_MEMORY_SIZE:
                 flight_rows[i] = output.memory[:FLIGHT_MEMORY_SIZE]
+            if wheel_rows is not None and output.memory is not None:
+                wheel_rows[i] = output.memory
 
     runs: list[SimulationResult] | None = None
     if trajectories:
@@ -887,7 +892,8 @@ def simulate_batch(
             runs = [wheel_result(run, outputs[i], cluster, rate=rate) for i, run in enumerate(runs)]
             wheel_records = tuple(run.wheels for run in runs if run.wheels is not None)
         else:
-            wheel_records = tuple(wheel_record(output, cluster, rate=rate, kept=0) for output in outputs)
+            assert wheel_rows is not None
+            wheel_records = tuple(wheel_record(row, None, cluster, rate=rate, kept=0) for row in wheel_rows)
     return assemble_batch(
         stats,
         n=n,
@@ -936,6 +942,7 @@ def _run_lanes(
     progress: Callable[[int, int], Any] | None,
     flight: tuple[list[np.ndarray | None], Saturation, SensorModel | None, list[DelayModel | None]],
     torques: tuple[list[Disturbance | None], bool],
+    wheels: tuple[WheelCluster, np.ndarray] | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -944,7 +951,8 @@ def _run_lanes(
     ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
     streamed beside the noise; else each lane is streamed its run's rows). Returns the runs left
-    to the scalar engine (a rule without lane form)."""
+    to the scalar engine (a rule without lane form). ``wheels``: every run on this wheel cluster
+    (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
 
@@ -958,6 +966,8 @@ def _run_lanes(
         if key is None:
             d = samples_by_run[i]
             key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d, own_torque)
+            if wheels is not None:  # J is a constant of a wheel library
+                key += (crafts[i].inertia.tobytes(),)
         groups.setdefault(key, []).append(i)
     packs: list[tuple[list[int], lane_engines.LaneBatches]] = []
     step = slice_samples(substeps)
@@ -973,17 +983,30 @@ def _run_lanes(
         # the group's structure: the union over its runs (flight_structure of their rows), as the scalar engine's
         structure = flight_structure(options, sensor) if is_flight else {}
         try:
-            lanes = lane_engines.lane_engine(
-                crafts[first],
-                rules[first],
-                d,
-                1.0 / rate,
-                substeps,
-                saturation=saturation,
-                torque_input=torque is not None,
-                torque_per_lane=own_torque,
-                **structure,
-            )
+            if wheels is not None:
+                lanes = lane_engines.wheel_lane_engine(
+                    crafts[first],
+                    d,
+                    1.0 / rate,
+                    substeps,
+                    wheels=wheels[0],
+                    sensor=structure["sensor"],
+                    disturbed=structure["disturbed"],
+                    torque_input=torque is not None,
+                    torque_per_lane=own_torque,
+                )
+            else:
+                lanes = lane_engines.lane_engine(
+                    crafts[first],
+                    rules[first],
+                    d,
+                    1.0 / rate,
+                    substeps,
+                    saturation=saturation,
+                    torque_input=torque is not None,
+                    torque_per_lane=own_torque,
+                    **structure,
+                )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
             left.extend(members)
@@ -992,7 +1015,9 @@ def _run_lanes(
             rows = np.stack([histories[i][0][0] for i in members])[:, :, None]
         else:  # the array history is shared: a view, copied W runs at a time
             rows = np.broadcast_to(histories[first][0].T, (len(members), STATE_SIZE, d))
-        if is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
+        if wheels is not None:  # the flight memory, then the wheel speeds and the wheel accumulators at 0
+            memory0 = np.array([wheel_memory(flight_memory(states[i], histories[i][0], d), wheels[0]) for i in members])
+        elif is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
             memory0 = np.array([flight_memory(states[i], histories[i][0], d) for i in members])
         else:
             memory0 = np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float)
@@ -1052,7 +1077,12 @@ def _run_lanes(
     _run_polled(jobs, progress, done_samples, total, stop_flag, workers)
     for members, packed in packs:
         stats[members] = lane_engines.lane_stats(packed)
-        if flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
+        if wheels is not None:  # the wheel sample's memory: the flight sample's ten entries, then the wheels'
+            memory = lane_engines.lane_memory(packed)
+            wheels[1][members] = memory
+            if flight_rows is not None:
+                flight_rows[members] = memory[:, :FLIGHT_MEMORY_SIZE]
+        elif flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
             flight_rows[members] = lane_engines.lane_memory(packed)
     return left
 

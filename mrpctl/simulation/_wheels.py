@@ -119,13 +119,15 @@ def run_wheels(
     )
 
 
-def wheel_record(output: Any, wheels: WheelCluster, *, rate: float, kept: int) -> WheelRecord:
-    """The `WheelRecord` of an engine's run output (``kept`` samples of its records)."""
+def wheel_record(
+    memory: Any, records: np.ndarray | None, wheels: WheelCluster, *, rate: float, kept: int
+) -> WheelRecord:
+    """The `WheelRecord` of a run from the wheel sample's memory after the run and its records (``kept`` rows)."""
     count = wheels.count
-    part = finite_array("memory", output.memory)[FLIGHT_MEMORY_SIZE:]
-    if output.records is not None and kept:
-        speeds = output.records[:kept, 7 : 7 + count]
-        motor = output.records[:kept, 7 + count : 7 + 2 * count]
+    part = finite_array("memory", memory)[FLIGHT_MEMORY_SIZE:]
+    if records is not None and kept:
+        speeds = records[:kept, 7 : 7 + count]
+        motor = records[:kept, 7 + count : 7 + 2 * count]
     else:
         speeds = motor = np.zeros((0, count))
     peak = part[count : 2 * count]
@@ -146,7 +148,7 @@ def wheel_result(result: SimulationResult, output: Any, wheels: WheelCluster, *,
     """``result`` with the wheel fields (`WheelRecord`) and the flight fields read from the wheel memory."""
     memory = finite_array("memory", output.memory)
     valid = max(result.samples, 1)
-    record = wheel_record(output, wheels, rate=rate, kept=result.t.shape[0])
+    record = wheel_record(output.memory, output.records, wheels, rate=rate, kept=result.t.shape[0])
     return dataclasses.replace(
         result,
         saturated_fraction=float(memory[5]) / valid,
