@@ -14,7 +14,9 @@ tens of seconds) through :func:`mrpctl.simulate`:
 
 All in this process, interleaved round by round, each timed by the process's CPU time; each entry
 is the minimum and the median over the rounds (ns per sample), the ratio to the 5 mN m ideal-torque
-sample's minimum. The engines are compiled (or loaded from the cache) before the rounds.
+sample's minimum. The engines are compiled (or loaded from the cache) before the rounds. A second table:
+the same samples on the lane engine (``simulate_batch`` of 32 runs, metrics only, one thread: W = 8 runs
+per C call), ns per sample and run.
 
 Run: ``.venv/bin/python bench/wheels_sample.py [rounds]`` (default 9).
 """
@@ -30,7 +32,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mrpctl import simulate
+from mrpctl import simulate, simulate_batch
 from mrpctl.engines.isa import host_isa_flags, native_isa_flags
 from mrpctl.flight import ActuatorModel, Hysteretic, Saturation
 from mrpctl.model import gain_from_pd, state
@@ -83,6 +85,19 @@ def _case(**options: object) -> Callable[[], object]:
     return call
 
 
+def _batch(**options: object) -> Callable[[], object]:
+    rng = np.random.default_rng(5)
+    x0 = state(rng.uniform(-0.4, 0.4, (LANE_RUNS, 3)), rng.uniform(-0.03, 0.03, (LANE_RUNS, 3)))
+
+    def call() -> object:
+        return simulate_batch(SPACECRAFT, K, x0, tau=TAU, rule=RULE, t_final=T_FINAL, rate=RATE, threads=1, **options)  # type: ignore[arg-type]
+
+    return call
+
+
+LANE_RUNS = 32
+
+
 def main() -> int:
     rounds = int(sys.argv[1]) if len(sys.argv) > 1 else 9
     cases: dict[str, Callable[[], object]] = {
@@ -113,6 +128,27 @@ def main() -> int:
             f"{label:34s} {low / N * 1e9:8.1f} {statistics.median(values) / N * 1e9:10.1f} "
             f"{low / base:9.2f} {low / free:8.2f}"
         )
+    batches: dict[str, Callable[[], object]] = {
+        "ideal torque": _batch(),
+        "ideal torque, 5 mN m": _batch(actuator=ActuatorModel(TORQUE_LIMIT, mode=Saturation.CLIP)),
+    }
+    for label, wheels in WHEELS.items():
+        batches[label] = _batch(wheels=wheels)
+    for call in batches.values():
+        call()
+    lane_times: dict[str, list[float]] = {label: [] for label in batches}
+    for _ in range(max(1, rounds // 3)):
+        for label, call in batches.items():
+            start = time.process_time()
+            call()
+            lane_times[label].append(time.process_time() - start)
+    base = min(lane_times["ideal torque, 5 mN m"])
+    free = min(lane_times["ideal torque"])
+    print(f"lane engine: simulate_batch of {LANE_RUNS} runs, metrics only, one thread, best of {max(1, rounds // 3)}")
+    print(f"{'sample':34s} {'ns/run-sample':>13s} {'x 5 mN m':>9s} {'x ideal':>8s}")
+    for label, values in lane_times.items():
+        low = min(values)
+        print(f"{label:34s} {low / (N * LANE_RUNS) * 1e9:13.1f} {low / base:9.2f} {low / free:8.2f}")
     return 0
 
 
