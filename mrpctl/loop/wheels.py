@@ -208,20 +208,18 @@ def wheel_core_function(
     clipped = ca.if_else(ca.sum1(torque_limited) > 0, 1.0, 0.0)
     peak_speed = memory[start + count : start + 2 * count]
     momentum = ca.norm_2(ca.DM(wheels.spin_axes) @ (ca.DM(wheels.spin_inertia) * speeds))
-    # the peaks by comparisons (as the predictor sample's): casadi_fmax is a libm call, lane by lane on the lanes
-    size, norm, speed = ca.fabs(command), ca.norm_2(command), ca.fabs(speeds)
     memory_next = ca.vertcat(
         h_next,
         c_next,
         sigma_seen,
         memory[5] + clipped,
-        ca.if_else(size > memory[6:9], size, memory[6:9]),
-        ca.if_else(norm > memory[9], norm, memory[9]),
+        ca.fmax(memory[6:9], ca.fabs(command)),
+        ca.fmax(memory[9], ca.norm_2(command)),
         speeds_next,
-        ca.if_else(speed > peak_speed, speed, peak_speed),
+        ca.fmax(peak_speed, ca.fabs(speeds)),
         memory[start + 2 * count : start + 3 * count] + torque_limited,
         memory[start + 3 * count : start + 4 * count] + speed_limited,
-        ca.if_else(momentum > memory[start + 4 * count], momentum, memory[start + 4 * count]),
+        ca.fmax(memory[start + 4 * count], momentum),
     )
     names = ["x", "memory", "x_delayed", "K", "parameters", "flight"]
     inputs = [x, memory, x_delayed, gain, parameters, flight] + ([noise] if sensor else [])
