@@ -424,7 +424,9 @@ class Engine:
         without the records and the torque input."""
         if not self.flight:
             return self.sample
-        if self.predictor or self.wheels is not None:
+        if self.wheels is not None:
+            raise CodegenError("the wheel loop needs the compiled engine (a C compiler); see mrpctl._compile")
+        if self.predictor:
             raise CodegenError("the predictor loop needs the compiled engine (a C compiler); see mrpctl._compile")
         spacecraft, d, period, substeps, saturation, limited, disturbed = self._structure
         core = flight_core_function(
