@@ -459,3 +459,34 @@ def test_progress_is_called_and_its_exception_stops_the_wheel_run() -> None:
     with pytest.raises(KeyboardInterrupt):
         simulate(CUBESAT, K, x0, tau=0.2, rule=Hysteretic(0.1), t_final=2.0, rate=10.0, wheels=wheels,
                  progress=interrupt)  # fmt: skip
+
+
+@pytest.mark.parametrize("combination", ["zero-input", "jitter", "torque rows", "torque function"])
+def test_wheels_with_the_flight_options_batch_equals_single(combination: str) -> None:
+    """A zero-input history, a seeded jitter, a per-sample torque (rows or a function): the lanes' metrics-only
+    batch gives each run's wheel metrics and settling as simulate does, bit for bit."""
+    from mrpctl import simulate_batch
+    from mrpctl.flight import DelayModel, Disturbance
+
+    wheels = WheelCluster.orthogonal(1e-4, 5e-3, 300.0)
+    K = gain_from_pd(CUBESAT, -0.04 * np.ones(3), -0.4 * np.ones(3))
+    x0 = state([[0.3, 0.1, -0.2], [0.1, -0.4, 0.2]], [[0.01, 0.0, 0.0], [0.0, 0.02, 0.0]])
+    options: dict = {
+        "zero-input": dict(history="zero-input"),
+        "jitter": dict(delay=DelayModel.jitter(0.1, 0.2, seed=1)),
+        "torque rows": dict(disturbance=np.full((401, 3), 1e-5)),
+        "torque function": dict(disturbance=Disturbance(function=lambda t: np.outer(np.sin(t), [1e-5, 0.0, 0.0]))),
+    }[combination]
+    run = dict(tau=0.2, rule=Hysteretic(0.1), t_final=40.0, rate=10.0, wheels=wheels, **options)
+    singles = [simulate(CUBESAT, K, x, **run) for x in x0]
+    batch = simulate_batch(CUBESAT, K, x0, **run)
+    assert batch.wheels is not None
+    for single, record in zip(singles, batch.wheels, strict=True):
+        assert single.wheels is not None
+        np.testing.assert_array_equal(record.final_speeds, single.wheels.final_speeds)
+        np.testing.assert_array_equal(record.peak_speed, single.wheels.peak_speed)
+    np.testing.assert_array_equal(
+        batch.settling_time, [np.nan if s.settling_time is None else s.settling_time for s in singles]
+    )
+    if combination == "jitter":
+        assert singles[0].delay_used is not None and len(set(singles[0].delay_used.tolist())) == 2
