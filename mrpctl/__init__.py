@@ -12,7 +12,7 @@ imported on the first LMI solve and matplotlib only by [`mrpctl.plots`][mrpctl.p
 from __future__ import annotations
 
 from mrpctl import design, errors, loop, model, mrp, paper, simulation
-from mrpctl._export import ExportResult, export
+from mrpctl._export import ExportResult, export, export_wheel_controller
 from mrpctl.errors import (
     CodegenError,
     CompilerWarning,
@@ -29,6 +29,7 @@ from mrpctl.scenario import Scenario, load_scenario
 from mrpctl.simulation import BatchResult, SimulationResult, simulate, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 __version__ = mrpctl_version()
 
@@ -54,11 +55,13 @@ __all__ = [
     "Spacecraft",
     "SpecificationError",
     "SwitchingRule",
+    "WheelCluster",
     "__version__",
     "closed_loop_functions",
     "design",
     "errors",
     "export",
+    "export_wheel_controller",
     "load_scenario",
     "loop",
     "model",

@@ -39,8 +39,9 @@ from typing import Any
 import casadi as ca
 
 from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_library, compiler_version, find_compiler
+from mrpctl.clock import delay_samples
 from mrpctl.errors import CodegenError, SpecificationError
-from mrpctl.flight import ActuatorModel, DelayModel, SensorModel
+from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, SensorModel
 from mrpctl.loop import (
     FLIGHT_MEMORY_LAYOUT,
     PREDICTOR_MEMORY_LAYOUT,
@@ -48,9 +49,12 @@ from mrpctl.loop import (
     FlightOptions,
     closed_loop_functions,
 )
+from mrpctl.loop.wheels import wheel_controller_function, wheel_step_function
+from mrpctl.model import gain_matrix, wheel_dynamics_expr, wheel_hub_inertia
 from mrpctl.provenance import mrpctl_version
-from mrpctl.spacecraft import Spacecraft
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "C_PREFIX",
@@ -61,9 +65,11 @@ __all__ = [
     "MANIFEST_NAME",
     "PREDICTOR_EXPORTED_FUNCTIONS",
     "SOURCE_NAME",
+    "WHEEL_EXPORTED_FUNCTIONS",
     "ExportResult",
     "content_hash",
     "export",
+    "export_wheel_controller",
 ]
 
 logger = logging.getLogger(__name__)
@@ -92,6 +98,8 @@ PREDICTOR_EXPORTED_FUNCTIONS = (
     "sample",
     "chunk",
 )
+#: Exported Functions of the wheel controller ([`export_wheel_controller`][mrpctl._export.export_wheel_controller]).
+WHEEL_EXPORTED_FUNCTIONS = ("wheel_controller", "wheel_dynamics", "wheel_step")
 #: Version of the manifest layout.
 MANIFEST_FORMAT_VERSION = 1
 
@@ -364,6 +372,181 @@ def export(
     )
 
 
+_WHEEL_DESCRIPTIONS = {
+    "wheel_controller": "the flight software of the wheel loop: from the delayed measurement x_meas = [sigma~; "
+    "omega~/4], the controller memory (h, c, sigma~_prev) and the wheel speeds Omega_k (rad/s): MRP set selection "
+    "with hysteresis delta, u_command = K [sigma_c; omega~/4] (+ the gyroscopic term when set), motor = the wheel "
+    "motor torques u_s (N m): minimum-norm allocation over the control axes (+ null-space term), each clipped to "
+    "its u_max and 0 when |Omega_i| >= Omega_max,i and Omega_i u_i >= 0; body = -Gs u_s (N m)",
+    "wheel_dynamics": "xdot (6) and speeds_dot (N) of the spacecraft and its wheels: x = [sigma; omega/4], speeds "
+    "Omega (rad/s), motor u_s (N m), w the external torque (N m)",
+    "wheel_step": "x_next, speeds_next after one measurement period h = 1/rate, RK4 with `substeps` substeps, "
+    "motor torques and w held",
+}
+
+
+def export_wheel_controller(
+    spacecraft: Spacecraft,
+    K: Any,
+    wheels: WheelCluster,
+    out_dir: str | os.PathLike[str],
+    *,
+    tau: float,
+    rule: Hysteretic | None = None,
+    rate: float = 1000.0,
+    substeps: int = 1,
+    overwrite: bool = False,
+    compile: bool = True,
+) -> ExportResult:
+    """Write the wheel loop's controller with its allocation (wheel torques out), its dynamics and its step.
+
+    `WHEEL_EXPORTED_FUNCTIONS` as ``.casadi`` files, one C translation unit (symbols ``mrpctl_<name>``),
+    the shared library (when a compiler is found) and ``manifest.json`` (with a ``wheels`` section), written
+    as [`export`][mrpctl._export.export] writes (a staging folder, then one rename). K, J, δ and the wheel
+    cluster are constants of the Functions: ``wheel_controller(x_meas, memory, speeds) -> (motor, body,
+    memory_next, command, torque_limited, speed_limited)`` is what flight software runs once per sample
+    (``design/wheels.md``).
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        The whole spacecraft's inertia J (kg m², wheels included).
+    K : array_like
+        (3, 6) gain on x = [σ; ω/4] (N m).
+    wheels : WheelCluster
+        The wheels, the allocation's control axes and options.
+    out_dir : path-like
+        The export folder (empty or missing unless ``overwrite``).
+    tau : float, keyword-only
+        Delay τ (s), a whole number of periods (recorded in the manifest).
+    rule : Hysteretic, keyword-only
+        The controller-side rule (default ``Hysteretic(0)``).
+    rate, substeps, overwrite, compile : keyword-only
+        As in [`export`][mrpctl._export.export].
+    """
+    overwrite = _flag("overwrite", overwrite)
+    compile = _flag("compile", compile)
+    spacecraft = check_spacecraft(spacecraft)
+    gain = gain_matrix(K)
+    if not isinstance(wheels, WheelCluster):
+        raise SpecificationError(f"wheels must be a mrpctl.wheels.WheelCluster, got {type(wheels).__name__}")
+    rule = Hysteretic(0.0) if rule is None else rule
+    if not isinstance(rule, Hysteretic):
+        raise SpecificationError(f"rule: the wheel controller takes Hysteretic(delta), got {type(rule).__name__}")
+    wheel_hub_inertia(spacecraft, wheels)
+    d = delay_samples(tau, rate)
+    period = 1.0 / float(rate)
+    controller = wheel_controller_function(spacecraft, wheels)
+    x_meas, memory = ca.SX.sym("x_meas", 6), ca.SX.sym("memory", 5)
+    speeds = ca.SX.sym("speeds", wheels.count)
+    outputs = controller(x_meas, memory, speeds, ca.DM(gain), ca.DM(list(rule.parameters())))
+    bound = ca.Function(
+        "wheel_controller", [x_meas, memory, speeds], list(outputs), ["x_meas", "memory", "speeds"],
+        controller.name_out(),
+    )  # fmt: skip
+    x, motor, w = ca.SX.sym("x", 6), ca.SX.sym("motor", wheels.count), ca.SX.sym("w", 3)
+    xdot, speeds_dot = wheel_dynamics_expr(spacecraft, wheels, x, speeds, motor, w)
+    functions = {
+        "wheel_controller": bound,
+        "wheel_dynamics": ca.Function(
+            "wheel_dynamics", [x, speeds, motor, w], [xdot, speeds_dot], ["x", "speeds", "motor", "w"],
+            ["xdot", "speeds_dot"],
+        ),
+        "wheel_step": wheel_step_function(spacecraft, wheels, period, substeps),
+    }  # fmt: skip
+    folder = _path(out_dir)
+    target = Path(os.path.realpath(folder))
+    _clean_leftovers(target)
+    _check_folder(folder, overwrite)
+    in_place = _in_place(target)
+    staging = _staging_folder(target, in_place)
+    try:
+        names: list[str] = []
+        for name, function in functions.items():
+            path = staging / f"{name}.casadi"
+            _write(path, lambda path=path, function=function: function.save(str(path)))
+            names.append(path.name)
+        names += _write_c_code(staging, functions)
+        compiler, reason = _build_library(staging, compile)
+        if compiler is not None:
+            names.append(LIBRARY_NAME)
+        manifest = {
+            "format": "mrpctl-export",
+            "format_version": MANIFEST_FORMAT_VERSION,
+            "mrpctl_version": mrpctl_version(),
+            "casadi_version": vars(ca)["__version__"],
+            "state": "x = [sigma; omega/4] (6) and the wheel speeds Omega (N, rad/s, relative to the body)",
+            "input": "motor (N): wheel motor torques (N m); the body receives -Gs motor",
+            "parameters": {
+                "tau": float(tau),
+                "rate": float(rate),
+                "period": period,
+                "delay_samples": d,
+                "substeps": substeps,
+                "K": gain.tolist(),
+                "J": spacecraft.inertia.tolist(),
+                "rule": {"class": "Hysteretic", "str": str(rule), "parameters": list(rule.parameters())},
+                "initial_memory": [1.0, 1.0, "short(sigma) of the first measurement the controller sees"],
+            },
+            "wheels": {
+                "count": wheels.count,
+                "spin_axes": wheels.spin_axes.tolist(),
+                "spin_inertia": wheels.spin_inertia.tolist(),
+                "torque_limit": wheels.torque_limit.tolist(),
+                "speed_limit": wheels.speed_limit.tolist(),
+                "viscous": wheels.viscous.tolist(),
+                "coulomb": wheels.coulomb.tolist(),
+                "limit_cycle_speed": wheels.limit_cycle_speed.tolist(),
+                "control_axes": wheels.control_axes.tolist(),
+                "null_gain": wheels.null_gain,
+                "bias_speeds": wheels.bias_speeds.tolist(),
+                "gyroscopic": wheels.gyroscopic,
+            },
+            "functions": {
+                name: {
+                    "file": f"{name}.casadi",
+                    "c_symbol": C_PREFIX + name,
+                    "description": _WHEEL_DESCRIPTIONS[name],
+                    "inputs": _ports(function, True),
+                    "outputs": _ports(function, False),
+                }
+                for name, function in functions.items()
+            },
+            "c": {
+                "source": SOURCE_NAME,
+                "header": HEADER_NAME,
+                "symbol_prefix": C_PREFIX,
+                "library": LIBRARY_NAME if compiler is not None else None,
+                "library_skipped_reason": reason,
+                "compiler": _compiler_description(compiler) if compiler is not None else None,
+                "flags": [*DEFAULT_FLAGS, "-lm"],
+            },
+            "files": {name: _file_digest(staging / name) for name in sorted(names)},
+            "content_hash": {
+                "algorithm": "sha256",
+                "covers": "every file listed in 'files' (all written files except manifest.json)",
+                "value": content_hash(staging, names),
+            },
+        }
+        manifest_path = staging / MANIFEST_NAME
+        _write(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
+        names.append(MANIFEST_NAME)
+        if in_place:
+            _publish_in_place(staging, target, names)
+        else:
+            _publish(staging, target)
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
+    return ExportResult(
+        folder=folder,
+        files=tuple(folder / name for name in names),
+        library=folder / LIBRARY_NAME if compiler is not None else None,
+        skipped_reason=reason,
+        manifest=manifest,
+    )
+
+
 def content_hash(folder: str | os.PathLike[str], names: Any) -> str:
     """SHA-256 of the files ``names`` in ``folder``, as the manifest's ``content_hash``.
 
@@ -385,7 +568,7 @@ def _flag(name: str, value: Any) -> bool:
 
 
 def _export_names() -> tuple[str, ...]:
-    every = EXPORTED_FUNCTIONS + FLIGHT_EXPORTED_FUNCTIONS + PREDICTOR_EXPORTED_FUNCTIONS
+    every = EXPORTED_FUNCTIONS + FLIGHT_EXPORTED_FUNCTIONS + PREDICTOR_EXPORTED_FUNCTIONS + WHEEL_EXPORTED_FUNCTIONS
     names = [f"{name}.casadi" for name in dict.fromkeys(every)]
     return (*names, SOURCE_NAME, HEADER_NAME, LIBRARY_NAME, MANIFEST_NAME)
 

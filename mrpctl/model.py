@@ -25,8 +25,10 @@ import casadi as ca
 import numpy as np
 
 from mrpctl._validation import finite_array, readonly
+from mrpctl.errors import SpecificationError
 from mrpctl.mrp import b_matrix_expr, skew_expr
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
+from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "INPUT_SIZE",
@@ -39,6 +41,8 @@ __all__ = [
     "plant_model",
     "state",
     "state_parts",
+    "wheel_dynamics_expr",
+    "wheel_hub_inertia",
 ]
 
 STATE_SIZE = 6
@@ -75,6 +79,60 @@ def dynamics_expr(
     sigma_dot = b_matrix_expr(sigma) @ omega / 4
     omega_dot = inertia_inverse @ (-skew_expr(omega) @ (inertia @ omega) + u)
     return ca.vertcat(sigma_dot, omega_dot / 4)
+
+
+def wheel_hub_inertia(spacecraft: Spacecraft, wheels: WheelCluster) -> np.ndarray:
+    """M = J − Gs diag(Js) Gsᵀ (kg m²): the inertia that multiplies ω̇ once the wheels' spin equations are
+    eliminated (Basilisk's ``matrixD`` of balanced wheels). J is the whole spacecraft's inertia, wheels
+    included; M must be positive definite (Js small enough against J)."""
+    axes = wheels.spin_axes
+    hub = spacecraft.inertia - (axes * wheels.spin_inertia) @ axes.T
+    hub = (hub + hub.T) / 2.0
+    if np.min(np.linalg.eigvalsh(hub)) <= 0.0:
+        raise SpecificationError(
+            "spin_inertia: J − Gs diag(Js) Gsᵀ is not positive definite (the wheels' spin inertia cannot exceed "
+            "the spacecraft's inertia J, which includes the wheels)"
+        )
+    return hub
+
+
+def wheel_dynamics_expr(
+    spacecraft: Spacecraft, wheels: WheelCluster, x: Any, speeds: Any, motor: Any, w: Any = None
+) -> tuple[Any, Any]:
+    """(ẋ, Ω̇) of the spacecraft with its wheel cluster, as CasADi expressions (SX or MX).
+
+    x = [σ; ω/4] (6), wheel speeds Ω (N, rad/s, relative to the body), motor torques u_s (N, N m,
+    on the wheels) and an external body torque w (3, N m; None: 0). With J the whole spacecraft's
+    inertia (wheels included), H = J ω + Gs diag(Js) Ω, the friction torque τ_f,i of each wheel
+    ([`WheelCluster`][mrpctl.wheels.WheelCluster]) and M = J − Gs diag(Js) Gsᵀ:
+
+        σ̇ = ¼ B(σ) ω
+        M ω̇ = −ω × H − Gs (u_s + τ_f) + w
+        Ω̇_i = (u_s,i + τ_f,i)/Js,i − g_iᵀ ω̇
+
+    (Basilisk's balanced wheels, ``reactionWheelStateEffector``). Friction terms are left out of the
+    expressions when every c_i and f_c,i is 0.
+    """
+    hub_inverse = ca.DM(np.linalg.inv(wheel_hub_inertia(spacecraft, wheels)))
+    inertia = ca.DM(spacecraft.inertia)
+    axes = ca.DM(wheels.spin_axes)
+    js = ca.DM(wheels.spin_inertia)
+    sigma = x[0:3]
+    omega = 4 * x[3:6]
+    torque = motor
+    if np.any(wheels.viscous > 0.0) or np.any(wheels.coulomb > 0.0):
+        viscous, coulomb, cycle = (ca.DM(a) for a in (wheels.viscous, wheels.coulomb, wheels.limit_cycle_speed))
+        outside = coulomb * ca.sign(speeds) + viscous * speeds
+        inside = (coulomb + viscous * cycle) / cycle * speeds
+        torque = motor - ca.if_else(ca.fabs(speeds) < cycle, inside, outside)
+    momentum = inertia @ omega + axes @ (js * speeds)
+    moment = -ca.cross(omega, momentum) - axes @ torque
+    if w is not None:
+        moment = moment + w
+    omega_dot = hub_inverse @ moment
+    speeds_dot = torque / js - axes.T @ omega_dot
+    sigma_dot = b_matrix_expr(sigma) @ omega / 4
+    return ca.vertcat(sigma_dot, omega_dot / 4), speeds_dot
 
 
 @dataclass(frozen=True, eq=False)

@@ -97,6 +97,7 @@ __all__ = [
     "plot_noise_study",
     "plot_response",
     "plot_sweep",
+    "plot_wheels",
     "render_rgba",
     "save_figure",
 ]
@@ -338,6 +339,57 @@ def plot_response(
         window = (float(switches[0]) - 0.05, float(switches[-1]) + 0.05)
     if window is not None:
         _zoom_inset(axes[0], result, window)
+    return fig
+
+
+def plot_wheels(result: Any, *, title: str | None = None, ax: Any = None) -> Figure:
+    """The wheel speeds (rpm) and motor torques (N m) of a run on a wheel cluster against t, with ±Ω_max and
+    ±u_max of each wheel drawn (dotted, the wheel's colour).
+
+    Parameters
+    ----------
+    result : SimulationResult
+        A run of [`mrpctl.simulate`][mrpctl.simulation.simulate] with ``wheels=...`` and kept samples.
+    title : str, optional
+        Figure title; by default the wheel count, the peak speed and the time at the limits.
+    ax : sequence of 2 matplotlib.axes.Axes, optional
+        Axes for the speeds and the torques; a new figure by default.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    record = getattr(result, "wheels", None)
+    if record is None:
+        raise SpecificationError("result: plot_wheels needs a run on a wheel cluster (simulate(..., wheels=...))")
+    t = np.asarray(result.t)
+    speeds, torques = np.asarray(record.speeds), np.asarray(record.motor_torque)
+    if t.size == 0 or speeds.shape[0] != t.size:
+        raise SpecificationError("result: plot_wheels needs the kept samples (keep_every not None)")
+    cluster = record.cluster
+    fig, axes = _new_axes(2, ax, figsize=(7.5, 5.0))
+    rpm = 60.0 / (2.0 * math.pi)
+    for i in range(speeds.shape[1]):
+        color = f"C{i % 10}"
+        axes[0].plot(t, speeds[:, i] * rpm, color=color, linewidth=1.0, label=f"Ω{i + 1}")
+        axes[1].plot(t, torques[:, i], color=color, linewidth=1.0, label=f"u_s,{i + 1}")
+        for sign in (1.0, -1.0):
+            axes[0].axhline(sign * cluster.speed_limit[i] * rpm, color=color, linewidth=0.8, linestyle=":")
+            axes[1].axhline(sign * cluster.torque_limit[i], color=color, linewidth=0.8, linestyle=":")
+    axes[0].plot([], [], color="0.3", linewidth=0.8, linestyle=":", label="±Ω_max, ±u_max")
+    axes[0].set_ylabel("wheel speed (rpm)")
+    axes[1].set_ylabel("motor torque (N m)")
+    axes[1].set_xlabel("time t (s)")
+    for panel in axes:
+        _legend_outside(panel)
+    if title is None:
+        limited = np.asarray(record.torque_limited_time).max(), np.asarray(record.speed_limited_time).max()
+        title = (
+            f"{speeds.shape[1]} wheels: peak {np.max(record.peak_speed) * rpm:.0f} rpm "
+            f"(wheel {record.worst_wheel + 1}), at the torque limit up to {limited[0]:g} s, "
+            f"at the speed limit up to {limited[1]:g} s"
+        )
+    axes[0].set_title(_typeset(title), fontsize=9)
     return fig
 
 

@@ -49,6 +49,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
+import hashlib
 import importlib.resources
 import os
 import threading
@@ -71,8 +72,10 @@ from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_structure
+from mrpctl.loop.wheels import wheel_core_function
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "DEFAULT_WIDTH",
@@ -83,8 +86,10 @@ __all__ = [
     "emit_lanes",
     "host_isa_flags",
     "lane_engine",
+    "lane_memory",
     "lane_stats",
     "simulate_lanes",
+    "wheel_lane_engine",
 ]
 
 
@@ -627,6 +632,68 @@ def lane_engine(
                 core = core_function(spacecraft, rule, d, period, substeps, inertia=layout)
             sample = engine_sample(core, d, f"mrpctl_lanes_{label}")
             found = LaneEngine(sample, d, width=width, **options)
+            _ENGINES[key] = found
+        return found
+
+
+def wheel_lane_engine(
+    spacecraft: Spacecraft,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    wheels: WheelCluster,
+    width: int = DEFAULT_WIDTH,
+    sensor: bool = True,
+    disturbed: bool = True,
+    torque_input: bool = False,
+    torque_per_lane: bool = False,
+) -> LaneEngine:
+    """The (cached) lane engine of the flight sample on a wheel cluster
+    ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; J and the cluster are constants of the
+    library), the ports as the flight sample's in `lane_engine` (structure ``limited=False``: the limits are the
+    wheels'). Its runs' memories start with `mrpctl.loop.wheels.wheel_memory`.
+
+    Raises
+    ------
+    CodegenError
+        If the sample has an operation without a bit-identical lane form, or the compiler fails.
+    """
+    disturbed = bool(disturbed or torque_input)
+    structure = {"sensor": bool(sensor), "limited": False, "disturbed": disturbed}
+    key = (
+        "wheels",
+        wheels.key(),
+        spacecraft.inertia.tobytes(),
+        d,
+        period,
+        substeps,
+        width,
+        tuple(structure.values()),
+        torque_input,
+        torque_per_lane and torque_input,
+    )
+    with _ENGINES_LOCK:
+        found = _ENGINES.get(key)
+        if found is None:
+            core = wheel_core_function(
+                spacecraft, wheels, d, period, substeps, sensor=structure["sensor"], disturbed=disturbed,
+                torque_input=torque_input,
+            )  # fmt: skip
+            digest = hashlib.sha256(repr(key[1:3]).encode()).hexdigest()[:12]
+            label = f"hysteretic_wheels{wheels.count}_{digest}_d{d}_s{substeps}"
+            label += ("" if structure["sensor"] else "_ideal") + ("" if disturbed else "_free")
+            label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
+            noise = ("noise",) if structure["sensor"] else ()
+            found = LaneEngine(
+                engine_sample(core, d, f"mrpctl_lanes_{label}"),
+                d,
+                width=width,
+                delayed=("x_delayed", "measurement" if structure["sensor"] else "x_meas"),
+                streamed=(*noise, "torque") if torque_input and not torque_per_lane else noise,
+                lane_streamed=("torque",) if torque_input and torque_per_lane else (),
+                structure=structure,
+            )
             _ENGINES[key] = found
         return found
 

@@ -55,7 +55,7 @@ from mrpctl.engines.stats import (
     initial_stats,
 )
 from mrpctl.engines.vm import VirtualMachineEngine
-from mrpctl.errors import CodegenError
+from mrpctl.errors import CodegenError, SpecificationError
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
     NOISE_SIZE,
@@ -83,6 +83,7 @@ from mrpctl.loop import (
     predictor_core_function,
 )
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, predictor_memory
+from mrpctl.loop.wheels import wheel_core_function, wheel_memory
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import (
@@ -95,6 +96,7 @@ from mrpctl.switching import (
     OnDelayed,
     SwitchingRule,
 )
+from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "SLICE_SAMPLES",
@@ -107,6 +109,7 @@ __all__ = [
     "rule_key",
     "short_history",
     "slice_samples",
+    "wheel_engine",
 ]
 
 #: Samples per C call: Ctrl-C and the batch's stop flag are seen between slices (about
@@ -271,8 +274,11 @@ class Engine:
         limited: bool = True,
         disturbed: bool = True,
         torque_input: bool = False,
+        *,
+        wheels: WheelCluster | None = None,
     ) -> None:
         self.d = d
+        self.wheels = wheels
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
         self.predictor = predictor is not None
@@ -281,7 +287,24 @@ class Engine:
         self.torque_input = torque_input and self.flight
         self._squared_peak = self.flight and not self.predictor and limited  # squared_peak of the flight sample
         self._sensor = sensor
-        if predictor is not None:
+        if wheels is not None:
+            if not isinstance(rule, Hysteretic) or predictor is not None:
+                raise SpecificationError("wheels: the wheel cluster flies with rule=Hysteretic(...) only")
+            self._squared_peak = False
+            core = wheel_core_function(
+                spacecraft,
+                wheels,
+                d,
+                period,
+                substeps,
+                sensor=sensor,
+                disturbed=disturbed,
+                records=True,
+                torque_input=torque_input,
+                noise_form=NoiseForm.MRP if sensor and _ROTATION_IN_DRIVER else NoiseForm.ROTATION_VECTOR,
+                short_measurements=not sensor,
+            )
+        elif predictor is not None:
             core = predictor_core_function(
                 spacecraft,
                 d,
@@ -322,7 +345,11 @@ class Engine:
         label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
         if self.flight:
             label += f"_{saturation.value}"
-        if predictor is not None:
+        if wheels is not None:
+            digest = hashlib.sha256(repr((wheels.key(), spacecraft.inertia.tobytes())).encode()).hexdigest()[:12]
+            label += f"_wheels{wheels.count}_{digest}" + ("" if sensor else "_ideal") + ("" if disturbed else "_free")
+            label += "_torque" if torque_input else ""
+        elif predictor is not None:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
             label += "_torque" if self.torque_input else ""
         elif self.flight:
@@ -361,6 +388,8 @@ class Engine:
         without the records and the torque input."""
         if not self.flight:
             return self.sample
+        if self.wheels is not None:
+            raise CodegenError("the wheel loop needs the compiled engine (a C compiler); see mrpctl._compile")
         if self.predictor:
             raise CodegenError("the predictor loop needs the compiled engine (a C compiler); see mrpctl._compile")
         spacecraft, d, period, substeps, saturation, limited, disturbed = self._structure
@@ -458,7 +487,10 @@ class Engine:
             state[STATE_SIZE:memory_end] = predictor_memory(x0)
             history = np.ascontiguousarray(np.hstack((history, history)))  # (m, z) with z = m before t = 0
         else:
-            state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
+            if self.wheels is not None:
+                state[STATE_SIZE:memory_end] = wheel_memory(flight_memory(x0, history, self.d), self.wheels)
+            else:
+                state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
             if self.flight and not self._sensor:  # the sample reads m_{k-d} as it is: a history row must be short
                 history = np.ascontiguousarray(short_history(history))
         state[memory_end:] = initial_stats(n)
@@ -670,6 +702,45 @@ def engine(
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)
+            _ENGINES[key] = found
+        return found
+
+
+def wheel_engine(
+    spacecraft: Spacecraft,
+    rule: SwitchingRule,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    wheels: WheelCluster,
+    sensor: bool = False,
+    disturbed: bool = True,
+    torque_input: bool = False,
+) -> Engine:
+    """The compiled engine of the flight sample on a wheel cluster, cached
+    ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; J and the cluster are constants of the
+    library, so one library per spacecraft inertia and cluster). Needs a C compiler (CodegenError without)."""
+    key = ("wheels", wheels.key(), spacecraft.inertia.tobytes(), d, period, substeps, sensor, disturbed, torque_input)
+    with _ENGINES_LOCK:
+        found = _ENGINES.get(key)
+        if found is None:
+            found = Engine(
+                spacecraft,
+                rule,
+                d,
+                period,
+                substeps,
+                sensor=sensor,
+                limited=False,
+                disturbed=disturbed,
+                torque_input=torque_input,
+                wheels=wheels,
+            )
+            if not found.compiled_code:
+                raise CodegenError(
+                    "wheels: the wheel cluster needs the compiled engine (a C compiler: gcc or cc, or CC)"
+                )
             _ENGINES[key] = found
         return found
 

@@ -19,7 +19,7 @@ from mrpctl._validation import available_memory, finite_array, integer, positive
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.engines.common import RunOutput
 from mrpctl.engines.lanes import DEFAULT_WIDTH
-from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples
+from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples, wheel_engine
 from mrpctl.engines.stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import (
@@ -45,12 +45,22 @@ from mrpctl.loop.options import (
     predictor_disturbance,
     varying_delay,
 )
+from mrpctl.loop.wheels import wheel_memory
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._guards import check_step_rotation
+from mrpctl.simulation._wheels import (
+    check_wheel_run,
+    progress_stop,
+    run_wheels,
+    wheel_record,
+    wheel_result,
+    wheel_run_bytes,
+)
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 #: At most this many switch instants are kept per run when ``keep_every != 1`` (16 MB);
 #: the count, the first and the last switch stay exact.
@@ -268,6 +278,7 @@ def simulate(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    wheels: WheelCluster | None = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -333,6 +344,13 @@ def simulate(
         the applied torque), ``disturbance`` (constant or per sample; the plant's only) and ``sensor``;
         needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
+    wheels : mrpctl.wheels.WheelCluster, keyword-only
+        Fly the body torque on this reaction-wheel cluster (``design/wheels.md``): the command u_c = K x
+        is allocated to the wheels' motor torques, each clipped to its torque limit and cut at its speed
+        limit, and the wheel speeds are states of the plant (J is the whole spacecraft's inertia, wheels
+        included). With ``rule=Hysteretic(...)`` only, without ``actuator`` and ``predictor``; takes
+        ``disturbance``, ``sensor`` and ``delay``; needs a C compiler. The result's ``wheels``
+        ([`WheelRecord`][mrpctl.simulation.results.WheelRecord]) has the wheel speeds and metrics.
 
     Returns
     -------
@@ -349,6 +367,8 @@ def simulate(
     gain = gain_matrix(K)
     x0 = finite_array("x0", x0, (STATE_SIZE,))
     rule = check_rule(rule)
+    if wheels is not None:
+        wheels = check_wheel_run(wheels, spacecraft, rule, actuator=actuator, predictor=predictor)
     d = delay_samples(tau, rate)
     rate = float(rate)
     t_final, n = _samples(t_final, rate)
@@ -370,12 +390,42 @@ def simulate(
     width = 1 if checked is None else 2
     records = checked is None and isinstance(rule, Hysteretic)
     _check_memory(
-        run_bytes(n, keep, flight=records) + workspace_bytes(n, d, substeps, width) + jitter_bytes(varying, d),
+        run_bytes(n, keep, flight=records)
+        + workspace_bytes(n, d, substeps, width)
+        + jitter_bytes(varying, d)
+        + (0 if wheels is None or keep is None else wheel_run_bytes((n - 1) // keep + 1, wheels)),
         limit,
         t_final=t_final,
         keep_every=keep,
     )
 
+    if wheels is not None:
+        output = run_wheels(
+            spacecraft=spacecraft,
+            wheels=wheels,
+            rule=rule,
+            d=d,
+            rate=rate,
+            substeps=substeps,
+            n=n,
+            x0=x0,
+            history_rows=history_rows,
+            gain=gain,
+            keep=keep,
+            disturbance=disturbance,
+            streamed=streamed,
+            sensor=sensor,
+            varying=varying,
+            stop=progress_stop(progress, n),
+            switch_limit=n if keep == 1 else SWITCH_LIMIT,
+        )
+        flown = assemble_run(
+            output,
+            n=n,
+            keep_every=keep,
+            common=_common(spacecraft, gain, tau, rate, d, rule, history_value, substeps, t_final, x0, None),
+        )
+        return wheel_result(flown, output, wheels, rate=rate)
     found = engine(
         spacecraft,
         rule,
@@ -432,6 +482,34 @@ def simulate(
     return assemble_run(output, n=n, keep_every=keep, common=common)
 
 
+def _common(
+    spacecraft: Spacecraft,
+    gain: np.ndarray,
+    tau: float,
+    rate: float,
+    d: int,
+    rule: SwitchingRule,
+    history: Any,
+    substeps: int,
+    t_final: float,
+    x0: np.ndarray,
+    predictor: Any,
+) -> dict[str, Any]:
+    return dict(
+        spacecraft=spacecraft,
+        K=readonly(gain),
+        tau=float(tau),
+        rate=rate,
+        delay_samples=d,
+        rule=rule,
+        history=history,
+        substeps=substeps,
+        t_final=t_final,
+        x0=readonly(x0),
+        predictor=predictor,
+    )
+
+
 # ======================================================================= batches
 def _broadcast(name: str, count: int, n: int) -> None:
     if count not in (1, n):
@@ -466,6 +544,7 @@ def simulate_batch(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    wheels: WheelCluster | None = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -533,6 +612,10 @@ def simulate_batch(
         thread
         pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
         (shared or per run), each run streaming its own rows.
+    wheels : mrpctl.wheels.WheelCluster, keyword-only
+        Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
+        no ``actuator``, no ``predictor``): the runs take the scalar engine on the thread pool, and the result's
+        ``wheels`` holds each run's wheel metrics (and, with ``trajectories``, its wheel speeds and torques).
 
     Returns
     -------
@@ -573,6 +656,9 @@ def simulate_batch(
     delays = np.broadcast_to(delays, (n_runs,))
     rules = rules * n_runs if len(rules) == 1 else rules
     crafts = crafts * n_runs if len(crafts) == 1 else crafts
+    if wheels is not None:
+        for pair in {(id(c), id(r)): (c, r) for c, r in zip(crafts, rules, strict=True)}.values():
+            wheels = check_wheel_run(wheels, pair[0], pair[1], actuator=actuator, predictor=predictor)
     rate = positive_scalar("rate", rate)
     t_final, n = _samples(t_final, rate)
     substeps = check_substeps(substeps)
@@ -661,6 +747,7 @@ def simulate_batch(
     any_flight = checked is not None or any(isinstance(one, Hysteretic) for one in rules)
     flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
+    wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
     if not trajectories and _LANES and checked is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
@@ -679,6 +766,7 @@ def simulate_batch(
             progress=progress,
             flight=(options_by_run, saturation, sensor, varying),
             torques=(streamed_by_run, shared),
+            wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -687,6 +775,18 @@ def simulate_batch(
         structure = _structure(checked, options_by_run[i], sensor, actuator)
         torque_input = streamed_by_run[i] is not None
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input)
+        if key not in by_structure and wheels is not None:
+            by_structure[key] = wheel_engine(
+                crafts[i],
+                rules[i],
+                samples_by_run[i],
+                1.0 / rate,
+                substeps,
+                wheels=wheels,
+                sensor=structure["sensor"],
+                disturbed=structure["disturbed"],
+                torque_input=torque_input,
+            )
         if key not in by_structure:
             by_structure[key] = engine(
                 crafts[i],
@@ -757,6 +857,8 @@ def simulate_batch(
             stats[i] = output.stats
             if flight_rows is not None and output.memory is not None and output.memory.size >= FLIGHT_MEMORY_SIZE:
                 flight_rows[i] = output.memory[:FLIGHT_MEMORY_SIZE]
+            if wheel_rows is not None and output.memory is not None:
+                wheel_rows[i] = output.memory
 
     runs: list[SimulationResult] | None = None
     if trajectories:
@@ -783,12 +885,22 @@ def simulate_batch(
                     ),
                 )
             )
+    wheel_records = None
+    if wheels is not None:
+        cluster = wheels
+        if runs is not None:
+            runs = [wheel_result(run, outputs[i], cluster, rate=rate) for i, run in enumerate(runs)]
+            wheel_records = tuple(run.wheels for run in runs if run.wheels is not None)
+        else:
+            assert wheel_rows is not None
+            wheel_records = tuple(wheel_record(row, None, cluster, rate=rate, kept=0) for row in wheel_rows)
     return assemble_batch(
         stats,
         n=n,
         rate=rate,
         runs=runs,
         flight_memory=flight_rows,
+        wheels=wheel_records,
         common=dict(
             x0=readonly(states),
             K=readonly(gains),
@@ -830,6 +942,7 @@ def _run_lanes(
     progress: Callable[[int, int], Any] | None,
     flight: tuple[list[np.ndarray | None], Saturation, SensorModel | None, list[DelayModel | None]],
     torques: tuple[list[Disturbance | None], bool],
+    wheels: tuple[WheelCluster, np.ndarray] | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -838,7 +951,8 @@ def _run_lanes(
     ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
     streamed beside the noise; else each lane is streamed its run's rows). Returns the runs left
-    to the scalar engine (a rule without lane form)."""
+    to the scalar engine (a rule without lane form). ``wheels``: every run on this wheel cluster
+    (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
 
@@ -852,6 +966,8 @@ def _run_lanes(
         if key is None:
             d = samples_by_run[i]
             key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d, own_torque)
+            if wheels is not None:  # J is a constant of a wheel library
+                key += (crafts[i].inertia.tobytes(),)
         groups.setdefault(key, []).append(i)
     packs: list[tuple[list[int], lane_engines.LaneBatches]] = []
     step = slice_samples(substeps)
@@ -867,17 +983,30 @@ def _run_lanes(
         # the group's structure: the union over its runs (flight_structure of their rows), as the scalar engine's
         structure = flight_structure(options, sensor) if is_flight else {}
         try:
-            lanes = lane_engines.lane_engine(
-                crafts[first],
-                rules[first],
-                d,
-                1.0 / rate,
-                substeps,
-                saturation=saturation,
-                torque_input=torque is not None,
-                torque_per_lane=own_torque,
-                **structure,
-            )
+            if wheels is not None:
+                lanes = lane_engines.wheel_lane_engine(
+                    crafts[first],
+                    d,
+                    1.0 / rate,
+                    substeps,
+                    wheels=wheels[0],
+                    sensor=structure["sensor"],
+                    disturbed=structure["disturbed"],
+                    torque_input=torque is not None,
+                    torque_per_lane=own_torque,
+                )
+            else:
+                lanes = lane_engines.lane_engine(
+                    crafts[first],
+                    rules[first],
+                    d,
+                    1.0 / rate,
+                    substeps,
+                    saturation=saturation,
+                    torque_input=torque is not None,
+                    torque_per_lane=own_torque,
+                    **structure,
+                )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
             left.extend(members)
@@ -886,7 +1015,9 @@ def _run_lanes(
             rows = np.stack([histories[i][0][0] for i in members])[:, :, None]
         else:  # the array history is shared: a view, copied W runs at a time
             rows = np.broadcast_to(histories[first][0].T, (len(members), STATE_SIZE, d))
-        if is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
+        if wheels is not None:  # the flight memory, then the wheel speeds and the wheel accumulators at 0
+            memory0 = np.array([wheel_memory(flight_memory(states[i], histories[i][0], d), wheels[0]) for i in members])
+        elif is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
             memory0 = np.array([flight_memory(states[i], histories[i][0], d) for i in members])
         else:
             memory0 = np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float)
@@ -946,7 +1077,12 @@ def _run_lanes(
     _run_polled(jobs, progress, done_samples, total, stop_flag, workers)
     for members, packed in packs:
         stats[members] = lane_engines.lane_stats(packed)
-        if flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
+        if wheels is not None:  # the wheel sample's memory: the flight sample's ten entries, then the wheels'
+            memory = lane_engines.lane_memory(packed)
+            wheels[1][members] = memory
+            if flight_rows is not None:
+                flight_rows[members] = memory[:, :FLIGHT_MEMORY_SIZE]
+        elif flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
             flight_rows[members] = lane_engines.lane_memory(packed)
     return left
 

@@ -33,6 +33,7 @@ __all__ = [
     "STATE",
     "BatchResult",
     "SimulationResult",
+    "WheelRecord",
     "rule_fields",
     "to_pandas",
     "to_xarray",
@@ -51,6 +52,42 @@ class _Conversions:
     def to_pandas(self) -> Any:
         """The result as a ``pandas.DataFrame`` (`mrpctl.data.to_pandas`)."""
         return to_pandas(self)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True, eq=False)
+class WheelRecord:
+    """The wheels of one run on a [`WheelCluster`][mrpctl.wheels.WheelCluster].
+
+    Attributes
+    ----------
+    cluster : WheelCluster
+        The wheels flown.
+    speeds : numpy.ndarray
+        (m, N) wheel speeds Ω_i at the kept samples (rad/s, relative to the body).
+    motor_torque : numpy.ndarray
+        (m, N) motor torques u_s,i held over [t_k, t_{k+1}) (N m, after the torque clip and the speed cut).
+    final_speeds : numpy.ndarray
+        (N,) Ω_i at the end of the run (after its last sample's period).
+    peak_speed : numpy.ndarray
+        (N,) max_k |Ω_i(t_k)| over every sample (rad/s).
+    torque_limited_time, speed_limited_time : numpy.ndarray
+        (N,) time each wheel's motor torque was clipped to its u_max,i, or cut by its speed limit
+        (s: samples × period, over every sample).
+    peak_momentum : float
+        max_k |Gs diag(Js) Ω(t_k)| (N m s), the largest momentum the wheels stored in the body frame.
+    worst_wheel : int
+        The wheel with the largest peak |Ω_i|/Ω_max,i (index from 0).
+    """
+
+    cluster: Any = field(repr=False)
+    speeds: np.ndarray = field(repr=False)
+    motor_torque: np.ndarray = field(repr=False)
+    final_speeds: np.ndarray
+    peak_speed: np.ndarray
+    torque_limited_time: np.ndarray
+    speed_limited_time: np.ndarray
+    peak_momentum: float
+    worst_wheel: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,6 +155,10 @@ class SimulationResult(_Conversions):
     predictor : mrpctl.Predictor or None
         The predictor controller of the run (the flight-loop fields above are then reported too);
         None for the plain delayed law.
+    wheels : WheelRecord or None
+        A run on a reaction-wheel cluster (``simulate(..., wheels=...)``): the wheel speeds, motor
+        torques and wheel metrics; ``u`` is then the body torque of the motors −Gs u_s and
+        ``saturated_fraction`` the fraction of samples with a wheel at its torque limit. None otherwise.
     spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
         The inputs of the run.
     """
@@ -155,6 +196,7 @@ class SimulationResult(_Conversions):
     sigma_c: np.ndarray | None = field(default=None, repr=False)
     delay_used: np.ndarray | None = field(default=None, repr=False)
     command: np.ndarray | None = field(default=None, repr=False)
+    wheels: WheelRecord | None = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -328,6 +370,9 @@ class BatchResult(_Conversions):
         (N m), before the actuator limits (NaN rows for runs of another rule); None otherwise.
     runs : tuple of SimulationResult or None
         The full runs when ``trajectories=True`` was asked for.
+    wheels : tuple of WheelRecord or None
+        Runs on a wheel cluster (``wheels=...``): each run's `WheelRecord` (its ``speeds`` and
+        ``motor_torque`` empty without ``trajectories``); None otherwise.
     rate, t_final, substeps, history
         The shared inputs.
     """
@@ -353,6 +398,7 @@ class BatchResult(_Conversions):
     runs: tuple[SimulationResult, ...] | None = field(default=None, repr=False)
     saturated_fraction: np.ndarray | None = field(default=None, repr=False)
     peak_command: np.ndarray | None = field(default=None, repr=False)
+    wheels: tuple[WheelRecord, ...] | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.switch_count)
@@ -375,7 +421,7 @@ class BatchResult(_Conversions):
                 raise SpecificationError(
                     "batches: every batch must share rate, t_final, substeps and history to be concatenated"
                 )
-        arrays = {
+        arrays: dict[str, Any] = {
             name: readonly(np.concatenate([getattr(b, name) for b in batches]), getattr(first, name).dtype)
             for name in _BATCH_ARRAYS
         }
@@ -388,9 +434,13 @@ class BatchResult(_Conversions):
                 np.concatenate([_or_nan(b.saturated_fraction, (len(b),)) for b in batches])
             )
             flight["peak_command"] = readonly(np.concatenate([_or_nan(b.peak_command, (len(b), 4)) for b in batches]))
+        wheels = None
+        if all(b.wheels is not None for b in batches):
+            wheels = tuple(record for b in batches for record in (b.wheels or ()))
         return cls(
             **flight,
             **arrays,
+            wheels=wheels,
             rules=tuple(rule for b in batches for rule in b.rules),
             rate=first.rate,
             t_final=first.t_final,
@@ -438,6 +488,7 @@ def assemble_batch(
     common: dict[str, Any],
     runs: list[SimulationResult] | None,
     flight_memory: np.ndarray | None = None,
+    wheels: tuple[WheelRecord, ...] | None = None,
 ) -> BatchResult:
     """The [`BatchResult`][mrpctl.BatchResult] from the (N, stats) rows of the runs (and the (N, 10) flight
     memories after the runs: n_sat at 5, peak |u_c,i| at 6:9, peak |u_c| at 9; NaN rows for
@@ -467,6 +518,7 @@ def assemble_batch(
         peak_torque=readonly([m.peak_torque for m in metrics]),
         rate=rate,
         runs=tuple(runs) if runs is not None else None,
+        wheels=wheels,
         **common,
     )
 

@@ -1,0 +1,235 @@
+"""The flight sample on a reaction-wheel cluster: the controller-side rule, the allocation and the wheels (pure SX).
+
+[`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function] is the sample of
+[`flight_core_function`][mrpctl.loop.flight_core_function] (the same ports, the same measurement, ring and
+rule [`Hysteretic`][mrpctl.flight.Hysteretic]) with the body torque made by N wheels
+([`WheelCluster`][mrpctl.wheels.WheelCluster]): the command u_c is allocated to motor torques by
+the minimum-norm pseudo-inverse (plus the null-space term), each motor torque is clipped to its
+wheel's u_max and cut by its speed limit, held over the period, and the spacecraft and its wheels
+are integrated together by RK4 ([`wheel_dynamics_expr`][mrpctl.model.wheel_dynamics_expr]). The wheel
+speeds are carried in the sample's memory after the flight sample's ten entries
+(`WHEEL_MEMORY_FIELDS`). Equations and semantics: ``design/wheels.md``.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from mrpctl.errors import SpecificationError
+from mrpctl.flight import (
+    FLIGHT_CONSTANTS_SIZE,
+    FLIGHT_MEMORY_SIZE,
+    NOISE_SIZE,
+    NoiseForm,
+    raw_measurement_function,
+    selection_function,
+    short_expr,
+)
+from mrpctl.model import INPUT_SIZE, STATE_SIZE, wheel_dynamics_expr
+from mrpctl.spacecraft import Spacecraft
+from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent
+from mrpctl.wheels import WheelCluster, allocation_matrix, null_space_projector, wheel_memory_size
+
+__all__ = [
+    "wheel_allocation_function",
+    "wheel_controller_function",
+    "wheel_core_function",
+    "wheel_memory",
+    "wheel_step_function",
+]
+
+
+def wheel_step_function(spacecraft: Spacecraft, wheels: WheelCluster, period: float, substeps: int) -> ca.Function:
+    """``step(x, speeds, motor, w) -> (x_next, speeds_next)``: RK4 over one period h of the spacecraft and its
+    wheels with the motor torques and the external torque held, ``substeps`` equal substeps."""
+    count = wheels.count
+    x = ca.SX.sym("x", STATE_SIZE)
+    speeds = ca.SX.sym("speeds", count)
+    motor = ca.SX.sym("motor", count)
+    w = ca.SX.sym("w", INPUT_SIZE)
+    xdot, speeds_dot = wheel_dynamics_expr(spacecraft, wheels, x, speeds, motor, w)
+    dynamics = ca.Function("wheel_dynamics", [x, speeds, motor, w], [xdot, speeds_dot])
+    dt = period / substeps
+    z, s = x, speeds
+    for _ in range(substeps):
+        k1, l1 = dynamics(z, s, motor, w)
+        k2, l2 = dynamics(z + (dt / 2) * k1, s + (dt / 2) * l1, motor, w)
+        k3, l3 = dynamics(z + (dt / 2) * k2, s + (dt / 2) * l2, motor, w)
+        k4, l4 = dynamics(z + dt * k3, s + dt * l3, motor, w)
+        z = z + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+        s = s + (dt / 6) * (l1 + 2 * l2 + 2 * l3 + l4)
+    return ca.Function(
+        "wheel_step", [x, speeds, motor, w], [z, s], ["x", "speeds", "motor", "w"], ["x_next", "speeds_next"]
+    )
+
+
+def wheel_allocation_function(spacecraft: Spacecraft, wheels: WheelCluster) -> ca.Function:
+    """``allocation(command, omega, speeds) -> (motor, body, torque_limited, speed_limited)`` (pure SX).
+
+    The controller's side of the wheels: from the body torque request u_c (N m), the measured rate ω
+    (rad/s; used by the gyroscopic term only) and the wheel speeds Ω (rad/s):
+
+    1. with ``gyroscopic``, u_c + ω × (J ω + Gs h_s), h_s,i = Js,i (g_iᵀ ω + Ω_i) (``mrpFeedback``);
+    2. u_s = A u_c' − k_n P diag(Js) (Ω − Ω_bias) (A of [`allocation_matrix`][mrpctl.wheels.allocation_matrix],
+       P of [`null_space_projector`][mrpctl.wheels.null_space_projector]; the second term with k_n > 0 only);
+    3. each u_s,i clipped to [−u_max,i, u_max,i] (``torque_limited``_i = 1 when it was);
+    4. u_s,i = 0 when |Ω_i| >= Ω_max,i and Ω_i u_s,i >= 0 (``speed_limited``_i = 1).
+
+    ``motor`` is the motor torques (N m, on the wheels), ``body`` = −Gs u_s the torque the body receives
+    from them (N m).
+    """
+    count = wheels.count
+    command = ca.SX.sym("command", INPUT_SIZE)
+    omega = ca.SX.sym("omega", INPUT_SIZE)
+    speeds = ca.SX.sym("speeds", count)
+    axes = ca.DM(wheels.spin_axes)
+    js = ca.DM(wheels.spin_inertia)
+    request = command
+    if wheels.gyroscopic:
+        spin = js * (axes.T @ omega + speeds)
+        request = command + ca.cross(omega, ca.DM(spacecraft.inertia) @ omega + axes @ spin)
+    motor = ca.DM(allocation_matrix(wheels)) @ request
+    if wheels.null_gain > 0.0:
+        drive = ca.DM(-wheels.null_gain * null_space_projector(wheels))
+        motor = motor + drive @ (js * (speeds - ca.DM(wheels.bias_speeds)))
+    limit = ca.DM(wheels.torque_limit)
+    torque_limited = ca.fabs(motor) > limit
+    motor = ca.if_else(motor > limit, limit, ca.if_else(motor < -limit, -limit, motor))
+    speed_limited = ca.logic_and(ca.fabs(speeds) >= ca.DM(wheels.speed_limit), speeds * motor >= 0)
+    motor = ca.if_else(speed_limited, 0.0, motor)
+    body = -(axes @ motor)
+    return ca.Function(
+        "allocation",
+        [command, omega, speeds],
+        [motor, body, ca.if_else(torque_limited, 1.0, 0.0), ca.if_else(speed_limited, 1.0, 0.0)],
+        ["command", "omega", "speeds"],
+        ["motor", "body", "torque_limited", "speed_limited"],
+    )
+
+
+def wheel_controller_function(spacecraft: Spacecraft, wheels: WheelCluster) -> ca.Function:
+    """``wheel_controller(x_meas, memory, speeds, K, parameters) -> (motor, body, memory_next, command,
+    torque_limited, speed_limited)`` (pure SX): the flight software of the wheel loop, once per sample.
+
+    From the delayed measurement ``x_meas`` = [σ̃; ω̃/4] (the controller takes its short set), the
+    controller memory (h, c, σ̃_prev) (5), the wheel speeds Ω_k (N, rad/s), the gain K (3 × 6, N m) and
+    ``parameters`` = (δ,): the MRP set selection of [`Hysteretic`][mrpctl.flight.Hysteretic], u_c =
+    K [σ_c; ω̃/4] (``command``, N m) and the allocation of
+    [`wheel_allocation_function`][mrpctl.loop.wheels.wheel_allocation_function]: ``motor`` the wheel motor
+    torques u_s (N m, clipped and speed-cut), ``body`` = −Gs u_s. The same expressions as the controller
+    part of [`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function].
+    """
+    allocation = wheel_allocation_function(spacecraft, wheels)
+    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
+    memory = ca.SX.sym("memory", 5)
+    speeds = ca.SX.sym("speeds", wheels.count)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    sigma_seen = short_expr(x_meas[0:3])
+    h_next, c_next, sigma_c, _ = selection_function()(memory[0], memory[1], sigma_seen, memory[2:5], parameters[0])
+    command = gain @ ca.vertcat(sigma_c, x_meas[3:6])
+    motor, body, torque_limited, speed_limited = allocation(command, 4 * x_meas[3:6], speeds)
+    return ca.Function(
+        "wheel_controller",
+        [x_meas, memory, speeds, gain, parameters],
+        [motor, body, ca.vertcat(h_next, c_next, sigma_seen), command, torque_limited, speed_limited],
+        ["x_meas", "memory", "speeds", "K", "parameters"],
+        ["motor", "body", "memory_next", "command", "torque_limited", "speed_limited"],
+    )
+
+
+def wheel_memory(flight_memory: np.ndarray, wheels: WheelCluster) -> np.ndarray:
+    """The wheel sample's memory at k = 0: the flight sample's ``flight_memory`` (10), then Ω(0) and the
+    wheel accumulators at 0 (`WHEEL_MEMORY_FIELDS`)."""
+    part = np.zeros(wheel_memory_size(wheels.count))
+    part[0 : wheels.count] = wheels.speeds
+    return np.concatenate((np.asarray(flight_memory, dtype=float), part))
+
+
+def wheel_core_function(
+    spacecraft: Spacecraft,
+    wheels: WheelCluster,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    sensor: bool = True,
+    disturbed: bool = True,
+    records: bool = False,
+    torque_input: bool = False,
+    noise_form: NoiseForm = NoiseForm.ROTATION_VECTOR,
+    short_measurements: bool = False,
+) -> ca.Function:
+    """One sample of the flight loop on the wheel cluster (pure SX).
+
+    ``core(x, memory, x_delayed, K, parameters, flight[, noise][, torque]) ->
+    (x_next, memory_next, x_meas, u, switched[, measurement][, record])``: the ports of
+    [`flight_core_function`][mrpctl.loop.flight_core_function] without a run-time inertia (J, the wheels
+    and the allocation are constants of the sample). ``memory`` is the flight sample's ten entries
+    (h, c, σ̃_prev, the samples with a wheel clipped to its torque limit, peak |u_c,i|, peak |u_c|) and
+    the wheel part (Ω, peak |Ω_i|, samples at the torque limit and at the speed limit per wheel, peak
+    |Gs diag(Js) Ω|); ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) whose u_max, u_norm must
+    be inf (the limits are the wheels'). ``u`` is the body torque of the motors −Gs u_s (N m);
+    ``record`` (with ``records``) = (h_{k+1}, σ_c,k, u_c,k, Ω_k (N), u_s,k (N)). The wheel speeds the
+    controller reads are those of the sample instant (tachometers, no delay); the attitude and the
+    rate are the delayed measurement, as in the flight sample. The other keywords as in
+    [`flight_core_function`][mrpctl.loop.flight_core_function].
+    """
+    if short_measurements and sensor:
+        raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
+    count = wheels.count
+    step = wheel_step_function(spacecraft, wheels, period, substeps)
+    allocation = wheel_allocation_function(spacecraft, wheels)
+    size = FLIGHT_MEMORY_SIZE + wheel_memory_size(count)
+    x = ca.SX.sym("x", STATE_SIZE)
+    memory = ca.SX.sym("memory", size)
+    x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
+    gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
+    parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
+    flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
+    noise = ca.SX.sym("noise", NOISE_SIZE)
+    torque = ca.SX.sym("torque", INPUT_SIZE)
+    w = torque if torque_input else flight[4:7]
+    disturbed = disturbed or torque_input
+    x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
+    measure = raw_measurement_function(noise_form)
+    measured = measure.call([x_meas, noise[0:3], noise[3:6], flight[7:10]])[0] if sensor else x_meas
+    seen = x_delayed if d > 0 else measured
+    sigma_seen = seen[0:3] if short_measurements else short_expr(seen[0:3])
+    h_next, c_next, sigma_c, switched = selection_function()(
+        memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
+    )
+    command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    start = FLIGHT_MEMORY_SIZE
+    speeds = memory[start : start + count]
+    motor, body, torque_limited, speed_limited = allocation(command, 4 * seen[3:6], speeds)
+    x_next, speeds_next = step(x_meas, speeds, motor, w if disturbed else ca.DM.zeros(INPUT_SIZE))
+    clipped = ca.if_else(ca.sum1(torque_limited) > 0, 1.0, 0.0)
+    peak_speed = memory[start + count : start + 2 * count]
+    momentum = ca.norm_2(ca.DM(wheels.spin_axes) @ (ca.DM(wheels.spin_inertia) * speeds))
+    memory_next = ca.vertcat(
+        h_next,
+        c_next,
+        sigma_seen,
+        memory[5] + clipped,
+        ca.fmax(memory[6:9], ca.fabs(command)),
+        ca.fmax(memory[9], ca.norm_2(command)),
+        speeds_next,
+        ca.fmax(peak_speed, ca.fabs(speeds)),
+        memory[start + 2 * count : start + 3 * count] + torque_limited,
+        memory[start + 3 * count : start + 4 * count] + speed_limited,
+        ca.fmax(memory[start + 4 * count], momentum),
+    )
+    names = ["x", "memory", "x_delayed", "K", "parameters", "flight"]
+    inputs = [x, memory, x_delayed, gain, parameters, flight] + ([noise] if sensor else [])
+    names += ["noise"] if sensor else []
+    if torque_input:
+        inputs.append(torque)
+        names.append("torque")
+    output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
+    outputs = [x_next, memory_next, x_meas, body, switched] + ([measured] if sensor else [])
+    if records:
+        output_names.append("record")
+        outputs.append(ca.vertcat(h_next, sigma_c, command, speeds, motor))
+    return ca.Function("core", inputs, outputs, names, output_names)
