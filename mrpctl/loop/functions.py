@@ -29,6 +29,7 @@ from mrpctl.flight import (
     selection_function,
     short_expr,
 )
+from mrpctl.flight.tracking import REFERENCE_WIDTH, feedforward_expr, tracking_error_expr
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, plant_model
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
@@ -169,6 +170,8 @@ def flight_core_function(
     noise_form: NoiseForm = NoiseForm.ROTATION_VECTOR,
     short_measurements: bool = False,
     squared_peak: bool = False,
+    reference_input: bool = False,
+    feedforward: bool = False,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
@@ -216,7 +219,18 @@ def flight_core_function(
 
     With δ = 0, no limit (inf) and w = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s
     K m_{k−d} bit for bit.
+
+    With ``reference_input`` the sample tracks a reference (``design/tracking.md``): a last input
+    ``reference`` (18) = (σ_R/N, ω_R/N, ω̇_R/N at t_k; the same at the controller's error time, see
+    [`ErrorTime`][mrpctl.flight.tracking.ErrorTime]); the controller forms σ_B/R and ω_B/R from the delayed
+    measurement and the second row ([`tracking_error_expr`][mrpctl.flight.tracking.tracking_error_expr]), the
+    selection (continuity and hysteresis) acts on σ_B/R, u_c = K [σ_c; ω_B/R/4] (+ with ``feedforward``
+    [`feedforward_expr`][mrpctl.flight.tracking.feedforward_expr] of the measured delayed ω̃), and a last output
+    ``tracking_error`` (6) is the true error [σ_B/R; ω_B/R/4] at t_k (from x_meas and the first row), which
+    the records (10: (h, σ_c, u_c, σ_B/R)) and the engine's settling statistics use.
     """
+    if feedforward and not reference_input:
+        raise SpecificationError("feedforward: the feedforward terms need a reference (reference_input)")
     if short_measurements and sensor:
         raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
     step = step_function(spacecraft, period, substeps, inertia=inertia)
@@ -225,10 +239,12 @@ def flight_core_function(
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
-    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    symbols = None if inertia is None else _inertia_symbols(inertia)
+    extra = [] if symbols is None else list(symbols[:2])
     flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
     noise = ca.SX.sym("noise", NOISE_SIZE)
     torque = ca.SX.sym("torque", INPUT_SIZE)
+    reference = ca.SX.sym("reference", 2 * REFERENCE_WIDTH)
     w = torque if torque_input else flight[4:7]
     disturbed = disturbed or torque_input
     x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
@@ -239,10 +255,19 @@ def flight_core_function(
     seen = x_delayed if d > 0 else measured
     # without a sensor m_k is x_meas, bookkept short by OnCurrent: only a history row may be long
     sigma_seen = seen[0:3] if short_measurements else short_expr(seen[0:3])
+    rate_seen = seen[3:6]
+    if reference_input:
+        # the tracking error of the delayed measurement against the controller's reference row (its error time)
+        sigma_bn = sigma_seen
+        row = reference[REFERENCE_WIDTH:]
+        sigma_seen, rate_seen, omega_r_body = tracking_error_expr(sigma_bn, seen[3:6], row[0:3], row[3:6])
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
-    command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    command = gain @ ca.vertcat(sigma_c, rate_seen)
+    if feedforward:
+        j_matrix = ca.DM(spacecraft.inertia) if symbols is None else symbols[2]
+        command = command + feedforward_expr(j_matrix, 4 * seen[3:6], sigma_bn, omega_r_body, row[6:9])
     if limited:
         u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
         count = memory[5] + saturated
@@ -269,11 +294,19 @@ def flight_core_function(
     if torque_input:
         inputs.append(torque)
         names.append("torque")
+    if reference_input:
+        inputs.append(reference)
+        names.append("reference")
     output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
     outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
+    if reference_input:  # the true pointing error at t_k: the metrics' state
+        true_sigma, true_rate, _ = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])
     if records:
         output_names.append("record")
-        outputs.append(ca.vertcat(h_next, sigma_c, command))
+        outputs.append(ca.vertcat(h_next, sigma_c, command, *([true_sigma] if reference_input else [])))
+    if reference_input:
+        output_names.append("tracking_error")
+        outputs.append(ca.vertcat(true_sigma, true_rate))
     return ca.Function("core", inputs, outputs, names, output_names)
 
 

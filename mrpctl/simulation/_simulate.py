@@ -32,6 +32,7 @@ from mrpctl.flight import (
     Saturation,
     SensorModel,
 )
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.loop.options import (
     NO_FLIGHT_OPTIONS,
@@ -48,6 +49,7 @@ from mrpctl.loop.options import (
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._guards import check_step_rotation
+from mrpctl.simulation._tracking import tracking_options
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
@@ -268,6 +270,10 @@ def simulate(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    reference: Any = None,
+    error_time: ErrorTime = ErrorTime.MEASUREMENT,
+    feedforward: bool = False,
+    pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -333,6 +339,21 @@ def simulate(
         the applied torque), ``disturbance`` (constant or per sample; the plant's only) and ``sensor``;
         needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
+    reference : array_like (n, 9) or object with ``samples(t)``, keyword-only
+        Track a reference (``design/tracking.md``; ``rule=Hysteretic(...)``, compiled engine): one row
+        (σ_R/N, ω_R/N, ω̇_R/N) per sample t_k = k/rate (ω in rad/s and ω̇ in rad/s², inertial components), at least
+        n rows, or an object whose ``samples(t)`` returns the (len(t), 9) rows of the sample times (evaluated
+        slice by slice). The controller forms σ_B/R and ω_B/R from the delayed measurement, its rule acts on
+        σ_B/R, and u_c = K [σ_c; ω_B/R/4]. The result's ``sigma``, ``omega`` stay the plant's σ_B/N, ω_B/N; its
+        ``settling_time`` and ``max_sigma`` are those of the true error σ_B/R, ω_B/R; ``pointing_error`` (deg),
+        ``pointing_max``, ``pointing_rms`` and ``slew_time`` report the pointing. None (default): regulation.
+    error_time : mrpctl.flight.tracking.ErrorTime, keyword-only
+        Which reference the delayed measurement is compared with: ``MEASUREMENT`` (default), the one of its
+        own time t_{k−d}, or ``CURRENT``, the one of t_k.
+    feedforward : bool, keyword-only
+        Add ω̃ × (J ω̃) + J([B̃N] ω̇_R − ω̃ × [B̃N] ω_R) to u_c (ω̃ the delayed measured rate); default False.
+    pointing_tolerance : float, keyword-only
+        The slew time's tolerance on Φ_B/R (degrees, > 0), default 0.1.
 
     Returns
     -------
@@ -358,6 +379,9 @@ def simulate(
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
     checked = check_predictor(predictor, rule, history, delay)
+    tracked, feedforward, pointing_tolerance = tracking_options(
+        reference, error_time, feedforward, pointing_tolerance, rule=rule, predictor=checked, n=n, rate=rate, d=d
+    )
     if checked is None:
         options, saturation = flight_options(rule, actuator, disturbance, sensor)
         varying = varying_delay(rule, delay, d, rate, n)
@@ -386,7 +410,10 @@ def simulate(
         predictor=None if checked is None else checked.model,
         **_structure(checked, options, sensor, actuator),
         **({} if streamed is None else {"torque_input": True}),
+        **({} if tracked is None else {"reference_input": True, "feedforward": feedforward}),
     )
+    if tracked is not None and not found.compiled_code:
+        raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
     if streamed is not None and not found.compiled_code:
         raise CodegenError(
             "disturbance: a per-sample torque needs the compiled engine (install a C compiler: gcc or cc, or set CC)"
@@ -415,6 +442,7 @@ def simulate(
         delay=varying,
         rate=rate,
         **({} if streamed is None else {"disturbance": streamed}),
+        **({} if tracked is None else {"reference": tracked}),
     )
     common = dict(
         spacecraft=spacecraft,
@@ -429,7 +457,10 @@ def simulate(
         x0=readonly(x0),
         predictor=checked,
     )
-    return assemble_run(output, n=n, keep_every=keep, common=common)
+    if tracked is None:
+        return assemble_run(output, n=n, keep_every=keep, common=common)
+    common.update(error_time=tracked.error_time, feedforward=feedforward)
+    return assemble_run(output, n=n, keep_every=keep, common=common, pointing_tolerance=pointing_tolerance)
 
 
 # ======================================================================= batches
