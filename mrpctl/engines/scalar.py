@@ -76,7 +76,7 @@ from mrpctl.flight import (
     short_expr,
     stream_key,
 )
-from mrpctl.flight.tracking import REFERENCE_WIDTH, ReferenceStream, tracking_error_expr
+from mrpctl.flight.tracking import ReferenceStream, tracking_error_expr
 from mrpctl.loop import (
     InertiaInput,
     core_function,
@@ -129,7 +129,8 @@ def _short_function() -> ca.Function:
 def _error_function() -> ca.Function:
     sigma = ca.SX.sym("sigma", 3)
     sigma_r = ca.SX.sym("sigma_r", 3)
-    return ca.Function("error", [sigma, sigma_r], [tracking_error_expr(sigma, ca.DM.zeros(3), sigma_r, ca.DM.zeros(3))[0]])
+    error = tracking_error_expr(sigma, ca.DM.zeros(3), sigma_r, ca.DM.zeros(3))[0]
+    return ca.Function("error", [sigma, sigma_r], [error])
 
 
 def tracking_memory(sigma_seen: np.ndarray, reference: ReferenceStream) -> np.ndarray:
@@ -411,7 +412,7 @@ class Engine:
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 8
-                + [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_longlong]
+                + [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
                 + [ctypes.c_void_p] * 3
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
@@ -575,7 +576,7 @@ class Engine:
         newest = -1 - self.d
         schedule: np.ndarray | None = None
         k = 0
-        reference_rows: np.ndarray | None = None
+        reference_rows: tuple[np.ndarray, np.ndarray] | None = None
         diverged = memory_end + S_DIVERGED
         while k < n:
             k1 = min(k + step, n)
@@ -584,6 +585,8 @@ class Engine:
                 assert disturbance is not None
                 torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1, rate)), INPUT_SIZE
             reference_rows = None if reference is None else reference.rows(k, k1)
+            if reference is not None and k < reference.lag:  # the held rows before t = 0 in slices of their own
+                k1 = min(k1, reference.lag)
             if delay is not None and jitter is None:  # a given sequence: j*(k) of the slice from NumPy
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])
@@ -600,8 +603,8 @@ class Engine:
                 noise_key.ctypes.data,
                 address(torque),
                 torque_stride,
-                None if reference_rows is None else address(reference_rows),
-                2 * REFERENCE_WIDTH,
+                None if reference_rows is None else address(reference_rows[0]),
+                None if reference_rows is None else address(reference_rows[1]),
                 None if schedule is None else schedule.ctypes.data,
                 None if jitter is None else jitter.ctypes.data,
                 None if delay_used is None else delay_used.ctypes.data,

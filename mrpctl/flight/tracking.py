@@ -27,7 +27,6 @@ import casadi as ca
 import numpy as np
 
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.flight.expressions import compose_mrp_expr, short_expr
 from mrpctl.mrp import skew_expr
 
 __all__ = [
@@ -40,6 +39,7 @@ __all__ = [
     "pointing_metrics",
     "reference_stream",
     "rotate_expr",
+    "rotation_scale",
     "tracking_error_expr",
 ]
 
@@ -65,48 +65,72 @@ class ErrorTime(enum.Enum):
     CURRENT = "current"
 
 
-def rotate_expr(sigma: Any, v: Any) -> Any:
+def rotate_expr(sigma: Any, v: Any, scale: Any = None) -> Any:
     """[BN](σ) v (SX): N components of v into B components, [BN] = I + (8[σ×]² − 4(1 − |σ|²)[σ×])/(1 + |σ|²)².
 
     Written with two cross products (no matrix): v + (8 σ × (σ × v) − 4 (1 − |σ|²) σ × v)/(1 + |σ|²)².
-    With v = 0 it returns ±0 entries (the values of v, up to the sign of zero).
+    ``scale`` = (1 − |σ|², 1/(1 + |σ|²)²) when the caller has them (`rotation_scale`: one division for
+    several vectors). With v = 0 it returns v's values (up to the sign of a zero).
     """
-    squared = ca.dot(sigma, sigma)
+    one_minus, inverse = rotation_scale(sigma) if scale is None else scale
     once = skew_expr(sigma) @ v
     twice = skew_expr(sigma) @ once
-    scale = 1 / ((1 + squared) * (1 + squared))
-    return v + (8 * twice - 4 * (1 - squared) * once) * scale
+    return v + (8 * twice - 4 * one_minus * once) * inverse
 
 
-def tracking_error_expr(sigma_bn: Any, omega_scaled: Any, sigma_rn: Any, omega_rn: Any) -> tuple[Any, Any, Any]:
-    """(σ_B/R short, ω_B/R/4, [BN] ω_R/N) from σ_B/N, ω_B/N/4 (body), σ_R/N and ω_R/N (N components) (SX).
+def rotation_scale(sigma: Any, squared: Any = None) -> tuple[Any, Any]:
+    """(1 − |σ|², 1/(1 + |σ|²)²) of [`rotate_expr`][mrpctl.flight.tracking.rotate_expr] (SX; ``squared`` = |σ|²
+    when known)."""
+    squared = ca.dot(sigma, sigma) if squared is None else squared
+    return 1 - squared, 1 / ((1 + squared) * (1 + squared))
 
-    σ_B/R = short(compose(−σ_R/N, σ_B/N)); ω_B/R/4 = ω/4 − ([BN] ω_R/N)/4. With σ_R/N = 0 and ω_R/N = 0
-    they equal σ_B/N (short) and ω/4 in value (bit for bit up to the sign of a zero).
+
+def tracking_error_expr(sigma_bn: Any, omega_scaled: Any, sigma_rn: Any, omega_rn: Any) -> tuple[Any, Any, Any, Any]:
+    """(σ_B/R short, ω_B/R/4, [BN] ω_R/N, the rotation's scale) from σ_B/N, ω_B/N/4 (body), σ_R/N and ω_R/N
+    (N components) (SX).
+
+    σ_B/R is σ_B/N ⊕ σ_N/R, σ_N/R = −σ_R/N ([BR] = [BN][NR], Schaub & Junkins Eq. 3.152),
+    n/D with n = (1 − |σ_R|²) σ_B − (1 − |σ_B|²) σ_R + 2 σ_B × σ_R and D = 1 + |σ_R|²|σ_B|² + 2 σ_R·σ_B, in
+    its short set at one division: n/D when |n|² <= D², else −n D/|n|² (the shadow).
+    ω_B/R/4 = ω/4 − ([BN] ω_R/N)/4. With σ_R/N = 0 and ω_R/N = 0 they equal a short σ_B/N and ω/4 in value
+    (bit for bit up to the sign of a zero: n = σ_B, D = 1). |σ_B/N|² is computed once for the composition
+    and the rotation; the scale is returned for the feedforward's rotation of ω̇_R.
     """
-    sigma_br = short_expr(compose_mrp_expr(-sigma_rn, sigma_bn))
-    omega_r_body = rotate_expr(sigma_bn, omega_rn)
-    return sigma_br, omega_scaled - 0.25 * omega_r_body, omega_r_body
+    s_body = ca.dot(sigma_bn, sigma_bn)
+    s_ref = ca.dot(sigma_rn, sigma_rn)
+    numerator = (1 - s_ref) * sigma_bn - (1 - s_body) * sigma_rn + 2 * (skew_expr(sigma_bn) @ sigma_rn)
+    denominator = 1 + s_ref * s_body + 2 * ca.dot(sigma_rn, sigma_bn)
+    size = ca.dot(numerator, numerator)
+    long_set = size > denominator * denominator
+    # both if_else branches are evaluated: keep the unused shadow of n = 0 finite
+    factor = ca.if_else(long_set, -denominator / ca.if_else(size > 0, size, 1.0), 1 / denominator)
+    sigma_br = numerator * factor
+    scale = rotation_scale(sigma_bn, s_body)
+    omega_r_body = rotate_expr(sigma_bn, omega_rn, scale)
+    return sigma_br, omega_scaled - 0.25 * omega_r_body, omega_r_body, scale
 
 
-def feedforward_expr(inertia: Any, omega: Any, sigma_bn: Any, omega_r_body: Any, domega_rn: Any) -> Any:
+def feedforward_expr(
+    inertia: Any, omega: Any, sigma_bn: Any, omega_r_body: Any, domega_rn: Any, scale: Any = None
+) -> Any:
     """f = ω × (J ω) + J([BN] ω̇_R/N − ω × ω_R^B) (SX, N m): the MRP tracking law's feedforward.
 
     ``omega`` the body rate the controller has (rad/s), ``omega_r_body`` = [BN] ω_R/N (rad/s, body),
-    ``domega_rn`` = ω̇_R/N (rad/s², N components), rotated here by [BN](σ_B/N); J (3 × 3) a constant or the
-    run-time inertia.
+    ``domega_rn`` = ω̇_R/N (rad/s², N components), rotated here by [BN](σ_B/N) (``scale`` from
+    [`tracking_error_expr`][mrpctl.flight.tracking.tracking_error_expr]); J (3 × 3) a constant or the run-time
+    inertia.
     """
     cross = skew_expr(omega)
-    return cross @ (inertia @ omega) + inertia @ (rotate_expr(sigma_bn, domega_rn) - cross @ omega_r_body)
+    return cross @ (inertia @ omega) + inertia @ (rotate_expr(sigma_bn, domega_rn, scale) - cross @ omega_r_body)
 
 
 class ReferenceStream:
     """A checked reference, read slice by slice: (rows now; rows at the error time) of samples k0..k1.
 
-    Built by [`reference_stream`][mrpctl.flight.tracking.reference_stream]. ``rows(k0, k1)`` is (k1 − k0, 18):
-    the reference at t_k (the true pointing error, the metrics) and at the error time t_k − lag
-    (the controller's), with lag = d samples for ``MEASUREMENT`` (held at row 0 before t = 0, as the
-    constant history holds x0) and 0 for ``CURRENT``.
+    Built by [`reference_stream`][mrpctl.flight.tracking.reference_stream]. ``rows(k0, k1)`` gives two
+    (k1 − k0, 9) blocks: the reference at t_k (the true pointing error, the metrics) and at the error time
+    t_k − lag (the controller's), with lag = d samples for ``MEASUREMENT`` (held at row 0 before t = 0, as
+    the constant history holds x0) and 0 for ``CURRENT``.
     """
 
     def __init__(self, source: Any, n: int, rate: float, lag: int, error_time: ErrorTime, name: str) -> None:
@@ -121,14 +145,22 @@ class ReferenceStream:
         t = np.arange(k0, k1, dtype=float) / self.rate
         return _check_rows(self.name, self._source.samples(t), k1 - k0, f"{self.name}.samples(t)")
 
-    def rows(self, k0: int, k1: int) -> np.ndarray:
-        """(k1 − k0, 18) contiguous rows (reference at t_k; reference at the error time)."""
-        out = np.empty((k1 - k0, 2 * REFERENCE_WIDTH))
+    def rows(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
+        """((k1 − k0, 9) reference at t_k, (k1 − k0, 9) reference at the error time), C-contiguous.
+
+        Views of an array reference (no copy), but for the first d rows of ``MEASUREMENT``, where the
+        reference before t = 0 is held at row 0; the same array twice for ``CURRENT``.
+        """
         low = max(k0 - self.lag, 0)
-        block = self.samples(low, k1)
-        out[:, 0:REFERENCE_WIDTH] = block[k0 - low :]
-        out[:, REFERENCE_WIDTH:] = block[np.maximum(np.arange(k0, k1) - self.lag, 0) - low]
-        return out
+        block = np.ascontiguousarray(self.samples(low, k1))
+        now = block[k0 - low :]
+        if self.lag == 0:
+            return now, now
+        held = max(min(self.lag - k0, k1 - k0), 0)  # samples k whose error time k − lag is before t = 0
+        if held == 0:
+            return now, block[0 : k1 - k0]
+        error = np.concatenate((np.repeat(block[0:1], held, axis=0), block[0 : k1 - k0 - held]))
+        return now, error
 
     def first(self) -> np.ndarray:
         """The controller's reference row at k = 0 (row 0 in both conventions)."""

@@ -220,10 +220,10 @@ def flight_core_function(
     With δ = 0, no limit (inf) and w = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s
     K m_{k−d} bit for bit.
 
-    With ``reference_input`` the sample tracks a reference (``design/tracking.md``): a last input
-    ``reference`` (18) = (σ_R/N, ω_R/N, ω̇_R/N at t_k; the same at the controller's error time, see
-    [`ErrorTime`][mrpctl.flight.tracking.ErrorTime]); the controller forms σ_B/R and ω_B/R from the delayed
-    measurement and the second row ([`tracking_error_expr`][mrpctl.flight.tracking.tracking_error_expr]), the
+    With ``reference_input`` the sample tracks a reference (``design/tracking.md``): two last inputs
+    ``reference`` (9) = (σ_R/N, ω_R/N, ω̇_R/N) at t_k and ``reference_error`` (9), the same at the controller's
+    error time (see [`ErrorTime`][mrpctl.flight.tracking.ErrorTime]); the controller forms σ_B/R and ω_B/R from
+    the delayed measurement and the second row ([`tracking_error_expr`][mrpctl.flight.tracking.tracking_error_expr]), the
     selection (continuity and hysteresis) acts on σ_B/R, u_c = K [σ_c; ω_B/R/4] (+ with ``feedforward``
     [`feedforward_expr`][mrpctl.flight.tracking.feedforward_expr] of the measured delayed ω̃), and a last output
     ``tracking_error`` (6) is the true error [σ_B/R; ω_B/R/4] at t_k (from x_meas and the first row), which
@@ -244,7 +244,8 @@ def flight_core_function(
     flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
     noise = ca.SX.sym("noise", NOISE_SIZE)
     torque = ca.SX.sym("torque", INPUT_SIZE)
-    reference = ca.SX.sym("reference", 2 * REFERENCE_WIDTH)
+    reference = ca.SX.sym("reference", REFERENCE_WIDTH)  # at t_k
+    reference_error = ca.SX.sym("reference_error", REFERENCE_WIDTH)  # at the controller's error time
     w = torque if torque_input else flight[4:7]
     disturbed = disturbed or torque_input
     x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
@@ -259,15 +260,15 @@ def flight_core_function(
     if reference_input:
         # the tracking error of the delayed measurement against the controller's reference row (its error time)
         sigma_bn = sigma_seen
-        row = reference[REFERENCE_WIDTH:]
-        sigma_seen, rate_seen, omega_r_body = tracking_error_expr(sigma_bn, seen[3:6], row[0:3], row[3:6])
+        row = reference_error
+        sigma_seen, rate_seen, omega_r_body, scale = tracking_error_expr(sigma_bn, seen[3:6], row[0:3], row[3:6])
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
     command = gain @ ca.vertcat(sigma_c, rate_seen)
     if feedforward:
         j_matrix = ca.DM(spacecraft.inertia) if symbols is None else symbols[2]
-        command = command + feedforward_expr(j_matrix, 4 * seen[3:6], sigma_bn, omega_r_body, row[6:9])
+        command = command + feedforward_expr(j_matrix, 4 * seen[3:6], sigma_bn, omega_r_body, row[6:9], scale)
     if limited:
         u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
         count = memory[5] + saturated
@@ -295,12 +296,12 @@ def flight_core_function(
         inputs.append(torque)
         names.append("torque")
     if reference_input:
-        inputs.append(reference)
-        names.append("reference")
+        inputs += [reference, reference_error]
+        names += ["reference", "reference_error"]
     output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
     outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
     if reference_input:  # the true pointing error at t_k: the metrics' state
-        true_sigma, true_rate, _ = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])
+        true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
     if records:
         output_names.append("record")
         outputs.append(ca.vertcat(h_next, sigma_c, command, *([true_sigma] if reference_input else [])))
