@@ -253,3 +253,25 @@ def test_bad_tracking_options() -> None:
         _simulate(reference=None, feedforward=True)
     with pytest.raises(SpecificationError, match="OnDelayed.*Hysteretic"):
         _simulate(rule=mrpctl.OnDelayed())
+
+
+def test_batch_equals_simulate_shared_and_per_run() -> None:
+    rows = REFERENCES["slew"]
+    other = REFERENCES["rotating"]
+    kw = dict(tau=TAU, rule=Hysteretic(0.1), t_final=T_FINAL, rate=RATE, feedforward=True)
+    starts = np.stack((X0, AT_REST))
+    shared = mrpctl.simulate_batch(paper.SPACECRAFT, paper.GAIN, starts, reference=rows, trajectories=True, **kw)
+    metrics = mrpctl.simulate_batch(paper.SPACECRAFT, paper.GAIN, starts, reference=[rows, other], **kw)
+    for i, start in enumerate(starts):
+        alone = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, start, reference=rows, **kw)
+        run = shared.runs[i]
+        assert np.array_equal(run.sigma, alone.sigma) and np.array_equal(run.u, alone.u)
+        assert np.array_equal(run.pointing_error, alone.pointing_error) and run.slew_time == alone.slew_time
+        own = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, start, reference=[rows, other][i], **kw)
+        assert metrics.switch_count[i] == own.switch_count
+        assert metrics.max_sigma[i] == own.max_sigma
+        assert np.nan_to_num(metrics.settling_time[i], nan=-1.0) == (own.settling_time or -1.0)
+    with pytest.raises(DimensionError, match="reference: expected 1 or 2 entries"):
+        mrpctl.simulate_batch(paper.SPACECRAFT, paper.GAIN, starts, reference=[rows, rows, rows], **kw)
+    with pytest.raises(DimensionError, match=r"reference\[1\]: the run has 601 samples"):
+        mrpctl.simulate_batch(paper.SPACECRAFT, paper.GAIN, starts, reference=[rows, rows[:10]], **kw)

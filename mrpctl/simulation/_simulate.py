@@ -32,7 +32,7 @@ from mrpctl.flight import (
     Saturation,
     SensorModel,
 )
-from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime, ReferenceStream
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.loop.options import (
     NO_FLIGHT_OPTIONS,
@@ -248,6 +248,36 @@ def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: 
     if checked is not None:
         return {"sensor": sensor is not None, "limited": actuator is not None}
     return flight_structure(options, sensor)
+
+
+def _tracked_by_run(
+    reference: Any,
+    error_time: Any,
+    feedforward: Any,
+    pointing_tolerance: Any,
+    rules: Sequence[SwitchingRule],
+    checked: Any,
+    n: int,
+    rate: float,
+    samples_by_run: Sequence[int],
+) -> list[ReferenceStream | None]:
+    """simulate_batch's reference of each run (None: regulation), checked once per (reference, delay)."""
+    runs = len(rules)
+    per_run = isinstance(reference, list | tuple)
+    if per_run:
+        _broadcast("reference", len(reference), runs)
+    items = (list(reference) * (runs if len(reference) == 1 else 1)) if per_run else [reference] * runs
+    made: dict[tuple[int, int], ReferenceStream | None] = {}
+    out: list[ReferenceStream | None] = []
+    for i in range(runs):
+        key = (id(items[i]), samples_by_run[i])
+        if key not in made:
+            made[key] = tracking_options(
+                items[i], error_time, feedforward, pointing_tolerance, rule=rules[i], predictor=checked, n=n,
+                rate=rate, d=samples_by_run[i], name=f"reference[{i}]" if per_run else "reference",
+            )[0]  # fmt: skip
+        out.append(made[key])
+    return out
 
 
 # ======================================================================= simulate
@@ -497,6 +527,10 @@ def simulate_batch(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    reference: Any = None,
+    error_time: ErrorTime = ErrorTime.MEASUREMENT,
+    feedforward: bool = False,
+    pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -564,6 +598,16 @@ def simulate_batch(
         thread
         pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
         (shared or per run), each run streaming its own rows.
+    reference : keyword-only
+        Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
+        [`Hysteretic`][mrpctl.flight.Hysteretic]): one reference shared by the runs (an (n, 9) array, read
+        through views, or an object with ``samples(t)``), or a list of N of them, one per run. Tracking runs take
+        the scalar engine on the thread pool (not the lanes), also when ``trajectories`` is False; each equals
+        [`simulate`][mrpctl.simulation.simulate] with its reference bit for bit. The batch's ``settling_time`` and
+        ``max_sigma`` are then those of the true error σ_B/R, ω_B/R; the pointing metrics are in ``runs``
+        (``trajectories=True``).
+    error_time, feedforward, pointing_tolerance : keyword-only
+        As in [`simulate`][mrpctl.simulation.simulate], shared by the runs.
 
     Returns
     -------
@@ -634,6 +678,10 @@ def simulate_batch(
     checked = None
     for one in rules:
         checked = check_predictor(predictor, one, history, delay)
+    tracked_by_run = _tracked_by_run(
+        reference, error_time, feedforward, pointing_tolerance, rules, checked, n, rate, samples_by_run
+    )
+    feedforward = feedforward is True
     per_run = _per_run_disturbances(disturbance, n_runs, n)
     shared = per_run is None
     hint = _SHARED_HINT if shared and isinstance(disturbance, list | tuple) else ""
@@ -692,7 +740,9 @@ def simulate_batch(
     any_flight = checked is not None or any(isinstance(one, Hysteretic) for one in rules)
     flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
-    if not trajectories and _LANES and checked is None and find_compiler() is not None:
+    if reference is not None and find_compiler() is None:
+        raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
+    if not trajectories and _LANES and checked is None and find_compiler() is not None and reference is None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -718,6 +768,7 @@ def simulate_batch(
         structure = _structure(checked, options_by_run[i], sensor, actuator)
         torque_input = streamed_by_run[i] is not None
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input)
+        key += (tracked_by_run[i] is not None,)
         if key not in by_structure:
             by_structure[key] = engine(
                 crafts[i],
@@ -729,6 +780,7 @@ def simulate_batch(
                 predictor=None if checked is None else checked.model,
                 **structure,
                 **({"torque_input": True} if torque_input else {}),
+                **({} if tracked_by_run[i] is None else {"reference_input": True, "feedforward": feedforward}),
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
@@ -773,6 +825,7 @@ def simulate_batch(
                 delay=varying[i],
                 rate=rate,
                 **({} if streamed_by_run[i] is None else {"disturbance": streamed_by_run[i]}),
+                **({} if tracked_by_run[i] is None else {"reference": tracked_by_run[i]}),
             )
             previous += n
             done_samples[slot] = previous
@@ -811,7 +864,13 @@ def simulate_batch(
                         t_final=t_final,
                         x0=readonly(states[i]),
                         predictor=checked,
+                        **(
+                            {}
+                            if tracked_by_run[i] is None
+                            else {"error_time": tracked_by_run[i].error_time, "feedforward": feedforward}
+                        ),
                     ),
+                    pointing_tolerance=None if tracked_by_run[i] is None else float(pointing_tolerance),
                 )
             )
     return assemble_batch(
