@@ -219,13 +219,13 @@ def _simulate(**kw):
 
 def test_bad_references() -> None:
     rows = REFERENCES["slew"]
-    with pytest.raises(DimensionError, match="reference: .*shape"):
+    with pytest.raises(DimensionError, match=r"reference: .*shape"):
         _simulate(reference=rows[:, 0:6])
     with pytest.raises(DimensionError, match="reference: the run has 601 samples but the reference has 600 rows"):
         _simulate(reference=rows[:-1])
     bad = rows.copy()
     bad[7, 4] = np.nan
-    with pytest.raises(SpecificationError, match="reference: .*finite; row 7"):
+    with pytest.raises(SpecificationError, match=r"reference: .*finite; row 7"):
         _simulate(reference=bad)
     long = rows.copy()
     long[3, 0:3] = (2.0, 0.0, 0.0)
@@ -251,7 +251,7 @@ def test_bad_tracking_options() -> None:
         _simulate(pointing_tolerance=0.0)
     with pytest.raises(SpecificationError, match="feedforward: the feedforward terms need a reference"):
         _simulate(reference=None, feedforward=True)
-    with pytest.raises(SpecificationError, match="OnDelayed.*Hysteretic"):
+    with pytest.raises(SpecificationError, match=r"OnDelayed.*Hysteretic"):
         _simulate(rule=mrpctl.OnDelayed())
 
 

@@ -158,9 +158,9 @@ def tracking_loop(
         q_used, w_used = (history_q, history_w) if k < d else (ring_q[k - d], ring_w[k - d])
         row = reference[max(k - d, 0)] if measurement_time else reference[k]
         q_error = _product(q_used, _conjugate(_quaternion(row[0:3])))
-        if previous is not None and float(q_error @ previous) < 0.0:
-            q_error = -q_error
-        elif previous is None and q_error[0] < 0.0:
+        # the sign by continuity with the previous sample's (at k = 0: the scalar part >= 0)
+        flip = q_error[0] < 0.0 if previous is None else float(q_error @ previous) < 0.0
+        if flip:
             q_error = -q_error
         previous = q_error
         if h * q_error[0] < -delta:

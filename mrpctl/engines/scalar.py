@@ -529,7 +529,9 @@ class Engine:
         else:
             state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
             if reference is not None:  # the controller's previous MRP is the error σ_B/R it sees at k = 0
-                state[STATE_SIZE + 2 : STATE_SIZE + 5] = tracking_memory(state[STATE_SIZE + 2 : STATE_SIZE + 5], reference)
+                state[STATE_SIZE + 2 : STATE_SIZE + 5] = tracking_memory(
+                    state[STATE_SIZE + 2 : STATE_SIZE + 5], reference
+                )
             if self.flight and not self._sensor:  # the sample reads m_{k-d} as it is: a history row must be short
                 history = np.ascontiguousarray(short_history(history))
         state[memory_end:] = initial_stats(n)

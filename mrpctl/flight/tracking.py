@@ -6,7 +6,7 @@ A reference is one row per controller sample k (t_k = k/rate) of 9 numbers, Basi
 ω̇_R/N (rad/s², N components). The controller, from the delayed measurement [σ̃_B/N; ω̃_B/N/4]
 (body components), forms
 
-    σ_B/R = short(σ_B/N ⊕ σ_N/R),       [BR] = [BN][NR], σ_N/R = −σ_R/N (MRP composition)
+    σ_B/R = short(σ_B/N ⊕ σ_N/R),       `[BR] = [BN][NR]`, σ_N/R = −σ_R/N (MRP composition)
     ω_B/R = ω̃ − [B̃N] ω_R/N            (body components; [B̃N] of the measured σ̃_B/N)
 
 and the tracking law
@@ -89,7 +89,7 @@ def tracking_error_expr(sigma_bn: Any, omega_scaled: Any, sigma_rn: Any, omega_r
     """(σ_B/R short, ω_B/R/4, [BN] ω_R/N, the rotation's scale) from σ_B/N, ω_B/N/4 (body), σ_R/N and ω_R/N
     (N components) (SX).
 
-    σ_B/R is σ_B/N ⊕ σ_N/R, σ_N/R = −σ_R/N ([BR] = [BN][NR], Schaub & Junkins Eq. 3.152),
+    σ_B/R is σ_B/N ⊕ σ_N/R, σ_N/R = −σ_R/N (`[BR] = [BN][NR]`, Schaub & Junkins Eq. 3.152),
     n/D with n = (1 − |σ_R|²) σ_B − (1 − |σ_B|²) σ_R + 2 σ_B × σ_R and D = 1 + |σ_R|²|σ_B|² + 2 σ_R·σ_B, in
     its short set at one division: n/D when |n|² <= D², else −n D/|n|² (the shadow).
     ω_B/R/4 = ω/4 − ([BN] ω_R/N)/4. With σ_R/N = 0 and ω_R/N = 0 they equal a short σ_B/N and ω/4 in value

@@ -223,8 +223,9 @@ def flight_core_function(
     With ``reference_input`` the sample tracks a reference (``design/tracking.md``): two last inputs
     ``reference`` (9) = (σ_R/N, ω_R/N, ω̇_R/N) at t_k and ``reference_error`` (9), the same at the controller's
     error time (see [`ErrorTime`][mrpctl.flight.tracking.ErrorTime]); the controller forms σ_B/R and ω_B/R from
-    the delayed measurement and the second row ([`tracking_error_expr`][mrpctl.flight.tracking.tracking_error_expr]), the
-    selection (continuity and hysteresis) acts on σ_B/R, u_c = K [σ_c; ω_B/R/4] (+ with ``feedforward``
+    the delayed measurement and the second row
+    ([`tracking_error_expr`][mrpctl.flight.tracking.tracking_error_expr]), the selection (continuity and
+    hysteresis) acts on σ_B/R, u_c = K [σ_c; ω_B/R/4] (+ with ``feedforward``
     [`feedforward_expr`][mrpctl.flight.tracking.feedforward_expr] of the measured delayed ω̃), and a last output
     ``tracking_error`` (6) is the true error [σ_B/R; ω_B/R/4] at t_k (from x_meas and the first row), which
     the records (10: (h, σ_c, u_c, σ_B/R)) and the engine's settling statistics use.

@@ -767,8 +767,8 @@ def simulate_batch(
     for i in scalar_runs:
         structure = _structure(checked, options_by_run[i], sensor, actuator)
         torque_input = streamed_by_run[i] is not None
-        key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input)
-        key += (tracked_by_run[i] is not None,)
+        tracking = tracked_by_run[i] is not None
+        key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input, tracking)
         if key not in by_structure:
             by_structure[key] = engine(
                 crafts[i],
@@ -847,6 +847,7 @@ def simulate_batch(
         runs = []
         for i, output in enumerate(outputs):
             assert output is not None
+            stream = tracked_by_run[i]
             runs.append(
                 assemble_run(
                     output,
@@ -864,13 +865,9 @@ def simulate_batch(
                         t_final=t_final,
                         x0=readonly(states[i]),
                         predictor=checked,
-                        **(
-                            {}
-                            if tracked_by_run[i] is None
-                            else {"error_time": tracked_by_run[i].error_time, "feedforward": feedforward}
-                        ),
+                        **({} if stream is None else {"error_time": stream.error_time, "feedforward": feedforward}),
                     ),
-                    pointing_tolerance=None if tracked_by_run[i] is None else float(pointing_tolerance),
+                    pointing_tolerance=None if stream is None else float(pointing_tolerance),
                 )
             )
     return assemble_batch(
