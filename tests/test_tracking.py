@@ -10,6 +10,7 @@ import pytest
 
 import mrpctl
 from mrpctl import paper
+from mrpctl.engines import lanes
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, ErrorTime, Hysteretic, SensorModel
 from tests.tracking_reference import tracking_loop
@@ -275,3 +276,25 @@ def test_batch_equals_simulate_shared_and_per_run() -> None:
         mrpctl.simulate_batch(paper.SPACECRAFT, paper.GAIN, starts, reference=[rows, rows, rows], **kw)
     with pytest.raises(DimensionError, match=r"reference\[1\]: the run has 601 samples"):
         mrpctl.simulate_batch(paper.SPACECRAFT, paper.GAIN, starts, reference=[rows, rows[:10]], **kw)
+
+
+def test_lanes_run_a_shared_reference_as_simulate() -> None:
+    """Metrics-only batches with a shared reference take the lane engine: the scalar engine's numbers."""
+    rows = REFERENCES["slew"]
+    sensor = SensorModel(attitude_noise=1e-3, rate_noise=1e-5, seed=5)
+    starts = np.stack([X0, AT_REST, X0 * 0.5])
+    kw = dict(tau=TAU, rule=Hysteretic(0.1), t_final=T_FINAL, rate=RATE, feedforward=True, sensor=sensor)
+    for error_time in ErrorTime:
+        batch = mrpctl.simulate_batch(
+            paper.SPACECRAFT, paper.GAIN, starts, reference=rows, error_time=error_time, threads=1, **kw
+        )
+        for i, start in enumerate(starts):
+            alone = mrpctl.simulate(
+                paper.SPACECRAFT, paper.GAIN, start, reference=rows, error_time=error_time, keep_every=None, **kw
+            )
+            assert batch.switch_count[i] == alone.switch_count
+            assert batch.max_sigma[i] == alone.max_sigma and batch.peak_torque[i] == alone.peak_torque
+            assert np.nan_to_num(batch.settling_time[i], nan=-1.0) == (alone.settling_time or -1.0)
+            assert batch.first_switch_time[i] == (alone.first_switch_time or np.nan) or alone.first_switch_time is None
+    # the batch ran on a lane engine of the tracking sample (no fallback to the scalar engine)
+    assert any(key[-1] == ("tracking", True) for key in lanes._ENGINES)

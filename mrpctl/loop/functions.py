@@ -530,7 +530,9 @@ def flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
     max(d, 1) samples of the flight ``sample`` (a ``mapaccum``); ``history`` holds the
     measurements m_{k−d}, …, m_{k−1} (the previous chunk's ``measurements``), ``noise`` one
     column (θ_k; η_k) per sample, ``states`` the bookkept true states x_k; ``torque`` (when
-    ``sample`` has it: a per-sample disturbance) one column w_k (N m) per sample.
+    ``sample`` has it: a per-sample disturbance) one column w_k (N m) per sample; ``reference`` and
+    ``reference_error`` (a tracking sample) one column (9) per sample each, and a last output ``tracking_error``
+    (6 per sample).
     """
     length = max(d, 1)
     accumulated = sample.mapaccum("chunk_samples", length, 2)
@@ -542,11 +544,17 @@ def flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
     if "torque" in sample.name_in():
         inputs.append(ca.MX.sym("torque", INPUT_SIZE, length))
         names.append("torque")
-    xs, memories, states, u, switched, measurements = accumulated(*inputs)
+    for name in ("reference", "reference_error"):  # a tracking sample: one reference row per sample
+        if name in sample.name_in():
+            inputs.append(ca.MX.sym(name, REFERENCE_WIDTH, length))
+            names.append(name)
+    outs = accumulated(*inputs)
+    xs, memories, states, u, switched, measurements = outs[0:6]
+    tracking = ["tracking_error"] if "tracking_error" in sample.name_out() else []
     return ca.Function(
         "chunk",
         inputs,
-        [xs[:, length - 1], memories[:, length - 1], states, measurements, u, switched],
+        [xs[:, length - 1], memories[:, length - 1], states, measurements, u, switched, *outs[6 : 6 + len(tracking)]],
         names,
-        ["x_end", "memory_end", "states", "measurements", "u", "switched"],
+        ["x_end", "memory_end", "states", "measurements", "u", "switched", *tracking],
     )
