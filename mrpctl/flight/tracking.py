@@ -102,8 +102,8 @@ def tracking_error_expr(sigma_bn: Any, omega_scaled: Any, sigma_rn: Any, omega_r
     denominator = 1 + s_ref * s_body + 2 * ca.dot(sigma_rn, sigma_bn)
     size = ca.dot(numerator, numerator)
     long_set = size > denominator * denominator
-    # both if_else branches are evaluated: keep the unused shadow of n = 0 finite
-    factor = ca.if_else(long_set, -denominator / ca.if_else(size > 0, size, 1.0), 1 / denominator)
+    # one division: −D/|n|² (the shadow) or 1/D; |n|² > D² >= 0 makes the shadow's divisor positive
+    factor = ca.if_else(long_set, -denominator, 1.0) / ca.if_else(long_set, size, denominator)
     sigma_br = numerator * factor
     scale = rotation_scale(sigma_bn, s_body)
     omega_r_body = rotate_expr(sigma_bn, omega_rn, scale)
