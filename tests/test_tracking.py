@@ -298,3 +298,19 @@ def test_lanes_run_a_shared_reference_as_simulate() -> None:
             assert batch.first_switch_time[i] == (alone.first_switch_time or np.nan) or alone.first_switch_time is None
     # the batch ran on a lane engine of the tracking sample (no fallback to the scalar engine)
     assert any(key[-1] == ("tracking", True) for key in lanes._ENGINES)
+
+
+def test_no_delay_and_kept_samples() -> None:
+    """τ = 0 (both error times are the same row) against the NumPy loop; keep_every > 1 keeps Φ at the kept t."""
+    rows = REFERENCES["slew"]
+    kw = dict(rule=Hysteretic(0.0), t_final=T_FINAL, rate=RATE, reference=rows, feedforward=True)
+    result = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, tau=0.0, **kw)
+    run = tracking_loop(paper.INERTIA, paper.GAIN, X0, rows, rate=RATE, t_final=T_FINAL, d=0, feedforward=True)
+    _compare(result, run)
+    current = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, tau=0.0, error_time=ErrorTime.CURRENT, **kw)
+    assert np.array_equal(current.sigma, result.sigma)
+    thinned = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, tau=TAU, keep_every=7, **kw)
+    every = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, tau=TAU, **kw)
+    assert thinned.pointing_error.shape == thinned.t.shape
+    assert np.array_equal(thinned.pointing_error, every.pointing_error[::7])
+    assert thinned.settling_time == every.settling_time and thinned.switch_count == every.switch_count
