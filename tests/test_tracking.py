@@ -298,6 +298,27 @@ def test_lanes_run_a_shared_reference_as_simulate() -> None:
             assert batch.first_switch_time[i] == (alone.first_switch_time or np.nan) or alone.first_switch_time is None
     # the batch ran on a lane engine of the tracking sample (no fallback to the scalar engine)
     assert any(key[-1] == ("tracking", True) for key in lanes._ENGINES)
+    # per-run references (and per-run torques beside them): each lane streamed its own rows
+    references = [rows, REFERENCES["rotating"], rows]
+    torques = [np.full((N, 3), 0.01 * (i + 1)) for i in range(3)]
+    for torque in (None, torques):
+        batch = mrpctl.simulate_batch(
+            paper.SPACECRAFT, paper.GAIN, starts, reference=references, disturbance=torque, threads=1, **kw
+        )
+        for i, start in enumerate(starts):
+            alone = mrpctl.simulate(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                start,
+                reference=references[i],
+                disturbance=None if torque is None else torque[i],
+                keep_every=None,
+                **kw,
+            )
+            assert batch.switch_count[i] == alone.switch_count
+            assert batch.max_sigma[i] == alone.max_sigma and batch.peak_torque[i] == alone.peak_torque
+            assert np.nan_to_num(batch.settling_time[i], nan=-1.0) == (alone.settling_time or -1.0)
+    assert any(key[-1] == ("tracking", True, "lanes") for key in lanes._ENGINES)
 
 
 def test_no_delay_and_kept_samples() -> None:

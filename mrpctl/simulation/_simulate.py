@@ -602,8 +602,8 @@ def simulate_batch(
         Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
         [`Hysteretic`][mrpctl.flight.Hysteretic]): one reference shared by the runs (an (n, 9) array, read
         through views, or an object with ``samples(t)``), or a list of N of them, one per run. Metrics-only runs
-        with a shared reference take the lane engine (its rows streamed beside the noise and a shared torque);
-        per-run references (or a shared one beside per-run torques) the scalar engine on the thread pool; each
+        take the lane engine: a shared reference's rows streamed beside the noise and a shared torque,
+        per-run references (or a shared one beside per-run torques) a per-lane stream of each run's rows; each
         run equals [`simulate`][mrpctl.simulation.simulate] with its reference bit for bit. The batch's
         ``settling_time`` and ``max_sigma`` are then those of the true error σ_B/R, ω_B/R; the pointing metrics
         are in ``runs`` (``trajectories=True``).
@@ -743,9 +743,7 @@ def simulate_batch(
     scalar_runs = list(range(n_runs))
     if reference is not None and find_compiler() is None:
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
-    # a shared reference rides the lanes' shared stream (not beside per-run torques: those run on the thread pool)
-    lanes_take = reference is None or (not isinstance(reference, list | tuple) and shared)
-    if not trajectories and _LANES and checked is None and find_compiler() is not None and lanes_take:
+    if not trajectories and _LANES and checked is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -763,7 +761,7 @@ def simulate_batch(
             progress=progress,
             flight=(options_by_run, saturation, sensor, varying),
             torques=(streamed_by_run, shared),
-            tracking=(tracked_by_run, feedforward),
+            tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -921,7 +919,7 @@ def _run_lanes(
     progress: Callable[[int, int], Any] | None,
     flight: tuple[list[np.ndarray | None], Saturation, SensorModel | None, list[DelayModel | None]],
     torques: tuple[list[Disturbance | None], bool],
-    tracking: tuple[list[ReferenceStream | None], bool] | None = None,
+    tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -930,11 +928,14 @@ def _run_lanes(
     ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
     streamed beside the noise; else each lane is streamed its run's rows). Returns the runs left
-    to the scalar engine (a rule without lane form). ``tracking``: each run's reference (one shared by the
-    runs: streamed beside the noise) and the feedforward."""
+    to the scalar engine (a rule without lane form). ``tracking``: each run's reference, the feedforward and
+    whether the references are per run (then, or beside per-run torques, each lane is streamed its own rows;
+    a shared one is streamed beside the noise)."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
-    tracked_by_run, feedforward = ([None] * len(crafts), False) if tracking is None else tracking
+    tracked_by_run, feedforward, per_run_reference = (
+        ([None] * len(crafts), False, False) if tracking is None else tracking
+    )
 
     groups: dict[Any, list[int]] = {}
     keys: dict[tuple[int, int, int, bool], Any] = {}  # objects alive during the call: id() is safe
@@ -946,7 +947,8 @@ def _run_lanes(
         if key is None:
             d = samples_by_run[i]
             key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d, own_torque)
-            key += (id(tracked_by_run[i]),) if tracked_by_run[i] is not None else ()
+            if tracked_by_run[i] is not None:  # a shared reference: the group's; per run: one per lane
+                key += (None if per_run_reference or own_torque else id(tracked_by_run[i]),)
         groups.setdefault(key, []).append(i)
     packs: list[tuple[list[int], lane_engines.LaneBatches]] = []
     step = slice_samples(substeps)
@@ -956,7 +958,10 @@ def _run_lanes(
         is_flight = isinstance(rules[first], Hysteretic)
         own_torque = is_flight and streamed_by_run[first] is not None and not shared
         torque: Any = streamed_by_run[first] if is_flight else None
-        reference = tracked_by_run[first] if is_flight else None
+        reference: Any = tracked_by_run[first] if is_flight else None
+        own_reference = reference is not None and (per_run_reference or own_torque)
+        if own_reference:
+            reference = [tracked_by_run[i] for i in members]
         if own_torque:
             torque = [streamed_by_run[i] for i in members]
         options = _lane_options(options_by_run, members) if is_flight else None
@@ -973,7 +978,11 @@ def _run_lanes(
                 torque_input=torque is not None,
                 torque_per_lane=own_torque,
                 **structure,
-                **({} if reference is None else {"reference_input": True, "feedforward": feedforward}),
+                **(
+                    {}
+                    if reference is None
+                    else {"reference_input": True, "feedforward": feedforward, "reference_per_lane": own_reference}
+                ),
             )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
@@ -986,7 +995,9 @@ def _run_lanes(
         if is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
             memory0 = np.array([flight_memory(states[i], histories[i][0], d) for i in members])
             if reference is not None:  # the controller's previous MRP is the error σ_B/R it sees at k = 0
-                memory0[:, 2:5] = [tracking_memory(row[2:5], reference) for row in memory0]
+                streams = reference if own_reference else [reference] * len(members)
+                sigmas = [tracking_memory(row[2:5], stream) for row, stream in zip(memory0, streams, strict=True)]
+                memory0[:, 2:5] = sigmas
         else:
             memory0 = np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float)
         packs.append(
