@@ -13,7 +13,7 @@ from mrpctl import paper
 from mrpctl.engines import lanes
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, ErrorTime, Hysteretic, SensorModel
-from tests.tracking_reference import tracking_loop
+from tests.tracking_reference import predictor_tracking_loop, tracking_loop
 
 pytestmark = pytest.mark.skipif(mrpctl._compile.find_compiler() is None, reason="tracking needs a C compiler")
 
@@ -72,6 +72,7 @@ def _compare(result, run, *, sensor: bool = False) -> None:
     np.testing.assert_array_equal(result.logic, run.h)
     np.testing.assert_allclose(result.pointing_error, run.pointing_deg, rtol=1e-9, atol=1e-9)
     assert result.settling_time == run.settling_time
+    assert result.switch_count >= 1  # the predicted error passes |σ_B/R| = α
 
 
 @pytest.mark.parametrize("kind", sorted(REFERENCES))
@@ -335,3 +336,44 @@ def test_no_delay_and_kept_samples() -> None:
     assert thinned.pointing_error.shape == thinned.t.shape
     assert np.array_equal(thinned.pointing_error, every.pointing_error[::7])
     assert thinned.settling_time == every.settling_time and thinned.switch_count == every.switch_count
+
+
+@pytest.mark.parametrize("kind", sorted(REFERENCES))
+@pytest.mark.parametrize("feedforward", [False, True])
+def test_the_predictor_tracks_as_the_numpy_reference(kind: str, feedforward: bool) -> None:
+    """The predictor on the tracking error of its prediction against the reference of t_k."""
+    rows = REFERENCES[kind]
+    model = mrpctl.Spacecraft(inertia=(150.0, 95.0, 85.0))  # a model unlike the plant
+    result = mrpctl.simulate(
+        paper.SPACECRAFT,
+        paper.GAIN,
+        X0,
+        tau=TAU,
+        rule=mrpctl.OnPredicted(1.0),
+        t_final=T_FINAL,
+        rate=RATE,
+        predictor=mrpctl.Predictor(model=model),
+        reference=rows,
+        feedforward=feedforward,
+    )
+    assert result.error_time is ErrorTime.CURRENT and result.logic is None
+    run = predictor_tracking_loop(
+        paper.INERTIA,
+        paper.GAIN,
+        X0,
+        rows,
+        rate=RATE,
+        t_final=T_FINAL,
+        d=5,
+        alpha=1.0,
+        feedforward=feedforward,
+        model_inertia=(150.0, 95.0, 85.0),
+    )
+    np.testing.assert_array_equal(result.switch_indices, run.switches)
+    np.testing.assert_allclose(result.sigma, run.sigma, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(result.omega, run.omega, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(result.u, run.u, rtol=1e-12, atol=1e-12 * np.abs(run.u).max())
+    np.testing.assert_allclose(result.sigma_c, run.sigma_c, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(result.pointing_error, run.pointing_deg, rtol=1e-9, atol=1e-9)
+    assert result.settling_time == run.settling_time
+    assert result.switch_count >= 1  # the predicted error passes |σ_B/R| = α

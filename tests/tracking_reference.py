@@ -197,3 +197,101 @@ def tracking_loop(
         settling_time=settle / rate if settle < n else None,
         **out,
     )
+
+
+def _short_mrp(q: np.ndarray) -> np.ndarray:
+    q = q if q[0] >= 0.0 else -q
+    return q[1:4] / (1.0 + q[0])
+
+
+def _mrp_shadow(sigma: np.ndarray) -> np.ndarray:
+    return -sigma / float(sigma @ sigma)
+
+
+def predictor_tracking_loop(
+    inertia: Any,
+    K: Any,
+    x0: Any,
+    reference: np.ndarray,
+    *,
+    rate: float,
+    t_final: float,
+    d: int,
+    alpha: float = 1.0,
+    feedforward: bool = False,
+    model_inertia: Any = None,
+) -> TrackingRun:
+    """The predictor (model copy, error composed on the rotation group and carried over τ) on the tracking
+    error of the prediction against the reference of t_k, in quaternions:
+
+    q_E = q_z(k−d)* ⊗ q_y, δω = ω_y − ω_z(k−d), q̂ = q(τ δω) ⊗ q_z(k) ⊗ q_E, ω̂ = ω_z(k) + δω;
+    σ_B/R the short MRP of q̂ ⊗ q_R*, ω_B/R = ω̂ − C(q̂) ω_R; the set nearest the previous σ_B/R
+    (|σ|² > 1e-8), then its shadow when |σ| >= α (a switch); u = K [σ_B/R; ω_B/R/4] (+ the feedforward of ω̂,
+    C(q̂) and J_m); the plant and the copy z (J_m, one RK4 step) driven by u, both kept short.
+    """
+    inertia = np.asarray(inertia, dtype=float)
+    inertia = np.diag(inertia) if inertia.shape == (3,) else inertia
+    model = inertia if model_inertia is None else np.asarray(model_inertia, dtype=float)
+    model = np.diag(model) if model.shape == (3,) else model
+    inverse, model_inverse = np.linalg.inv(inertia), np.linalg.inv(model)
+    gain = np.asarray(K, dtype=float)
+    n = math.floor(t_final * rate + 1e-9) + 1
+    h = 1.0 / rate
+    tau = d * h
+    x = np.asarray(x0, dtype=float).copy()
+    if x[0:3] @ x[0:3] > 1.0:
+        x[0:3] = _mrp_shadow(x[0:3])
+    z = x.copy()
+    xs, zs = [], []
+    out = {name: np.zeros((n, 3)) for name in ("sigma", "omega", "u", "command", "sigma_c")}
+    angle = np.zeros(n)
+    switches: list[int] = []
+    previous = _short_mrp(_product(_quaternion(z[0:3]), _conjugate(_quaternion(reference[0][0:3]))))
+    unsettled = -1
+    for k in range(n):
+        xs.append(x.copy())
+        zs.append(z.copy())
+        y = xs[k - d] if k >= d else xs[0]
+        z_old = zs[k - d] if k >= d else zs[0]
+        q_error = _product(_conjugate(_quaternion(z_old[0:3])), _quaternion(y[0:3]))
+        d_omega = 4.0 * (y[3:6] - z_old[3:6])
+        q_hat = _product(_noise_quaternion(tau * d_omega), _product(_quaternion(z[0:3]), q_error))
+        omega_hat = 4.0 * z[3:6] + d_omega
+        row = reference[k]
+        sigma = _short_mrp(_product(q_hat, _conjugate(_quaternion(row[0:3]))))
+        dcm = _dcm(q_hat if q_hat[0] >= 0.0 else -q_hat)
+        omega_r = dcm @ row[3:6]
+        if sigma @ sigma > 1e-8 and np.linalg.norm(_mrp_shadow(sigma) - previous) < np.linalg.norm(sigma - previous):
+            sigma = _mrp_shadow(sigma)
+        if sigma @ sigma >= alpha**2:
+            sigma = _mrp_shadow(sigma)
+            switches.append(k)
+        previous = sigma
+        command = gain @ np.concatenate((sigma, (omega_hat - omega_r) / 4.0))
+        if feedforward:
+            command = command + _cross(omega_hat, model @ omega_hat)
+            command = command + model @ (dcm @ row[6:9] - _cross(omega_hat, omega_r))
+        true_error = _product(_quaternion(x[0:3]), _conjugate(_quaternion(row[0:3])))
+        angle[k] = math.degrees(2.0 * math.acos(min(1.0, abs(true_error[0]))))
+        true_rate = 4.0 * x[3:6] - _dcm(_quaternion(x[0:3])) @ row[3:6]
+        sigma_error = true_error[1:4] / (1.0 + abs(true_error[0]))
+        if sigma_error @ sigma_error >= 1e-4 or true_rate @ true_rate >= 1e-6:
+            unsettled = k
+        out["sigma"][k], out["omega"][k], out["u"][k] = x[0:3], 4.0 * x[3:6], command
+        out["command"][k], out["sigma_c"][k] = command, sigma
+        sigma_next, omega_next = _rk4(x[0:3], 4.0 * x[3:6], command, h, 1, inertia, inverse)
+        x = np.concatenate((sigma_next, omega_next / 4.0))
+        if x[0:3] @ x[0:3] > 1.0:
+            x[0:3] = _mrp_shadow(x[0:3])
+        sigma_m, omega_m = _rk4(z[0:3], 4.0 * z[3:6], command, h, 1, model, model_inverse)
+        z = np.concatenate((sigma_m, omega_m / 4.0))
+        if z[0:3] @ z[0:3] > 1.0:
+            z[0:3] = _mrp_shadow(z[0:3])
+    settle = unsettled + 1
+    return TrackingRun(
+        switches=np.array(switches, dtype=np.int64),
+        h=np.ones(n),
+        pointing_deg=angle,
+        settling_time=settle / rate if settle < n else None,
+        **out,
+    )

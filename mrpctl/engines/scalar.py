@@ -354,6 +354,7 @@ class Engine:
                 sensor=sensor,
                 limited=limited,
                 torque_input=self.torque_input,
+                **({"reference_input": True, "feedforward": feedforward} if reference_input else {}),
             )
         elif self.flight:
             core = flight_core_function(
@@ -387,6 +388,7 @@ class Engine:
         if predictor is not None:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
             label += "_torque" if self.torque_input else ""
+            label += ("_tracking" + ("_ff" if feedforward else "")) if reference_input else ""
         elif self.flight:
             label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
             label += "_torque" if torque_input else ""
@@ -525,6 +527,10 @@ class Engine:
         state[:STATE_SIZE] = x0
         if self.predictor:
             state[STATE_SIZE:memory_end] = predictor_memory(x0)
+            if reference is not None:  # the previous σ̂ is the error σ_B/R of the prediction z_0 at k = 0
+                state[STATE_SIZE + 2 : STATE_SIZE + 5] = tracking_memory(
+                    state[STATE_SIZE + 2 : STATE_SIZE + 5], reference
+                )
             history = np.ascontiguousarray(np.hstack((history, history)))  # (m, z) with z = m before t = 0
         else:
             state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
@@ -734,6 +740,7 @@ def engine(
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
         key += ("torque",) if torque_input else ()  # without it the key (and the library) of before
+        key += (("tracking", feedforward),) if reference_input else ()
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -749,7 +756,11 @@ def engine(
                 limited=limited,
                 disturbed=disturbed,
                 torque_input=torque_input,
-                **({"reference_input": True, "feedforward": feedforward} if reference_input and flight else {}),
+                **(
+                    {"reference_input": True, "feedforward": feedforward}
+                    if reference_input and (flight or model is not None)
+                    else {}
+                ),
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)

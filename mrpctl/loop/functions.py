@@ -364,6 +364,8 @@ def predictor_core_function(
     sensor: bool = False,
     limited: bool = True,
     torque_input: bool = False,
+    reference_input: bool = False,
+    feedforward: bool = False,
 ) -> ca.Function:
     """One sample of the predictor loop (``design/predictor.md``, form (b)) (pure SX).
 
@@ -392,7 +394,16 @@ def predictor_core_function(
        u + w (``substeps`` RK4 substeps), the model copy with u alone by one RK4 step of J_m, and
        kept in the short set: z_{k+1} = short(RK4_m(z_k, u)). The controller does not know w: the
        copy never sees it, it enters the prediction only through the measurement y.
+
+    With ``reference_input`` the predictor tracks a reference (``design/tracking.md``): the inputs
+    ``reference`` (the row of t_k: the true error) and ``reference_error`` (the controller's row) as in
+    [`flight_core_function`][mrpctl.loop.flight_core_function]; step 4 acts on the tracking error of the
+    prediction, σ_B/R = short(σ̂ ⊕ σ_N/R) and ω_B/R = ω̂ − [B̂N] ω_R/N (continuity, then the shadow when
+    |σ_B/R| >= α), u_c = K [σ_B/R; ω_B/R/4] (+ with ``feedforward`` the terms of ω̂, [B̂N] and the model's
+    J_m), and the outputs end with ``record`` (10: 1, σ_B/R used, u_c, the true σ_B/R) and ``tracking_error``.
     """
+    if feedforward and not reference_input:
+        raise SpecificationError("feedforward: the feedforward terms need a reference (reference_input)")
     step = step_function(spacecraft, period, substeps, inertia=inertia)
     model_step = step_function(spacecraft, period, 1, inertia=model_inertia)
     x = ca.SX.sym("x", STATE_SIZE)
@@ -417,10 +428,26 @@ def predictor_core_function(
     measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
     z = memory[FLIGHT_MEMORY_SIZE:PREDICTOR_MEMORY_SIZE]
     y, z_old = (x_delayed[0:STATE_SIZE], x_delayed[STATE_SIZE:]) if d > 0 else (measured, z)
-    x_hat, switched = prediction_expr(y, z_old, z, memory[2:5], parameters[0], tau)
+    reference = ca.SX.sym("reference", REFERENCE_WIDTH)  # at t_k
+    reference_error = ca.SX.sym("reference_error", REFERENCE_WIDTH)  # the controller's row
+    if reference_input:
+        x_hat, switched, predicted, omega_r_body, scale = _prediction_tracking_expr(
+            y, z_old, z, memory[2:5], parameters[0], tau, reference_error
+        )
+    else:
+        x_hat, switched = prediction_expr(y, z_old, z, memory[2:5], parameters[0], tau)
     sigma_hat = x_hat[0:3]
 
     command = gain @ x_hat
+    if feedforward:
+        command = command + feedforward_expr(
+            model_j if model_inertia is InertiaInput.FULL else ca.diag(model_j),
+            4 * predicted[3:6],
+            predicted[0:3],
+            omega_r_body,
+            reference_error[6:9],
+            scale,
+        )
     if limited:
         u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
     else:
@@ -446,13 +473,39 @@ def predictor_core_function(
     if torque_input:
         inputs.append(torque)
         names.append("torque")
-    return ca.Function(
-        "core",
-        inputs,
-        [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)],
-        names,
-        ["x_next", "memory_next", "x_meas", "u", "switched", "ring"],
+    outputs = [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)]
+    output_names = ["x_next", "memory_next", "x_meas", "u", "switched", "ring"]
+    if reference_input:
+        inputs += [reference, reference_error]
+        names += ["reference", "reference_error"]
+        true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
+        outputs += [ca.vertcat(1.0, sigma_hat, command, true_sigma), ca.vertcat(true_sigma, true_rate)]
+        output_names += ["record", "tracking_error"]
+    return ca.Function("core", inputs, outputs, names, output_names)
+
+
+def _prediction_tracking_expr(
+    y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any, row: Any
+) -> tuple[Any, Any, Any, Any, Any]:
+    """[`prediction_expr`][mrpctl.loop.prediction_expr] on the tracking error: (x̂ = [σ_B/R; ω_B/R/4], switched,
+    the prediction [σ̂_B/N; ω̂/4], [B̂N] ω_R/N, the rotation scale) against the reference ``row`` (9)."""
+    q_y = quaternion_from_mrp_expr(y[0:3])
+    q_old = quaternion_from_mrp_expr(z_old[0:3])
+    q_z = quaternion_from_mrp_expr(z[0:3])
+    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
+    delta_omega = 4 * (y[3:6] - z_old[3:6])
+    q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
+    predicted = ca.vertcat(_short_mrp_from_quaternion(q_hat), z[3:6] + (y[3:6] - z_old[3:6]))
+    sigma, rate, omega_r_body, scale = tracking_error_expr(predicted[0:3], predicted[3:6], row[0:3], row[3:6])
+    shadow = _safe_shadow(sigma)
+    nearer = ca.logic_and(
+        ca.dot(sigma, sigma) > _CONTINUITY_FLOOR,
+        ca.norm_2(shadow - previous) < ca.norm_2(sigma - previous),
     )
+    sigma = ca.if_else(nearer, shadow, sigma)
+    switched = ca.if_else(ca.dot(sigma, sigma) >= alpha * alpha, 1.0, 0.0)
+    sigma = ca.if_else(switched, _safe_shadow(sigma), sigma)
+    return ca.vertcat(sigma, rate), switched, predicted, omega_r_body, scale
 
 
 def prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import math
@@ -301,7 +302,7 @@ def simulate(
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
     reference: Any = None,
-    error_time: ErrorTime = ErrorTime.MEASUREMENT,
+    error_time: ErrorTime | None = None,
     feedforward: bool = False,
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
 ) -> SimulationResult:
@@ -370,7 +371,7 @@ def simulate(
         needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
     reference : array_like (n, 9) or object with ``samples(t)``, keyword-only
-        Track a reference (``design/tracking.md``; ``rule=Hysteretic(...)``, compiled engine): one row
+        Track a reference (``design/tracking.md``; ``rule=Hysteretic(...)`` or the predictor, compiled engine): one row
         (σ_R/N, ω_R/N, ω̇_R/N) per sample t_k = k/rate (ω in rad/s and ω̇ in rad/s², inertial components), at least
         n rows, or an object whose ``samples(t)`` returns the (len(t), 9) rows of the sample times (evaluated
         slice by slice). The controller forms σ_B/R and ω_B/R from the delayed measurement, its rule acts on
@@ -378,8 +379,10 @@ def simulate(
         ``settling_time`` and ``max_sigma`` are those of the true error σ_B/R, ω_B/R; ``pointing_error`` (deg),
         ``pointing_max``, ``pointing_rms`` and ``slew_time`` report the pointing. None (default): regulation.
     error_time : mrpctl.flight.tracking.ErrorTime, keyword-only
-        Which reference the delayed measurement is compared with: ``MEASUREMENT`` (default), the one of its
-        own time t_{k−d}, or ``CURRENT``, the one of t_k.
+        Which reference the delayed measurement is compared with: ``MEASUREMENT``, the one of its own time
+        t_{k−d}, or ``CURRENT``, the one of t_k; default (None) ``MEASUREMENT``, and ``CURRENT`` with a predictor
+        (whose prediction is of t_k: its tracking error is formed from x̂ and the reference of t_k, and the
+        rule ``OnPredicted(alpha)`` acts on that σ_B/R).
     feedforward : bool, keyword-only
         Add ω̃ × (J ω̃) + J([B̃N] ω̇_R − ω̃ × [B̃N] ω_R) to u_c (ω̃ the delayed measured rate); default False.
     pointing_tolerance : float, keyword-only
@@ -422,7 +425,7 @@ def simulate(
         options, varying = predictor_constants(options, float(tau), checked.model), None
         streamed = None if disturbance is None or disturbance.constant else disturbance
     width = 1 if checked is None else 2
-    records = checked is None and isinstance(rule, Hysteretic)
+    records = (checked is None and isinstance(rule, Hysteretic)) or tracked is not None
     _check_memory(
         run_bytes(n, keep, flight=records) + workspace_bytes(n, d, substeps, width) + jitter_bytes(varying, d),
         limit,
@@ -490,7 +493,9 @@ def simulate(
     if tracked is None:
         return assemble_run(output, n=n, keep_every=keep, common=common)
     common.update(error_time=tracked.error_time, feedforward=feedforward)
-    return assemble_run(output, n=n, keep_every=keep, common=common, pointing_tolerance=pointing_tolerance)
+    result = assemble_run(output, n=n, keep_every=keep, common=common, pointing_tolerance=pointing_tolerance)
+    # the predictor's records carry no logic variable h (its rule switches on the prediction)
+    return result if checked is None else dataclasses.replace(result, logic=None, delay_used=None)
 
 
 # ======================================================================= batches
@@ -528,7 +533,7 @@ def simulate_batch(
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
     reference: Any = None,
-    error_time: ErrorTime = ErrorTime.MEASUREMENT,
+    error_time: ErrorTime | None = None,
     feedforward: bool = False,
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
 ) -> BatchResult:
@@ -668,7 +673,9 @@ def simulate_batch(
     histories = [_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
     workers = min(threads, n_runs)
     width = 1 if predictor is None else 2
-    records = trajectories and predictor is None and any(isinstance(one, Hysteretic) for one in rules)
+    records = trajectories and (
+        reference is not None or (predictor is None and any(isinstance(one, Hysteretic) for one in rules))
+    )
     estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width)
     estimate += n_runs * _batch_run_bytes(n, keep, trajectories, records=records)
     if not trajectories and _LANES:
@@ -872,6 +879,8 @@ def simulate_batch(
                     pointing_tolerance=None if stream is None else float(pointing_tolerance),
                 )
             )
+            if stream is not None and checked is not None:  # as simulate: the predictor's records have no h
+                runs[-1] = dataclasses.replace(runs[-1], logic=None, delay_used=None)
     return assemble_batch(
         stats,
         n=n,

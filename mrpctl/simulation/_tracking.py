@@ -39,12 +39,9 @@ def tracking_options(
         if feedforward:
             raise SpecificationError("feedforward: the feedforward terms need a reference (give reference=...)")
         return None, False, tolerance
-    if predictor is not None:
-        raise SpecificationError(
-            "reference: the predictor loop regulates to the origin only; tracking runs in the flight loop "
-            "(rule=mrpctl.flight.Hysteretic(delta), no predictor)"
-        )
-    if not isinstance(rule, Hysteretic):
+    if predictor is None and not isinstance(rule, Hysteretic):
         raise SpecificationError(_PLANT_SIDE.format(rule=rule))
-    stream = reference_stream(reference, n, rate, d, ErrorTime.MEASUREMENT if error_time is None else error_time, name)
+    if error_time is None:  # the prediction is of now: its error is against the reference of now
+        error_time = ErrorTime.MEASUREMENT if predictor is None else ErrorTime.CURRENT
+    stream = reference_stream(reference, n, rate, d, error_time, name)
     return stream, feedforward, tolerance
