@@ -6,7 +6,8 @@ The paper spacecraft and gain (``mrpctl.paper``), τ = 0.5 s, 1 kHz, the control
    the orbit normal (``--axis``: the inertial y axis, or a skew axis off the principal axes), the body starting on
    the reference (σ = 0, ω = n ê), 300 s. For each error convention (``ErrorTime``) with and without feedforward:
    the steady pointing error Φ_B/R at the end (deg and mrad), the max and RMS after the settling time, and n τ, the
-   bookkeeping lag the current-time convention is expected to settle at.
+   bookkeeping lag the current-time convention is expected to settle at; and the predictor (model = plant,
+   ``OnPredicted(1.0)``), whose prediction of t_k is compared with the reference of t_k.
 2. **A 270° eigenaxis rest-to-rest slew**: a smooth (cycloidal: zero rate and acceleration at both ends) reference
    about a skew axis, the body at rest at the start attitude, 120 s; slew durations of 60 s (the paper's loop
    follows it), 5 s and 3 s (it cannot: the reference runs away, the error passes 180°), noise-free and with a
@@ -23,7 +24,7 @@ import math
 
 import numpy as np
 
-from mrpctl import paper, simulate
+from mrpctl import OnPredicted, Predictor, paper, simulate
 from mrpctl.flight import ErrorTime, Hysteretic, SensorModel
 
 TAU = 0.5
@@ -96,6 +97,26 @@ def nadir_table() -> list[str]:
                     f"{math.radians(end) * 1e3:.4f} | {_fmt(result.pointing_max)} | {_fmt(result.pointing_rms)} | "
                     f"{_fmt(result.settling_time, '.2f')} |"
                 )
+        for feedforward in (False, True):  # the predictor: its prediction of t_k against the reference of t_k
+            result = simulate(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                x0,
+                tau=TAU,
+                rule=OnPredicted(1.0),
+                predictor=Predictor(model=paper.SPACECRAFT),
+                t_final=t_final,
+                rate=RATE,
+                reference=rows,
+                feedforward=feedforward,
+            )
+            assert result.pointing_error is not None
+            end = float(result.pointing_error[-1])
+            lines.append(
+                f"| {label} | predictor (current) | {'on' if feedforward else 'off'} | {end:.3e} | "
+                f"{math.radians(end) * 1e3:.4f} | {_fmt(result.pointing_max)} | {_fmt(result.pointing_rms)} | "
+                f"{_fmt(result.settling_time, '.2f')} |"
+            )
     lines.append("")
     lines.append(f"n τ = {ORBIT_RATE * TAU * 1e3:.4f} mrad = {math.degrees(ORBIT_RATE * TAU):.3e} deg")
     return lines
