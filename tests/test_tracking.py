@@ -377,3 +377,21 @@ def test_the_predictor_tracks_as_the_numpy_reference(kind: str, feedforward: boo
     np.testing.assert_allclose(result.pointing_error, run.pointing_deg, rtol=1e-9, atol=1e-9)
     assert result.settling_time == run.settling_time
     assert result.switch_count >= 1  # the predicted error passes |σ_B/R| = α
+
+
+def test_predictor_regulation_is_tracking_of_the_origin() -> None:
+    kw = dict(
+        tau=0.5,
+        rule=mrpctl.OnPredicted(1.0),
+        t_final=8.0,
+        rate=100.0,
+        predictor=mrpctl.Predictor(model=paper.SPACECRAFT),
+    )
+    plain = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **kw)
+    tracked = mrpctl.simulate(
+        paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, reference=np.zeros((plain.samples, 9)), **kw
+    )
+    for name in ("sigma", "omega", "u", "switch_indices", "sign_flips"):
+        assert np.array_equal(getattr(plain, name), getattr(tracked, name)), name
+    for name in ("switch_count", "max_sigma", "peak_torque", "settling_time", "saturated_fraction"):
+        assert getattr(plain, name) == getattr(tracked, name), name
