@@ -395,3 +395,16 @@ def test_predictor_regulation_is_tracking_of_the_origin() -> None:
         assert np.array_equal(getattr(plain, name), getattr(tracked, name)), name
     for name in ("switch_count", "max_sigma", "peak_torque", "settling_time", "saturated_fraction"):
         assert getattr(plain, name) == getattr(tracked, name), name
+
+
+def test_predictor_batch_equals_simulate() -> None:
+    predictor = mrpctl.Predictor(model=paper.SPACECRAFT)
+    kw = dict(tau=TAU, rule=mrpctl.OnPredicted(1.0), t_final=T_FINAL, rate=RATE, predictor=predictor, feedforward=True)
+    starts = np.stack([X0, AT_REST])
+    references = [REFERENCES["slew"], REFERENCES["rotating"]]
+    batch = mrpctl.simulate_batch(paper.SPACECRAFT, paper.GAIN, starts, reference=references, trajectories=True, **kw)
+    for i, start in enumerate(starts):
+        alone = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, start, reference=references[i], **kw)
+        run = batch.runs[i]
+        assert np.array_equal(run.sigma, alone.sigma) and np.array_equal(run.pointing_error, alone.pointing_error)
+        assert run.logic is None and run.switch_count == alone.switch_count == batch.switch_count[i]
