@@ -14,7 +14,7 @@ Written again from the equations of ``design/tracking.md``, one run, in quaterni
 * law: u_c = K [σ_c; ω_BR/4] (+ ω̃ × Jω̃ + J(C ω̇_R − ω̃ × C ω_R) with feedforward);
 * actuator (optional): direction-preserving scaling to u_max per axis.
 
-The true error at t_k (from the true σ_k and r_k) gives the settling time and Φ_B/R = 2 acos|β_BR,0|.
+The true error at t_k (from the true σ_k and r_k) gives the settling time and Φ_B/R = 2 atan2(|β_v|, |β₀|).
 Only the noise samples (``SensorModel.noise``) are taken from mrpctl, as data.
 """
 
@@ -181,7 +181,8 @@ def tracking_loop(
         # the true error at t_k
         now = reference[k]
         q_true_error = _product(q_true, _conjugate(_quaternion(now[0:3])))
-        angle[k] = math.degrees(2.0 * math.acos(min(1.0, abs(q_true_error[0]))))
+        # Φ = 2 atan2(|β_v|, |β₀|), written as 4 atan(|β_v|/(1 + |β₀|)): accurate near 0 (acos is not)
+        angle[k] = math.degrees(4.0 * math.atan(np.linalg.norm(q_true_error[1:4]) / (1.0 + abs(q_true_error[0]))))
         true_rate = omega - _dcm(q_true) @ now[3:6]
         sigma_error = q_true_error[1:4] / (1.0 + abs(q_true_error[0]))
         if sigma_error @ sigma_error >= settling_sigma**2 or true_rate @ true_rate >= settling_omega**2:
@@ -272,7 +273,7 @@ def predictor_tracking_loop(
             command = command + _cross(omega_hat, model @ omega_hat)
             command = command + model @ (dcm @ row[6:9] - _cross(omega_hat, omega_r))
         true_error = _product(_quaternion(x[0:3]), _conjugate(_quaternion(row[0:3])))
-        angle[k] = math.degrees(2.0 * math.acos(min(1.0, abs(true_error[0]))))
+        angle[k] = math.degrees(4.0 * math.atan(np.linalg.norm(true_error[1:4]) / (1.0 + abs(true_error[0]))))
         true_rate = 4.0 * x[3:6] - _dcm(_quaternion(x[0:3])) @ row[3:6]
         sigma_error = true_error[1:4] / (1.0 + abs(true_error[0]))
         if sigma_error @ sigma_error >= 1e-4 or true_rate @ true_rate >= 1e-6:
