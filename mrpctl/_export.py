@@ -42,6 +42,7 @@ from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_lib
 from mrpctl.clock import delay_samples
 from mrpctl.errors import CodegenError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, SensorModel
+from mrpctl.flight.tracking import ErrorTime
 from mrpctl.loop import (
     FLIGHT_MEMORY_LAYOUT,
     PREDICTOR_MEMORY_LAYOUT,
@@ -65,6 +66,7 @@ __all__ = [
     "MANIFEST_NAME",
     "PREDICTOR_EXPORTED_FUNCTIONS",
     "SOURCE_NAME",
+    "TRACKING_EXPORTED_FUNCTIONS",
     "WHEEL_EXPORTED_FUNCTIONS",
     "ExportResult",
     "content_hash",
@@ -87,6 +89,8 @@ MANIFEST_NAME = "manifest.json"
 EXPORTED_FUNCTIONS = ("dynamics", "controller", "rule", "step", "sample", "chunk")
 #: Exported Functions of the loop as flown (rule ``Hysteretic``), in the same sense.
 FLIGHT_EXPORTED_FUNCTIONS = ("dynamics", "flight_controller", "sensor", "step", "sample", "chunk")
+#: Exported Functions of the tracking loop (``tracking=True``, rule ``Hysteretic``), in the same sense.
+TRACKING_EXPORTED_FUNCTIONS = ("dynamics", "tracking_controller", "sensor", "step", "sample", "chunk")
 #: Exported Functions of the predictor loop (``predictor=Predictor(...)``, rule ``OnPredicted``).
 PREDICTOR_EXPORTED_FUNCTIONS = (
     "dynamics",
@@ -144,6 +148,21 @@ _FLIGHT_DESCRIPTIONS = {
 _TORQUE_DESCRIPTIONS = {
     "sample": _FLIGHT_DESCRIPTIONS["sample"] + "; torque = w_k, the per-sample disturbance (N m, body frame)",
     "chunk": _FLIGHT_DESCRIPTIONS["chunk"] + ", torque one column w_k (N m) per sample",
+}
+
+# The tracking loop (tracking=True): the reference rows are inputs, the controller acts on the tracking error.
+_TRACKING_DESCRIPTIONS = {
+    "tracking_controller": "the flight software of the tracking loop: from the delayed measurement x_meas = "
+    "[sigma~_BN; omega~/4] and the reference row of the error time (sigma_RN, omega_RN_N in rad/s, domega_RN_N "
+    "in rad/s^2), the tracking error sigma_BR = short(sigma~_BN (+) -sigma_RN), omega_BR = omega~ - [B~N] "
+    "omega_RN_N; MRP set selection with hysteresis delta on sigma_BR (memory (h, c, sigma_BR_prev)); "
+    "u_command = K [sigma_c; omega_BR/4] (+ omega~ x J omega~ + J([B~N] domega_RN_N - omega~ x [B~N] omega_RN_N) "
+    "with feedforward) and u = the actuator-limited torque (N m)",
+    "sample": _FLIGHT_DESCRIPTIONS["sample"].replace("flight_controller", "tracking_controller")
+    + "; reference = the reference row (9) of t_k (the true error tracking_error = [sigma_BR; omega_BR/4] of "
+    "x_meas), reference_error = the row of the controller's error time (tracking.error_time)",
+    "chunk": _FLIGHT_DESCRIPTIONS["chunk"] + ", reference and reference_error one column (9) per sample, "
+    "tracking_error one column (6) per sample",
 }
 
 # The Functions of the predictor loop (predictor=Predictor(...), rule OnPredicted).
@@ -250,6 +269,9 @@ def export(
     predictor: Any = None,
     overwrite: bool = False,
     compile: bool = True,
+    tracking: bool = False,
+    error_time: ErrorTime = ErrorTime.MEASUREMENT,
+    feedforward: bool = False,
 ) -> ExportResult:
     """Write the closed loop's CasADi Functions to ``out_dir`` as ``.casadi`` files, C code and a library.
 
@@ -291,6 +313,12 @@ def export(
         manifest (model inertia, τ, α, the memory and delay-line layouts). A per-sample disturbance
         is the ``torque`` input of ``sample`` and ``chunk`` here too (plant only; named in
         ``predictor.disturbance``).
+    tracking, error_time, feedforward : keyword-only
+        Export the tracking loop (``rule=Hysteretic(...)``; ``design/tracking.md``):
+        `TRACKING_EXPORTED_FUNCTIONS`, with ``tracking_controller`` for flight software, the reference ports
+        ``reference`` / ``reference_error`` of ``sample`` and ``chunk``, and a ``tracking`` section in the
+        manifest naming the ports, the row layout and the error convention ``error_time`` (which row the caller
+        feeds as ``reference_error``); ``feedforward`` adds the feedforward terms.
     overwrite : bool, keyword-only
         Allow a non-empty ``out_dir``: the previous export in it (the names listed in the
         module docstring) is replaced as a whole, a library that is not rebuilt disappears,
@@ -333,6 +361,9 @@ def export(
         sensor=sensor,
         delay=delay,
         predictor=predictor,
+        tracking=tracking,
+        error_time=error_time,
+        feedforward=feedforward,
     )
     folder = _path(out_dir)
     target = Path(os.path.realpath(folder))  # a symbolic link stays, its target is replaced
@@ -568,7 +599,13 @@ def _flag(name: str, value: Any) -> bool:
 
 
 def _export_names() -> tuple[str, ...]:
-    every = EXPORTED_FUNCTIONS + FLIGHT_EXPORTED_FUNCTIONS + PREDICTOR_EXPORTED_FUNCTIONS + WHEEL_EXPORTED_FUNCTIONS
+    every = (
+        EXPORTED_FUNCTIONS
+        + FLIGHT_EXPORTED_FUNCTIONS
+        + PREDICTOR_EXPORTED_FUNCTIONS
+        + WHEEL_EXPORTED_FUNCTIONS
+        + TRACKING_EXPORTED_FUNCTIONS
+    )
     names = [f"{name}.casadi" for name in dict.fromkeys(every)]
     return (*names, SOURCE_NAME, HEADER_NAME, LIBRARY_NAME, MANIFEST_NAME)
 
@@ -790,6 +827,11 @@ def _manifest(
             descriptions = {**_PREDICTOR_DESCRIPTIONS, **_PREDICTOR_TORQUE_DESCRIPTIONS}
     elif "torque" in functions["sample"].name_in():
         descriptions = {**_FLIGHT_DESCRIPTIONS, **_TORQUE_DESCRIPTIONS}
+    if closed.tracking is not None:
+        descriptions = {**descriptions, **_TRACKING_DESCRIPTIONS}
+        if "torque" in functions["sample"].name_in():
+            descriptions["sample"] += "; torque = w_k, the per-sample disturbance (N m, body frame)"
+            descriptions["chunk"] += ", torque one column w_k (N m) per sample"
     manifest: dict[str, Any] = {
         "format": "mrpctl-export",
         "format_version": MANIFEST_FORMAT_VERSION,
@@ -845,7 +887,34 @@ def _manifest(
         manifest["predictor"] = _predictor_manifest(closed)
     elif closed.flight is not None:
         manifest["flight"] = _flight_manifest(closed, closed.flight)
+    if closed.tracking is not None:
+        manifest["tracking"] = _tracking_manifest(closed.tracking)
     return manifest
+
+
+def _tracking_manifest(tracking: dict[str, Any]) -> dict[str, Any]:
+    """The manifest's ``tracking`` section: the reference ports, the row layout and the error convention."""
+    error_time = tracking["error_time"]
+    return {
+        "reference_ports": {
+            "sample": ["reference", "reference_error"],
+            "chunk": ["reference", "reference_error"],
+            "tracking_controller": ["reference"],
+        },
+        "reference_row": "sigma_RN (3, MRP, short set), omega_RN_N (3, rad/s, inertial components), "
+        "domega_RN_N (3, rad/s^2, inertial components): Basilisk's AttRefMsgPayload",
+        "error_time": error_time.value,
+        "error_time_meaning": (
+            "reference_error (and the tracking_controller's reference) is the row of the measurement's time "
+            "t_(k-d) (row 0 before t = 0)"
+            if error_time is ErrorTime.MEASUREMENT
+            else "reference_error (and the tracking_controller's reference) is the row of the current time t_k"
+        ),
+        "feedforward": tracking["feedforward"],
+        "outputs": "tracking_error = [sigma_BR; omega_BR/4] of the true state against the row of t_k; "
+        "tracking_controller's sigma_br = the controller's tracking error (short set)",
+        "memory": "flight.memory_layout with sigma_prev = the previous sigma_BR",
+    }
 
 
 def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:

@@ -346,6 +346,13 @@ def test_bad_combinations_say_what_to_use() -> None:
     heavy = WheelCluster.orthogonal(0.2, 5e-3, 600.0)  # spin inertia as large as J
     with pytest.raises(SpecificationError, match="spin_inertia"):
         simulate(CUBESAT, K, x0, rule=Hysteretic(0.1), wheels=heavy, **run)
+    reference = np.zeros((11, 9))
+    with pytest.raises(SpecificationError, match="tracking a reference on a wheel cluster is not modelled"):
+        simulate(CUBESAT, K, x0, rule=Hysteretic(0.1), wheels=wheels, reference=reference, **run)
+    from mrpctl import simulate_batch
+
+    with pytest.raises(SpecificationError, match="tracking a reference on a wheel cluster is not modelled"):
+        simulate_batch(CUBESAT, K, [x0, x0], rule=Hysteretic(0.1), wheels=wheels, reference=reference, **run)
 
 
 def test_predictor_with_wheels_is_refused() -> None:

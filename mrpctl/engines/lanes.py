@@ -70,6 +70,7 @@ from mrpctl.engines.scalar import engine_sample, noise_rows, rule_key
 from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
+from mrpctl.flight.tracking import REFERENCE_WIDTH, ReferenceStream
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_structure
 from mrpctl.loop.wheels import wheel_core_function
@@ -553,6 +554,9 @@ def lane_engine(
     disturbed: bool = True,
     torque_input: bool = False,
     torque_per_lane: bool = False,
+    reference_input: bool = False,
+    feedforward: bool = False,
+    reference_per_lane: bool = False,
     **options: Any,
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
@@ -569,8 +573,11 @@ def lane_engine(
     does) and takes its ``noise`` as a stream shared by the lanes; without one (an ideal sensor)
     it has neither and the delayed input is fed from ``x_meas``. With ``torque_input`` it takes its
     per-sample disturbance ``torque`` (a stream shared by the lanes too; with ``torque_per_lane`` a
-    stream of each lane's own torque; ``disturbed`` is then implied). The keywords are ignored for
-    the other rules. The engine's `LaneEngine.structure` is the flight sample's structure.
+    stream of each lane's own torque; ``disturbed`` is then implied). With ``reference_input`` the flight
+    sample tracks a reference shared by the lanes (its rows ``reference``, ``reference_error`` streamed
+    beside the noise and the torque; ``feedforward``: with the feedforward terms; with ``reference_per_lane``
+    each lane's own reference, a per-lane stream). The keywords are ignored for the other rules. The
+    engine's `LaneEngine.structure` is the flight sample's structure.
 
     Raises
     ------
@@ -586,7 +593,7 @@ def lane_engine(
         if flight
         else None
     )
-    key = (
+    key: tuple[Any, ...] = (
         layout,
         type(rule),
         rule_key(rule, d),
@@ -600,6 +607,8 @@ def lane_engine(
         torque_per_lane and torque_input and flight,
         tuple(sorted(options.items())),
     )
+    tracking = flight and reference_input
+    key += (("tracking", feedforward) + (("lanes",) if reference_per_lane else ()),) if tracking else ()
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -616,15 +625,21 @@ def lane_engine(
                     sensor=structure["sensor"],
                     limited=structure["limited"],
                     disturbed=structure["disturbed"],
+                    reference_input=tracking,
+                    feedforward=tracking and feedforward,
                 )
                 label += f"_{saturation.value}" + ("" if structure["sensor"] else "_ideal")
                 label += ("" if structure["limited"] else "_unlimited") + ("" if structure["disturbed"] else "_free")
                 label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
+                label += ("_tracking" + ("_ff" if feedforward else "")) if tracking else ""
+                label += "_lanes" if tracking and reference_per_lane else ""
                 noise = ("noise",) if structure["sensor"] else ()
+                rows = ("reference", "reference_error") if tracking else ()
+                shared_rows, lane_rows = ((), rows) if reference_per_lane else (rows, ())
                 options = {
                     "delayed": ("x_delayed", "measurement" if structure["sensor"] else "x_meas"),
-                    "streamed": (*noise, "torque") if torque_input and not torque_per_lane else noise,
-                    "lane_streamed": ("torque",) if torque_input and torque_per_lane else (),
+                    "streamed": ((*noise, "torque") if torque_input and not torque_per_lane else noise) + shared_rows,
+                    "lane_streamed": (("torque",) if torque_input and torque_per_lane else ()) + lane_rows,
                     "structure": structure,
                     **options,
                 }
@@ -715,6 +730,7 @@ def closed_loop_batches(
     delay: DelayModel | None = None,
     rate: float = 1.0,
     disturbance: Disturbance | Sequence[Disturbance] | None = None,
+    reference: ReferenceStream | Sequence[ReferenceStream] | None = None,
 ) -> LaneBatches:
     """The closed-loop runs packed for `LaneBatches.run` (arguments as `simulate_lanes`);
     read the statistics with `lane_stats` once every batch has run.
@@ -734,7 +750,11 @@ def closed_loop_batches(
     The engine's structure must serve every run (`flight_structure`
     of ``flight_options`` and ``sensor``, the union over the rows): a run with a limit, a torque w,
     a noisy sensor or a gyro bias on an engine specialised without it is refused
-    (SpecificationError), as its numbers would not be the scalar engine's.
+    (SpecificationError), as its numbers would not be the scalar engine's. ``reference``: a reference
+    shared by the runs (an engine of `lane_engine` with ``reference_input``), its two blocks of rows of each
+    slice ([`ReferenceStream.rows`][mrpctl.flight.tracking.ReferenceStream.rows]) streamed after the noise and
+    the torque, or one per run (an engine with per-lane reference streams: ``reference_per_lane``); ``memory0``
+    then holds each run's σ_B/R at k = 0 (`mrpctl.engines.scalar.tracking_memory`).
     """
     runs = len(x0)
     crafts = (spacecraft,) * runs if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
@@ -779,7 +799,35 @@ def closed_loop_batches(
         per_lane = "torque" in engine.lane_streamed
         if ("torque" in engine.streamed or per_lane) != (disturbance is not None):
             raise SpecificationError("disturbance: a per-sample torque needs a lane engine with a torque stream")
-        if per_lane:
+        own_reference = "reference" in engine.lane_streamed
+        if ("reference" in engine.streamed or own_reference) != (reference is not None):
+            raise SpecificationError("reference: a tracked reference needs a lane engine with a reference stream")
+        if own_reference:
+            references = tuple(reference) if isinstance(reference, Sequence) else ()
+            torques = tuple(disturbance) if per_lane and isinstance(disturbance, Sequence) else None
+            if len(references) != runs or (per_lane and (torques is None or len(torques) != runs)):
+                raise DimensionError(f"reference: this lane engine takes one reference per run ({runs})")
+            shared_torque = disturbance if isinstance(disturbance, Disturbance) else None
+            stream = functools.partial(
+                _lane_references,
+                sensor if noisy else None,
+                noise_columns,
+                shared_torque,
+                torques,
+                references,
+                rate,
+                engine.width,
+            )
+        elif isinstance(reference, ReferenceStream):
+            if per_lane:
+                raise SpecificationError("reference: a shared reference with per-run torques is not supported")
+            torque = disturbance if isinstance(disturbance, Disturbance) else None
+            stream = functools.partial(
+                _with_reference, sensor if noisy else None, noise_columns, torque, reference, rate
+            )
+        elif reference is not None:
+            raise SpecificationError("reference: this lane engine takes one shared reference")
+        elif per_lane:
             torques = tuple(disturbance) if isinstance(disturbance, Sequence) else ()
             if len(torques) != runs or not all(isinstance(w, Disturbance) for w in torques):
                 raise DimensionError(f"disturbance: this lane engine takes one Disturbance per run ({runs})")
@@ -820,6 +868,68 @@ def _noise_and_torque(
     if sensor is not None:
         rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
     rows[:, noise_columns:] = disturbance.samples(k0, k1, rate)
+    return rows
+
+
+def _with_reference(
+    sensor: SensorModel | None,
+    noise_columns: int,
+    disturbance: Disturbance | None,
+    reference: ReferenceStream,
+    rate: float,
+    k0: int,
+    k1: int,
+) -> np.ndarray:
+    """The stream rows of a slice of a tracking sample: the noise and the torque as in `_noise_and_torque`
+    (the torque's 3 columns only with one), then the reference at t_k (9) and at the error time (9)."""
+    torque_columns = 0 if disturbance is None else 3
+    start = noise_columns + torque_columns
+    rows = np.zeros((k1 - k0, start + 2 * REFERENCE_WIDTH))
+    if sensor is not None:
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
+    if disturbance is not None:
+        rows[:, noise_columns:start] = disturbance.samples(k0, k1, rate)
+    now, error = reference.rows(k0, k1)
+    rows[:, start : start + REFERENCE_WIDTH] = now
+    rows[:, start + REFERENCE_WIDTH :] = error
+    return rows
+
+
+def _lane_references(
+    sensor: SensorModel | None,
+    noise_columns: int,
+    shared_torque: Disturbance | None,
+    torques: Sequence[Disturbance] | None,
+    references: Sequence[ReferenceStream],
+    rate: float,
+    width: int,
+    k0: int,
+    k1: int,
+    runs: np.ndarray,
+) -> np.ndarray:
+    """The stream rows of a slice for the W ``runs`` of a batch of a tracking sample with per-lane references:
+    the shared noise and the shared torque (if any), then the per-lane torques (if any, 3 W), then each lane's
+    reference at t_k (9 W) and at the error time (9 W) (nonzero j of lane l at its offset + j W + l)."""
+    shared = noise_columns + (3 if shared_torque is not None else 0)
+    per_lane = (3 if torques is not None else 0) + 2 * REFERENCE_WIDTH
+    rows = np.zeros((k1 - k0, shared + per_lane * width))
+    if sensor is not None:
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
+    if shared_torque is not None:
+        rows[:, noise_columns:shared] = shared_torque.samples(k0, k1, rate)
+    offset = shared
+    if torques is not None:
+        lanes = np.zeros((k1 - k0, 3, width))
+        for lane, run in enumerate(runs):
+            lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)
+        rows[:, offset : offset + 3 * width] = lanes.reshape(k1 - k0, 3 * width)
+        offset += 3 * width
+    now = np.zeros((k1 - k0, REFERENCE_WIDTH, width))
+    error = np.zeros((k1 - k0, REFERENCE_WIDTH, width))
+    for lane, run in enumerate(runs):
+        now[:, :, lane], error[:, :, lane] = references[int(run)].rows(k0, k1)
+    rows[:, offset : offset + REFERENCE_WIDTH * width] = now.reshape(k1 - k0, REFERENCE_WIDTH * width)
+    rows[:, offset + REFERENCE_WIDTH * width :] = error.reshape(k1 - k0, REFERENCE_WIDTH * width)
     return rows
 
 

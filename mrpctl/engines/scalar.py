@@ -74,6 +74,7 @@ from mrpctl.flight import (
     short_expr,
     stream_key,
 )
+from mrpctl.flight.tracking import ReferenceStream, tracking_error_expr
 from mrpctl.loop import (
     InertiaInput,
     core_function,
@@ -109,6 +110,7 @@ __all__ = [
     "rule_key",
     "short_history",
     "slice_samples",
+    "tracking_memory",
     "wheel_engine",
 ]
 
@@ -122,6 +124,21 @@ STATE_BLOCK = STATE_SIZE + MEMORY_SIZE + STATS_SIZE  # x, memory, stats: the dri
 def _short_function() -> ca.Function:
     sigma = ca.SX.sym("sigma", 3)
     return ca.Function("short", [sigma], [short_expr(sigma)])
+
+
+@functools.lru_cache(maxsize=1)
+def _error_function() -> ca.Function:
+    sigma = ca.SX.sym("sigma", 3)
+    sigma_r = ca.SX.sym("sigma_r", 3)
+    error = tracking_error_expr(sigma, ca.DM.zeros(3), sigma_r, ca.DM.zeros(3))[0]
+    return ca.Function("error", [sigma, sigma_r], [error])
+
+
+def tracking_memory(sigma_seen: np.ndarray, reference: ReferenceStream) -> np.ndarray:
+    """σ̃_prev of the tracking sample at k = 0: σ_B/R of the σ̃ the controller sees at k = 0 (the regulation
+    memory's, [`flight_memory`][mrpctl.loop.options.flight_memory]) against the reference row it uses at k = 0
+    (through the sample's own SX: its bits)."""
+    return np.asarray(_error_function()(np.asarray(sigma_seen, float), reference.first()[0:3])).ravel()
 
 
 def short_history(history: np.ndarray) -> np.ndarray:
@@ -175,6 +192,10 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     outs = core(x, memory, x_delayed, gain, parameters, *extra)
     x_raw, memory_rule, x_meas, u, switched = outs[0:5]
     more, more_names = list(outs[5:]), [core.name_out(i) for i in range(5, core.n_out())]  # the flight measurement
+    settling_state = x_meas  # tracking: the true error [σ_B/R; ω_B/R/4] at t_k, for the settling statistics
+    if "tracking_error" in more_names:
+        settling_state = more.pop(more_names.index("tracking_error"))
+        more_names.remove("tracking_error")
 
     k = stats[S_K]
     counted = ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
@@ -186,7 +207,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     memory_next = ca.if_else(counted, memory_rule, memory) if frozen_memory else memory_rule
     switch_counted = ca.logic_and(counted, switched > 0)
 
-    sigma, omega = x_meas[0:3], 4 * x_meas[3:6]
+    sigma, omega = settling_state[0:3], 4 * settling_state[3:6]
     sigma_squared = ca.dot(sigma, sigma)
     unsettled = ca.logic_or(sigma_squared >= SETTLING_SIGMA**2, ca.dot(omega, omega) >= SETTLING_OMEGA**2)
     u_prev = stats[S_UPREV]
@@ -239,6 +260,7 @@ def _driver_source(sample: ca.Function, rotation: ca.Function | None = None) -> 
         "MRPCTL_RING_OUTPUT": int("measurement" in sample.name_out() or "ring" in sample.name_out()),
         "MRPCTL_RECORD_OUTPUT": sample.name_out().index("record") if "record" in sample.name_out() else 0,
         "MRPCTL_TORQUE_INPUT": sample.name_in().index("torque") if "torque" in sample.name_in() else 0,
+        "MRPCTL_REFERENCE_INPUT": sample.name_in().index("reference") if "reference" in sample.name_in() else 0,
         "MRPCTL_RECORD_WIDTH": sample.size1_out("record") if "record" in sample.name_out() else 1,
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
         "MRPCTL_ROTATION_INPUT": int(rotation is not None),
@@ -274,11 +296,14 @@ class Engine:
         limited: bool = True,
         disturbed: bool = True,
         torque_input: bool = False,
+        reference_input: bool = False,
+        feedforward: bool = False,
         *,
         wheels: WheelCluster | None = None,
     ) -> None:
         self.d = d
         self.wheels = wheels
+        self.reference_input = reference_input
         self.substeps = substeps
         self.inertia = inertia_input(spacecraft)
         self.predictor = predictor is not None
@@ -316,6 +341,7 @@ class Engine:
                 sensor=sensor,
                 limited=limited,
                 torque_input=self.torque_input,
+                **({"reference_input": True, "feedforward": feedforward} if reference_input else {}),
             )
         elif self.flight:
             core = flight_core_function(
@@ -337,6 +363,7 @@ class Engine:
                 # run() takes the square root of the peak |u_c|² at the end; with limits only, where the
                 # actuator's |u_c| is a root too (measured: 15 instructions fewer with limits, 5-10 more without)
                 squared_peak=limited,
+                **({"reference_input": True, "feedforward": feedforward} if reference_input else {}),
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -352,9 +379,11 @@ class Engine:
         elif predictor is not None:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
             label += "_torque" if self.torque_input else ""
+            label += ("_tracking" + ("_ff" if feedforward else "")) if reference_input else ""
         elif self.flight:
             label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
             label += "_torque" if torque_input else ""
+            label += ("_tracking" + ("_ff" if feedforward else "")) if reference_input else ""
         # the scalar driver runs counted samples only: the flight samples drop the memory guard
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}", frozen_memory=not self.flight)
         min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
@@ -376,7 +405,7 @@ class Engine:
             self._run_c.argtypes = (
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 8
-                + [ctypes.c_longlong]
+                + [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
                 + [ctypes.c_void_p] * 3
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
@@ -442,6 +471,7 @@ class Engine:
         delay: DelayModel | None = None,
         rate: float = 1.0,
         disturbance: Disturbance | None = None,
+        reference: ReferenceStream | None = None,
     ) -> RunOutput:
         """One run of n samples, slice by slice.
 
@@ -476,7 +506,12 @@ class Engine:
         disturbance : Disturbance, optional
             A per-sample torque (engine built with ``torque_input``): the rows of each slice
             ([`samples`][mrpctl.flight.Disturbance.samples]) are handed to the driver.
+        reference : ReferenceStream, optional
+            A tracked reference (engine built with ``reference_input``): the rows of each slice
+            ([`ReferenceStream.rows`][mrpctl.flight.tracking.ReferenceStream.rows]) are handed to the driver.
         """
+        if self.reference_input != (reference is not None):
+            raise ValueError("a reference needs an engine with a reference input, and only it")
         if self.torque_input != (disturbance is not None and not disturbance.constant):
             raise ValueError("a per-sample disturbance needs an engine with a torque input, and only it")
         state = workspace.state
@@ -485,12 +520,20 @@ class Engine:
         state[:STATE_SIZE] = x0
         if self.predictor:
             state[STATE_SIZE:memory_end] = predictor_memory(x0)
+            if reference is not None:  # the previous σ̂ is the error σ_B/R of the prediction z_0 at k = 0
+                state[STATE_SIZE + 2 : STATE_SIZE + 5] = tracking_memory(
+                    state[STATE_SIZE + 2 : STATE_SIZE + 5], reference
+                )
             history = np.ascontiguousarray(np.hstack((history, history)))  # (m, z) with z = m before t = 0
         else:
             if self.wheels is not None:
                 state[STATE_SIZE:memory_end] = wheel_memory(flight_memory(x0, history, self.d), self.wheels)
             else:
                 state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
+            if reference is not None:  # the controller's previous MRP is the error σ_B/R it sees at k = 0
+                state[STATE_SIZE + 2 : STATE_SIZE + 5] = tracking_memory(
+                    state[STATE_SIZE + 2 : STATE_SIZE + 5], reference
+                )
             if self.flight and not self._sensor:  # the sample reads m_{k-d} as it is: a history row must be short
                 history = np.ascontiguousarray(short_history(history))
         state[memory_end:] = initial_stats(n)
@@ -537,6 +580,7 @@ class Engine:
         newest = -1 - self.d
         schedule: np.ndarray | None = None
         k = 0
+        reference_rows: tuple[np.ndarray, np.ndarray] | None = None
         diverged = memory_end + S_DIVERGED
         while k < n:
             k1 = min(k + step, n)
@@ -544,6 +588,9 @@ class Engine:
             if self.torque_input:
                 assert disturbance is not None
                 torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1, rate)), INPUT_SIZE
+            reference_rows = None if reference is None else reference.rows(k, k1)
+            if reference is not None and k < reference.lag:  # the held rows before t = 0 in slices of their own
+                k1 = min(k1, reference.lag)
             if delay is not None and jitter is None:  # a given sequence: j*(k) of the slice from NumPy
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])
@@ -560,6 +607,8 @@ class Engine:
                 noise_key.ctypes.data,
                 address(torque),
                 torque_stride,
+                None if reference_rows is None else address(reference_rows[0]),
+                None if reference_rows is None else address(reference_rows[1]),
                 None if schedule is None else schedule.ctypes.data,
                 None if jitter is None else jitter.ctypes.data,
                 None if delay_used is None else delay_used.ctypes.data,
@@ -653,6 +702,8 @@ def engine(
     limited: bool = True,
     disturbed: bool = True,
     torque_input: bool = False,
+    reference_input: bool = False,
+    feedforward: bool = False,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
@@ -681,9 +732,11 @@ def engine(
             substeps,
             saturation,
         ) + ((sensor, limited, disturbed, torque_input) if flight else ())
+        key += (("tracking", feedforward),) if flight and reference_input else ()  # else the key of before
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
         key += ("torque",) if torque_input else ()  # without it the key (and the library) of before
+        key += (("tracking", feedforward),) if reference_input else ()
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -699,6 +752,8 @@ def engine(
                 limited=limited,
                 disturbed=disturbed,
                 torque_input=torque_input,
+                reference_input=bool(reference_input and (flight or model is not None)),
+                feedforward=bool(feedforward and reference_input and (flight or model is not None)),
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)

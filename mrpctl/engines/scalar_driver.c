@@ -13,7 +13,9 @@
  * normals of noise.c (included in front of this file) of the streams noise_key[0] (attitude) and
  * noise_key[1] (rate), drawn MRPCTL_NOISE_BLOCK samples at a time by mrpctl_normal_rows; a zero sigma gives exact zeros (the NumPy mirror: mrpctl.flight.SensorModel.noise_rows). With MRPCTL_RECORD_OUTPUT (its output index) the flight sample's record of
  * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept); with
- * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque.
+ * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque, and with
+ * MRPCTL_REFERENCE_INPUT (its input index; the next input is the reference at the error time) a tracked
+ * reference, row k - k0 of reference and of reference_error.
  *
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
  * stats alternate between two buffers; the sample writes m_k into a ring of ring_size
@@ -64,7 +66,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
     const casadi_real* noise, const unsigned long long* noise_key, const casadi_real* torque,
-    long long torque_stride, const long long* used, long long* jitter, long long* kept_delays, long long k0, long long k1,
+    long long torque_stride, const casadi_real* reference, const casadi_real* reference_error, const long long* used, long long* jitter, long long* kept_delays, long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
     casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched, casadi_real* kept_records) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
@@ -128,6 +130,10 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #if !MRPCTL_RECORD_OUTPUT
   (void)kept_records;
 #endif
+#if !MRPCTL_REFERENCE_INPUT
+  (void)reference;
+  (void)reference_error;
+#endif
   for (k = k0; k < k1; ++k) {
     casadi_real* now = buffers[now_index];
     casadi_real* next = buffers[now_index ^ 1];
@@ -188,6 +194,11 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #if MRPCTL_TORQUE_INPUT
     /* a per-sample disturbance w_k (the flight sample's last input) */
     arg[MRPCTL_TORQUE_INPUT] = torque + torque_stride * (k - k0);
+#endif
+#if MRPCTL_REFERENCE_INPUT
+    /* a tracked reference: row k - k0 of the slice's reference at t_k and at the controller's error time (9 each) */
+    arg[MRPCTL_REFERENCE_INPUT] = reference + 9 * (k - k0);
+    arg[MRPCTL_REFERENCE_INPUT + 1] = reference_error + 9 * (k - k0);
 #endif
 #if MRPCTL_RING_OUTPUT
     /* the flight and predictor samples: the sensor's measurement (and the model state) go to the ring,

@@ -58,6 +58,7 @@ from mrpctl.flight.models import (
     newest_arrived_slice,
 )
 from mrpctl.flight.streams import stream_key, stream_normals
+from mrpctl.flight.tracking import ErrorTime
 
 __all__ = [
     "FLIGHT_CONSTANTS_SIZE",
@@ -71,6 +72,7 @@ __all__ = [
     "DelayKind",
     "DelayModel",
     "Disturbance",
+    "ErrorTime",
     "Hysteretic",
     "NoiseForm",
     "Saturation",

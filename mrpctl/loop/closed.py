@@ -46,6 +46,7 @@ from mrpctl.flight import (
     selection_function,
     short_expr,
 )
+from mrpctl.flight.tracking import REFERENCE_WIDTH, ErrorTime, feedforward_expr, tracking_error_expr
 from mrpctl.loop.functions import (
     CONTROLLER_MEMORY_SIZE,
     PREDICTOR_MEMORY_SIZE,
@@ -189,6 +190,15 @@ class ClosedLoopFunctions:
         and the gyro bias.
     flight : FlightOptions or None
         The flight models (None for the paper's state-side rules).
+    tracking_controller : casadi.Function or None
+        Tracking loop only (``tracking=True``): ``tracking_controller(x_meas, memory, reference, delta) ->
+        (u, u_command, memory_next, switched, sigma_br)``: the flight controller on the tracking error of the
+        delayed measurement against ``reference`` (9: σ_R/N, ω_R/N, ω̇_R/N, the row of the error time;
+        ``design/tracking.md``), memory (h, c, σ_B/R,prev), u_command = K [σ_c; ω_B/R/4] (+ feedforward).
+        ``sample`` and ``chunk`` then take ``reference`` (the row of t_k: the true error) and
+        ``reference_error`` (the row of the error time) and give ``tracking_error`` (the true [σ_B/R; ω_B/R/4]).
+    tracking : dict or None
+        Tracking loop only: ``{"error_time": ErrorTime, "feedforward": bool}``.
     """
 
     spacecraft: Spacecraft
@@ -212,6 +222,8 @@ class ClosedLoopFunctions:
     predictor_controller: ca.Function | None = field(default=None, repr=False)
     prediction: ca.Function | None = field(default=None, repr=False)
     model_step: ca.Function | None = field(default=None, repr=False)
+    tracking_controller: ca.Function | None = field(default=None, repr=False)
+    tracking: dict[str, Any] | None = None
 
     @property
     def period(self) -> float:
@@ -222,7 +234,8 @@ class ClosedLoopFunctions:
         """The Functions by name, for export.
 
         Paper rules: dynamics, controller, rule, step, sample, chunk. Flight loop:
-        dynamics, flight_controller, sensor, step, sample, chunk. Predictor: dynamics,
+        dynamics, flight_controller, sensor, step, sample, chunk; tracking: tracking_controller in place of
+        flight_controller. Predictor: dynamics,
         predictor_controller, prediction, model_step, sensor, step, sample, chunk.
         """
         if self.predictor_controller is not None and self.prediction is not None and self.model_step is not None:
@@ -232,6 +245,15 @@ class ClosedLoopFunctions:
                 "predictor_controller": self.predictor_controller,
                 "prediction": self.prediction,
                 "model_step": self.model_step,
+                "sensor": self.sensor,
+                "step": self.step,
+                "sample": self.sample,
+                "chunk": self.chunk,
+            }
+        if self.tracking_controller is not None and self.sensor is not None:
+            return {
+                "dynamics": self.dynamics,
+                "tracking_controller": self.tracking_controller,
                 "sensor": self.sensor,
                 "step": self.step,
                 "sample": self.sample,
@@ -287,6 +309,9 @@ def closed_loop_functions(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Any = None,
+    tracking: bool = False,
+    error_time: ErrorTime = ErrorTime.MEASUREMENT,
+    feedforward: bool = False,
 ) -> ClosedLoopFunctions:
     """Build the closed loop's named CasADi Functions (see [`ClosedLoopFunctions`][mrpctl.loop.ClosedLoopFunctions]).
 
@@ -316,6 +341,11 @@ def closed_loop_functions(
         no delay model): ``sample`` and ``chunk`` are the engine's predictor sample with K,
         α, τ, J_m and the flight constants bound, and ``predictor_controller``, ``prediction``,
         ``model_step`` and ``sensor`` are the flight-software pieces (see `_predictor_loop`).
+    tracking, error_time, feedforward : keyword-only
+        The tracking loop (``rule=Hysteretic(...)``): ``sample`` and ``chunk`` take the reference rows and
+        ``tracking_controller`` replaces ``flight_controller`` (see
+        [`ClosedLoopFunctions`][mrpctl.loop.ClosedLoopFunctions]); ``error_time`` is recorded (which row the
+        caller feeds as ``reference_error``), ``feedforward`` adds the feedforward terms.
 
     Raises
     ------
@@ -329,6 +359,21 @@ def closed_loop_functions(
     rate = float(rate)
     substeps = check_substeps(substeps)
     period = 1.0 / rate
+    if not isinstance(tracking, bool) or not isinstance(feedforward, bool):
+        raise SpecificationError(f"tracking, feedforward must be True or False, got {tracking!r}, {feedforward!r}")
+    if feedforward and not tracking:
+        raise SpecificationError("feedforward: the feedforward terms need the tracking loop (tracking=True)")
+    tracked = None
+    if tracking:
+        if predictor is not None or not isinstance(rule, Hysteretic):
+            raise SpecificationError(
+                f"tracking: the tracking loop is the flight loop's (rule=mrpctl.flight.Hysteretic(delta), no "
+                f"predictor), got rule {rule}"
+            )
+        try:
+            tracked = {"error_time": ErrorTime(error_time), "feedforward": feedforward}
+        except ValueError as error:
+            raise SpecificationError(f"error_time must be an mrpctl.flight.ErrorTime, got {error_time!r}") from error
     if predictor is not None or isinstance(rule, OnPredicted):
         return _predictor_loop(
             spacecraft, gain, rule, d, float(tau), rate, substeps, actuator, disturbance, sensor, delay, predictor
@@ -362,16 +407,18 @@ def closed_loop_functions(
             saturation=saturation,
         )
         sample, flight_controller, sensor_function = _flight_functions(
-            spacecraft, gain, rule, d, period, substeps, flight
+            spacecraft, gain, rule, d, period, substeps, flight, tracked
         )
         return ClosedLoopFunctions(
             **common,
             controller=controller,
             sample=sample,
             chunk=flight_chunk_function(sample, d),
-            flight_controller=flight_controller,
+            flight_controller=flight_controller if tracked is None else None,
             sensor=sensor_function,
             flight=flight,
+            tracking_controller=None if tracked is None else flight_controller,
+            tracking=tracked,
         )
     core = core_function(spacecraft, rule, d, period, substeps)
     x = ca.SX.sym("x", STATE_SIZE)
@@ -401,6 +448,7 @@ def _flight_functions(
     period: float,
     substeps: int,
     flight: FlightOptions,
+    tracked: dict[str, Any] | None = None,
 ) -> tuple[ca.Function, ca.Function, ca.Function]:
     """(sample, flight_controller, sensor) of the flight loop with K, δ and the flight constants bound.
 
@@ -412,43 +460,64 @@ def _flight_functions(
     """
     constants = ca.DM(np.asarray(flight.constants))
     per_sample = flight.disturbance is not None and not flight.disturbance.constant
-    core = flight_core_function(spacecraft, d, period, substeps, saturation=flight.saturation, torque_input=per_sample)
+    tracking = {} if tracked is None else {"reference_input": True, "feedforward": tracked["feedforward"]}
+    core = flight_core_function(
+        spacecraft, d, period, substeps, saturation=flight.saturation, torque_input=per_sample, **tracking
+    )
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
     noise = ca.SX.sym("noise", NOISE_SIZE)
     inputs, names = [x, memory, x_delayed, noise], ["x", "memory", "x_delayed", "noise"]
     torque = [ca.SX.sym("torque", INPUT_SIZE)] if per_sample else []  # w_k, the per-sample disturbance
-    bound = list(core(x, memory, x_delayed, ca.DM(gain), ca.DM(rule.parameters()), constants, noise, *torque))
+    rows = [ca.SX.sym(name, REFERENCE_WIDTH) for name in ("reference", "reference_error")] if tracking else []
+    bound = list(core(x, memory, x_delayed, ca.DM(gain), ca.DM(rule.parameters()), constants, noise, *torque, *rows))
     sample = ca.Function(
         "sample",
-        inputs + torque,
+        inputs + torque + rows,
         bound,
-        names + (["torque"] if per_sample else []),
-        ["x_next", "memory_next", "x_meas", "u", "switched", "measurement"],
+        names + (["torque"] if per_sample else []) + (["reference", "reference_error"] if tracking else []),
+        ["x_next", "memory_next", "x_meas", "u", "switched", "measurement"] + (["tracking_error"] if tracking else []),
     )
 
     measured = ca.SX.sym("x_meas", STATE_SIZE)
     controller_memory = ca.SX.sym("memory", CONTROLLER_MEMORY_SIZE)
     delta = ca.SX.sym("delta")
     sigma_seen = short_expr(measured[0:3])
+    rate_seen = measured[3:6]
+    row = ca.SX.sym("reference", REFERENCE_WIDTH)
+    if tracked is not None:  # the sample's expressions in the same order (flight_core_function)
+        sigma_bn = sigma_seen
+        sigma_seen, rate_seen, omega_r_body, scale = tracking_error_expr(sigma_bn, measured[3:6], row[0:3], row[3:6])
     h_next, c_next, sigma_c, switched = selection_function()(
         controller_memory[0], controller_memory[1], sigma_seen, controller_memory[2:5], delta
     )
-    command = ca.DM(gain) @ ca.vertcat(sigma_c, measured[3:6])
+    command = ca.DM(gain) @ ca.vertcat(sigma_c, rate_seen)
+    if tracked is not None and tracked["feedforward"]:
+        inertia = ca.DM(spacecraft.inertia)
+        command = command + feedforward_expr(inertia, 4 * measured[3:6], sigma_bn, omega_r_body, row[6:9], scale)
     u = actuator_function(flight.saturation)(command, constants[0:3], constants[3], ca.DM.zeros(3))[0]
-    flight_controller = ca.Function(
-        "flight_controller",
-        [measured, controller_memory, delta],
-        [u, command, ca.vertcat(h_next, c_next, sigma_seen), switched],
-        ["x_meas", "memory", "delta"],
-        ["u", "u_command", "memory_next", "switched"],
-    )
+    if tracked is not None:
+        controller = ca.Function(
+            "tracking_controller",
+            [measured, controller_memory, row, delta],
+            [u, command, ca.vertcat(h_next, c_next, sigma_seen), switched, sigma_seen],
+            ["x_meas", "memory", "reference", "delta"],
+            ["u", "u_command", "memory_next", "switched", "sigma_br"],
+        )
+    else:
+        controller = ca.Function(
+            "flight_controller",
+            [measured, controller_memory, delta],
+            [u, command, ca.vertcat(h_next, c_next, sigma_seen), switched],
+            ["x_meas", "memory", "delta"],
+            ["u", "u_command", "memory_next", "switched"],
+        )
 
     true_state = OnCurrent().expressions(x, x, ca.SX.zeros(MEMORY_SIZE), delay_samples=d)[0]
     measurement = measurement_function()(true_state, noise[0:3], noise[3:6], constants[7:10])[0]
     sensor = ca.Function("sensor", [x, noise], [true_state, measurement], ["x", "noise"], ["x_true", "measurement"])
-    return sample, flight_controller, sensor
+    return sample, controller, sensor
 
 
 #: Names of the predictor sample's memory entries (`PREDICTOR_MEMORY_SIZE`), in order.

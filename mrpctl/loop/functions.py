@@ -29,6 +29,7 @@ from mrpctl.flight import (
     selection_function,
     short_expr,
 )
+from mrpctl.flight.tracking import REFERENCE_WIDTH, feedforward_expr, tracking_error_expr
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, plant_model
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
@@ -169,6 +170,8 @@ def flight_core_function(
     noise_form: NoiseForm = NoiseForm.ROTATION_VECTOR,
     short_measurements: bool = False,
     squared_peak: bool = False,
+    reference_input: bool = False,
+    feedforward: bool = False,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
@@ -216,7 +219,19 @@ def flight_core_function(
 
     With δ = 0, no limit (inf) and w = 0, σ_c = σ̃ at every sample and u is ``OnCurrent``'s
     K m_{k−d} bit for bit.
+
+    With ``reference_input`` the sample tracks a reference (``design/tracking.md``): two last inputs
+    ``reference`` (9) = (σ_R/N, ω_R/N, ω̇_R/N) at t_k and ``reference_error`` (9), the same at the controller's
+    error time (see [`ErrorTime`][mrpctl.flight.tracking.ErrorTime]); the controller forms σ_B/R and ω_B/R from
+    the delayed measurement and the second row
+    ([`tracking_error_expr`][mrpctl.flight.tracking.tracking_error_expr]), the selection (continuity and
+    hysteresis) acts on σ_B/R, u_c = K [σ_c; ω_B/R/4] (+ with ``feedforward``
+    [`feedforward_expr`][mrpctl.flight.tracking.feedforward_expr] of the measured delayed ω̃), and a last output
+    ``tracking_error`` (6) is the true error [σ_B/R; ω_B/R/4] at t_k (from x_meas and the first row), which
+    the records (10: (h, σ_c, u_c, σ_B/R)) and the engine's settling statistics use.
     """
+    if feedforward and not reference_input:
+        raise SpecificationError("feedforward: the feedforward terms need a reference (reference_input)")
     if short_measurements and sensor:
         raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
     step = step_function(spacecraft, period, substeps, inertia=inertia)
@@ -225,10 +240,13 @@ def flight_core_function(
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
-    extra = [] if inertia is None else list(_inertia_symbols(inertia)[:2])
+    symbols = None if inertia is None else _inertia_symbols(inertia)
+    extra = [] if symbols is None else list(symbols[:2])
     flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
     noise = ca.SX.sym("noise", NOISE_SIZE)
     torque = ca.SX.sym("torque", INPUT_SIZE)
+    reference = ca.SX.sym("reference", REFERENCE_WIDTH)  # at t_k
+    reference_error = ca.SX.sym("reference_error", REFERENCE_WIDTH)  # at the controller's error time
     w = torque if torque_input else flight[4:7]
     disturbed = disturbed or torque_input
     x_meas = OnCurrent().expressions(x, x, memory[0:MEMORY_SIZE], delay_samples=d)[0]
@@ -239,10 +257,19 @@ def flight_core_function(
     seen = x_delayed if d > 0 else measured
     # without a sensor m_k is x_meas, bookkept short by OnCurrent: only a history row may be long
     sigma_seen = seen[0:3] if short_measurements else short_expr(seen[0:3])
+    rate_seen = seen[3:6]
+    if reference_input:
+        # the tracking error of the delayed measurement against the controller's reference row (its error time)
+        sigma_bn = sigma_seen
+        row = reference_error
+        sigma_seen, rate_seen, omega_r_body, scale = tracking_error_expr(sigma_bn, seen[3:6], row[0:3], row[3:6])
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
-    command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    command = gain @ ca.vertcat(sigma_c, rate_seen)
+    if feedforward:
+        j_matrix = ca.DM(spacecraft.inertia) if symbols is None else symbols[2]
+        command = command + feedforward_expr(j_matrix, 4 * seen[3:6], sigma_bn, omega_r_body, row[6:9], scale)
     if limited:
         u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
         count = memory[5] + saturated
@@ -269,11 +296,19 @@ def flight_core_function(
     if torque_input:
         inputs.append(torque)
         names.append("torque")
+    if reference_input:
+        inputs += [reference, reference_error]
+        names += ["reference", "reference_error"]
     output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
     outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
+    if reference_input:  # the true pointing error at t_k: the metrics' state
+        true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
     if records:
         output_names.append("record")
-        outputs.append(ca.vertcat(h_next, sigma_c, command))
+        outputs.append(ca.vertcat(h_next, sigma_c, command, *([true_sigma] if reference_input else [])))
+    if reference_input:
+        output_names.append("tracking_error")
+        outputs.append(ca.vertcat(true_sigma, true_rate))
     return ca.Function("core", inputs, outputs, names, output_names)
 
 
@@ -329,6 +364,8 @@ def predictor_core_function(
     sensor: bool = False,
     limited: bool = True,
     torque_input: bool = False,
+    reference_input: bool = False,
+    feedforward: bool = False,
 ) -> ca.Function:
     """One sample of the predictor loop (``design/predictor.md``, form (b)) (pure SX).
 
@@ -357,7 +394,16 @@ def predictor_core_function(
        u + w (``substeps`` RK4 substeps), the model copy with u alone by one RK4 step of J_m, and
        kept in the short set: z_{k+1} = short(RK4_m(z_k, u)). The controller does not know w: the
        copy never sees it, it enters the prediction only through the measurement y.
+
+    With ``reference_input`` the predictor tracks a reference (``design/tracking.md``): the inputs
+    ``reference`` (the row of t_k: the true error) and ``reference_error`` (the controller's row) as in
+    [`flight_core_function`][mrpctl.loop.flight_core_function]; step 4 acts on the tracking error of the
+    prediction, σ_B/R = short(σ̂ ⊕ σ_N/R) and ω_B/R = ω̂ − [B̂N] ω_R/N (continuity, then the shadow when
+    |σ_B/R| >= α), u_c = K [σ_B/R; ω_B/R/4] (+ with ``feedforward`` the terms of ω̂, [B̂N] and the model's
+    J_m), and the outputs end with ``record`` (10: 1, σ_B/R used, u_c, the true σ_B/R) and ``tracking_error``.
     """
+    if feedforward and not reference_input:
+        raise SpecificationError("feedforward: the feedforward terms need a reference (reference_input)")
     step = step_function(spacecraft, period, substeps, inertia=inertia)
     model_step = step_function(spacecraft, period, 1, inertia=model_inertia)
     x = ca.SX.sym("x", STATE_SIZE)
@@ -382,10 +428,26 @@ def predictor_core_function(
     measured = measurement_function()(x_meas, noise[0:3], noise[3:6], flight[7:10])[0] if sensor else x_meas
     z = memory[FLIGHT_MEMORY_SIZE:PREDICTOR_MEMORY_SIZE]
     y, z_old = (x_delayed[0:STATE_SIZE], x_delayed[STATE_SIZE:]) if d > 0 else (measured, z)
-    x_hat, switched = prediction_expr(y, z_old, z, memory[2:5], parameters[0], tau)
+    reference = ca.SX.sym("reference", REFERENCE_WIDTH)  # at t_k
+    reference_error = ca.SX.sym("reference_error", REFERENCE_WIDTH)  # the controller's row
+    if reference_input:
+        x_hat, switched, predicted, omega_r_body, scale = _prediction_tracking_expr(
+            y, z_old, z, memory[2:5], parameters[0], tau, reference_error
+        )
+    else:
+        x_hat, switched = prediction_expr(y, z_old, z, memory[2:5], parameters[0], tau)
     sigma_hat = x_hat[0:3]
 
     command = gain @ x_hat
+    if feedforward:
+        command = command + feedforward_expr(
+            model_j if model_inertia is InertiaInput.FULL else ca.diag(model_j),
+            4 * predicted[3:6],
+            predicted[0:3],
+            omega_r_body,
+            reference_error[6:9],
+            scale,
+        )
     if limited:
         u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
     else:
@@ -411,13 +473,39 @@ def predictor_core_function(
     if torque_input:
         inputs.append(torque)
         names.append("torque")
-    return ca.Function(
-        "core",
-        inputs,
-        [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)],
-        names,
-        ["x_next", "memory_next", "x_meas", "u", "switched", "ring"],
+    outputs = [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)]
+    output_names = ["x_next", "memory_next", "x_meas", "u", "switched", "ring"]
+    if reference_input:
+        inputs += [reference, reference_error]
+        names += ["reference", "reference_error"]
+        true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
+        outputs += [ca.vertcat(1.0, sigma_hat, command, true_sigma), ca.vertcat(true_sigma, true_rate)]
+        output_names += ["record", "tracking_error"]
+    return ca.Function("core", inputs, outputs, names, output_names)
+
+
+def _prediction_tracking_expr(
+    y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any, row: Any
+) -> tuple[Any, Any, Any, Any, Any]:
+    """[`prediction_expr`][mrpctl.loop.prediction_expr] on the tracking error: (x̂ = [σ_B/R; ω_B/R/4], switched,
+    the prediction [σ̂_B/N; ω̂/4], [B̂N] ω_R/N, the rotation scale) against the reference ``row`` (9)."""
+    q_y = quaternion_from_mrp_expr(y[0:3])
+    q_old = quaternion_from_mrp_expr(z_old[0:3])
+    q_z = quaternion_from_mrp_expr(z[0:3])
+    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
+    delta_omega = 4 * (y[3:6] - z_old[3:6])
+    q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
+    predicted = ca.vertcat(_short_mrp_from_quaternion(q_hat), z[3:6] + (y[3:6] - z_old[3:6]))
+    sigma, rate, omega_r_body, scale = tracking_error_expr(predicted[0:3], predicted[3:6], row[0:3], row[3:6])
+    shadow = _safe_shadow(sigma)
+    nearer = ca.logic_and(
+        ca.dot(sigma, sigma) > _CONTINUITY_FLOOR,
+        ca.norm_2(shadow - previous) < ca.norm_2(sigma - previous),
     )
+    sigma = ca.if_else(nearer, shadow, sigma)
+    switched = ca.if_else(ca.dot(sigma, sigma) >= alpha * alpha, 1.0, 0.0)
+    sigma = ca.if_else(switched, _safe_shadow(sigma), sigma)
+    return ca.vertcat(sigma, rate), switched, predicted, omega_r_body, scale
 
 
 def prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:
@@ -495,7 +583,9 @@ def flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
     max(d, 1) samples of the flight ``sample`` (a ``mapaccum``); ``history`` holds the
     measurements m_{k−d}, …, m_{k−1} (the previous chunk's ``measurements``), ``noise`` one
     column (θ_k; η_k) per sample, ``states`` the bookkept true states x_k; ``torque`` (when
-    ``sample`` has it: a per-sample disturbance) one column w_k (N m) per sample.
+    ``sample`` has it: a per-sample disturbance) one column w_k (N m) per sample; ``reference`` and
+    ``reference_error`` (a tracking sample) one column (9) per sample each, and a last output ``tracking_error``
+    (6 per sample).
     """
     length = max(d, 1)
     accumulated = sample.mapaccum("chunk_samples", length, 2)
@@ -507,11 +597,17 @@ def flight_chunk_function(sample: ca.Function, d: int) -> ca.Function:
     if "torque" in sample.name_in():
         inputs.append(ca.MX.sym("torque", INPUT_SIZE, length))
         names.append("torque")
-    xs, memories, states, u, switched, measurements = accumulated(*inputs)
+    for name in ("reference", "reference_error"):  # a tracking sample: one reference row per sample
+        if name in sample.name_in():
+            inputs.append(ca.MX.sym(name, REFERENCE_WIDTH, length))
+            names.append(name)
+    outs = accumulated(*inputs)
+    xs, memories, states, u, switched, measurements = outs[0:6]
+    tracking = ["tracking_error"] if "tracking_error" in sample.name_out() else []
     return ca.Function(
         "chunk",
         inputs,
-        [xs[:, length - 1], memories[:, length - 1], states, measurements, u, switched],
+        [xs[:, length - 1], memories[:, length - 1], states, measurements, u, switched, *outs[6 : 6 + len(tracking)]],
         names,
-        ["x_end", "memory_end", "states", "measurements", "u", "switched"],
+        ["x_end", "memory_end", "states", "measurements", "u", "switched", *tracking],
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import math
@@ -19,7 +20,7 @@ from mrpctl._validation import available_memory, finite_array, integer, positive
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.engines.common import RunOutput
 from mrpctl.engines.lanes import DEFAULT_WIDTH
-from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples, wheel_engine
+from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples, tracking_memory, wheel_engine
 from mrpctl.engines.stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import (
@@ -32,6 +33,7 @@ from mrpctl.flight import (
     Saturation,
     SensorModel,
 )
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime, ReferenceStream
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.loop.options import (
     NO_FLIGHT_OPTIONS,
@@ -49,6 +51,7 @@ from mrpctl.loop.wheels import wheel_memory
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._guards import check_step_rotation
+from mrpctl.simulation._tracking import tracking_options
 from mrpctl.simulation._wheels import (
     check_wheel_run,
     progress_stop,
@@ -258,6 +261,36 @@ def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: 
     return flight_structure(options, sensor)
 
 
+def _tracked_by_run(
+    reference: Any,
+    error_time: Any,
+    feedforward: Any,
+    pointing_tolerance: Any,
+    rules: Sequence[SwitchingRule],
+    checked: Any,
+    n: int,
+    rate: float,
+    samples_by_run: Sequence[int],
+) -> list[ReferenceStream | None]:
+    """simulate_batch's reference of each run (None: regulation), checked once per (reference, delay)."""
+    runs = len(rules)
+    per_run = isinstance(reference, list | tuple)
+    if per_run:
+        _broadcast("reference", len(reference), runs)
+    items = (list(reference) * (runs if len(reference) == 1 else 1)) if per_run else [reference] * runs
+    made: dict[tuple[int, int], ReferenceStream | None] = {}
+    out: list[ReferenceStream | None] = []
+    for i in range(runs):
+        key = (id(items[i]), samples_by_run[i])
+        if key not in made:
+            made[key] = tracking_options(
+                items[i], error_time, feedforward, pointing_tolerance, rule=rules[i], predictor=checked, n=n,
+                rate=rate, d=samples_by_run[i], name=f"reference[{i}]" if per_run else "reference",
+            )[0]  # fmt: skip
+        out.append(made[key])
+    return out
+
+
 # ======================================================================= simulate
 def simulate(
     spacecraft: Spacecraft,
@@ -279,6 +312,10 @@ def simulate(
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
     wheels: WheelCluster | None = None,
+    reference: Any = None,
+    error_time: ErrorTime | None = None,
+    feedforward: bool = False,
+    pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -351,6 +388,23 @@ def simulate(
         included). With ``rule=Hysteretic(...)`` only, without ``actuator`` and ``predictor``; takes
         ``disturbance``, ``sensor`` and ``delay``; needs a C compiler. The result's ``wheels``
         ([`WheelRecord`][mrpctl.simulation.results.WheelRecord]) has the wheel speeds and metrics.
+    reference : array_like (n, 9) or object with ``samples(t)``, keyword-only
+        Track a reference (``design/tracking.md``; ``rule=Hysteretic(...)`` or the predictor, compiled engine): one row
+        (σ_R/N, ω_R/N, ω̇_R/N) per sample t_k = k/rate (ω in rad/s and ω̇ in rad/s², inertial components), at least
+        n rows, or an object whose ``samples(t)`` returns the (len(t), 9) rows of the sample times (evaluated
+        slice by slice). The controller forms σ_B/R and ω_B/R from the delayed measurement, its rule acts on
+        σ_B/R, and u_c = K [σ_c; ω_B/R/4]. The result's ``sigma``, ``omega`` stay the plant's σ_B/N, ω_B/N; its
+        ``settling_time`` and ``max_sigma`` are those of the true error σ_B/R, ω_B/R; ``pointing_error`` (deg),
+        ``pointing_max``, ``pointing_rms`` and ``slew_time`` report the pointing. None (default): regulation.
+    error_time : mrpctl.flight.tracking.ErrorTime, keyword-only
+        Which reference the delayed measurement is compared with: ``MEASUREMENT``, the one of its own time
+        t_{k−d}, or ``CURRENT``, the one of t_k; default (None) ``MEASUREMENT``, and ``CURRENT`` with a predictor
+        (whose prediction is of t_k: its tracking error is formed from x̂ and the reference of t_k, and the
+        rule ``OnPredicted(alpha)`` acts on that σ_B/R).
+    feedforward : bool, keyword-only
+        Add ω̃ × (J ω̃) + J([B̃N] ω̇_R − ω̃ × [B̃N] ω_R) to u_c (ω̃ the delayed measured rate); default False.
+    pointing_tolerance : float, keyword-only
+        The slew time's tolerance on Φ_B/R (degrees, > 0), default 0.1.
 
     Returns
     -------
@@ -369,6 +423,11 @@ def simulate(
     rule = check_rule(rule)
     if wheels is not None:
         wheels = check_wheel_run(wheels, spacecraft, rule, actuator=actuator, predictor=predictor)
+        if reference is not None:
+            raise SpecificationError(
+                "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
+                "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
+            )
     d = delay_samples(tau, rate)
     rate = float(rate)
     t_final, n = _samples(t_final, rate)
@@ -378,6 +437,9 @@ def simulate(
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
     checked = check_predictor(predictor, rule, history, delay)
+    tracked, feedforward, pointing_tolerance = tracking_options(
+        reference, error_time, feedforward, pointing_tolerance, rule=rule, predictor=checked, n=n, rate=rate, d=d
+    )
     if checked is None:
         options, saturation = flight_options(rule, actuator, disturbance, sensor)
         varying = varying_delay(rule, delay, d, rate, n)
@@ -388,7 +450,7 @@ def simulate(
         options, varying = predictor_constants(options, float(tau), checked.model), None
         streamed = None if disturbance is None or disturbance.constant else disturbance
     width = 1 if checked is None else 2
-    records = checked is None and isinstance(rule, Hysteretic)
+    records = (checked is None and isinstance(rule, Hysteretic)) or tracked is not None
     _check_memory(
         run_bytes(n, keep, flight=records)
         + workspace_bytes(n, d, substeps, width)
@@ -436,7 +498,10 @@ def simulate(
         predictor=None if checked is None else checked.model,
         **_structure(checked, options, sensor, actuator),
         **({} if streamed is None else {"torque_input": True}),
+        **({} if tracked is None else {"reference_input": True, "feedforward": feedforward}),
     )
+    if tracked is not None and not found.compiled_code:
+        raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
     if streamed is not None and not found.compiled_code:
         raise CodegenError(
             "disturbance: a per-sample torque needs the compiled engine (install a C compiler: gcc or cc, or set CC)"
@@ -465,6 +530,7 @@ def simulate(
         delay=varying,
         rate=rate,
         **({} if streamed is None else {"disturbance": streamed}),
+        **({} if tracked is None else {"reference": tracked}),
     )
     common = dict(
         spacecraft=spacecraft,
@@ -479,7 +545,12 @@ def simulate(
         x0=readonly(x0),
         predictor=checked,
     )
-    return assemble_run(output, n=n, keep_every=keep, common=common)
+    if tracked is None:
+        return assemble_run(output, n=n, keep_every=keep, common=common)
+    common.update(error_time=tracked.error_time, feedforward=feedforward)
+    result = assemble_run(output, n=n, keep_every=keep, common=common, pointing_tolerance=pointing_tolerance)
+    # the predictor's records carry no logic variable h (its rule switches on the prediction)
+    return result if checked is None else dataclasses.replace(result, logic=None, delay_used=None)
 
 
 def _common(
@@ -545,6 +616,10 @@ def simulate_batch(
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
     wheels: WheelCluster | None = None,
+    reference: Any = None,
+    error_time: ErrorTime | None = None,
+    feedforward: bool = False,
+    pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -616,6 +691,17 @@ def simulate_batch(
         Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
         no ``actuator``, no ``predictor``): the runs take the scalar engine on the thread pool, and the result's
         ``wheels`` holds each run's wheel metrics (and, with ``trajectories``, its wheel speeds and torques).
+    reference : keyword-only
+        Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
+        [`Hysteretic`][mrpctl.flight.Hysteretic]): one reference shared by the runs (an (n, 9) array, read
+        through views, or an object with ``samples(t)``), or a list of N of them, one per run. Metrics-only runs
+        take the lane engine: a shared reference's rows streamed beside the noise and a shared torque,
+        per-run references (or a shared one beside per-run torques) a per-lane stream of each run's rows; each
+        run equals [`simulate`][mrpctl.simulation.simulate] with its reference bit for bit. The batch's
+        ``settling_time`` and ``max_sigma`` are then those of the true error σ_B/R, ω_B/R; the pointing metrics
+        are in ``runs`` (``trajectories=True``).
+    error_time, feedforward, pointing_tolerance : keyword-only
+        As in [`simulate`][mrpctl.simulation.simulate], shared by the runs.
 
     Returns
     -------
@@ -659,6 +745,11 @@ def simulate_batch(
     if wheels is not None:
         for pair in {(id(c), id(r)): (c, r) for c, r in zip(crafts, rules, strict=True)}.values():
             wheels = check_wheel_run(wheels, pair[0], pair[1], actuator=actuator, predictor=predictor)
+        if reference is not None:
+            raise SpecificationError(
+                "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
+                "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
+            )
     rate = positive_scalar("rate", rate)
     t_final, n = _samples(t_final, rate)
     substeps = check_substeps(substeps)
@@ -678,7 +769,9 @@ def simulate_batch(
     histories = [_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
     workers = min(threads, n_runs)
     width = 1 if predictor is None else 2
-    records = trajectories and predictor is None and any(isinstance(one, Hysteretic) for one in rules)
+    records = trajectories and (
+        reference is not None or (predictor is None and any(isinstance(one, Hysteretic) for one in rules))
+    )
     estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width)
     estimate += n_runs * _batch_run_bytes(n, keep, trajectories, records=records)
     if not trajectories and _LANES:
@@ -689,6 +782,10 @@ def simulate_batch(
     checked = None
     for one in rules:
         checked = check_predictor(predictor, one, history, delay)
+    tracked_by_run = _tracked_by_run(
+        reference, error_time, feedforward, pointing_tolerance, rules, checked, n, rate, samples_by_run
+    )
+    feedforward = feedforward is True
     per_run = _per_run_disturbances(disturbance, n_runs, n)
     shared = per_run is None
     hint = _SHARED_HINT if shared and isinstance(disturbance, list | tuple) else ""
@@ -748,6 +845,8 @@ def simulate_batch(
     flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
     wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
+    if reference is not None and find_compiler() is None:
+        raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
     if not trajectories and _LANES and checked is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
@@ -767,6 +866,7 @@ def simulate_batch(
             flight=(options_by_run, saturation, sensor, varying),
             torques=(streamed_by_run, shared),
             wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
+            tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -774,7 +874,8 @@ def simulate_batch(
     for i in scalar_runs:
         structure = _structure(checked, options_by_run[i], sensor, actuator)
         torque_input = streamed_by_run[i] is not None
-        key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input)
+        tracking = tracked_by_run[i] is not None
+        key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input, tracking)
         if key not in by_structure and wheels is not None:
             by_structure[key] = wheel_engine(
                 crafts[i],
@@ -798,6 +899,7 @@ def simulate_batch(
                 predictor=None if checked is None else checked.model,
                 **structure,
                 **({"torque_input": True} if torque_input else {}),
+                **({} if tracked_by_run[i] is None else {"reference_input": True, "feedforward": feedforward}),
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
@@ -842,6 +944,7 @@ def simulate_batch(
                 delay=varying[i],
                 rate=rate,
                 **({} if streamed_by_run[i] is None else {"disturbance": streamed_by_run[i]}),
+                **({} if tracked_by_run[i] is None else {"reference": tracked_by_run[i]}),
             )
             previous += n
             done_samples[slot] = previous
@@ -865,6 +968,7 @@ def simulate_batch(
         runs = []
         for i, output in enumerate(outputs):
             assert output is not None
+            stream = tracked_by_run[i]
             runs.append(
                 assemble_run(
                     output,
@@ -882,9 +986,13 @@ def simulate_batch(
                         t_final=t_final,
                         x0=readonly(states[i]),
                         predictor=checked,
+                        **({} if stream is None else {"error_time": stream.error_time, "feedforward": feedforward}),
                     ),
+                    pointing_tolerance=None if stream is None else float(pointing_tolerance),
                 )
             )
+            if stream is not None and checked is not None:  # as simulate: the predictor's records have no h
+                runs[-1] = dataclasses.replace(runs[-1], logic=None, delay_used=None)
     wheel_records = None
     if wheels is not None:
         cluster = wheels
@@ -943,6 +1051,7 @@ def _run_lanes(
     flight: tuple[list[np.ndarray | None], Saturation, SensorModel | None, list[DelayModel | None]],
     torques: tuple[list[Disturbance | None], bool],
     wheels: tuple[WheelCluster, np.ndarray] | None = None,
+    tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -952,9 +1061,15 @@ def _run_lanes(
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
     streamed beside the noise; else each lane is streamed its run's rows). Returns the runs left
     to the scalar engine (a rule without lane form). ``wheels``: every run on this wheel cluster
-    (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it."""
+    (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it.
+    ``tracking``: each run's reference, the feedforward and
+    whether the references are per run (then, or beside per-run torques, each lane is streamed its own rows;
+    a shared one is streamed beside the noise)."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
+    tracked_by_run, feedforward, per_run_reference = (
+        ([None] * len(crafts), False, False) if tracking is None else tracking
+    )
 
     groups: dict[Any, list[int]] = {}
     keys: dict[tuple[int, int, int, bool], Any] = {}  # objects alive during the call: id() is safe
@@ -968,6 +1083,8 @@ def _run_lanes(
             key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d, own_torque)
             if wheels is not None:  # J is a constant of a wheel library
                 key += (crafts[i].inertia.tobytes(),)
+            if tracked_by_run[i] is not None:  # a shared reference: the group's; per run: one per lane
+                key += (None if per_run_reference or own_torque else id(tracked_by_run[i]),)
         groups.setdefault(key, []).append(i)
     packs: list[tuple[list[int], lane_engines.LaneBatches]] = []
     step = slice_samples(substeps)
@@ -977,6 +1094,10 @@ def _run_lanes(
         is_flight = isinstance(rules[first], Hysteretic)
         own_torque = is_flight and streamed_by_run[first] is not None and not shared
         torque: Any = streamed_by_run[first] if is_flight else None
+        reference: Any = tracked_by_run[first] if is_flight else None
+        own_reference = reference is not None and (per_run_reference or own_torque)
+        if own_reference:
+            reference = [tracked_by_run[i] for i in members]
         if own_torque:
             torque = [streamed_by_run[i] for i in members]
         options = _lane_options(options_by_run, members) if is_flight else None
@@ -1006,6 +1127,15 @@ def _run_lanes(
                     torque_input=torque is not None,
                     torque_per_lane=own_torque,
                     **structure,
+                    **(
+                        {}
+                        if reference is None
+                        else {
+                            "reference_input": True,
+                            "feedforward": feedforward,
+                            "reference_per_lane": own_reference,
+                        }
+                    ),
                 )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
@@ -1019,6 +1149,10 @@ def _run_lanes(
             memory0 = np.array([wheel_memory(flight_memory(states[i], histories[i][0], d), wheels[0]) for i in members])
         elif is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
             memory0 = np.array([flight_memory(states[i], histories[i][0], d) for i in members])
+            if reference is not None:  # the controller's previous MRP is the error σ_B/R it sees at k = 0
+                streams = reference if own_reference else [reference] * len(members)
+                sigmas = [tracking_memory(row[2:5], stream) for row, stream in zip(memory0, streams, strict=True)]
+                memory0[:, 2:5] = sigmas
         else:
             memory0 = np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float)
         packs.append(
@@ -1040,6 +1174,7 @@ def _run_lanes(
                     delay=varying[first] if is_flight else None,
                     rate=rate,
                     disturbance=torque,
+                    **({} if reference is None else {"reference": reference}),
                 ),
             )
         )

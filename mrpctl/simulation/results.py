@@ -15,6 +15,7 @@ from mrpctl.engines.common import RunOutput
 from mrpctl.engines.stats import DIVERGENCE_BOUND, Metrics
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE
+from mrpctl.flight.tracking import pointing_metrics
 from mrpctl.loop import PREDICTOR_MEMORY_SIZE
 from mrpctl.rules import RULE_NAMES
 from mrpctl.spacecraft import Spacecraft
@@ -159,6 +160,18 @@ class SimulationResult(_Conversions):
         A run on a reaction-wheel cluster (``simulate(..., wheels=...)``): the wheel speeds, motor
         torques and wheel metrics; ``u`` is then the body torque of the motors −Gs u_s and
         ``saturated_fraction`` the fraction of samples with a wheel at its torque limit. None otherwise.
+    error_time, feedforward : ErrorTime or None, bool or None
+        A tracking run's (``reference=``) error convention and feedforward; None for regulation.
+    pointing_error : numpy.ndarray or None
+        Tracking, trajectories kept: (m,) the true pointing error Φ_B/R = 4 atan|σ_B/R(t_k)| (deg) at each
+        kept sample; None otherwise.
+    pointing_max, pointing_rms : float or None
+        Tracking: the max and the RMS of Φ_B/R (deg) over the kept samples from ``settling_time`` on (the
+        settling of the true error σ_B/R, ω_B/R); None when the run did not settle or nothing was kept.
+    slew_time : float or None
+        Tracking: the first kept t_k from which Φ_B/R < ``pointing_tolerance`` to the end; None if never.
+    pointing_tolerance : float or None
+        Tracking: the slew time's tolerance (deg).
     spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
         The inputs of the run.
     """
@@ -197,6 +210,13 @@ class SimulationResult(_Conversions):
     delay_used: np.ndarray | None = field(default=None, repr=False)
     command: np.ndarray | None = field(default=None, repr=False)
     wheels: WheelRecord | None = field(default=None, repr=False)
+    error_time: Any = None
+    feedforward: bool | None = None
+    pointing_error: np.ndarray | None = field(default=None, repr=False)
+    pointing_max: float | None = None
+    pointing_rms: float | None = None
+    slew_time: float | None = None
+    pointing_tolerance: float | None = None
 
     @property
     def converged(self) -> bool:
@@ -256,8 +276,16 @@ class SimulationResult(_Conversions):
         )
 
 
-def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: dict[str, Any]) -> SimulationResult:
-    """The one place a [`SimulationResult`][mrpctl.SimulationResult] is built from what an engine returned."""
+def assemble_run(
+    output: RunOutput,
+    *,
+    n: int,
+    keep_every: int | None,
+    common: dict[str, Any],
+    pointing_tolerance: float | None = None,
+) -> SimulationResult:
+    """The one place a [`SimulationResult`][mrpctl.SimulationResult] is built from what an engine returned
+    (``pointing_tolerance``: a tracking run's, whose records end with the true σ_B/R)."""
     rate = common["rate"]
     metrics = Metrics.from_stats(output.stats)
     valid = metrics.valid_samples(n)
@@ -287,6 +315,10 @@ def assemble_run(output: RunOutput, *, n: int, keep_every: int | None, common: d
         flight["sigma_c"] = readonly(output.records[:rows, 1:4])
         flight["command"] = readonly(output.records[:rows, 4:7])
         flight["delay_used"] = readonly(output.delay_used[:rows], np.int64)
+        if pointing_tolerance is not None:
+            pointing = pointing_metrics(output.records[:rows, 7:10], t, settling, pointing_tolerance)
+            pointing["pointing_error"] = readonly(pointing["pointing_error"])
+            flight.update(pointing)
     return SimulationResult(
         t=sealed(t),
         sigma=sealed(measurements[:, 0:3]),
