@@ -31,6 +31,7 @@ __all__ = [
     "inertia_mismatch_margin",
     "lifted_spectral_radius",
     "margin_side",
+    "margin_side_bracket",
     "perturbed_spacecraft",
     "predictor_loop_matrices",
     "predictor_stability",
@@ -681,6 +682,17 @@ def margin_side(stable: Callable[[float], bool], sign: float, end: float, rtol: 
     """Scan |e| geometrically from 1e-3 to ``end``; bisect the first [stable, unstable] pair to ``rtol``."""
     good, _, capped = _side_bracket(stable, sign, end, rtol)
     return good, capped
+
+
+def margin_side_bracket(
+    stable: Callable[[float], bool], sign: float, end: float, rtol: float
+) -> tuple[float, float, bool]:
+    """[`margin_side`][mrpctl.predictor.analysis.margin_side] with its bracket: (stable, not shown stable, capped).
+
+    The stability boundary lies between the two signed e (relative width ``rtol``); both are ``sign * end``
+    when capped (stable up to the search limit).
+    """
+    return _side_bracket(stable, sign, end, rtol)
 
 
 def inertia_mismatch_margin(
