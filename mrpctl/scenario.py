@@ -883,11 +883,14 @@ omega = [0.3, 0.0, 0.0]  # body rates (rad/s)
 
 [rule]
 # Shadow-set switching: "none", "on-current" (|sigma(t)| >= 1), "on-delayed" (|sigma(t - tau)| >= 1),
-# "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1), or the
-# controller-side set selection of the loop as flown, "hysteretic" (delta in [0, 1) or alpha >= 1),
-# or "on-predicted" (the predictor controller; alpha >= 1, inf: never switch; needs a [predictor]
-# table: empty for the exact model, inertia = [...] or inertia_error = e; see predictor-paper).
-type = "delay-aware"
+# "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1; not sound in general:
+# it fails to settle on fast tumbles, design/flight.md), the controller-side set selection of the loop as
+# flown, "hysteretic" (delta in [0, 1) or alpha >= 1), or "on-predicted" (the predictor controller;
+# alpha >= 1, inf: never switch; needs a [predictor] table: empty for the exact model, inertia = [...] or
+# inertia_error = e; see predictor-paper). The default here is the command line's: hysteresis delta = 0.1
+# (|sigma_c| <= alpha = 1.106), in the band delta 0.05-0.18 recommended for attitude noise up to 0.01 rad.
+type = "hysteretic"
+delta = 0.1
 
 # The loop as flown (only with type = "hysteretic"; see `mrpctl simulate flight-paper`), all optional:
 # [actuator]     u_max = 20.0 (N m, scalar or 3 values), u_norm = 30.0 (N m), saturation = "scale" or "clip"

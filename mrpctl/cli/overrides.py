@@ -19,6 +19,7 @@ from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hys
 from mrpctl.model import state
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.reproduction import paper_scenarios
+from mrpctl.rules import DEFAULT_DELTA, DEFAULT_RULE
 from mrpctl.scenario import (
     Scenario,
     delay_sequence,
@@ -83,9 +84,17 @@ def plant_given(args: argparse.Namespace) -> list[str]:
 
 
 def paper_base() -> Scenario:
-    """The paper's example with mrpctl's delay-aware rule: the base of ``simulate`` and ``sweep`` without a file."""
+    """The paper's example with the default rule: the base of ``simulate`` and ``sweep`` without a file.
 
-    return paper_scenarios()["delay_aware"]
+    The rule is the controller-side hysteresis [`DEFAULT_RULE`][mrpctl.rules.DEFAULT_RULE].
+    """
+
+    return replace(
+        paper_scenarios()["delay_aware"],
+        name="paper-hysteretic",
+        description=f"the paper's example, controller-side hysteresis (delta = {DEFAULT_DELTA:g})",
+        rule=DEFAULT_RULE,
+    )
 
 
 def scenario_from_args(args: argparse.Namespace, *, file: Path | str | None) -> Scenario:

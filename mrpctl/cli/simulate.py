@@ -32,6 +32,7 @@ from mrpctl.cli.overrides import apply_flight_options, apply_overrides, paper_ba
 from mrpctl.design import linearized_loop
 from mrpctl.errors import SpecificationError
 from mrpctl.predictor import OnPredicted
+from mrpctl.rules import DEFAULT_DELTA
 from mrpctl.scenario import Scenario, load_scenario, rule_name, shipped_scenarios, tumbling_states
 from mrpctl.simulation import BatchResult, SimulationResult, simulate_batch
 from mrpctl.switching import BoundaryLayer
@@ -133,7 +134,7 @@ def add_simulate(commands: Any) -> None:
         help="simulate a scenario file, or a run given by options",
         description=(
             "Simulate one closed-loop run: a scenario file, a shipped scenario by name "
-            f"({names}), or without a file the paper's example (delay-aware rule) changed by "
+            f"({names}), or without a file the paper's example (rule hysteretic, delta = {DEFAULT_DELTA:g}) changed by "
             "--inertia, --K/--k-sigma/--k-omega, --sigma/--omega and the run options."
         ),
         formatter_class=Formatter,
@@ -340,7 +341,11 @@ def add_sweep(commands: Any) -> None:
     )
     parser.add_argument("parameter", choices=("eps", "tau", "tumble"), help="what to sweep")
     parser.add_argument(
-        "--scenario", help="base scenario TOML or shipped name (default: the paper's example, delay-aware rule)"
+        "--scenario",
+        help=(
+            "base scenario TOML or shipped name "
+            f"(default: the paper's example, rule hysteretic, delta = {DEFAULT_DELTA:g})"
+        ),
     )
     parser.add_argument("--values", type=float, nargs="+", help="values of eps or tau (eps default: 0.001 ... 0.2)")
     parser.add_argument("--count", type=int, help="tumble: number of initial states (default 50)")
