@@ -25,7 +25,7 @@ from mrpctl.loop import delay_samples
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
-from mrpctl.simulation import SimulationResult, simulate
+from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationResult, settling_tolerances, simulate
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
 
@@ -46,7 +46,17 @@ __all__ = [
 ]
 
 #: The names a scenario file or the command line may give a switching rule.
-_TOP_KEYS = {"name", "description", "t_final", "tau", "rate", "history", "substeps"}
+_TOP_KEYS = {
+    "name",
+    "description",
+    "t_final",
+    "tau",
+    "rate",
+    "history",
+    "substeps",
+    "settling_attitude_deg",
+    "settling_rate",
+}
 _TABLES = {"spacecraft", "gains", "initial", "rule"}
 #: The predictor controller's table (``[rule] type = "on-predicted"`` only, and then required).
 _PREDICTOR_TABLE = "predictor"
@@ -141,6 +151,11 @@ class Scenario:
     uncertainty : InertiaUncertainty or None
         The inertia box ``mrpctl verify`` certifies the gain over (``[uncertainty]``, any rule); not
         used by the simulation. None: the nominal inertia only.
+    settling_attitude : float
+        Attitude tolerance of the settling time (principal angle, deg; file key ``settling_attitude_deg``),
+        default 4 atan(1e-2) = 2.2918° (|σ| < 1e-2).
+    settling_rate : float
+        Rate tolerance of the settling time (rad/s; file key ``settling_rate``), default 1e-3.
     """
 
     name: str
@@ -160,6 +175,8 @@ class Scenario:
     delay: DelayModel | None = None
     predictor: Predictor | None = None
     uncertainty: InertiaUncertainty | None = None
+    settling_attitude: float = SETTLING_ATTITUDE_DEG
+    settling_rate: float = SETTLING_OMEGA
 
     @property
     def flight_options(self) -> dict[str, Any]:
@@ -195,6 +212,8 @@ class Scenario:
             rate=self.rate,
             history=self.history,
             substeps=self.substeps,
+            settling_attitude=self.settling_attitude,
+            settling_rate=self.settling_rate,
             **self.run_options,
         )
 
@@ -628,6 +647,12 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     samples = sample_count(t_final, rate)
     flight = _flight_tables(data, rule, tau, rate, _Horizon(None if base is None else Path(base), samples))
     predictor = _predictor_table(data, rule, spacecraft, history)
+    try:
+        settle_attitude, settle_rate, _ = settling_tolerances(
+            data.get("settling_attitude_deg", SETTLING_ATTITUDE_DEG), data.get("settling_rate", SETTLING_OMEGA)
+        )
+    except SpecificationError as exc:
+        raise SpecificationError(f"{exc} (scenario keys settling_attitude_deg, settling_rate)") from exc
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
@@ -642,6 +667,8 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         description=str(data.get("description", "")),
         predictor=predictor,
         uncertainty=_uncertainty_table(data, spacecraft),
+        settling_attitude=settle_attitude,
+        settling_rate=settle_rate,
         **flight,
     )
 
@@ -758,6 +785,16 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
         f"t_final = {_toml_value(scenario.t_final)}     # horizon (s)",
         f"history = {_toml_value(scenario.history)}",
         f"substeps = {scenario.substeps}",
+        *(
+            [f"settling_attitude_deg = {_toml_value(scenario.settling_attitude)}  # settled: principal angle below"]
+            if scenario.settling_attitude != SETTLING_ATTITUDE_DEG
+            else []
+        ),
+        *(
+            [f"settling_rate = {_toml_value(scenario.settling_rate)}  # settled: |omega| below (rad/s)"]
+            if scenario.settling_rate != SETTLING_OMEGA
+            else []
+        ),
         "",
         "[spacecraft]",
         f"inertia = {_toml_value(inertia_value)}  # kg m^2",
@@ -859,6 +896,8 @@ rate = 1000.0      # measurement rate (Hz)
 t_final = 60.0     # horizon (s)
 history = "constant"  # measurements before t = 0: "constant" (= x0) or "zero-input"
 substeps = 1       # RK4 substeps per measurement period
+# settling_attitude_deg = 2.2918  # "settled": principal angle below this (deg; default 4 atan(0.01), |sigma| < 0.01)
+# settling_rate = 1e-3            # ... and |omega| below this (rad/s), from then to the end
 
 [spacecraft]
 # Principal inertias J = diag(J1, J2, J3), or a full symmetric 3x3 matrix (kg m^2).

@@ -31,6 +31,7 @@ from mrpctl.scenario import (
     samples_file,
     torque_rows,
 )
+from mrpctl.simulation import settling_tolerances
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = [
@@ -153,6 +154,15 @@ def apply_overrides(scenario: Scenario, args: argparse.Namespace) -> Scenario:
     substeps = getattr(args, "substeps", None)
     if substeps is not None:
         changes["substeps"] = integer("--substeps", substeps, minimum=1)
+    attitude, rate = getattr(args, "settling_attitude", None), getattr(args, "settling_rate", None)
+    if attitude is not None:
+        changes["settling_attitude"] = _option_value(
+            "--settling-attitude", lambda: settling_tolerances(attitude, scenario.settling_rate)[0]
+        )
+    if rate is not None:
+        changes["settling_rate"] = _option_value(
+            "--settling-rate", lambda: settling_tolerances(scenario.settling_attitude, rate)[1]
+        )
     return replace(scenario, **changes) if changes else scenario
 
 

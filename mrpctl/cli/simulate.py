@@ -66,6 +66,8 @@ def _result_summary(result: SimulationResult) -> dict[str, Any]:
         "sign_flips": result.sign_flips,
         "max_sigma": result.max_sigma,
         "settling_time": result.settling_time,
+        "settling_attitude_deg": result.settling_attitude,
+        "settling_rate": result.settling_rate,
         "converged": result.converged,
         "diverged": result.diverged,
         "final_sigma": result.sigma[-1],
@@ -246,6 +248,8 @@ def _sweep(args: argparse.Namespace) -> int:
                 rate=base.rate,
                 history=base.history,
                 substeps=base.substeps,
+                settling_attitude=base.settling_attitude,
+                settling_rate=base.settling_rate,
                 **base.flight_options,  # a flight scenario's models, shared by the runs
             )
             batches.append(batch)

@@ -15,12 +15,12 @@ from typing import Any
 import numpy as np
 
 from mrpctl._compile import find_compiler
-from mrpctl._validation import available_memory, finite_array, integer, positive_scalar, readonly
+from mrpctl._validation import available_memory, finite_array, finite_scalar, integer, positive_scalar, readonly
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.engines.common import RunOutput
 from mrpctl.engines.lanes import DEFAULT_WIDTH
 from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples
-from mrpctl.engines.stats import HISTORY_KINDS, STATS_SIZE
+from mrpctl.engines.stats import HISTORY_KINDS, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, STATS_SIZE, settling_bounds
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
@@ -268,6 +268,8 @@ def simulate(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    settling_attitude: float = SETTLING_ATTITUDE_DEG,
+    settling_rate: float = SETTLING_OMEGA,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -334,6 +336,12 @@ def simulate(
         needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
 
+    settling_attitude : float, keyword-only
+        Attitude tolerance of "settled": the principal angle Φ (deg) with |σ| = tan(Φ/4), in (0, 180];
+        default 4 atan(1e-2) = 2.2918° (|σ| < 1e-2).
+    settling_rate : float, keyword-only
+        Rate tolerance of "settled": |ω| below this (rad/s), > 0; default 1e-3. Both are run-time
+        constants of the compiled sample (no recompilation); the result records them.
     Returns
     -------
     SimulationResult
@@ -355,6 +363,7 @@ def simulate(
     substeps = check_substeps(substeps)
     check_step_rotation(x0, rate, substeps)
     keep = _keep_every(keep_every)
+    settle_attitude, settle_rate, settling = settling_tolerances(settling_attitude, settling_rate)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
     checked = check_predictor(predictor, rule, history, delay)
@@ -415,6 +424,7 @@ def simulate(
         delay=varying,
         rate=rate,
         **({} if streamed is None else {"disturbance": streamed}),
+        settling=settling,
     )
     common = dict(
         spacecraft=spacecraft,
@@ -428,8 +438,21 @@ def simulate(
         t_final=t_final,
         x0=readonly(x0),
         predictor=checked,
+        settling_attitude=settle_attitude,
+        settling_rate=settle_rate,
     )
     return assemble_run(output, n=n, keep_every=keep, common=common)
+
+
+def settling_tolerances(settling_attitude: Any, settling_rate: Any) -> tuple[float, float, tuple[float, float]]:
+    """(attitude (deg), rate (rad/s), their squared bounds (|σ|², |ω|²)): the checked settling tolerances."""
+    attitude = finite_scalar("settling_attitude", settling_attitude)
+    if not 0.0 < attitude <= 180.0:
+        raise SpecificationError(
+            f"settling_attitude (principal-angle tolerance, deg) must be in (0, 180], got {attitude}"
+        )
+    rate = positive_scalar("settling_rate", settling_rate)
+    return attitude, rate, settling_bounds(attitude, rate)
 
 
 # ======================================================================= batches
@@ -466,6 +489,8 @@ def simulate_batch(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    settling_attitude: float = SETTLING_ATTITUDE_DEG,
+    settling_rate: float = SETTLING_OMEGA,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -534,10 +559,17 @@ def simulate_batch(
         pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
         (shared or per run), each run streaming its own rows.
 
+    settling_attitude : float, keyword-only
+        Attitude tolerance of "settled": the principal angle Φ (deg) with |σ| = tan(Φ/4), in (0, 180];
+        default 4 atan(1e-2) = 2.2918° (|σ| < 1e-2).
+    settling_rate : float, keyword-only
+        Rate tolerance of "settled": |ω| below this (rad/s), > 0; default 1e-3. Both are run-time
+        constants of the compiled sample (no recompilation); the result records them.
     Returns
     -------
     BatchResult
     """
+    settle_attitude, settle_rate, settling = settling_tolerances(settling_attitude, settling_rate)
     crafts = (spacecraft,) if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
     if not crafts:
         raise SpecificationError("spacecraft: give a Spacecraft or a non-empty sequence of them")
@@ -679,6 +711,7 @@ def simulate_batch(
             progress=progress,
             flight=(options_by_run, saturation, sensor, varying),
             torques=(streamed_by_run, shared),
+            settling=settling,
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -742,6 +775,7 @@ def simulate_batch(
                 delay=varying[i],
                 rate=rate,
                 **({} if streamed_by_run[i] is None else {"disturbance": streamed_by_run[i]}),
+                settling=settling,
             )
             previous += n
             done_samples[slot] = previous
@@ -780,6 +814,8 @@ def simulate_batch(
                         t_final=t_final,
                         x0=readonly(states[i]),
                         predictor=checked,
+                        settling_attitude=settle_attitude,
+                        settling_rate=settle_rate,
                     ),
                 )
             )
@@ -798,6 +834,8 @@ def simulate_batch(
             t_final=t_final,
             substeps=substeps,
             history=history if isinstance(history, str) else readonly(history),
+            settling_attitude=settle_attitude,
+            settling_rate=settle_rate,
         ),
     )
 
@@ -830,6 +868,7 @@ def _run_lanes(
     progress: Callable[[int, int], Any] | None,
     flight: tuple[list[np.ndarray | None], Saturation, SensorModel | None, list[DelayModel | None]],
     torques: tuple[list[Disturbance | None], bool],
+    settling: tuple[float, float] | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -909,6 +948,7 @@ def _run_lanes(
                     delay=varying[first] if is_flight else None,
                     rate=rate,
                     disturbance=torque,
+                    settling=settling,
                 ),
             )
         )

@@ -12,7 +12,7 @@ import numpy as np
 
 from mrpctl._validation import readonly, sealed
 from mrpctl.engines.common import RunOutput
-from mrpctl.engines.stats import DIVERGENCE_BOUND, Metrics
+from mrpctl.engines.stats import DIVERGENCE_BOUND, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, Metrics
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE
 from mrpctl.loop import PREDICTOR_MEMORY_SIZE
@@ -89,8 +89,9 @@ class SimulationResult(_Conversions):
     peak_torque : float
         max_k |u_k|_∞ over every sample (N m).
     settling_time : float or None
-        First t_k from which |σ| < 1e-2 and |ω| < 1e-3 rad/s to the end; None if the run
-        does not settle (or diverged).
+        First t_k from which the run stays settled to the end: |σ| < tan(Φ_s/4) and |ω| < ω_s, the
+        tolerances ``settling_attitude`` Φ_s and ``settling_rate`` ω_s (default |σ| < 1e-2, |ω| < 1e-3 rad/s);
+        None if the run does not settle (or diverged).
     diverged : bool
         True when |σ| or |ω| exceeded 1e6 or stopped being finite; the run stopped there
         and the arrays end at the last good sample.
@@ -118,6 +119,10 @@ class SimulationResult(_Conversions):
     predictor : mrpctl.Predictor or None
         The predictor controller of the run (the flight-loop fields above are then reported too);
         None for the plain delayed law.
+    settling_attitude : float
+        The attitude tolerance of ``settling_time``: a principal angle (deg), default 4 atan(1e-2) = 2.2918°.
+    settling_rate : float
+        The rate tolerance of ``settling_time`` (rad/s), default 1e-3.
     spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
         The inputs of the run.
     """
@@ -155,10 +160,12 @@ class SimulationResult(_Conversions):
     sigma_c: np.ndarray | None = field(default=None, repr=False)
     delay_used: np.ndarray | None = field(default=None, repr=False)
     command: np.ndarray | None = field(default=None, repr=False)
+    settling_attitude: float = SETTLING_ATTITUDE_DEG
+    settling_rate: float = SETTLING_OMEGA
 
     @property
     def converged(self) -> bool:
-        """True when the run settled (|σ| < 1e-2, |ω| < 1e-3 rad/s) and stayed so to the end."""
+        """True when the run settled (within ``settling_attitude`` and ``settling_rate``) and stayed so to the end."""
         return self.settling_time is not None
 
     @property
@@ -313,7 +320,8 @@ class BatchResult(_Conversions):
     sign_flips : numpy.ndarray
         (N, 3) torque sign changes per axis.
     settling_time : numpy.ndarray
-        (N,) settling time (s), NaN when the run did not settle.
+        (N,) settling time (s), NaN when the run did not settle (tolerances ``settling_attitude``, deg, and
+        ``settling_rate``, rad/s, as in [`SimulationResult`][mrpctl.simulation.SimulationResult]).
     converged, diverged : numpy.ndarray
         (N,) booleans.
     max_sigma : numpy.ndarray
@@ -328,7 +336,7 @@ class BatchResult(_Conversions):
         (N m), before the actuator limits (NaN rows for runs of another rule); None otherwise.
     runs : tuple of SimulationResult or None
         The full runs when ``trajectories=True`` was asked for.
-    rate, t_final, substeps, history
+    rate, t_final, substeps, history, settling_attitude, settling_rate
         The shared inputs.
     """
 
@@ -353,13 +361,16 @@ class BatchResult(_Conversions):
     runs: tuple[SimulationResult, ...] | None = field(default=None, repr=False)
     saturated_fraction: np.ndarray | None = field(default=None, repr=False)
     peak_command: np.ndarray | None = field(default=None, repr=False)
+    settling_attitude: float = SETTLING_ATTITUDE_DEG
+    settling_rate: float = SETTLING_OMEGA
 
     def __len__(self) -> int:
         return len(self.switch_count)
 
     @classmethod
     def concatenate(cls, batches: Sequence[BatchResult]) -> BatchResult:
-        """One batch of the runs of ``batches`` in order (they must share rate, horizon, substeps and history).
+        """One batch of the runs of ``batches`` in order (they must share rate, horizon, substeps, history and the
+        settling tolerances).
 
         Raises
         ------
@@ -370,10 +381,12 @@ class BatchResult(_Conversions):
             raise SpecificationError("batches: give at least one BatchResult")
         first = batches[0]
         for other in batches[1:]:
-            same = (other.rate, other.t_final, other.substeps) == (first.rate, first.t_final, first.substeps)
+            shared = ("rate", "t_final", "substeps", "settling_attitude", "settling_rate")
+            same = all(getattr(other, name) == getattr(first, name) for name in shared)
             if not same or not _same_history(other.history, first.history):
                 raise SpecificationError(
-                    "batches: every batch must share rate, t_final, substeps and history to be concatenated"
+                    "batches: every batch must share rate, t_final, substeps, history and the settling tolerances "
+                    "to be concatenated"
                 )
         arrays = {
             name: readonly(np.concatenate([getattr(b, name) for b in batches]), getattr(first, name).dtype)
@@ -392,6 +405,8 @@ class BatchResult(_Conversions):
             **flight,
             **arrays,
             rules=tuple(rule for b in batches for rule in b.rules),
+            settling_attitude=first.settling_attitude,
+            settling_rate=first.settling_rate,
             rate=first.rate,
             t_final=first.t_final,
             substeps=first.substeps,
@@ -552,6 +567,10 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
         value = getattr(result, name)
         if value is not None:
             data[name] = (dims, np.asarray(value), attributes)
+    if (result.settling_attitude, result.settling_rate) != (SETTLING_ATTITUDE_DEG, SETTLING_OMEGA):
+        # the tolerances of settling_time, written when they are not the defaults
+        data["settling_attitude"] = ((), result.settling_attitude, {"units": "deg", "long_name": "settled below"})
+        data["settling_rate"] = ((), result.settling_rate, {"units": "rad/s", "long_name": "settled below"})
     attrs: dict[str, Any] = {
         **rule_fields(result.rule),
         "history": "array",
@@ -593,6 +612,8 @@ def _batch_dataset(result: BatchResult) -> xr.Dataset:
         "rate": float(result.rate),
         "t_final": float(result.t_final),
         "substeps": int(result.substeps),
+        "settling_attitude_deg": float(result.settling_attitude),
+        "settling_rate": float(result.settling_rate),
     }
     attrs["history"] = result.history if isinstance(result.history, str) else "array"
     coords = {"run": np.arange(n), "axis": AXES, "state": STATE}
