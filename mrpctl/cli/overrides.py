@@ -99,27 +99,26 @@ def paper_base() -> Scenario:
 
 
 def scenario_from_args(args: argparse.Namespace, *, file: Path | str | None) -> Scenario:
-    """A scenario file, or the paper's example, with the plant, gain and initial-state options applied."""
+    """A scenario file, or the paper's example, with the plant, gain and initial-state options applied.
+
+    The options override the file's values as every other option does (``--inertia`` the plant, not a
+    predictor's model; ``--sigma`` or ``--omega`` one half of the initial state, the other half kept).
+    """
     if file is not None:
-        given = plant_given(args) + [o for o, v in (("--sigma", args.sigma), ("--omega", args.omega)) if v is not None]
-        if given:
-            raise SpecificationError(
-                f"{given[0]} does not apply with a scenario file (the file gives the plant, gain and initial state); "
-                "edit the file or leave out the file"
-            )
-        return load_scenario(file)
-    base = paper_base()
-    changes: dict[str, Any] = {"name": "command_line", "description": "from command-line options"}
+        base = load_scenario(file)
+        changes: dict[str, Any] = {}
+    else:
+        base = paper_base()
+        changes = {"name": "command_line", "description": "from command-line options"}
+    sigma, omega = getattr(args, "sigma", None), getattr(args, "omega", None)
     if args.inertia is not None:
         changes["spacecraft"] = spacecraft_from(args.inertia)
     gain = gain_from_args(args)
     if gain is not None:
         changes["K"] = finite_array("--K", gain, (3, 6))
-    if args.sigma is not None or args.omega is not None:
-        sigma = base.x0[:3] if args.sigma is None else args.sigma
-        omega = 4.0 * base.x0[3:] if args.omega is None else args.omega
-        changes["x0"] = state(sigma, omega)
-    return replace(base, **changes)
+    if sigma is not None or omega is not None:
+        changes["x0"] = state(base.x0[:3] if sigma is None else sigma, 4.0 * base.x0[3:] if omega is None else omega)
+    return replace(base, **changes) if changes else base
 
 
 def _predictor_given(args: argparse.Namespace) -> list[str]:
