@@ -147,6 +147,10 @@ _OPTIONAL: dict[str, tuple[tuple[str, ...], str]] = {
     "sigma_c": (("time", "axis"), "f"),
     "delay_used": (("time",), "i"),
     "command": (("time", "axis"), "f"),
+    "sigma_measured": (("time", "axis"), "f"),
+    "omega_measured": (("time", "axis"), "f"),
+    "sigma_predicted": (("time", "axis"), "f"),
+    "omega_predicted": (("time", "axis"), "f"),
     "history": (("history_sample", "state"), "f"),
 }
 _KIND_NAMES = {"f": "floats", "i": "integers", "b": "flags", "s": "names"}

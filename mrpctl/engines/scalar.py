@@ -49,6 +49,7 @@ from mrpctl.engines.stats import (
     S_MAX_SIGMA,
     S_N,
     S_PEAK_TORQUE,
+    S_SET_CHANGES,
     S_SETTLE_OMEGA,
     S_SETTLE_SIGMA,
     S_UNSETTLED,
@@ -223,6 +224,8 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     sigma_squared = ca.dot(sigma, sigma)
     # the tolerances are run-time constants carried in the statistics (default SETTLING_SIGMA², SETTLING_OMEGA²)
     unsettled = ca.logic_or(sigma_squared >= stats[S_SETTLE_SIGMA], ca.dot(omega, omega) >= stats[S_SETTLE_OMEGA])
+    # the plant's σ replaced by its shadow at this sample (by the rule, or by the flight loop's bookkeeping)
+    set_changed = ca.logic_or(ca.logic_or(x_meas[0] != x[0], x_meas[1] != x[1]), x_meas[2] != x[2])
     u_prev = stats[S_UPREV]
     flips = stats[S_FLIPS] + ca.if_else(ca.logic_and(counted, u * u_prev < 0), 1.0, 0.0)
     # max |u_i| by comparisons: casadi_fmax is a libm call per use (no -ffinite-math-only)
@@ -244,6 +247,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
         ca.if_else(ca.logic_and(counted, torque > peak), torque, peak),  # max |u|_inf
         stats[S_SETTLE_SIGMA],
         stats[S_SETTLE_OMEGA],
+        stats[S_SET_CHANGES] + ca.if_else(ca.logic_and(counted, set_changed), 1.0, 0.0),
     )
     return ca.Function(
         name,
@@ -332,6 +336,7 @@ class Engine:
                 sensor=sensor,
                 limited=limited,
                 torque_input=self.torque_input,
+                records=True,
             )
         elif self.flight:
             core = flight_core_function(

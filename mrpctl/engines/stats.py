@@ -40,7 +40,10 @@ S_UPREV = slice(8, 11)
 S_UNSETTLED, S_MAX_SIGMA, S_DIVERGED, S_PEAK_TORQUE = 11, 12, 13, 14
 # The settling tolerances |σ|², |ω|² (run-time constants: the sample passes them on unchanged)
 S_SETTLE_SIGMA, S_SETTLE_OMEGA = 15, 16
-STATS_SIZE = 17
+# The changes of the plant's MRP set (the sample replaced σ_k by its shadow): the rule's switches for the
+# plant-side rules, the bookkeeping's for the flight loop and the predictor
+S_SET_CHANGES = 17
+STATS_SIZE = 18
 
 
 def settling_bounds(attitude_deg: float = SETTLING_ATTITUDE_DEG, rate: float = SETTLING_OMEGA) -> tuple[float, float]:
@@ -75,6 +78,7 @@ class Metrics:
     max_sigma: float
     diverged_index: int
     peak_torque: float
+    set_changes: int = 0
 
     @classmethod
     def from_stats(cls, stats: np.ndarray) -> Metrics:
@@ -87,6 +91,7 @@ class Metrics:
             max_sigma=math.sqrt(stats[S_MAX_SIGMA]),
             diverged_index=round(stats[S_DIVERGED]),
             peak_torque=float(stats[S_PEAK_TORQUE]),
+            set_changes=round(stats[S_SET_CHANGES]),
         )
 
     @property

@@ -185,8 +185,10 @@ def flight_core_function(
     (no noise, no bias: m_k = x_meas exactly), without ``limited`` for no actuator limit
     (u_max = u_norm = inf: u = u_c, the saturated count stays 0; u_max, u_norm unused), without
     ``disturbed`` for w = 0 (u + w = u; w unused). With ``records`` a last output ``record`` =
-    (h_{k+1}, σ_c,k, u_c,k) (the logic variable after the rule, the MRP the control law used, the
-    commanded torque before the actuator limits, N m): the result's per-sample records. With
+    (h_{k+1}, σ_c,k, u_c,k, σ̃_k, ω̃_k) (the logic variable after the rule, the MRP the control law used, the
+    commanded torque before the actuator limits, N m, and what the controller read: the short set of the
+    delayed measured attitude, after the noise, and the delayed measured rate, rad/s): the result's
+    per-sample records. With
     ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the sample (a
     per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
     ``noise_form`` ([`NoiseForm`][mrpctl.flight.NoiseForm]): with ``MRP`` the first half of ``noise`` is the
@@ -273,7 +275,7 @@ def flight_core_function(
     outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
     if records:
         output_names.append("record")
-        outputs.append(ca.vertcat(h_next, sigma_c, command))
+        outputs.append(ca.vertcat(h_next, sigma_c, command, sigma_seen, 4 * seen[3:6]))
     return ca.Function("core", inputs, outputs, names, output_names)
 
 
@@ -329,6 +331,7 @@ def predictor_core_function(
     sensor: bool = False,
     limited: bool = True,
     torque_input: bool = False,
+    records: bool = False,
 ) -> ca.Function:
     """One sample of the predictor loop (``design/predictor.md``, form (b)) (pure SX).
 
@@ -343,7 +346,10 @@ def predictor_core_function(
     actuator is left out of the expressions (u = u_c; u_max, u_norm unused), which saves its
     libm calls. With ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the
     sample (a per-sample disturbance streamed by the engine; the constant w in ``flight`` is then
-    unused); like the constant w it acts on the plant only. At sample k:
+    unused); like the constant w it acts on the plant only. With ``records`` a last output ``record`` =
+    (σ_y, ω_y, σ̂, ω̂, u_c) (15): what the controller saw, the delayed measurement y = m_{k−d} (attitude as
+    measured, after the noise; rate in rad/s), its prediction x̂ after the rule (σ̂ in the set it switched to,
+    ω̂ in rad/s) and the commanded torque (N m). At sample k:
 
     1. plant bookkeeping (``OnCurrent``, no physical effect): x_meas, recorded in the result;
     2. the sensor (with ``sensor``): m_k, else m_k = x_meas;
@@ -411,13 +417,12 @@ def predictor_core_function(
     if torque_input:
         inputs.append(torque)
         names.append("torque")
-    return ca.Function(
-        "core",
-        inputs,
-        [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)],
-        names,
-        ["x_next", "memory_next", "x_meas", "u", "switched", "ring"],
-    )
+    outputs = [x_next, memory_next, x_meas, u, switched, ca.vertcat(measured, z)]
+    output_names = ["x_next", "memory_next", "x_meas", "u", "switched", "ring"]
+    if records:
+        outputs.append(ca.vertcat(y[0:3], 4 * y[3:6], x_hat[0:3], 4 * x_hat[3:6], command))
+        output_names.append("record")
+    return ca.Function("core", inputs, outputs, names, output_names)
 
 
 def prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:

@@ -58,9 +58,9 @@ SWITCH_LIMIT = 2**20
 # Bytes per kept sample in a result: m_k and u_k as computed (72), t (8), omega (24).
 _BYTES_PER_KEPT = 104
 _BYTES_PER_SWITCH = 16  # index and time
-# Flight runs: the records (h, sigma_c, u_c) and the delay used per kept sample as computed (64) and their
-# copies (64).
-_BYTES_PER_RECORD = 128
+# Flight and predictor runs: the records (at most 15 numbers: the predictor's measurement, prediction and command)
+# and the delay used per kept sample as computed (128) and their copies (128).
+_BYTES_PER_RECORD = 256
 #: simulate_batch's Python objects of each run before it runs (its delay in samples, its history row, references):
 #: 276 B measured by tracemalloc (a second audit), rounded up
 _BYTES_PER_RUN = 400
@@ -342,6 +342,7 @@ def simulate(
     settling_rate : float, keyword-only
         Rate tolerance of "settled": |ω| below this (rad/s), > 0; default 1e-3. Both are run-time
         constants of the compiled sample (no recompilation); the result records them.
+
     Returns
     -------
     SimulationResult
@@ -377,7 +378,7 @@ def simulate(
         options, varying = predictor_constants(options, float(tau), checked.model), None
         streamed = None if disturbance is None or disturbance.constant else disturbance
     width = 1 if checked is None else 2
-    records = checked is None and isinstance(rule, Hysteretic)
+    records = checked is not None or isinstance(rule, Hysteretic)
     _check_memory(
         run_bytes(n, keep, flight=records) + workspace_bytes(n, d, substeps, width) + jitter_bytes(varying, d),
         limit,
@@ -491,6 +492,7 @@ def simulate_batch(
     predictor: Predictor | None = None,
     settling_attitude: float = SETTLING_ATTITUDE_DEG,
     settling_rate: float = SETTLING_OMEGA,
+    switches: bool = False,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -565,11 +567,18 @@ def simulate_batch(
     settling_rate : float, keyword-only
         Rate tolerance of "settled": |ω| below this (rad/s), > 0; default 1e-3. Both are run-time
         constants of the compiled sample (no recompilation); the result records them.
+    switches : bool, keyword-only
+        Also keep every run's switch indices (``BatchResult.switch_indices``; at most 2**20 per run, the
+        counts stay exact) without the trajectories: the runs then take the scalar engine on the thread
+        pool, not the lanes (the same metrics bit for bit). With ``trajectories`` they are kept anyway.
+
     Returns
     -------
     BatchResult
     """
     settle_attitude, settle_rate, settling = settling_tolerances(settling_attitude, settling_rate)
+    if not isinstance(switches, bool):
+        raise SpecificationError(f"switches must be True or False, got {switches!r}")
     crafts = (spacecraft,) if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
     if not crafts:
         raise SpecificationError("spacecraft: give a Spacecraft or a non-empty sequence of them")
@@ -624,7 +633,7 @@ def simulate_batch(
     histories = [_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
     workers = min(threads, n_runs)
     width = 1 if predictor is None else 2
-    records = trajectories and predictor is None and any(isinstance(one, Hysteretic) for one in rules)
+    records = trajectories and (predictor is not None or any(isinstance(one, Hysteretic) for one in rules))
     estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width)
     estimate += n_runs * _batch_run_bytes(n, keep, trajectories, records=records)
     if not trajectories and _LANES:
@@ -693,7 +702,7 @@ def simulate_batch(
     any_flight = checked is not None or any(isinstance(one, Hysteretic) for one in rules)
     flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
-    if not trajectories and _LANES and checked is None and find_compiler() is not None:
+    if not trajectories and not switches and _LANES and checked is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -756,7 +765,7 @@ def simulate_batch(
             found = engines[i]
             space = spaces.get(id(found))
             if space is None:
-                space = spaces[id(found)] = found.workspace(n, switches=trajectories)
+                space = spaces[id(found)] = found.workspace(n, switches=trajectories or switches)
             d = samples_by_run[i]
             outputs[i] = found.run(
                 states[i],
@@ -792,6 +801,12 @@ def simulate_batch(
             if flight_rows is not None and output.memory is not None and output.memory.size >= FLIGHT_MEMORY_SIZE:
                 flight_rows[i] = output.memory[:FLIGHT_MEMORY_SIZE]
 
+    indices: tuple[np.ndarray, ...] | None = None
+    if switches and not trajectories:
+        kept = [outputs[i] for i in range(n_runs)]
+        indices = tuple(
+            readonly(np.zeros(0) if o is None or o.switch_indices is None else o.switch_indices, np.int64) for o in kept
+        )
     runs: list[SimulationResult] | None = None
     if trajectories:
         runs = []
@@ -836,6 +851,7 @@ def simulate_batch(
             history=history if isinstance(history, str) else readonly(history),
             settling_attitude=settle_attitude,
             settling_rate=settle_rate,
+            switch_indices=indices if runs is None else tuple(run.switch_indices for run in runs),
         ),
     )
 
