@@ -514,19 +514,18 @@ def predictor_model(spacecraft: Spacecraft, inertia: Any = None, inertia_error: 
     inertia : array_like, optional
         The model's inertia J_m (3 principal values or a 3x3 matrix, kg m²).
     inertia_error : float or array_like, optional
-        Relative error e of the model: J_m = (1 + e) J for a scalar; for 3 values e_i,
-        J_m = S J S with S = diag(√(1 + e_i)) (for a diagonal J, J_m,ii = (1 + e_i) J_ii).
-        Each e > −1 (dimensionless). Not together with ``inertia``.
-
-    Notes
-    -----
-    The margin of [`mrpctl.predictor.inertia_mismatch_margin`][mrpctl.predictor.inertia_mismatch_margin] is stated the
-    other way round,
-    J = (1 + e') J_m: a uniform model error e is the plant error e' = 1/(1 + e) − 1.
+        Relative inertia error e of the plant against the model, the one convention of mrpctl
+        ([`perturbed_spacecraft`][mrpctl.predictor.perturbed_spacecraft],
+        [`inertia_mismatch_margin`][mrpctl.predictor.inertia_mismatch_margin]): J = (1 + e) J_m, so
+        J_m = J / (1 + e) for a scalar; for 3 values e_i, J = S J_m S with S = diag(√(1 + e_i)), so
+        J_m = S⁻¹ J S⁻¹ (for a diagonal J, J_m,ii = J_ii / (1 + e_i)). e > 0: the plant is heavier than
+        the model. Each e > −1 (dimensionless). Not together with ``inertia``.
     """
     plant = check_spacecraft(spacecraft, "spacecraft")
     if inertia is not None and inertia_error is not None:
-        raise SpecificationError("give inertia (the model's J) or inertia_error (relative to the plant), not both")
+        raise SpecificationError(
+            "give inertia (the model's J) or inertia_error (the plant's error against the model), not both"
+        )
     if inertia is not None:
         return Spacecraft(inertia)
     if inertia_error is None:
@@ -538,8 +537,8 @@ def predictor_model(spacecraft: Spacecraft, inertia: Any = None, inertia_error: 
         raise DimensionError(f"inertia_error: expected a scalar or 3 per-axis values but found shape {errors.shape}")
     if np.any(errors <= -1.0):
         raise SpecificationError(f"inertia_error: each relative error must be > -1, got {errors.tolist()}")
-    scale = np.diag(np.sqrt(1.0 + errors))
-    return Spacecraft(scale @ plant.inertia @ scale)
+    inverse = np.diag(1.0 / np.sqrt(1.0 + errors))  # S⁻¹: J = S J_m S
+    return Spacecraft(inverse @ plant.inertia @ inverse)
 
 
 def _check_keys(table: str, data: dict[str, Any], allowed: set[str]) -> None:

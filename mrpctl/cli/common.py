@@ -199,7 +199,7 @@ def add_flight_options(parser: argparse.ArgumentParser) -> None:
         type=float,
         nargs="+",
         metavar="E",
-        help="the predictor with model inertia (1 + E) J of the plant J: 1 value, or 3 per axis",
+        help="the predictor with the model J_m = J / (1 + E) of the plant J (J = (1 + E) J_m): 1 value, or 3 per axis",
     )
 
 
