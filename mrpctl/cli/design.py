@@ -269,7 +269,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         product_bound=bound,
         period=period,
         tau_min=tau_min,
-        rate=jitter_rate,
+        delay_rate=jitter_rate,
         rtol=rtol,
     )
     assert isinstance(result, RobustPDSynthesis)
