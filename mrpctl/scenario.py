@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
@@ -947,15 +948,17 @@ def tumbling_states(
     *,
     seed: int = 0,
     angle_deg: tuple[float, float] = (160.0, 179.0),
-    rate: tuple[float, float] = (0.5, 1.2),
+    body_rate: tuple[float, float] = (0.5, 1.2),
     cross_rate: float = 0.05,
+    rate: Any = None,
 ) -> np.ndarray:
     """Random initial states x0 = [σ; ω/4] of a body tumbling towards Φ = 180°.
 
     Each state has a uniformly random principal axis ê, a principal angle Φ uniform in
     ``angle_deg`` (so |σ| = tan(Φ/4) is just below 1) and a body rate
-    ω = w ê + v with w uniform in ``rate`` (rad/s, carrying Φ through 180°) and v a
-    random vector orthogonal to ê with |v| uniform in [0, ``cross_rate``]. With the
+    ω = w ê + v with w uniform in ``body_rate`` (rad/s, carrying Φ through 180°) and v a
+    random vector orthogonal to ê with |v| uniform in [0, ``cross_rate``]. (``rate`` is the deprecated
+    name of ``body_rate``: in mrpctl ``rate`` is a measurement rate in Hz.) With the
     defaults and the paper's spacecraft and gains at τ = 0.5 s, about 87 % of the
     states carry |σ| through 1 (measured on 200 states, seed 1).
 
@@ -970,9 +973,16 @@ def tumbling_states(
     low, high = (finite_scalar("angle_deg", a) for a in angle_deg)
     if not 0.0 <= low <= high < 360.0:
         raise SpecificationError(f"angle_deg must satisfy 0 <= low <= high < 360, got {angle_deg}")
-    w_low, w_high = (finite_scalar("rate", w) for w in rate)
+    if rate is not None:
+        warnings.warn(
+            "tumbling_states(rate=) is deprecated: use body_rate= (rate is a measurement rate in Hz elsewhere)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        body_rate = rate
+    w_low, w_high = (finite_scalar("body_rate", w) for w in body_rate)
     if not 0.0 <= w_low <= w_high:
-        raise SpecificationError(f"rate must satisfy 0 <= low <= high (rad/s), got {rate}")
+        raise SpecificationError(f"body_rate must satisfy 0 <= low <= high (rad/s), got {body_rate}")
     generator = np.random.default_rng(seed)
     axis = generator.normal(size=(count, 3))
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)

@@ -46,3 +46,14 @@ def test_no_design_function_takes_rate_for_a_delay_rate() -> None:
             if "rate" in parameters:  # any other `rate` of the design package is a sample rate in Hz
                 doc = inspect.getdoc(thing) or ""
                 assert "Hz" in doc.split("rate :", 1)[-1].split("\n", 2)[1], name
+
+
+def test_a_body_rate_is_body_rate() -> None:
+    from mrpctl.scenario import tumbling_states
+
+    new = tumbling_states(5, seed=2, body_rate=(1.0, 2.0))
+    with pytest.warns(DeprecationWarning, match="use body_rate="):
+        old = tumbling_states(5, seed=2, rate=(1.0, 2.0))
+    assert np.array_equal(new, old)
+    with pytest.raises(SpecificationError, match="body_rate"):
+        tumbling_states(5, body_rate=(2.0, 1.0))

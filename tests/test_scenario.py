@@ -238,7 +238,7 @@ def test_tumbling_states_are_reproducible_and_tumble() -> None:
 
 
 def test_tumbling_ranges_are_settable() -> None:
-    states = tumbling_states(100, seed=1, angle_deg=(90.0, 100.0), rate=(2.0, 3.0), cross_rate=0.0)
+    states = tumbling_states(100, seed=1, angle_deg=(90.0, 100.0), body_rate=(2.0, 3.0), cross_rate=0.0)
     sigma, omega = states[:, :3], 4 * states[:, 3:]
     angle = np.degrees(4 * np.arctan(np.linalg.norm(sigma, axis=1)))
     assert np.all((angle >= 90.0 - 1e-9) & (angle <= 100.0 + 1e-9))

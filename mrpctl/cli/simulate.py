@@ -213,7 +213,7 @@ def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, s
         count,
         seed=0 if args.seed is None else args.seed,
         angle_deg=(160.0, 179.0) if args.angle_range is None else tuple(args.angle_range),
-        rate=(0.5, 1.2) if args.rate_range is None else tuple(args.rate_range),
+        body_rate=(0.5, 1.2) if args.rate_range is None else tuple(args.rate_range),
         cross_rate=0.05 if args.cross_rate is None else args.cross_rate,
     )
     return np.arange(count, dtype=float), "tumbling initial state (run index)", [{"x0": x} for x in states]
