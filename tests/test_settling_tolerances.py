@@ -163,3 +163,23 @@ def test_saved_runs_keep_them(tmp_path) -> None:
     assert (back.settling_attitude, back.settling_rate, back.settling_time) == (10.0, 1e-2, run.settling_time)
     plain = data.load(data.save(simulate(SC, paper.GAIN, X0, rule=OnCurrent(), **COMMON), tmp_path / "plain.nc"))
     assert (plain.settling_attitude, plain.settling_rate) == (SETTLING_ATTITUDE_DEG, SETTLING_OMEGA)
+
+
+def test_the_virtual_machine_takes_them(monkeypatch: pytest.MonkeyPatch) -> None:
+    from mrpctl import _compile
+    from mrpctl._compile import CompilerWarning
+    from mrpctl.engines.scalar import clear_engines
+
+    arguments = dict(rule=OnCurrent(), **COMMON, **LOOSE)
+    compiled = simulate(SC, paper.GAIN, X0, **arguments)
+    clear_engines()
+    try:
+        monkeypatch.setattr(_compile, "find_compiler", lambda: None)
+        with pytest.warns(CompilerWarning):
+            interpreted = simulate(SC, paper.GAIN, X0, **arguments)
+    finally:
+        clear_engines()
+    assert compiled.settling_time is not None
+    assert interpreted.settling_time == compiled.settling_time
+    assert interpreted.settling_time == _settling(interpreted.sigma, interpreted.omega, 100.0, 10.0, 1e-2)
+    assert interpreted.plant_set_changes == compiled.plant_set_changes == compiled.switch_count
