@@ -87,7 +87,7 @@ def plant_given(args: argparse.Namespace) -> list[str]:
 def paper_base() -> Scenario:
     """The paper's example with the default rule: the base of ``simulate`` and ``sweep`` without a file.
 
-    The rule is the controller-side hysteresis [`DEFAULT_RULE`][mrpctl.rules.DEFAULT_RULE].
+    The rule is the controller-side hysteresis ``mrpctl.rules.DEFAULT_RULE``, ``Hysteretic(0.1)``.
     """
 
     return replace(

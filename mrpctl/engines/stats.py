@@ -50,7 +50,7 @@ def settling_bounds(attitude_deg: float = SETTLING_ATTITUDE_DEG, rate: float = S
     """(|σ|², |ω|²) bounds of "settled" for a principal-angle tolerance (deg) and a rate tolerance (rad/s).
 
     The defaults give (1e-2², 1e-3²) exactly, the bounds the sample compiled in before they were inputs.
-    The values are checked by the caller ([`mrpctl.simulation.settling_tolerances`]).
+    The values are checked by the caller ([`settling_tolerances`][mrpctl.simulation.settling_tolerances]).
     """
     sigma = math.tan(math.radians(attitude_deg) / 4.0)
     return sigma * sigma, rate * rate
