@@ -27,7 +27,7 @@ from mrpctl.predictor import (
     OnPredicted,
     Predictor,
     inertia_mismatch_margin,
-    margin_side,
+    margin_side_bracket,
     perturbed_spacecraft,
 )
 from mrpctl.simulation import SimulationResult, simulate
@@ -236,9 +236,9 @@ def _pd_margin(gain: np.ndarray, rtol: float) -> MarginInterval:
     def stable(e: float) -> bool:
         return bool(linearized_loop(perturbed_spacecraft(paper.SPACECRAFT, e), gain).delay_margin().margin > TAU)
 
-    upper, upper_capped = margin_side(stable, 1.0, 10.0, rtol)
-    lower, lower_capped = margin_side(stable, -1.0, 1.0 - 1e-3, rtol)
-    return MarginInterval(lower, upper, lower_capped, upper_capped)
+    upper, upper_out, upper_capped = margin_side_bracket(stable, 1.0, 10.0, rtol)
+    lower, lower_out, lower_capped = margin_side_bracket(stable, -1.0, 1.0 - 1e-3, rtol)
+    return MarginInterval(lower, upper, lower_capped, upper_capped, (lower, lower_out), (upper, upper_out))
 
 
 def predictor_study(

@@ -139,12 +139,18 @@ _SCHEMA: dict[str, tuple[tuple[str, ...], str]] = {
 #: Variables a run may have (the predictor's model, the flight loop's metrics and records, a history array).
 _OPTIONAL: dict[str, tuple[tuple[str, ...], str]] = {
     "predictor_inertia": (("row", "col"), "f"),
+    "settling_attitude": ((), "f"),
+    "settling_rate": ((), "f"),
     "saturated_fraction": ((), "f"),
     "peak_command": (("command",), "f"),
     "logic": (("time",), "f"),
     "sigma_c": (("time", "axis"), "f"),
     "delay_used": (("time",), "i"),
     "command": (("time", "axis"), "f"),
+    "sigma_measured": (("time", "axis"), "f"),
+    "omega_measured": (("time", "axis"), "f"),
+    "sigma_predicted": (("time", "axis"), "f"),
+    "omega_predicted": (("time", "axis"), "f"),
     "history": (("history_sample", "state"), "f"),
 }
 _KIND_NAMES = {"f": "floats", "i": "integers", "b": "flags", "s": "names"}
@@ -380,6 +386,9 @@ def _result(dataset: xr.Dataset, checked: dict[str, Any]) -> SimulationResult:
         if name in dataset:
             values = dataset[name].values
             flown[name] = readonly(values, np.int64 if name == "delay_used" else float)
+    for name in ("settling_attitude", "settling_rate"):  # written when not the defaults
+        if name in dataset:
+            flown[name] = float(dataset[name])
     return SimulationResult(
         t=readonly(dataset["time"].values),
         sigma=readonly(dataset["sigma"].values),

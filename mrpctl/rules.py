@@ -12,7 +12,16 @@ from mrpctl.flight import Hysteretic
 from mrpctl.predictor import OnPredicted
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
-__all__ = ["RULE_NAMES", "rule_from_name", "rule_name"]
+__all__ = ["DEFAULT_DELTA", "DEFAULT_RULE", "RULE_NAMES", "rule_from_name", "rule_name"]
+
+#: The hysteresis δ of the default rule: inside the band α ≈ 1.05–1.2 (δ ≈ 0.05–0.18) that design/flight.md
+#: recommends for attitude noise up to 0.01 rad per axis (α = √((1 + δ)/(1 − δ)) = 1.106).
+DEFAULT_DELTA = 0.1
+#: The rule of the command line without a scenario file (``simulate``, ``sweep``), of ``design --toml`` and of
+#: the ``init`` starter: the controller-side set selection with hysteresis, ``Hysteretic(DEFAULT_DELTA)``, which
+#: converges wherever ``NoSwitching`` and ``OnCurrent`` do in the tumble studies of design/flight.md (the
+#: plant-side ``DelayAware`` does not; it stays available by name).
+DEFAULT_RULE: SwitchingRule = Hysteretic(DEFAULT_DELTA)
 
 #: The rule classes by their file and command-line names.
 RULE_NAMES = {

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
@@ -25,7 +26,7 @@ from mrpctl.loop import delay_samples
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
-from mrpctl.simulation import SimulationResult, simulate
+from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationResult, settling_tolerances, simulate
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
 
@@ -46,7 +47,17 @@ __all__ = [
 ]
 
 #: The names a scenario file or the command line may give a switching rule.
-_TOP_KEYS = {"name", "description", "t_final", "tau", "rate", "history", "substeps"}
+_TOP_KEYS = {
+    "name",
+    "description",
+    "t_final",
+    "tau",
+    "rate",
+    "history",
+    "substeps",
+    "settling_attitude_deg",
+    "settling_rate",
+}
 _TABLES = {"spacecraft", "gains", "initial", "rule"}
 #: The predictor controller's table (``[rule] type = "on-predicted"`` only, and then required).
 _PREDICTOR_TABLE = "predictor"
@@ -141,6 +152,11 @@ class Scenario:
     uncertainty : InertiaUncertainty or None
         The inertia box ``mrpctl verify`` certifies the gain over (``[uncertainty]``, any rule); not
         used by the simulation. None: the nominal inertia only.
+    settling_attitude : float
+        Attitude tolerance of the settling time (principal angle, deg; file key ``settling_attitude_deg``),
+        default 4 atan(1e-2) = 2.2918° (|σ| < 1e-2).
+    settling_rate : float
+        Rate tolerance of the settling time (rad/s; file key ``settling_rate``), default 1e-3.
     """
 
     name: str
@@ -160,6 +176,8 @@ class Scenario:
     delay: DelayModel | None = None
     predictor: Predictor | None = None
     uncertainty: InertiaUncertainty | None = None
+    settling_attitude: float = SETTLING_ATTITUDE_DEG
+    settling_rate: float = SETTLING_OMEGA
 
     @property
     def flight_options(self) -> dict[str, Any]:
@@ -195,6 +213,8 @@ class Scenario:
             rate=self.rate,
             history=self.history,
             substeps=self.substeps,
+            settling_attitude=self.settling_attitude,
+            settling_rate=self.settling_rate,
             **self.run_options,
         )
 
@@ -495,19 +515,18 @@ def predictor_model(spacecraft: Spacecraft, inertia: Any = None, inertia_error: 
     inertia : array_like, optional
         The model's inertia J_m (3 principal values or a 3x3 matrix, kg m²).
     inertia_error : float or array_like, optional
-        Relative error e of the model: J_m = (1 + e) J for a scalar; for 3 values e_i,
-        J_m = S J S with S = diag(√(1 + e_i)) (for a diagonal J, J_m,ii = (1 + e_i) J_ii).
-        Each e > −1 (dimensionless). Not together with ``inertia``.
-
-    Notes
-    -----
-    The margin of [`mrpctl.predictor.inertia_mismatch_margin`][mrpctl.predictor.inertia_mismatch_margin] is stated the
-    other way round,
-    J = (1 + e') J_m: a uniform model error e is the plant error e' = 1/(1 + e) − 1.
+        Relative inertia error e of the plant against the model, the one convention of mrpctl
+        ([`perturbed_spacecraft`][mrpctl.predictor.perturbed_spacecraft],
+        [`inertia_mismatch_margin`][mrpctl.predictor.inertia_mismatch_margin]): J = (1 + e) J_m, so
+        J_m = J / (1 + e) for a scalar; for 3 values e_i, J = S J_m S with S = diag(√(1 + e_i)), so
+        J_m = S⁻¹ J S⁻¹ (for a diagonal J, J_m,ii = J_ii / (1 + e_i)). e > 0: the plant is heavier than
+        the model. Each e > −1 (dimensionless). Not together with ``inertia``.
     """
     plant = check_spacecraft(spacecraft, "spacecraft")
     if inertia is not None and inertia_error is not None:
-        raise SpecificationError("give inertia (the model's J) or inertia_error (relative to the plant), not both")
+        raise SpecificationError(
+            "give inertia (the model's J) or inertia_error (the plant's error against the model), not both"
+        )
     if inertia is not None:
         return Spacecraft(inertia)
     if inertia_error is None:
@@ -519,8 +538,8 @@ def predictor_model(spacecraft: Spacecraft, inertia: Any = None, inertia_error: 
         raise DimensionError(f"inertia_error: expected a scalar or 3 per-axis values but found shape {errors.shape}")
     if np.any(errors <= -1.0):
         raise SpecificationError(f"inertia_error: each relative error must be > -1, got {errors.tolist()}")
-    scale = np.diag(np.sqrt(1.0 + errors))
-    return Spacecraft(scale @ plant.inertia @ scale)
+    inverse = np.diag(1.0 / np.sqrt(1.0 + errors))  # S⁻¹: J = S J_m S
+    return Spacecraft(inverse @ plant.inertia @ inverse)
 
 
 def _check_keys(table: str, data: dict[str, Any], allowed: set[str]) -> None:
@@ -628,6 +647,12 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     samples = sample_count(t_final, rate)
     flight = _flight_tables(data, rule, tau, rate, _Horizon(None if base is None else Path(base), samples))
     predictor = _predictor_table(data, rule, spacecraft, history)
+    try:
+        settle_attitude, settle_rate, _ = settling_tolerances(
+            data.get("settling_attitude_deg", SETTLING_ATTITUDE_DEG), data.get("settling_rate", SETTLING_OMEGA)
+        )
+    except SpecificationError as exc:
+        raise SpecificationError(f"{exc} (scenario keys settling_attitude_deg, settling_rate)") from exc
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
@@ -642,6 +667,8 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         description=str(data.get("description", "")),
         predictor=predictor,
         uncertainty=_uncertainty_table(data, spacecraft),
+        settling_attitude=settle_attitude,
+        settling_rate=settle_rate,
         **flight,
     )
 
@@ -758,6 +785,16 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
         f"t_final = {_toml_value(scenario.t_final)}     # horizon (s)",
         f"history = {_toml_value(scenario.history)}",
         f"substeps = {scenario.substeps}",
+        *(
+            [f"settling_attitude_deg = {_toml_value(scenario.settling_attitude)}  # settled: principal angle below"]
+            if scenario.settling_attitude != SETTLING_ATTITUDE_DEG
+            else []
+        ),
+        *(
+            [f"settling_rate = {_toml_value(scenario.settling_rate)}  # settled: |omega| below (rad/s)"]
+            if scenario.settling_rate != SETTLING_OMEGA
+            else []
+        ),
         "",
         "[spacecraft]",
         f"inertia = {_toml_value(inertia_value)}  # kg m^2",
@@ -859,6 +896,8 @@ rate = 1000.0      # measurement rate (Hz)
 t_final = 60.0     # horizon (s)
 history = "constant"  # measurements before t = 0: "constant" (= x0) or "zero-input"
 substeps = 1       # RK4 substeps per measurement period
+# settling_attitude_deg = 2.2918  # "settled": principal angle below this (deg; default 4 atan(0.01), |sigma| < 0.01)
+# settling_rate = 1e-3            # ... and |omega| below this (rad/s), from then to the end
 
 [spacecraft]
 # Principal inertias J = diag(J1, J2, J3), or a full symmetric 3x3 matrix (kg m^2).
@@ -883,11 +922,14 @@ omega = [0.3, 0.0, 0.0]  # body rates (rad/s)
 
 [rule]
 # Shadow-set switching: "none", "on-current" (|sigma(t)| >= 1), "on-delayed" (|sigma(t - tau)| >= 1),
-# "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1), or the
-# controller-side set selection of the loop as flown, "hysteretic" (delta in [0, 1) or alpha >= 1),
-# or "on-predicted" (the predictor controller; alpha >= 1, inf: never switch; needs a [predictor]
-# table: empty for the exact model, inertia = [...] or inertia_error = e; see predictor-paper).
-type = "delay-aware"
+# "boundary-layer" (needs eps > 0), "delay-aware" (optional alpha >= 1, default 1; not sound in general:
+# it fails to settle on fast tumbles, design/flight.md), the controller-side set selection of the loop as
+# flown, "hysteretic" (delta in [0, 1) or alpha >= 1), or "on-predicted" (the predictor controller;
+# alpha >= 1, inf: never switch; needs a [predictor] table: empty for the exact model, inertia = [...] or
+# inertia_error = e; see predictor-paper). The default here is the command line's: hysteresis delta = 0.1
+# (|sigma_c| <= alpha = 1.106), in the band delta 0.05-0.18 recommended for attitude noise up to 0.01 rad.
+type = "hysteretic"
+delta = 0.1
 
 # The loop as flown (only with type = "hysteretic"; see `mrpctl simulate flight-paper`), all optional:
 # [actuator]     u_max = 20.0 (N m, scalar or 3 values), u_norm = 30.0 (N m), saturation = "scale" or "clip"
@@ -906,15 +948,17 @@ def tumbling_states(
     *,
     seed: int = 0,
     angle_deg: tuple[float, float] = (160.0, 179.0),
-    rate: tuple[float, float] = (0.5, 1.2),
+    body_rate: tuple[float, float] = (0.5, 1.2),
     cross_rate: float = 0.05,
+    rate: Any = None,
 ) -> np.ndarray:
     """Random initial states x0 = [σ; ω/4] of a body tumbling towards Φ = 180°.
 
     Each state has a uniformly random principal axis ê, a principal angle Φ uniform in
     ``angle_deg`` (so |σ| = tan(Φ/4) is just below 1) and a body rate
-    ω = w ê + v with w uniform in ``rate`` (rad/s, carrying Φ through 180°) and v a
-    random vector orthogonal to ê with |v| uniform in [0, ``cross_rate``]. With the
+    ω = w ê + v with w uniform in ``body_rate`` (rad/s, carrying Φ through 180°) and v a
+    random vector orthogonal to ê with |v| uniform in [0, ``cross_rate``]. (``rate`` is the deprecated
+    name of ``body_rate``: in mrpctl ``rate`` is a measurement rate in Hz.) With the
     defaults and the paper's spacecraft and gains at τ = 0.5 s, about 87 % of the
     states carry |σ| through 1 (measured on 200 states, seed 1).
 
@@ -929,9 +973,16 @@ def tumbling_states(
     low, high = (finite_scalar("angle_deg", a) for a in angle_deg)
     if not 0.0 <= low <= high < 360.0:
         raise SpecificationError(f"angle_deg must satisfy 0 <= low <= high < 360, got {angle_deg}")
-    w_low, w_high = (finite_scalar("rate", w) for w in rate)
+    if rate is not None:
+        warnings.warn(
+            "tumbling_states(rate=) is deprecated: use body_rate= (rate is a measurement rate in Hz elsewhere)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        body_rate = rate
+    w_low, w_high = (finite_scalar("body_rate", w) for w in body_rate)
     if not 0.0 <= w_low <= w_high:
-        raise SpecificationError(f"rate must satisfy 0 <= low <= high (rad/s), got {rate}")
+        raise SpecificationError(f"body_rate must satisfy 0 <= low <= high (rad/s), got {body_rate}")
     generator = np.random.default_rng(seed)
     axis = generator.normal(size=(count, 3))
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)

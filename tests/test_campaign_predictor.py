@@ -17,8 +17,9 @@ from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.spacecraft import Spacecraft
 
 NOMINAL = np.diag([140.0, 100.0, 80.0])
-#: The documented model of inertia_error = e: S J S with S = diag(sqrt(1 + e)) (about (1 + e) J).
-SCALE = np.diag(np.sqrt(np.full(3, 1.05)))
+#: The documented model of inertia_error = e: the nominal J = S J_m S with S = diag(sqrt(1 + e)), so
+#: J_m = S⁻¹ J S⁻¹ (about J / (1 + e)).
+SCALE = np.diag(1.0 / np.sqrt(np.full(3, 1.05)))
 MODEL = SCALE @ NOMINAL @ SCALE
 
 SPEC = {
@@ -53,9 +54,9 @@ def stored(tmp_path_factory):
 def test_the_model_is_the_nominal_spacecraft_and_the_plant_is_dispersed(stored):
     spec, _, ds = stored
     assert isinstance(spec.predictor, Predictor)
-    # inertia_error = e scales the nominal J (not a run's plant): J_m = (1 + e) J_nominal
+    # inertia_error = e relates the model to the nominal J (not to a run's plant): J_nominal = (1 + e) J_m
     assert np.array_equal(spec.predictor.model.inertia, MODEL)
-    assert np.allclose(MODEL, 1.05 * NOMINAL, rtol=1e-14, atol=0.0)
+    assert np.allclose(MODEL, NOMINAL / 1.05, rtol=1e-14, atol=0.0)
     assert json.loads(ds.attrs["predictor_model_inertia"]) == MODEL.tolist()
     plants = ds["inertia"].values
     assert len({p.tobytes() for p in plants}) == spec.cases  # every case its own plant

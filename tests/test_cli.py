@@ -281,7 +281,7 @@ def test_sweep_tumble_csv_and_ranges(tmp_path: Path, capsys: pytest.CaptureFixtu
         (["sweep", "eps", "--count", "3"], "--count applies only to 'sweep tumble'"),
         (["sweep", "tau", "--values", "0.1", "--tau", "0.2"], "--tau does not apply to 'sweep tau'"),
         (["sweep", "tau", "--values", "0.1", "--seed", "3"], "--seed applies only to 'sweep tumble'"),
-        (["simulate", str(FIG4), "--inertia", "1", "2", "2"], "--inertia does not apply with a scenario file"),
+        (["sweep", "tau", "--scenario", "flight-paper", "--values", "0.3", "0.5"], "sweep tau with a jittering delay"),
         (["verify", str(FIG4), "--K", *["1"] * 18], "--K does not apply with a scenario file"),
         (["design", "--inertia", "1", "2", "2", "--tau", "0.1", "--rate", "100"], "--rate applies only with --toml"),
     ],

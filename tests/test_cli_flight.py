@@ -91,7 +91,7 @@ def test_export_with_flight_options(tmp_path: Path, capsys: pytest.CaptureFixtur
 @pytest.mark.parametrize(
     ("argv", "needles"),
     [
-        (["simulate", "--torque-limit", "20"], ("actuator", "--hysteresis", "delay-aware")),
+        (["simulate", "paper_fig4_on_delayed", "--torque-limit", "20"], ("actuator", "--hysteresis", "on-delayed")),
         (["simulate", "--hysteresis", "1.5"], ("--hysteresis", "delta", "[0, 1)")),
         (["simulate", "--hysteresis", "0.1", "--rule", "on-delayed"], ("--hysteresis", "on-delayed")),
         (["simulate", "--hysteresis", "0.1", "--alpha", "1.2"], ("--alpha", "--rule")),

@@ -53,8 +53,8 @@ def test_simulate_shipped_predictor_scenario(capsys: pytest.CaptureFixture[str])
     ("options", "model", "alpha"),
     [
         (["--predictor"], J, 1.0),
-        (["--predictor-error", "0.1", "--alpha", "1.2"], 1.1 * J, 1.2),
-        (["--predictor-error", "0.1", "-0.05", "0.2"], np.diag([154.0, 95.0, 96.0]), 1.0),
+        (["--predictor-error", "0.1", "--alpha", "1.2"], J / 1.1, 1.2),  # the plant J = 1.1 J_m
+        (["--predictor-error", "0.1", "-0.05", "0.2"], np.diag([140.0 / 1.1, 100.0 / 0.95, 80.0 / 1.2]), 1.0),
         (
             ["--predictor-inertia", "150", "95", "85", "--rule", "on-predicted", "--alpha", "inf"],
             np.diag([150.0, 95.0, 85.0]),
@@ -137,7 +137,7 @@ def test_export_manifest_of_a_predictor_scenario(capsys: pytest.CaptureFixture[s
     result = _json(capsys)
     manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
     section = manifest["predictor"]
-    np.testing.assert_allclose(section["model_inertia"], 1.05 * J, rtol=1e-15)
+    np.testing.assert_allclose(section["model_inertia"], J / 1.05, rtol=1e-15)
     assert section["alpha"] == 1.1 and section["tau"] == 0.5
     assert section["actuator"]["u_max"] == [20.0, 20.0, 20.0]
     assert "predictor_controller" in " ".join(result["files"])

@@ -29,8 +29,8 @@ def test_myshkis_yorke_bound_is_never_exceeded() -> None:
 @pytest.mark.parametrize("mu", sorted(WIRTINGER_TABLE))
 def test_wirtinger_matches_published_table(mu: float) -> None:
     published = WIRTINGER_TABLE[mu]
-    assert certify_interval(BENCH_A, BENCH_AD, 0.998 * published, rate=mu, order=1).certified
-    assert not certify_interval(BENCH_A, BENCH_AD, 1.002 * published, rate=mu, order=1).certified
+    assert certify_interval(BENCH_A, BENCH_AD, 0.998 * published, delay_rate=mu, order=1).certified
+    assert not certify_interval(BENCH_A, BENCH_AD, 1.002 * published, delay_rate=mu, order=1).certified
 
 
 def test_time_varying_at_zero_rate_never_beats_constant_delay() -> None:
@@ -38,7 +38,7 @@ def test_time_varying_at_zero_rate_never_beats_constant_delay() -> None:
     # relaxed, the default positivity), design/lmi.md section 5.
     for order, tau_const in ((0, 4.47131), (1, 6.05874), (2, 6.16882)):
         assert certify(BENCH_A, BENCH_AD, 0.9995 * tau_const, order=order).certified
-        assert not certify_interval(BENCH_A, BENCH_AD, 1.0005 * tau_const, rate=0.0, order=order).certified
+        assert not certify_interval(BENCH_A, BENCH_AD, 1.0005 * tau_const, delay_rate=0.0, order=order).certified
 
 
 def test_soundness_on_random_systems_against_exact_margin(rng: np.random.Generator) -> None:
@@ -53,12 +53,12 @@ def test_soundness_on_random_systems_against_exact_margin(rng: np.random.Generat
             continue
         rate = rates[checked % 3]
         order = checked % 3
-        assert not certify_interval(a, a_d, 1.01 * exact.margin, rate=rate, order=order).certified
+        assert not certify_interval(a, a_d, 1.01 * exact.margin, delay_rate=rate, order=order).certified
         checked += 1
 
 
 def test_float64_recheck_decides_and_blocks_are_negative_for_a_bad_point() -> None:
-    cert = certify_interval(BENCH_A, BENCH_AD, 2.0, rate=0.5, order=1)
+    cert = certify_interval(BENCH_A, BENCH_AD, 2.0, delay_rate=0.5, order=1)
     assert cert.certified and cert.solver_status == "optimal"
     rate = DelayRate.bounded(0.5)
     blocks = interval_blocks([(2.0 * BENCH_A, 2.0 * BENCH_AD)], 0.0, rate, dict(cert.matrices), order=1)
@@ -69,17 +69,19 @@ def test_float64_recheck_decides_and_blocks_are_negative_for_a_bad_point() -> No
 
 
 def test_interval_with_positive_lower_end_and_scale_invariance() -> None:
-    base = certify_interval(BENCH_A, BENCH_AD, 3.0, tau_min=1.0, rate=0.2, order=1)
-    scaled = certify_interval(1e3 * BENCH_A, 1e3 * BENCH_AD, 3e-3, tau_min=1e-3, rate=0.2, order=1)
+    base = certify_interval(BENCH_A, BENCH_AD, 3.0, tau_min=1.0, delay_rate=0.2, order=1)
+    scaled = certify_interval(1e3 * BENCH_A, 1e3 * BENCH_AD, 3e-3, tau_min=1e-3, delay_rate=0.2, order=1)
     assert base.certified and scaled.certified
     assert scaled.solver_margin == pytest.approx(base.solver_margin, rel=1e-5)
 
 
 def test_thread_pool_gives_the_serial_answers() -> None:
     cases = [(2.0, 0.5), (2.3, 0.5), (1.8, None)]
-    serial = [certify_interval(BENCH_A, BENCH_AD, h, rate=r).solver_margin for h, r in cases]
+    serial = [certify_interval(BENCH_A, BENCH_AD, h, delay_rate=r).solver_margin for h, r in cases]
     with ThreadPoolExecutor(max_workers=2) as pool:
-        threaded = list(pool.map(lambda c: certify_interval(BENCH_A, BENCH_AD, c[0], rate=c[1]).solver_margin, cases))
+        threaded = list(
+            pool.map(lambda c: certify_interval(BENCH_A, BENCH_AD, c[0], delay_rate=c[1]).solver_margin, cases)
+        )
     assert threaded == serial
 
 
@@ -87,7 +89,7 @@ def test_bad_input_is_refused() -> None:
     with pytest.raises(SpecificationError, match="tau_max must exceed tau_min"):
         certify_interval(BENCH_A, BENCH_AD, 1.0, tau_min=1.0)
     with pytest.raises(SpecificationError, match="rate"):
-        certify_interval(BENCH_A, BENCH_AD, 1.0, rate=True)  # type: ignore[arg-type]
+        certify_interval(BENCH_A, BENCH_AD, 1.0, delay_rate=True)  # type: ignore[arg-type]
     with pytest.raises(SpecificationError, match="lower <= upper"):
         DelayRate.between(1.0, 0.0)
     with pytest.raises(SpecificationError, match="must contain 0"):

@@ -152,7 +152,9 @@ def test_the_memory_estimate_counts_the_records() -> None:
     )
     assert run.logic is not None and run.sigma_c is not None and run.delay_used is not None
     assert run.command is not None
+    assert run.sigma_measured is not None and run.omega_measured is not None
     held = run.logic.nbytes + run.sigma_c.nbytes + run.delay_used.nbytes + run.command.nbytes
+    held += run.sigma_measured.nbytes + run.omega_measured.nbytes
     assert flight - plain >= 2 * held  # the records as computed and their read-only copies
     simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=OnCurrent(), memory_limit=plain, **common)
     with pytest.raises(SpecificationError, match="memory_limit"):

@@ -10,6 +10,7 @@ import pytest
 
 from mrpctl import mrp, paper
 from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.flight import Hysteretic
 from mrpctl.reproduction import flight_scenarios, paper_scenarios
 from mrpctl.scenario import (
     STARTER_SCENARIO,
@@ -148,7 +149,7 @@ def test_starter_scenario_loads() -> None:
     starter = parse_scenario(tomllib.loads(STARTER_SCENARIO))
     k = np.diag(4.0 * np.array([12.0, 15.0, 9.0]))
     assert np.max(np.abs(starter.K - np.hstack((-0.64 * k, -1.6 * k)))) < 1e-12
-    assert starter.rule == DelayAware() and starter.tau == 0.2
+    assert starter.rule == Hysteretic(0.1) and starter.tau == 0.2  # the command line's default rule
 
 
 def test_rule_names() -> None:
@@ -237,7 +238,7 @@ def test_tumbling_states_are_reproducible_and_tumble() -> None:
 
 
 def test_tumbling_ranges_are_settable() -> None:
-    states = tumbling_states(100, seed=1, angle_deg=(90.0, 100.0), rate=(2.0, 3.0), cross_rate=0.0)
+    states = tumbling_states(100, seed=1, angle_deg=(90.0, 100.0), body_rate=(2.0, 3.0), cross_rate=0.0)
     sigma, omega = states[:, :3], 4 * states[:, 3:]
     angle = np.degrees(4 * np.arctan(np.linalg.norm(sigma, axis=1)))
     assert np.all((angle >= 90.0 - 1e-9) & (angle <= 100.0 + 1e-9))

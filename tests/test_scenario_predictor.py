@@ -66,8 +66,9 @@ def test_rule_names_include_on_predicted() -> None:
         ({}, J),
         ({"inertia": [150.0, 95.0, 85.0]}, np.diag([150.0, 95.0, 85.0])),
         ({"inertia": [[150.0, 1.0, 0.0], [1.0, 95.0, 0.0], [0.0, 0.0, 85.0]]}, None),
-        ({"inertia_error": 0.1}, 1.1 * J),
-        ({"inertia_error": [0.1, -0.05, 0.2]}, np.diag([154.0, 95.0, 96.0])),
+        # the plant's error against the model: J = (1 + e) J_m (the convention of perturbed_spacecraft)
+        ({"inertia_error": 0.1}, J / 1.1),
+        ({"inertia_error": [0.1, -0.05, 0.2]}, np.diag([140.0 / 1.1, 100.0 / 0.95, 80.0 / 1.2])),
     ],
 )
 def test_predictor_table_gives_the_model(table: dict, expected: np.ndarray | None) -> None:
@@ -83,12 +84,19 @@ def test_predictor_table_gives_the_model(table: dict, expected: np.ndarray | Non
 
 
 def test_per_axis_error_of_a_full_inertia_is_a_congruence() -> None:
-    """3 errors on a non-diagonal J: J_m = S J S with S = diag(sqrt(1 + e_i)), written out element by element."""
+    """3 errors on a non-diagonal J: J = S J_m S with S = diag(sqrt(1 + e_i)), J_m written out element by element."""
     full = [[140.0, 5.0, -2.0], [5.0, 100.0, 3.0], [-2.0, 3.0, 80.0]]
     errors = [0.1, -0.2, 0.3]
     model = predictor_model(parse_scenario(_with("spacecraft", inertia=full)).spacecraft, inertia_error=errors)
-    expected = [[full[i][j] * math.sqrt((1 + errors[i]) * (1 + errors[j])) for j in range(3)] for i in range(3)]
+    expected = [[full[i][j] / math.sqrt((1 + errors[i]) * (1 + errors[j])) for j in range(3)] for i in range(3)]
     np.testing.assert_allclose(model.inertia, expected, rtol=1e-14)
+    # and it is the inverse of perturbed_spacecraft's per-axis plant, axis by axis
+    from mrpctl.predictor import perturbed_spacecraft
+
+    plant = model
+    for i in range(3):
+        plant = perturbed_spacecraft(plant, errors[i], axis=i)
+    np.testing.assert_allclose(plant.inertia, full, rtol=1e-14)
 
 
 @pytest.mark.parametrize("alpha", [1.0, 1.25, math.inf])

@@ -199,7 +199,7 @@ def _coupled() -> Spacecraft:
         ({"period": 0.1, "tau_min": 0.4}, "either period"),
         ({"tau_min": 0.6}, "tau_min must not exceed tau"),
         ({"tau_min": -0.1}, "tau_min must be >= 0"),
-        ({"rate": 0.5}, "rate applies only with tau_min"),
+        ({"delay_rate": 0.5}, "delay_rate applies only with tau_min"),
     ],
 )
 def test_bad_robust_input_names_the_parameter(kwargs: dict, match: str) -> None:

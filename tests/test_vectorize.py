@@ -365,9 +365,9 @@ def test_lane_engine_reads_its_ports_and_checks_inputs(monkeypatch: pytest.Monke
     assert math.isfinite(lanes.run(good, constants, history, 3)["stats"][0, 0])
     monkeypatch.setattr(_vectorize, "_available_memory", lambda: 2**30)
     with pytest.raises(
-        SpecificationError, match=r"about 5\.1 GiB .* about 1\.0 GiB are available; run fewer runs per call"
+        SpecificationError, match=r"about 5\.6 GiB .* about 1\.0 GiB are available; run fewer runs per call"
     ):
-        huge = 10**7  # 8 * (2 * 22 + 25) bytes per run: refused before anything is allocated
+        huge = 10**7  # 8 * (2 * 25 + 25) bytes per run (state 6, memory 1, stats 18): refused before any allocation
         lanes.run(
             {key: np.broadcast_to(value[:1], (huge, value.shape[1])) for key, value in good.items()},
             {key: np.broadcast_to(value[:1], (huge, value.shape[1])) for key, value in constants.items()},

@@ -98,6 +98,8 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
         peak_torque=spec.peak_torque,
         flight=[models for _, models in per_run],
         predictor=spec.predictor,
+        settling_attitude=base.settling_attitude,
+        settling_rate=base.settling_rate,
     )
     sigma_norm = np.linalg.norm(inputs.sigma0, axis=1)
     return {

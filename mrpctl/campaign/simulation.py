@@ -16,7 +16,7 @@ import numpy as np
 
 from mrpctl.flight import Disturbance
 from mrpctl.predictor import Predictor
-from mrpctl.simulation import simulate_batch
+from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 
@@ -125,6 +125,8 @@ def simulate_runs(
     peak_torque: bool = True,
     flight: Sequence[dict[str, Any] | None] | None = None,
     predictor: Predictor | None = None,
+    settling_attitude: float = SETTLING_ATTITUDE_DEG,
+    settling_rate: float = SETTLING_OMEGA,
 ) -> dict[str, np.ndarray]:
     """Simulate N runs, each with its own inertia, gain, initial state, delay, rule and flight models.
 
@@ -154,6 +156,10 @@ def simulate_runs(
         The predictor controller shared by every run (every rule an
         [`OnPredicted`][mrpctl.predictor.OnPredicted]): each call to [`mrpctl.simulate_batch`][mrpctl.simulate_batch]
         takes it.
+    settling_attitude, settling_rate : float, optional
+        The settling tolerances (principal angle in deg, rate in rad/s) of
+        [`mrpctl.simulate_batch`][mrpctl.simulate_batch] (the campaign file's ``settling_attitude_deg`` and
+        ``settling_rate``).
 
     Returns
     -------
@@ -162,6 +168,8 @@ def simulate_runs(
     """
     n = len(x0)
     options: dict[str, Any] = dict(t_final=t_final, rate=rate, history=history, substeps=substeps, threads=threads)
+    if (settling_attitude, settling_rate) != (SETTLING_ATTITUDE_DEG, SETTLING_OMEGA):
+        options.update(settling_attitude=settling_attitude, settling_rate=settling_rate)
     if predictor is not None:
         options["predictor"] = predictor
     if n == 0:

@@ -82,7 +82,7 @@ may differ: ``"on-predicted:1.2"``, ``"on-predicted:inf"`` never switches)::
     [rule]
     type = "on-predicted"
     [predictor]
-    inertia_error = 0.05            # the model: the NOMINAL [spacecraft], J_m = S J S, S = diag(sqrt(1 + e))
+    inertia_error = 0.05            # the model from the NOMINAL [spacecraft]: J = S J_m S, S = diag(sqrt(1 + e))
                                     # (or inertia = [...]; empty: the nominal spacecraft itself)
 
 The model is the same for every run; the plant is each run's dispersed spacecraft. ``flight.jitter``
@@ -704,7 +704,8 @@ def _predictor(data: dict[str, Any], base: Scenario, rules: tuple[SwitchingRule,
         if any(predicted):
             raise SpecificationError(
                 "[rule] type = 'on-predicted' needs a [predictor] table (the controller's model): empty for the "
-                "nominal spacecraft of the campaign, inertia_error = e (model (1 + e) J, or 3 per-axis values) or "
+                "nominal spacecraft of the campaign, inertia_error = e (the nominal J = (1 + e) J_m, or 3 per-axis "
+                "values) or "
                 "inertia = [J1, J2, J3] (or 3x3, kg m^2)"
             )
         return None

@@ -126,6 +126,15 @@ def add_run_options(parser: argparse.ArgumentParser, *, plot: str, csv: str) -> 
     parser.add_argument("--rate", type=float, help="override the measurement rate (Hz)")
     parser.add_argument("--history", choices=("constant", "zero-input"), help="override the history")
     parser.add_argument("--substeps", type=int, help="override the RK4 substeps per sample")
+    parser.add_argument(
+        "--settling-attitude",
+        type=float,
+        metavar="DEG",
+        help="settled: principal angle below DEG (default 2.2918 = 4 atan(0.01), i.e. |sigma| < 0.01)",
+    )
+    parser.add_argument(
+        "--settling-rate", type=float, metavar="RAD_S", help="settled: |omega| below RAD_S (default 1e-3 rad/s)"
+    )
     parser.add_argument("--plot", type=Path, help=plot + " (format from the suffix: .png, .pdf, .svg, ...)")
     parser.add_argument("--csv", type=Path, help=csv)
     parser.add_argument(
@@ -190,7 +199,7 @@ def add_flight_options(parser: argparse.ArgumentParser) -> None:
         type=float,
         nargs="+",
         metavar="E",
-        help="the predictor with model inertia (1 + E) J of the plant J: 1 value, or 3 per axis",
+        help="the predictor with the model J_m = J / (1 + E) of the plant J (J = (1 + E) J_m): 1 value, or 3 per axis",
     )
 
 

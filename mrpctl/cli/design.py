@@ -28,6 +28,7 @@ from mrpctl.cli.overrides import paper_base, spacecraft_from
 from mrpctl.design import FlownVerdict, SynthesisStatus, analyze_gains, synthesize_lmi, verify_flown
 from mrpctl.design.robust import RobustPDSynthesis, RobustStatus
 from mrpctl.errors import MrpctlError, SpecificationError
+from mrpctl.rules import DEFAULT_DELTA, DEFAULT_RULE
 from mrpctl.scenario import check_delay, rule_from_name, scenario_toml
 from mrpctl.spacecraft import Spacecraft
 
@@ -192,7 +193,7 @@ def _write_design_toml(
         tau=float(args.tau),
         rate=float(rate),
         t_final=60.0 if args.t_final is None else float(args.t_final),
-        rule=rule_from_name("delay-aware" if args.rule is None else args.rule, eps=args.eps, alpha=args.alpha),
+        rule=DEFAULT_RULE if args.rule is None else rule_from_name(args.rule, eps=args.eps, alpha=args.alpha),
     )
     with atomic_output(path) as stream:
         stream.write(scenario_toml(scenario, comment=comment))
@@ -268,7 +269,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         product_bound=bound,
         period=period,
         tau_min=tau_min,
-        rate=jitter_rate,
+        delay_rate=jitter_rate,
         rtol=rtol,
     )
     assert isinstance(result, RobustPDSynthesis)
@@ -506,6 +507,6 @@ def add_parser(commands: Any) -> None:
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --toml file")
     parser.add_argument("--rate", type=float, help="measurement rate written with --toml (Hz); default 1000")
     parser.add_argument("--t-final", type=float, help="horizon written with --toml (s); default 60")
-    add_rule_options(parser, "switching rule written with --toml; default delay-aware")
+    add_rule_options(parser, f"switching rule written with --toml; default hysteretic, delta = {DEFAULT_DELTA:g}")
     add_json(parser)
     parser.set_defaults(handler=_design)

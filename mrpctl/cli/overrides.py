@@ -19,6 +19,7 @@ from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hys
 from mrpctl.model import state
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.reproduction import paper_scenarios
+from mrpctl.rules import DEFAULT_DELTA, DEFAULT_RULE
 from mrpctl.scenario import (
     Scenario,
     delay_sequence,
@@ -30,6 +31,7 @@ from mrpctl.scenario import (
     samples_file,
     torque_rows,
 )
+from mrpctl.simulation import settling_tolerances
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = [
@@ -83,33 +85,40 @@ def plant_given(args: argparse.Namespace) -> list[str]:
 
 
 def paper_base() -> Scenario:
-    """The paper's example with mrpctl's delay-aware rule: the base of ``simulate`` and ``sweep`` without a file."""
+    """The paper's example with the default rule: the base of ``simulate`` and ``sweep`` without a file.
 
-    return paper_scenarios()["delay_aware"]
+    The rule is the controller-side hysteresis ``mrpctl.rules.DEFAULT_RULE``, ``Hysteretic(0.1)``.
+    """
+
+    return replace(
+        paper_scenarios()["delay_aware"],
+        name="paper-hysteretic",
+        description=f"the paper's example, controller-side hysteresis (delta = {DEFAULT_DELTA:g})",
+        rule=DEFAULT_RULE,
+    )
 
 
 def scenario_from_args(args: argparse.Namespace, *, file: Path | str | None) -> Scenario:
-    """A scenario file, or the paper's example, with the plant, gain and initial-state options applied."""
+    """A scenario file, or the paper's example, with the plant, gain and initial-state options applied.
+
+    The options override the file's values as every other option does (``--inertia`` the plant, not a
+    predictor's model; ``--sigma`` or ``--omega`` one half of the initial state, the other half kept).
+    """
     if file is not None:
-        given = plant_given(args) + [o for o, v in (("--sigma", args.sigma), ("--omega", args.omega)) if v is not None]
-        if given:
-            raise SpecificationError(
-                f"{given[0]} does not apply with a scenario file (the file gives the plant, gain and initial state); "
-                "edit the file or leave out the file"
-            )
-        return load_scenario(file)
-    base = paper_base()
-    changes: dict[str, Any] = {"name": "command_line", "description": "from command-line options"}
+        base = load_scenario(file)
+        changes: dict[str, Any] = {}
+    else:
+        base = paper_base()
+        changes = {"name": "command_line", "description": "from command-line options"}
+    sigma, omega = getattr(args, "sigma", None), getattr(args, "omega", None)
     if args.inertia is not None:
         changes["spacecraft"] = spacecraft_from(args.inertia)
     gain = gain_from_args(args)
     if gain is not None:
         changes["K"] = finite_array("--K", gain, (3, 6))
-    if args.sigma is not None or args.omega is not None:
-        sigma = base.x0[:3] if args.sigma is None else args.sigma
-        omega = 4.0 * base.x0[3:] if args.omega is None else args.omega
-        changes["x0"] = state(sigma, omega)
-    return replace(base, **changes)
+    if sigma is not None or omega is not None:
+        changes["x0"] = state(base.x0[:3] if sigma is None else sigma, 4.0 * base.x0[3:] if omega is None else omega)
+    return replace(base, **changes) if changes else base
 
 
 def _predictor_given(args: argparse.Namespace) -> list[str]:
@@ -144,6 +153,15 @@ def apply_overrides(scenario: Scenario, args: argparse.Namespace) -> Scenario:
     substeps = getattr(args, "substeps", None)
     if substeps is not None:
         changes["substeps"] = integer("--substeps", substeps, minimum=1)
+    attitude, rate = getattr(args, "settling_attitude", None), getattr(args, "settling_rate", None)
+    if attitude is not None:
+        changes["settling_attitude"] = _option_value(
+            "--settling-attitude", lambda: settling_tolerances(attitude, scenario.settling_rate)[0]
+        )
+    if rate is not None:
+        changes["settling_rate"] = _option_value(
+            "--settling-rate", lambda: settling_tolerances(scenario.settling_attitude, rate)[1]
+        )
     return replace(scenario, **changes) if changes else scenario
 
 

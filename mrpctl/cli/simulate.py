@@ -28,11 +28,12 @@ from mrpctl.cli.common import (
     save_plot,
 )
 from mrpctl.cli.limits import check_run_fits, check_sweep_fits
-from mrpctl.cli.overrides import apply_flight_options, apply_overrides, paper_base, scenario_from_args
+from mrpctl.cli.overrides import apply_flight_options, apply_overrides, scenario_from_args
 from mrpctl.design import linearized_loop
 from mrpctl.errors import SpecificationError
 from mrpctl.predictor import OnPredicted
-from mrpctl.scenario import Scenario, load_scenario, rule_name, shipped_scenarios, tumbling_states
+from mrpctl.rules import DEFAULT_DELTA
+from mrpctl.scenario import Scenario, rule_name, shipped_scenarios, tumbling_states
 from mrpctl.simulation import BatchResult, SimulationResult, simulate_batch
 from mrpctl.switching import BoundaryLayer
 
@@ -65,6 +66,8 @@ def _result_summary(result: SimulationResult) -> dict[str, Any]:
         "sign_flips": result.sign_flips,
         "max_sigma": result.max_sigma,
         "settling_time": result.settling_time,
+        "settling_attitude_deg": result.settling_attitude,
+        "settling_rate": result.settling_rate,
         "converged": result.converged,
         "diverged": result.diverged,
         "final_sigma": result.sigma[-1],
@@ -133,15 +136,15 @@ def add_simulate(commands: Any) -> None:
         help="simulate a scenario file, or a run given by options",
         description=(
             "Simulate one closed-loop run: a scenario file, a shipped scenario by name "
-            f"({names}), or without a file the paper's example (delay-aware rule) changed by "
+            f"({names}), or without a file the paper's example (rule hysteretic, delta = {DEFAULT_DELTA:g}) changed by "
             "--inertia, --K/--k-sigma/--k-omega, --sigma/--omega and the run options."
         ),
         formatter_class=Formatter,
         epilog=EXIT_CODES,
     )
     parser.add_argument("scenario", nargs="?", help="scenario TOML or shipped name")
-    add_plant_options(parser, "the paper's 140 100 80")
-    parser.add_argument("--sigma", type=float, nargs=3, metavar="S", help="initial MRPs sigma0")
+    add_plant_options(parser, "the paper's 140 100 80 (or the scenario's)")
+    parser.add_argument("--sigma", type=float, nargs=3, metavar="S", help="initial MRPs sigma0 (overrides the file)")
     parser.add_argument("--omega", type=float, nargs=3, metavar="W", help="initial body rates omega0 (rad/s)")
     add_run_options(
         parser, plot="write sigma, omega, u against t to this image", csv="write the trajectory to this CSV"
@@ -210,21 +213,27 @@ def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, s
         count,
         seed=0 if args.seed is None else args.seed,
         angle_deg=(160.0, 179.0) if args.angle_range is None else tuple(args.angle_range),
-        rate=(0.5, 1.2) if args.rate_range is None else tuple(args.rate_range),
+        body_rate=(0.5, 1.2) if args.rate_range is None else tuple(args.rate_range),
         cross_rate=0.05 if args.cross_rate is None else args.cross_rate,
     )
     return np.arange(count, dtype=float), "tumbling initial state (run index)", [{"x0": x} for x in states]
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    base = load_scenario(args.scenario) if args.scenario else paper_base()
+    base = scenario_from_args(args, file=args.scenario or None)
+    if args.parameter == "tau" and (base.delay is not None or args.jitter is not None or args.delay_file is not None):
+        raise SpecificationError(
+            "sweep tau with a jittering delay (the scenario's [delay], --jitter or --delay-file): the delay model "
+            "fixes every run's delay (tau = its tau_max); sweep tau without it, or run mrpctl simulate --jitter "
+            "TMIN TMAX once per delay window"
+        )
     base = apply_overrides(base, args)
-
     if base.predictor is not None or isinstance(base.rule, OnPredicted):
         raise SpecificationError(
             "sweep does not run the predictor (rule 'on-predicted') yet; use mrpctl simulate, or "
             "mrpctl.simulate_batch(..., predictor=mrpctl.Predictor(model)) from Python"
         )
+    base = apply_flight_options(base, args)
     check_plot_path(args.plot)
     chunk = integer("--chunk", args.chunk, minimum=1)
     values, label, runs = _sweep_runs(args, base)
@@ -245,6 +254,8 @@ def _sweep(args: argparse.Namespace) -> int:
                 rate=base.rate,
                 history=base.history,
                 substeps=base.substeps,
+                settling_attitude=base.settling_attitude,
+                settling_rate=base.settling_rate,
                 **base.flight_options,  # a flight scenario's models, shared by the runs
             )
             batches.append(batch)
@@ -340,7 +351,11 @@ def add_sweep(commands: Any) -> None:
     )
     parser.add_argument("parameter", choices=("eps", "tau", "tumble"), help="what to sweep")
     parser.add_argument(
-        "--scenario", help="base scenario TOML or shipped name (default: the paper's example, delay-aware rule)"
+        "--scenario",
+        help=(
+            "base scenario TOML or shipped name "
+            f"(default: the paper's example, rule hysteretic, delta = {DEFAULT_DELTA:g})"
+        ),
     )
     parser.add_argument("--values", type=float, nargs="+", help="values of eps or tau (eps default: 0.001 ... 0.2)")
     parser.add_argument("--count", type=int, help="tumble: number of initial states (default 50)")
@@ -361,5 +376,7 @@ def add_sweep(commands: Any) -> None:
     )
     parser.add_argument("--cross-rate", type=float, help="tumble: largest rate across the axis (rad/s; default 0.05)")
     parser.add_argument("--chunk", type=int, default=25, help="runs per batch call (progress granularity)")
+    add_plant_options(parser, "the paper's 140 100 80 (or the scenario's)")
     add_run_options(parser, plot="write the sweep plot to this image", csv="write the table to this CSV")
+    add_flight_options(parser)
     parser.set_defaults(handler=_sweep)

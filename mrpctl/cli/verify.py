@@ -141,7 +141,7 @@ def _flown_checks(
         rate_bound = rate_value(args.jitter_rate)
         loop = linearized_loop(spacecraft, gain)
         pairs = loop.axes if loop.split else ((loop.A, loop.A_d),)
-        certificates = [certify_interval(a, a_d, tau_max, tau_min=tau_min, rate=rate_bound) for a, a_d in pairs]
+        certificates = [certify_interval(a, a_d, tau_max, tau_min=tau_min, delay_rate=rate_bound) for a, a_d in pairs]
         rows.append(
             {
                 "check": "jitter",

@@ -20,6 +20,28 @@ from mrpctl.spacecraft import Spacecraft
 
 _LOG = logging.getLogger(__name__)
 
+#: The default of a deprecated keyword: not given.
+NOT_GIVEN: Any = object()
+
+
+def delay_rate_argument(delay_rate: Any, rate: Any) -> Any:
+    """The bound on the delay's rate dτ/dt of a design function: ``delay_rate``, or ``rate``, its old name.
+
+    ``rate`` is deprecated (a DeprecationWarning): elsewhere in mrpctl ``rate`` is a measurement rate in Hz.
+    """
+    if rate is NOT_GIVEN:
+        return delay_rate
+    warnings.warn(
+        "rate= (the bound on the delay's rate d tau/dt) is deprecated: use delay_rate= (rate is the measurement "
+        "rate in Hz elsewhere in mrpctl)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    if delay_rate is not None:
+        raise SpecificationError("give delay_rate (rate is its deprecated name), not both")
+    return rate
+
+
 #: cvxpy statuses that carry a usable solution (only "optimal": "optimal_inaccurate" never certifies).
 OPTIMAL = "optimal"
 

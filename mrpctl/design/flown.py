@@ -485,7 +485,7 @@ def _lmi_check(flown: _Flown, *, sampled: bool, jitter: bool, box: bool, order: 
         if lo is None:
             cert = certify_polytope(poly, flown.K, hi, order=n)
         else:
-            cert = certify_polytope(poly, flown.K, hi, order=n, tau_min=lo, rate=rate)
+            cert = certify_polytope(poly, flown.K, hi, order=n, tau_min=lo, delay_rate=rate)
         status = cert.status
         detail = str(cert)
     else:
@@ -499,7 +499,7 @@ def _lmi_check(flown: _Flown, *, sampled: bool, jitter: bool, box: bool, order: 
         elif lo is not None:
             loop = linearized_loop(flown.spacecraft, flown.K)
             pairs = loop.axes if loop.split else ((loop.A, loop.A_d),)
-            parts = [certify_interval(a, a_d, hi, tau_min=lo, rate=rate, order=n) for a, a_d in pairs]
+            parts = [certify_interval(a, a_d, hi, tau_min=lo, delay_rate=rate, order=n) for a, a_d in pairs]
             status = _worst([c.status for c in parts])
             detail = "\n".join(str(c) for c in parts)
         else:

@@ -24,7 +24,15 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import finite_scalar, nonnegative_scalar, positive_scalar, readonly
-from mrpctl.design._common import OPTIMAL, SolveOutcome, order_value, solve, system_matrices
+from mrpctl.design._common import (
+    NOT_GIVEN,
+    OPTIMAL,
+    SolveOutcome,
+    delay_rate_argument,
+    order_value,
+    solve,
+    system_matrices,
+)
 from mrpctl.design.lmi import DEFAULT_MARGIN_TOL, BlockMargin, CertificateStatus, SearchStatus, criterion_name
 from mrpctl.design.margin import delay_margin
 from mrpctl.errors import SpecificationError
@@ -693,7 +701,8 @@ def certify_interval(
     tau_max: float,
     *,
     tau_min: float = 0.0,
-    rate: DelayRate | float | None = None,
+    delay_rate: DelayRate | float | None = None,
+    rate: Any = NOT_GIVEN,
     order: int = 1,
     margin_tol: float = DEFAULT_MARGIN_TOL,
 ) -> IntervalCertificate:
@@ -707,9 +716,11 @@ def certify_interval(
         Upper end of the delay interval (s).
     tau_min : float, optional
         Lower end (s), default 0.
-    rate : DelayRate, float or None, optional
+    delay_rate : DelayRate, float or None, optional
         Bound on τ̇: a DelayRate, a number μ meaning |τ̇| ≤ μ, or None (default) for an unknown,
         arbitrarily fast-varying delay.
+    rate : optional
+        Deprecated name of ``delay_rate`` (DeprecationWarning).
     order : int, optional
         Bessel-Legendre order N of the integral inequality (0 Jensen, 1 Wirtinger; default 1).
     margin_tol : float, optional
@@ -721,9 +732,10 @@ def certify_interval(
 
     Examples
     --------
-    >>> certify_interval([[-2, 0], [0, -0.9]], [[-1, 0], [-1, -1]], 2.0, rate=0.5).certified
+    >>> certify_interval([[-2, 0], [0, -0.9]], [[-1, 0], [-1, -1]], 2.0, delay_rate=0.5).certified
     True
     """
+    rate = delay_rate_argument(delay_rate, rate)
     plants = _plants(A, A_d)
     lo, hi = _interval(tau_min, tau_max)
     return solve_interval(
@@ -736,7 +748,8 @@ def max_certified_interval_delay(
     A_d: Any,
     *,
     tau_min: float = 0.0,
-    rate: DelayRate | float | None = None,
+    delay_rate: DelayRate | float | None = None,
+    rate: Any = NOT_GIVEN,
     order: int = 1,
     rtol: float = 1e-3,
     tau_limit: float | None = None,
@@ -753,8 +766,8 @@ def max_certified_interval_delay(
     ----------
     A, A_d : array_like
     tau_min : float, optional
-    rate : DelayRate, float or None, optional
-        As in [`certify_interval`][mrpctl.design.certify_interval].
+    delay_rate : DelayRate, float or None, optional
+        As in [`certify_interval`][mrpctl.design.certify_interval] (``rate``: its deprecated name).
     order : int, optional
     rtol : float, optional
         Relative width of the final bracket (default 1e-3).
@@ -765,7 +778,7 @@ def max_certified_interval_delay(
 
     (a, a_d) = _plants(A, A_d)[0]
     lo = nonnegative_scalar("tau_min", tau_min)
-    rate_v = rate_value(rate)
+    rate_v = rate_value(delay_rate_argument(delay_rate, rate))
     order = order_value(order)
     rtol = positive_scalar("rtol", rtol)
     if rtol >= 0.5:

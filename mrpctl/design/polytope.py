@@ -34,7 +34,17 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import nonnegative_scalar, positive_scalar, readonly
-from mrpctl.design._common import OPTIMAL, SolveOutcome, balancing, order_value, similarity, solve, system_matrices
+from mrpctl.design._common import (
+    NOT_GIVEN,
+    OPTIMAL,
+    SolveOutcome,
+    balancing,
+    delay_rate_argument,
+    order_value,
+    similarity,
+    solve,
+    system_matrices,
+)
 from mrpctl.design.interval import (
     DelayRate,
     IntervalCertificate,
@@ -557,7 +567,8 @@ def certify_polytope(
     *,
     order: int = 2,
     tau_min: float | None = None,
-    rate: DelayRate | float | None = None,
+    delay_rate: DelayRate | float | None = None,
+    rate: Any = NOT_GIVEN,
     margin_tol: float = DEFAULT_MARGIN_TOL,
     functional: Functional | None = None,
     decay_rate: float = 0.0,
@@ -569,7 +580,7 @@ def certify_polytope(
     form with (Pᵢ, Sᵢ, Rᵢ) per vertex and a common slack (re-checked by `vertex_blocks` at
     every vertex); with ``Functional.COMMON`` as in [`certify`][mrpctl.design.certify] with (P, S, R)
     common to the vertices (re-checked by [`lmi_blocks`][mrpctl.design.lmi_blocks]). Otherwise the delay
-    varies in [tau_min, tau] with ``rate`` and the interval criterion is used with common matrices
+    varies in [tau_min, tau] with ``delay_rate`` and the interval criterion is used with common matrices
     (``functional`` is then ignored).
 
     Parameters
@@ -583,8 +594,8 @@ def certify_polytope(
         Bessel-Legendre order N (default 2).
     tau_min : float, optional
         Lower end of a time-varying delay interval (s).
-    rate : DelayRate or float, optional
-        Rate bound of the interval delay (None: unknown).
+    delay_rate : DelayRate or float, optional
+        Bound on the interval delay's rate dτ/dt (None: unknown); ``rate`` is its deprecated name.
     margin_tol : float, optional
         Relative eigenvalue margin every re-computed block must keep.
     functional : Functional, optional
@@ -598,6 +609,7 @@ def certify_polytope(
     """
     if not isinstance(polytope, InertiaPolytope):
         raise SpecificationError(f"polytope must be an InertiaPolytope, got {type(polytope).__name__}")
+    rate = delay_rate_argument(delay_rate, rate)
     tau = positive_scalar("tau", tau)
     order = order_value(order)
     margin_tol = positive_scalar("margin_tol", margin_tol)

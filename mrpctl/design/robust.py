@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from mrpctl._validation import integer, nonnegative_scalar, positive_scalar
-from mrpctl.design._common import order_value
+from mrpctl.design._common import NOT_GIVEN, delay_rate_argument, order_value
 from mrpctl.design.gains import PDGains, pd_gains
 from mrpctl.design.interval import DelayRate, rate_value
 from mrpctl.design.lmi import CertificateStatus
@@ -110,7 +110,8 @@ def synthesize_robust_pd(
     product_bound: float = 0.0,
     period: float | None = None,
     tau_min: float | None = None,
-    rate: DelayRate | float | None = None,
+    delay_rate: DelayRate | float | None = None,
+    rate: Any = NOT_GIVEN,
     rtol: float = 1e-3,
     omega_max: float | None = None,
 ) -> RobustPDSynthesis:
@@ -132,8 +133,10 @@ def synthesize_robust_pd(
     period : float, optional
         Sampling period h (s): certify the sawtooth τ(t) ∈ [τ, τ + h], τ̇ = 1.
     tau_min : float, optional
-        Lower end of a jitter interval [tau_min, tau] (s), with ``rate`` (None: unknown rate);
-        ``tau_min`` equal to ``tau`` is the constant delay, and ``rate`` without ``tau_min`` is refused.
+        Lower end of a jitter interval [tau_min, tau] (s), with ``delay_rate`` (None: unknown rate);
+        ``tau_min`` equal to ``tau`` is the constant delay, and ``delay_rate`` without ``tau_min`` is refused.
+    delay_rate : DelayRate or float, optional
+        Bound on the delay's rate dτ/dt with ``tau_min`` (``rate``: its deprecated name).
     rtol : float, optional
         Relative width of the final ωₙ bracket.
     omega_max : float, optional
@@ -149,7 +152,7 @@ def synthesize_robust_pd(
     pb = nonnegative_scalar("product_bound", product_bound)
     rtol = positive_scalar("rtol", rtol)
     poly = inertia_polytope(sc, tol, product_bound=pb)
-    delays = delay_set(tau, period=period, tau_min=tau_min, rate=rate)
+    delays = delay_set(tau, period=period, tau_min=tau_min, delay_rate=delay_rate_argument(delay_rate, rate))
     model, lo, hi, rate_v, d = delays.model, delays.tau_min, delays.tau_max, delays.rate, delays.samples
     top = None if omega_max is None else positive_scalar("omega_max", omega_max)
     solves = 0
@@ -162,7 +165,7 @@ def synthesize_robust_pd(
         if model is DelayModel.CONSTANT:
             cert = certify_polytope(poly, gains.K, hi, order=order)
         else:
-            cert = certify_polytope(poly, gains.K, hi, order=order, tau_min=lo, rate=rate_v)
+            cert = certify_polytope(poly, gains.K, hi, order=order, tau_min=lo, delay_rate=rate_v)
         failures += cert.status is CertificateStatus.SOLVER_FAILED
         return cert
 
@@ -254,20 +257,27 @@ class DelaySet:
 
 
 def delay_set(
-    tau: float, *, period: float | None = None, tau_min: float | None = None, rate: DelayRate | float | None = None
+    tau: float,
+    *,
+    period: float | None = None,
+    tau_min: float | None = None,
+    delay_rate: DelayRate | float | None = None,
+    rate: Any = NOT_GIVEN,
 ) -> DelaySet:
     """Check and classify the delay options shared by the robust syntheses.
 
     ``period`` h: the sampled loop, τ(t) ∈ [τ, τ + h], τ̇ = 1 (τ/h must be whole to 1e-9);
-    ``tau_min`` (with ``rate``, None = unknown): τ(t) ∈ [tau_min, τ] (``tau_min`` = τ is the constant
-    delay); neither: the constant delay τ. ``period`` with ``tau_min``, ``rate`` without
+    ``tau_min`` (with ``delay_rate``, None = unknown; ``rate`` is its deprecated name): τ(t) ∈ [tau_min, τ]
+    (``tau_min`` = τ is the constant delay); neither: the constant delay τ. ``period`` with ``tau_min``,
+    ``delay_rate`` without
     ``tau_min`` and ``tau_min`` > τ are refused (SpecificationError naming the parameter).
     """
     tau = positive_scalar("tau", tau)
     if period is not None and tau_min is not None:
         raise SpecificationError("give either period (sampled loop) or tau_min (jitter interval), not both")
+    rate = delay_rate_argument(delay_rate, rate)
     if rate is not None and tau_min is None:
-        raise SpecificationError("rate applies only with tau_min (the jitter interval [tau_min, tau])")
+        raise SpecificationError("delay_rate applies only with tau_min (the jitter interval [tau_min, tau])")
     if period is not None:
         h = positive_scalar("period", period)
         ratio = tau / h

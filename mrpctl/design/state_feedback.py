@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import nonnegative_scalar, positive_scalar, readonly
-from mrpctl.design._common import OPTIMAL, SynthesisStatus, axis_a, order_value, solve
+from mrpctl.design._common import NOT_GIVEN, OPTIMAL, SynthesisStatus, axis_a, delay_rate_argument, order_value, solve
 from mrpctl.design.interval import (
     DelayRate,
     UnknownRate,
@@ -283,7 +283,8 @@ def synthesize_lmi(
     product_bound: float | None = None,
     period: float | None = None,
     tau_min: float | None = None,
-    rate: DelayRate | float | None = None,
+    delay_rate: DelayRate | float | None = None,
+    rate: Any = NOT_GIVEN,
 ) -> LMISynthesis:
     """Delayed state feedback u = K x(t − τ) with decay rate α by the descriptor method.
 
@@ -320,8 +321,9 @@ def synthesize_lmi(
         τ̇ = 1 (τ/h must be whole).
     tau_min : float, optional
         Robust synthesis for the jitter τ(t) ∈ [tau_min, τ] (s); ``tau_min`` = τ is the constant delay.
-    rate : DelayRate or float, optional
-        With ``tau_min``: bound on τ̇ (a number μ means |τ̇| <= μ; None: unknown).
+    delay_rate : DelayRate or float, optional
+        With ``tau_min``: bound on τ̇ (a number μ means |τ̇| <= μ; None: unknown); ``rate`` is its
+        deprecated name.
 
     Returns
     -------
@@ -359,8 +361,9 @@ def synthesize_lmi(
     alpha = nonnegative_scalar("decay_rate", decay_rate)
     order = order_value(order)
     margin_tol = positive_scalar("margin_tol", margin_tol)
+    rate = delay_rate_argument(delay_rate, rate)
     robust = any(v is not None for v in (tolerance, product_bound, period, tau_min, rate))
-    delays = delay_set(tau, period=period, tau_min=tau_min, rate=rate)
+    delays = delay_set(tau, period=period, tau_min=tau_min, delay_rate=rate)
     if alpha * delays.tau_max > _MAX_DECAY_DELAY:
         raise SpecificationError(
             f"decay_rate: alpha * tau_max = {alpha * delays.tau_max:g} is above {_MAX_DECAY_DELAY:g}: the shifted "
@@ -623,7 +626,7 @@ def _synthesize_lmi_robust(
         )
     k = gain_from_pd(spacecraft, np.full(3, k_part[0, 0]), np.full(3, k_part[0, 1])) if split else k_part
     interval = delays.model is not DelayModel.CONSTANT
-    extra: dict[str, Any] = {"tau_min": lo, "rate": delays.rate} if interval else {}
+    extra: dict[str, Any] = {"tau_min": lo, "delay_rate": delays.rate} if interval else {}
     cert = certify_polytope(poly, k, hi, order=order, margin_tol=margin_tol, **extra)
     decay_cert = certify_polytope(poly, k, hi, order=order, margin_tol=margin_tol, decay_rate=alpha, **extra)
     exact_ok, exact_text = exact_check_of_set(poly, k, delays.model, lo, hi, delays.period, delays.samples)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import overload
+from typing import Any, overload
 
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
 from mrpctl._validation import positive_scalar
-from mrpctl.design._common import SynthesisStatus, axis_a, order_value
+from mrpctl.design._common import NOT_GIVEN, SynthesisStatus, axis_a, delay_rate_argument, order_value
 from mrpctl.design.gains import PDGains, damping_kind, pd_gains
 from mrpctl.design.interval import (
     DelayRate,
@@ -252,7 +252,7 @@ def synthesize_pd(
     product_bound: None = None,
     period: None = None,
     tau_min: None = None,
-    rate: None = None,
+    delay_rate: None = None,
 ) -> PDSynthesis: ...
 
 
@@ -271,7 +271,8 @@ def synthesize_pd(
     product_bound: float | None = None,
     period: float | None = None,
     tau_min: float | None = None,
-    rate: DelayRate | float | None = None,
+    delay_rate: DelayRate | float | None = None,
+    rate: Any = NOT_GIVEN,
 ) -> PDSynthesis | RobustPDSynthesis: ...
 
 
@@ -289,7 +290,8 @@ def synthesize_pd(
     product_bound: float | None = None,
     period: float | None = None,
     tau_min: float | None = None,
-    rate: DelayRate | float | None = None,
+    delay_rate: DelayRate | float | None = None,
+    rate: Any = NOT_GIVEN,
 ) -> PDSynthesis | RobustPDSynthesis:
     """The fastest-decaying delayed PD gains for the delay τ, with a certified decay rate.
 
@@ -333,14 +335,15 @@ def synthesize_pd(
         τ̇ = 1 (τ/h must be a whole number).
     tau_min : float, optional
         Robust design for the jitter τ(t) ∈ [tau_min, τ] (s) (``tau_min`` = τ: the constant delay).
-    rate : DelayRate or float, optional
-        With ``tau_min``: the bound on τ̇ (a number μ means |τ̇| <= μ; None: unknown rate).
+    delay_rate : DelayRate or float, optional
+        With ``tau_min``: the bound on τ̇ (a number μ means |τ̇| <= μ; None: unknown rate); ``rate`` is its
+        deprecated name (DeprecationWarning).
 
     Returns
     -------
     PDSynthesis or RobustPDSynthesis
         PDSynthesis without the robust options (the nominal design above). With any of
-        ``tolerance``, ``product_bound``, ``period``, ``tau_min``, ``rate`` given:
+        ``tolerance``, ``product_bound``, ``period``, ``tau_min``, ``delay_rate`` given:
         [`RobustPDSynthesis`][mrpctl.design.RobustPDSynthesis] from
         [`synthesize_robust_pd`][mrpctl.design.synthesize_robust_pd] (the one robust search), started at the
         decay-optimal nominal ωₙ = w/τ above: when the polytope certificate (order ``order``) holds
@@ -382,11 +385,12 @@ def synthesize_pd(
         pd_gains(spacecraft, zeta=z, omega_n=1.0, allow_underdamped=allow_underdamped)  # checks ζ
         w, lam = _best_w(z)
         how = f"w = omega_n tau optimised at zeta = {z:g}"
+    rate = delay_rate_argument(delay_rate, rate)
     if any(v is not None for v in (tolerance, product_bound, period, tau_min, rate)):
         if positivity is not Positivity.RELAXED or margin_tol != DEFAULT_MARGIN_TOL:
             raise SpecificationError(
                 "positivity and margin_tol apply only to the nominal design (not with tolerance, product_bound, "
-                "period, tau_min or rate)"
+                "period, tau_min or delay_rate)"
             )
         return synthesize_robust_pd(
             spacecraft,
@@ -397,7 +401,7 @@ def synthesize_pd(
             product_bound=0.0 if product_bound is None else product_bound,
             period=period,
             tau_min=tau_min,
-            rate=rate,
+            delay_rate=rate,
             rtol=max(rtol, 1e-3),
             omega_max=w / tau,
         )

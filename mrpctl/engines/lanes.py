@@ -731,6 +731,7 @@ def closed_loop_batches(
     rate: float = 1.0,
     disturbance: Disturbance | Sequence[Disturbance] | None = None,
     reference: ReferenceStream | Sequence[ReferenceStream] | None = None,
+    settling: tuple[float, float] | None = None,
 ) -> LaneBatches:
     """The closed-loop runs packed for `LaneBatches.run` (arguments as `simulate_lanes`);
     read the statistics with `lane_stats` once every batch has run.
@@ -843,7 +844,7 @@ def closed_loop_batches(
     elif flight_options is not None or sensor is not None or delay is not None:
         raise SpecificationError("flight_options, sensor, delay: this lane engine does not run the flight sample")
     return engine.batches(
-        {"x": x0, "memory": np.reshape(memory0, (runs, -1)), "stats": np.tile(initial_stats(n), (runs, 1))},
+        {"x": x0, "memory": np.reshape(memory0, (runs, -1)), "stats": np.tile(initial_stats(n, settling), (runs, 1))},
         constants,
         np.asarray(history).transpose(0, 2, 1),
         n,

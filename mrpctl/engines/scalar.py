@@ -47,10 +47,11 @@ from mrpctl.engines.stats import (
     S_MAX_SIGMA,
     S_N,
     S_PEAK_TORQUE,
+    S_SET_CHANGES,
+    S_SETTLE_OMEGA,
+    S_SETTLE_SIGMA,
     S_UNSETTLED,
     S_UPREV,
-    SETTLING_OMEGA,
-    SETTLING_SIGMA,
     STATS_SIZE,
     initial_stats,
 )
@@ -209,7 +210,10 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
 
     sigma, omega = settling_state[0:3], 4 * settling_state[3:6]
     sigma_squared = ca.dot(sigma, sigma)
-    unsettled = ca.logic_or(sigma_squared >= SETTLING_SIGMA**2, ca.dot(omega, omega) >= SETTLING_OMEGA**2)
+    # the tolerances are run-time constants carried in the statistics (default SETTLING_SIGMA², SETTLING_OMEGA²)
+    unsettled = ca.logic_or(sigma_squared >= stats[S_SETTLE_SIGMA], ca.dot(omega, omega) >= stats[S_SETTLE_OMEGA])
+    # the plant's σ replaced by its shadow at this sample (by the rule, or by the flight loop's bookkeeping)
+    set_changed = ca.logic_or(ca.logic_or(x_meas[0] != x[0], x_meas[1] != x[1]), x_meas[2] != x[2])
     u_prev = stats[S_UPREV]
     flips = stats[S_FLIPS] + ca.if_else(ca.logic_and(counted, u * u_prev < 0), 1.0, 0.0)
     # max |u_i| by comparisons: casadi_fmax is a libm call per use (no -ffinite-math-only)
@@ -229,6 +233,9 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
         ca.if_else(counted, ca.fmax(stats[S_MAX_SIGMA], sigma_squared), stats[S_MAX_SIGMA]),  # max |σ|²
         ca.if_else(ca.logic_and(counted, ca.logic_not(ok)), k, stats[S_DIVERGED]),
         ca.if_else(ca.logic_and(counted, torque > peak), torque, peak),  # max |u|_inf
+        stats[S_SETTLE_SIGMA],
+        stats[S_SETTLE_OMEGA],
+        stats[S_SET_CHANGES] + ca.if_else(ca.logic_and(counted, set_changed), 1.0, 0.0),
     )
     return ca.Function(
         name,
@@ -341,6 +348,7 @@ class Engine:
                 sensor=sensor,
                 limited=limited,
                 torque_input=self.torque_input,
+                records=True,
                 **({"reference_input": True, "feedforward": feedforward} if reference_input else {}),
             )
         elif self.flight:
@@ -472,6 +480,7 @@ class Engine:
         rate: float = 1.0,
         disturbance: Disturbance | None = None,
         reference: ReferenceStream | None = None,
+        settling: tuple[float, float] | None = None,
     ) -> RunOutput:
         """One run of n samples, slice by slice.
 
@@ -536,7 +545,7 @@ class Engine:
                 )
             if self.flight and not self._sensor:  # the sample reads m_{k-d} as it is: a history row must be short
                 history = np.ascontiguousarray(short_history(history))
-        state[memory_end:] = initial_stats(n)
+        state[memory_end:] = initial_stats(n, settling)
         history_stride = self.ring_width if history.shape[0] > 1 else 0
         gain_cm = np.ascontiguousarray(gain.T)  # column-major 3 x 6
         parameters = np.ascontiguousarray(parameters, dtype=float)

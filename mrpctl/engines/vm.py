@@ -153,6 +153,7 @@ class VirtualMachineEngine:
         sensor: Any = None,
         delay: Any = None,
         rate: float = 1.0,
+        settling: tuple[float, float] | None = None,
     ) -> RunOutput:
         """As `mrpctl.engines.scalar.Engine.run`, the whole horizon at once."""
         trajectories = keep_every is not None or workspace.switched is not None
@@ -173,7 +174,7 @@ class VirtualMachineEngine:
             noise = np.zeros((padded, STATE_SIZE)) if sensor is None else sensor.noise_rows(0, padded)
             constants.append(np.ascontiguousarray(noise.T))
         out = self.horizon(self.blocks(n), trajectories)(
-            x0, memory0, initial_stats(n), self.history_block(history), gain, parameters, *constants
+            x0, memory0, initial_stats(n, settling), self.history_block(history), gain, parameters, *constants
         )
         if not trajectories:
             return self.output(np.asarray(out).ravel(), n, None, None, None, keep_every, workspace, switch_limit)

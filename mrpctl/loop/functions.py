@@ -188,8 +188,10 @@ def flight_core_function(
     (no noise, no bias: m_k = x_meas exactly), without ``limited`` for no actuator limit
     (u_max = u_norm = inf: u = u_c, the saturated count stays 0; u_max, u_norm unused), without
     ``disturbed`` for w = 0 (u + w = u; w unused). With ``records`` a last output ``record`` =
-    (h_{k+1}, σ_c,k, u_c,k) (the logic variable after the rule, the MRP the control law used, the
-    commanded torque before the actuator limits, N m): the result's per-sample records. With
+    (h_{k+1}, σ_c,k, u_c,k, σ̃_k, ω̃_k) (the logic variable after the rule, the MRP the control law used, the
+    commanded torque before the actuator limits, N m, and what the controller read: the short set of the
+    delayed measured attitude, after the noise, and the delayed measured rate, rad/s): the result's
+    per-sample records. With
     ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the sample (a
     per-sample disturbance streamed by the engine; the constant w in ``flight`` is then unused).
     ``noise_form`` ([`NoiseForm`][mrpctl.flight.NoiseForm]): with ``MRP`` the first half of ``noise`` is the
@@ -305,7 +307,9 @@ def flight_core_function(
         true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
     if records:
         output_names.append("record")
-        outputs.append(ca.vertcat(h_next, sigma_c, command, *([true_sigma] if reference_input else [])))
+        outputs.append(
+            ca.vertcat(h_next, sigma_c, command, sigma_seen, 4 * seen[3:6], *([true_sigma] if reference_input else []))
+        )
     if reference_input:
         output_names.append("tracking_error")
         outputs.append(ca.vertcat(true_sigma, true_rate))
@@ -366,6 +370,7 @@ def predictor_core_function(
     torque_input: bool = False,
     reference_input: bool = False,
     feedforward: bool = False,
+    records: bool = False,
 ) -> ca.Function:
     """One sample of the predictor loop (``design/predictor.md``, form (b)) (pure SX).
 
@@ -380,7 +385,10 @@ def predictor_core_function(
     actuator is left out of the expressions (u = u_c; u_max, u_norm unused), which saves its
     libm calls. With ``torque_input`` a last input ``torque`` (3, N m) is the disturbance w_k of the
     sample (a per-sample disturbance streamed by the engine; the constant w in ``flight`` is then
-    unused); like the constant w it acts on the plant only. At sample k:
+    unused); like the constant w it acts on the plant only. With ``records`` a last output ``record`` =
+    (σ_y, ω_y, σ̂, ω̂, u_c) (15): what the controller saw, the delayed measurement y = m_{k−d} (attitude as
+    measured, after the noise; rate in rad/s), its prediction x̂ after the rule (σ̂ in the set it switched to,
+    ω̂ in rad/s) and the commanded torque (N m). At sample k:
 
     1. plant bookkeeping (``OnCurrent``, no physical effect): x_meas, recorded in the result;
     2. the sensor (with ``sensor``): m_k, else m_k = x_meas;
@@ -479,8 +487,19 @@ def predictor_core_function(
         inputs += [reference, reference_error]
         names += ["reference", "reference_error"]
         true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
-        outputs += [ca.vertcat(1.0, sigma_hat, command, true_sigma), ca.vertcat(true_sigma, true_rate)]
-        output_names += ["record", "tracking_error"]
+    if records or reference_input:
+        # (σ_y, ω_y, σ̂, ω̂, u_c): the measurement read and the prediction of the body (tracking: of σ_B/N, ω_B/N,
+        # whose error the law used), then with a reference the true error σ_B/R at t_k (the pointing metrics')
+        body = predicted if reference_input else x_hat
+        outputs.append(
+            ca.vertcat(
+                y[0:3], 4 * y[3:6], body[0:3], 4 * body[3:6], command, *([true_sigma] if reference_input else [])
+            )
+        )
+        output_names.append("record")
+    if reference_input:
+        outputs.append(ca.vertcat(true_sigma, true_rate))
+        output_names.append("tracking_error")
     return ca.Function("core", inputs, outputs, names, output_names)
 
 

@@ -149,7 +149,8 @@ def varying_delay(rule: Any, delay: Any, d: int, rate: float, n: int) -> DelayMo
         raise SpecificationError(f"delay must be a mrpctl.flight.DelayModel or None, got {delay!r}")
     if not isinstance(rule, Hysteretic):
         raise SpecificationError(
-            f"delay: a time-varying delay runs in the flight loop only (rule=Hysteretic), got {rule}"
+            f"delay: a time-varying delay runs in the flight loop only; use rule=mrpctl.flight.Hysteretic(delta) "
+            f"(Hysteretic(0.0) is OnCurrent's control), got {rule}"
         )
     low, high = delay.bounds(rate)
     if high != d:

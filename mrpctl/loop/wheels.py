@@ -231,5 +231,6 @@ def wheel_core_function(
     outputs = [x_next, memory_next, x_meas, body, switched] + ([measured] if sensor else [])
     if records:
         output_names.append("record")
-        outputs.append(ca.vertcat(h_next, sigma_c, command, speeds, motor))
+        # (h, σ_c, u_c, σ̃, ω̃) as the flight sample's record, then the wheel speeds and motor torques
+        outputs.append(ca.vertcat(h_next, sigma_c, command, sigma_seen, 4 * seen[3:6], speeds, motor))
     return ca.Function("core", inputs, outputs, names, output_names)

@@ -31,6 +31,7 @@ __all__ = [
     "inertia_mismatch_margin",
     "lifted_spectral_radius",
     "margin_side",
+    "margin_side_bracket",
     "perturbed_spacecraft",
     "predictor_loop_matrices",
     "predictor_stability",
@@ -230,7 +231,7 @@ class PredictorDesign:
         ωₙ (rad/s), the stable side of a bracket narrower than ``rtol``.
     zeta : float
     required : float
-        The required ± relative inertia error.
+        The required ± relative inertia error e (J_plant = (1 + e) J_model).
     margin : MismatchMargin
         The margin of the returned gain.
     """
@@ -630,7 +631,8 @@ def _axis_spectral_radius(a: np.ndarray, c: np.ndarray, d: int) -> float:
 
 # ============================================================================ margin
 def perturbed_spacecraft(spacecraft: Spacecraft, e: float, axis: int | None = None) -> Spacecraft:
-    """The plant with relative inertia error e: (1 + e) J, or S J S with S = I + (√(1 + e) − 1) e_i e_iᵀ on axis i."""
+    """The plant with relative inertia error e against the model J: J_plant = (1 + e) J_model, or S J S with
+    S = I + (√(1 + e) − 1) e_i e_iᵀ on axis i (the one convention of ``inertia_error`` in mrpctl)."""
     model = check_spacecraft(spacecraft, "spacecraft")
     e = finite_scalar("e", e)
     if e <= -1.0:
@@ -681,6 +683,17 @@ def margin_side(stable: Callable[[float], bool], sign: float, end: float, rtol: 
     """Scan |e| geometrically from 1e-3 to ``end``; bisect the first [stable, unstable] pair to ``rtol``."""
     good, _, capped = _side_bracket(stable, sign, end, rtol)
     return good, capped
+
+
+def margin_side_bracket(
+    stable: Callable[[float], bool], sign: float, end: float, rtol: float
+) -> tuple[float, float, bool]:
+    """[`margin_side`][mrpctl.predictor.analysis.margin_side] with its bracket: (stable, not shown stable, capped).
+
+    The stability boundary lies between the two signed e (relative width ``rtol``); both are ``sign * end``
+    when capped (stable up to the search limit).
+    """
+    return _side_bracket(stable, sign, end, rtol)
 
 
 def inertia_mismatch_margin(
@@ -845,7 +858,8 @@ def synthesize_predictor_pd(
     tau : float
         Delay τ > 0 (s).
     mismatch : float, keyword-only
-        Required relative inertia error m in (0, 1) that must stay stable on both sides (default 0.1).
+        Required relative inertia error m in (0, 1) that must stay stable on both sides, e = ±m with
+        J_plant = (1 + e) J_model (default 0.1).
     zeta : float, keyword-only
         Damping ratio ζ > 0 (default 1).
     rate : float or None, keyword-only

@@ -10,15 +10,16 @@ compiler). The model and the engine: ``design/switching.md``.
 
 from __future__ import annotations
 
-from mrpctl.engines.stats import DIVERGENCE_BOUND, HISTORY_KINDS, SETTLING_OMEGA, SETTLING_SIGMA
+from mrpctl.engines.stats import DIVERGENCE_BOUND, HISTORY_KINDS, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SETTLING_SIGMA
 from mrpctl.loop import MAX_SUBSTEPS, ClosedLoopFunctions, closed_loop_functions, delay_samples
-from mrpctl.simulation._simulate import SWITCH_LIMIT, simulate, simulate_batch
+from mrpctl.simulation._simulate import SWITCH_LIMIT, settling_tolerances, simulate, simulate_batch
 from mrpctl.simulation.results import BatchResult, SimulationResult
 
 __all__ = [
     "DIVERGENCE_BOUND",
     "HISTORY_KINDS",
     "MAX_SUBSTEPS",
+    "SETTLING_ATTITUDE_DEG",
     "SETTLING_OMEGA",
     "SETTLING_SIGMA",
     "SWITCH_LIMIT",
@@ -27,6 +28,7 @@ __all__ = [
     "SimulationResult",
     "closed_loop_functions",
     "delay_samples",
+    "settling_tolerances",
     "simulate",
     "simulate_batch",
 ]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import logging
 import math
@@ -16,12 +15,12 @@ from typing import Any
 import numpy as np
 
 from mrpctl._compile import find_compiler
-from mrpctl._validation import available_memory, finite_array, integer, positive_scalar, readonly
+from mrpctl._validation import available_memory, finite_array, finite_scalar, integer, positive_scalar, readonly
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.engines.common import RunOutput
 from mrpctl.engines.lanes import DEFAULT_WIDTH
 from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples, tracking_memory, wheel_engine
-from mrpctl.engines.stats import HISTORY_KINDS, STATS_SIZE
+from mrpctl.engines.stats import HISTORY_KINDS, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, STATS_SIZE, settling_bounds
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
@@ -71,9 +70,9 @@ SWITCH_LIMIT = 2**20
 # Bytes per kept sample in a result: m_k and u_k as computed (72), t (8), omega (24).
 _BYTES_PER_KEPT = 104
 _BYTES_PER_SWITCH = 16  # index and time
-# Flight runs: the records (h, sigma_c, u_c) and the delay used per kept sample as computed (64) and their
-# copies (64).
-_BYTES_PER_RECORD = 128
+# Flight and predictor runs: the records (at most 15 numbers: the predictor's measurement, prediction and command)
+# and the delay used per kept sample as computed (128) and their copies (128).
+_BYTES_PER_RECORD = 256
 #: simulate_batch's Python objects of each run before it runs (its delay in samples, its history row, references):
 #: 276 B measured by tracemalloc (a second audit), rounded up
 _BYTES_PER_RUN = 400
@@ -316,6 +315,8 @@ def simulate(
     error_time: ErrorTime | None = None,
     feedforward: bool = False,
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
+    settling_attitude: float = SETTLING_ATTITUDE_DEG,
+    settling_rate: float = SETTLING_OMEGA,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -406,6 +407,13 @@ def simulate(
     pointing_tolerance : float, keyword-only
         The slew time's tolerance on Φ_B/R (degrees, > 0), default 0.1.
 
+    settling_attitude : float, keyword-only
+        Attitude tolerance of "settled": the principal angle Φ (deg) with |σ| = tan(Φ/4), in (0, 180];
+        default 4 atan(1e-2) = 2.2918° (|σ| < 1e-2).
+    settling_rate : float, keyword-only
+        Rate tolerance of "settled": |ω| below this (rad/s), > 0; default 1e-3. Both are run-time
+        constants of the compiled sample (no recompilation); the result records them.
+
     Returns
     -------
     SimulationResult
@@ -434,6 +442,7 @@ def simulate(
     substeps = check_substeps(substeps)
     check_step_rotation(x0, rate, substeps)
     keep = _keep_every(keep_every)
+    settle_attitude, settle_rate, settling = settling_tolerances(settling_attitude, settling_rate)
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
     checked = check_predictor(predictor, rule, history, delay)
@@ -450,7 +459,7 @@ def simulate(
         options, varying = predictor_constants(options, float(tau), checked.model), None
         streamed = None if disturbance is None or disturbance.constant else disturbance
     width = 1 if checked is None else 2
-    records = (checked is None and isinstance(rule, Hysteretic)) or tracked is not None
+    records = checked is not None or isinstance(rule, Hysteretic) or tracked is not None
     _check_memory(
         run_bytes(n, keep, flight=records)
         + workspace_bytes(n, d, substeps, width)
@@ -531,6 +540,7 @@ def simulate(
         rate=rate,
         **({} if streamed is None else {"disturbance": streamed}),
         **({} if tracked is None else {"reference": tracked}),
+        settling=settling,
     )
     common = dict(
         spacecraft=spacecraft,
@@ -544,13 +554,13 @@ def simulate(
         t_final=t_final,
         x0=readonly(x0),
         predictor=checked,
+        settling_attitude=settle_attitude,
+        settling_rate=settle_rate,
     )
     if tracked is None:
         return assemble_run(output, n=n, keep_every=keep, common=common)
     common.update(error_time=tracked.error_time, feedforward=feedforward)
-    result = assemble_run(output, n=n, keep_every=keep, common=common, pointing_tolerance=pointing_tolerance)
-    # the predictor's records carry no logic variable h (its rule switches on the prediction)
-    return result if checked is None else dataclasses.replace(result, logic=None, delay_used=None)
+    return assemble_run(output, n=n, keep_every=keep, common=common, pointing_tolerance=pointing_tolerance)
 
 
 def _common(
@@ -579,6 +589,17 @@ def _common(
         x0=readonly(x0),
         predictor=predictor,
     )
+
+
+def settling_tolerances(settling_attitude: Any, settling_rate: Any) -> tuple[float, float, tuple[float, float]]:
+    """(attitude (deg), rate (rad/s), their squared bounds (|σ|², |ω|²)): the checked settling tolerances."""
+    attitude = finite_scalar("settling_attitude", settling_attitude)
+    if not 0.0 < attitude <= 180.0:
+        raise SpecificationError(
+            f"settling_attitude (principal-angle tolerance, deg) must be in (0, 180], got {attitude}"
+        )
+    rate = positive_scalar("settling_rate", settling_rate)
+    return attitude, rate, settling_bounds(attitude, rate)
 
 
 # ======================================================================= batches
@@ -620,6 +641,9 @@ def simulate_batch(
     error_time: ErrorTime | None = None,
     feedforward: bool = False,
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
+    settling_attitude: float = SETTLING_ATTITUDE_DEG,
+    settling_rate: float = SETTLING_OMEGA,
+    switches: bool = False,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -703,10 +727,24 @@ def simulate_batch(
     error_time, feedforward, pointing_tolerance : keyword-only
         As in [`simulate`][mrpctl.simulation.simulate], shared by the runs.
 
+    settling_attitude : float, keyword-only
+        Attitude tolerance of "settled": the principal angle Φ (deg) with |σ| = tan(Φ/4), in (0, 180];
+        default 4 atan(1e-2) = 2.2918° (|σ| < 1e-2).
+    settling_rate : float, keyword-only
+        Rate tolerance of "settled": |ω| below this (rad/s), > 0; default 1e-3. Both are run-time
+        constants of the compiled sample (no recompilation); the result records them.
+    switches : bool, keyword-only
+        Also keep every run's switch indices (``BatchResult.switch_indices``; at most 2**20 per run, the
+        counts stay exact) without the trajectories: the runs then take the scalar engine on the thread
+        pool, not the lanes (the same metrics bit for bit). With ``trajectories`` they are kept anyway.
+
     Returns
     -------
     BatchResult
     """
+    settle_attitude, settle_rate, settling = settling_tolerances(settling_attitude, settling_rate)
+    if not isinstance(switches, bool):
+        raise SpecificationError(f"switches must be True or False, got {switches!r}")
     crafts = (spacecraft,) if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
     if not crafts:
         raise SpecificationError("spacecraft: give a Spacecraft or a non-empty sequence of them")
@@ -770,7 +808,7 @@ def simulate_batch(
     workers = min(threads, n_runs)
     width = 1 if predictor is None else 2
     records = trajectories and (
-        reference is not None or (predictor is None and any(isinstance(one, Hysteretic) for one in rules))
+        predictor is not None or reference is not None or any(isinstance(one, Hysteretic) for one in rules)
     )
     estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width)
     estimate += n_runs * _batch_run_bytes(n, keep, trajectories, records=records)
@@ -847,7 +885,7 @@ def simulate_batch(
     wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
     if reference is not None and find_compiler() is None:
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
-    if not trajectories and _LANES and checked is None and find_compiler() is not None:
+    if not trajectories and not switches and _LANES and checked is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -867,6 +905,7 @@ def simulate_batch(
             torques=(streamed_by_run, shared),
             wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
             tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
+            settling=settling,
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -925,7 +964,7 @@ def simulate_batch(
             found = engines[i]
             space = spaces.get(id(found))
             if space is None:
-                space = spaces[id(found)] = found.workspace(n, switches=trajectories)
+                space = spaces[id(found)] = found.workspace(n, switches=trajectories or switches)
             d = samples_by_run[i]
             outputs[i] = found.run(
                 states[i],
@@ -945,6 +984,7 @@ def simulate_batch(
                 rate=rate,
                 **({} if streamed_by_run[i] is None else {"disturbance": streamed_by_run[i]}),
                 **({} if tracked_by_run[i] is None else {"reference": tracked_by_run[i]}),
+                settling=settling,
             )
             previous += n
             done_samples[slot] = previous
@@ -963,6 +1003,12 @@ def simulate_batch(
             if wheel_rows is not None and output.memory is not None:
                 wheel_rows[i] = output.memory
 
+    indices: tuple[np.ndarray, ...] | None = None
+    if switches and not trajectories:
+        kept = [outputs[i] for i in range(n_runs)]
+        indices = tuple(
+            readonly(np.zeros(0) if o is None or o.switch_indices is None else o.switch_indices, np.int64) for o in kept
+        )
     runs: list[SimulationResult] | None = None
     if trajectories:
         runs = []
@@ -987,12 +1033,12 @@ def simulate_batch(
                         x0=readonly(states[i]),
                         predictor=checked,
                         **({} if stream is None else {"error_time": stream.error_time, "feedforward": feedforward}),
+                        settling_attitude=settle_attitude,
+                        settling_rate=settle_rate,
                     ),
                     pointing_tolerance=None if stream is None else float(pointing_tolerance),
                 )
             )
-            if stream is not None and checked is not None:  # as simulate: the predictor's records have no h
-                runs[-1] = dataclasses.replace(runs[-1], logic=None, delay_used=None)
     wheel_records = None
     if wheels is not None:
         cluster = wheels
@@ -1018,6 +1064,9 @@ def simulate_batch(
             t_final=t_final,
             substeps=substeps,
             history=history if isinstance(history, str) else readonly(history),
+            settling_attitude=settle_attitude,
+            settling_rate=settle_rate,
+            switch_indices=indices if runs is None else tuple(run.switch_indices for run in runs),
         ),
     )
 
@@ -1052,6 +1101,7 @@ def _run_lanes(
     torques: tuple[list[Disturbance | None], bool],
     wheels: tuple[WheelCluster, np.ndarray] | None = None,
     tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
+    settling: tuple[float, float] | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -1175,6 +1225,7 @@ def _run_lanes(
                     rate=rate,
                     disturbance=torque,
                     **({} if reference is None else {"reference": reference}),
+                    settling=settling,
                 ),
             )
         )

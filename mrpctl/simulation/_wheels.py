@@ -126,8 +126,8 @@ def wheel_record(
     count = wheels.count
     part = finite_array("memory", memory)[FLIGHT_MEMORY_SIZE:]
     if records is not None and kept:
-        speeds = records[:kept, 7 : 7 + count]
-        motor = records[:kept, 7 + count : 7 + 2 * count]
+        speeds = records[:kept, 13 : 13 + count]  # after the flight sample's (h, σ_c, u_c, σ̃, ω̃)
+        motor = records[:kept, 13 + count : 13 + 2 * count]
     else:
         speeds = motor = np.zeros((0, count))
     peak = part[count : 2 * count]

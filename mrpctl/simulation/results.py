@@ -12,7 +12,7 @@ import numpy as np
 
 from mrpctl._validation import readonly, sealed
 from mrpctl.engines.common import RunOutput
-from mrpctl.engines.stats import DIVERGENCE_BOUND, Metrics
+from mrpctl.engines.stats import DIVERGENCE_BOUND, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, Metrics
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE
 from mrpctl.flight.tracking import pointing_metrics
@@ -117,7 +117,19 @@ class SimulationResult(_Conversions):
     switch_times : numpy.ndarray
         The same as times (s).
     switch_count : int
-        Number of shadow-set switches (exact, even when ``switch_indices`` was cut).
+        Number of shadow-set switches of the rule (exact, even when ``switch_indices`` was cut). What switches
+        depends on the rule: for the plant-side rules (``OnCurrent``, ``OnDelayed``, ``BoundaryLayer``,
+        ``DelayAware``) the changes of the plant's MRP set, which the control law sees τ later; for the flight
+        loop (``Hysteretic``) the controller's logic switches, the flips of h, each a change of the set of the
+        σ_c the control law uses (the plant's own bookkeeping changes, when the attitude passes 180°, are not
+        counted: they have no effect); for the predictor (``OnPredicted``) the switches of σ̂. The plant-side
+        switch at sample k and the flight loop's logic switch on the same crossing are d samples apart
+        (``Hysteretic(0)`` against ``OnCurrent``).
+    plant_set_changes : int
+        Number of samples at which the plant's MRP σ was replaced by its shadow (exact): for the plant-side
+        rules their switches (= ``switch_count``); for the flight loop and the predictor the bookkeeping that
+        keeps σ short, each time the true attitude passes 180° (≠ ``switch_count`` in general: noise makes
+        the controller switch without a crossing, hysteresis keeps it from switching on one).
     first_switch_time, last_switch_time : float or None
         Times of the first and last switch (s), None if there was none.
     sign_flips : numpy.ndarray
@@ -127,8 +139,9 @@ class SimulationResult(_Conversions):
     peak_torque : float
         max_k |u_k|_∞ over every sample (N m).
     settling_time : float or None
-        First t_k from which |σ| < 1e-2 and |ω| < 1e-3 rad/s to the end; None if the run
-        does not settle (or diverged).
+        First t_k from which the run stays settled to the end: |σ| < tan(Φ_s/4) and |ω| < ω_s, the
+        tolerances ``settling_attitude`` Φ_s and ``settling_rate`` ω_s (default |σ| < 1e-2, |ω| < 1e-3 rad/s);
+        None if the run does not settle (or diverged).
     diverged : bool
         True when |σ| or |ω| exceeded 1e6 or stopped being finite; the run stopped there
         and the arrays end at the last good sample.
@@ -152,7 +165,15 @@ class SimulationResult(_Conversions):
     command : numpy.ndarray or None
         Flight loop: (m, 3) the commanded torque u_c,k = K [σ_c,k; ω̃/4] at each kept sample, before
         the actuator limits (N m); ``u`` is the applied torque (u = u_c bit for bit where no limit
-        acted). None otherwise.
+        acted); the predictor: u_c,k = K x̂_k. None otherwise.
+    sigma_measured, omega_measured : numpy.ndarray or None
+        Flight loop and predictor (compiled engine, trajectories kept): (m, 3) what the controller read at
+        each kept sample, the delayed measurement m_{k−d} after the sensor's noise and bias: its attitude
+        (the flight loop: in the short set, before the set selection; the predictor: as measured) and its
+        rate ω̃ (rad/s). ``sigma``, ``omega`` stay the true state. None otherwise.
+    sigma_predicted, omega_predicted : numpy.ndarray or None
+        Predictor only: (m, 3) the prediction x̂_k the control law used (σ̂ after its rule, ω̂ in rad/s).
+        None otherwise.
     predictor : mrpctl.Predictor or None
         The predictor controller of the run (the flight-loop fields above are then reported too);
         None for the plain delayed law.
@@ -172,6 +193,10 @@ class SimulationResult(_Conversions):
         Tracking: the first kept t_k from which Φ_B/R < ``pointing_tolerance`` to the end; None if never.
     pointing_tolerance : float or None
         Tracking: the slew time's tolerance (deg).
+    settling_attitude : float
+        The attitude tolerance of ``settling_time``: a principal angle (deg), default 4 atan(1e-2) = 2.2918°.
+    settling_rate : float
+        The rate tolerance of ``settling_time`` (rad/s), default 1e-3.
     spacecraft, K, tau, rate, delay_samples, rule, history, substeps, x0, t_final, keep_every
         The inputs of the run.
     """
@@ -217,10 +242,17 @@ class SimulationResult(_Conversions):
     pointing_rms: float | None = None
     slew_time: float | None = None
     pointing_tolerance: float | None = None
+    plant_set_changes: int = 0
+    sigma_measured: np.ndarray | None = field(default=None, repr=False)
+    omega_measured: np.ndarray | None = field(default=None, repr=False)
+    sigma_predicted: np.ndarray | None = field(default=None, repr=False)
+    omega_predicted: np.ndarray | None = field(default=None, repr=False)
+    settling_attitude: float = SETTLING_ATTITUDE_DEG
+    settling_rate: float = SETTLING_OMEGA
 
     @property
     def converged(self) -> bool:
-        """True when the run settled (|σ| < 1e-2, |ω| < 1e-3 rad/s) and stayed so to the end."""
+        """True when the run settled (within ``settling_attitude`` and ``settling_rate``) and stayed so to the end."""
         return self.settling_time is not None
 
     @property
@@ -311,12 +343,23 @@ def assemble_run(
         flight = dict(saturated_fraction=float(output.memory[5]) / valid, peak_command=readonly(output.memory[6:10]))
     if output.records is not None and output.delay_used is not None and keep_every is not None:
         rows = (valid - 1) // keep_every + 1
-        flight["logic"] = readonly(output.records[:rows, 0])
-        flight["sigma_c"] = readonly(output.records[:rows, 1:4])
-        flight["command"] = readonly(output.records[:rows, 4:7])
+        records = output.records[:rows]
+        if common.get("predictor") is None:  # the flight sample: (h, σ_c, u_c, σ̃, ω̃)
+            flight["logic"] = readonly(records[:, 0])
+            flight["sigma_c"] = readonly(records[:, 1:4])
+            flight["command"] = readonly(records[:, 4:7])
+            flight["sigma_measured"] = readonly(records[:, 7:10])
+            flight["omega_measured"] = readonly(records[:, 10:13])
+        else:  # the predictor sample: (σ_y, ω_y, σ̂, ω̂, u_c)
+            flight["sigma_measured"] = readonly(records[:, 0:3])
+            flight["omega_measured"] = readonly(records[:, 3:6])
+            flight["sigma_predicted"] = readonly(records[:, 6:9])
+            flight["omega_predicted"] = readonly(records[:, 9:12])
+            flight["command"] = readonly(records[:, 12:15])
         flight["delay_used"] = readonly(output.delay_used[:rows], np.int64)
         if pointing_tolerance is not None:
-            pointing = pointing_metrics(output.records[:rows, 7:10], t, settling, pointing_tolerance)
+            # the true error σ_B/R at t_k closes a tracking run's record (flight sample and predictor alike)
+            pointing = pointing_metrics(output.records[:rows, -3:], t, settling, pointing_tolerance)
             pointing["pointing_error"] = readonly(pointing["pointing_error"])
             flight.update(pointing)
     return SimulationResult(
@@ -327,6 +370,7 @@ def assemble_run(
         switch_indices=readonly(indices, np.int64),
         switch_times=readonly(indices / rate),
         switch_count=metrics.switch_count,
+        plant_set_changes=metrics.set_changes,
         first_switch_time=first / rate if first >= 0 else None,
         last_switch_time=last / rate if last >= 0 else None,
         sign_flips=readonly(metrics.sign_flips, np.int64),
@@ -353,6 +397,7 @@ _BATCH_ARRAYS = (
     "K",
     "tau",
     "switch_count",
+    "plant_set_changes",
     "first_switch_time",
     "last_switch_time",
     "sign_flips",
@@ -381,13 +426,20 @@ class BatchResult(_Conversions):
     spacecraft : tuple of Spacecraft
         The spacecraft of each run.
     switch_count : numpy.ndarray
-        (N,) number of switches.
+        (N,) number of switches: what ``switch_count`` of [`SimulationResult`][mrpctl.simulation.SimulationResult]
+        counts for the run's rule.
+    plant_set_changes : numpy.ndarray
+        (N,) changes of the plant's MRP set per run (as in [`SimulationResult`][mrpctl.simulation.SimulationResult]).
+    switch_indices : tuple of numpy.ndarray or None
+        Per run, the sample indices of its switches (with ``trajectories`` or ``switches=True``; at most 2**20
+        per run); None otherwise.
     first_switch_time, last_switch_time : numpy.ndarray
         (N,) times of the first and last switch (s); NaN when a run never switched.
     sign_flips : numpy.ndarray
         (N, 3) torque sign changes per axis.
     settling_time : numpy.ndarray
-        (N,) settling time (s), NaN when the run did not settle.
+        (N,) settling time (s), NaN when the run did not settle (tolerances ``settling_attitude``, deg, and
+        ``settling_rate``, rad/s, as in [`SimulationResult`][mrpctl.simulation.SimulationResult]).
     converged, diverged : numpy.ndarray
         (N,) booleans.
     max_sigma : numpy.ndarray
@@ -406,6 +458,7 @@ class BatchResult(_Conversions):
         Runs on a wheel cluster (``wheels=...``): each run's `WheelRecord` (its ``speeds`` and
         ``motor_torque`` empty without ``trajectories``); None otherwise.
     rate, t_final, substeps, history
+    rate, t_final, substeps, history, settling_attitude, settling_rate
         The shared inputs.
     """
 
@@ -414,6 +467,7 @@ class BatchResult(_Conversions):
     tau: np.ndarray = field(repr=False)
     rules: tuple[SwitchingRule, ...] = field(repr=False)
     switch_count: np.ndarray = field(repr=False)
+    plant_set_changes: np.ndarray = field(repr=False)
     first_switch_time: np.ndarray = field(repr=False)
     last_switch_time: np.ndarray = field(repr=False)
     sign_flips: np.ndarray = field(repr=False)
@@ -431,13 +485,17 @@ class BatchResult(_Conversions):
     saturated_fraction: np.ndarray | None = field(default=None, repr=False)
     peak_command: np.ndarray | None = field(default=None, repr=False)
     wheels: tuple[WheelRecord, ...] | None = field(default=None, repr=False)
+    settling_attitude: float = SETTLING_ATTITUDE_DEG
+    settling_rate: float = SETTLING_OMEGA
+    switch_indices: tuple[np.ndarray, ...] | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.switch_count)
 
     @classmethod
     def concatenate(cls, batches: Sequence[BatchResult]) -> BatchResult:
-        """One batch of the runs of ``batches`` in order (they must share rate, horizon, substeps and history).
+        """One batch of the runs of ``batches`` in order (they must share rate, horizon, substeps, history and the
+        settling tolerances).
 
         Raises
         ------
@@ -448,15 +506,19 @@ class BatchResult(_Conversions):
             raise SpecificationError("batches: give at least one BatchResult")
         first = batches[0]
         for other in batches[1:]:
-            same = (other.rate, other.t_final, other.substeps) == (first.rate, first.t_final, first.substeps)
+            shared = ("rate", "t_final", "substeps", "settling_attitude", "settling_rate")
+            same = all(getattr(other, name) == getattr(first, name) for name in shared)
             if not same or not _same_history(other.history, first.history):
                 raise SpecificationError(
-                    "batches: every batch must share rate, t_final, substeps and history to be concatenated"
+                    "batches: every batch must share rate, t_final, substeps, history and the settling tolerances "
+                    "to be concatenated"
                 )
         arrays: dict[str, Any] = {
             name: readonly(np.concatenate([getattr(b, name) for b in batches]), getattr(first, name).dtype)
             for name in _BATCH_ARRAYS
         }
+        if all(b.switch_indices is not None for b in batches):
+            arrays["switch_indices"] = tuple(one for b in batches for one in (b.switch_indices or ()))
         runs = None
         if all(b.runs is not None for b in batches):
             runs = tuple(run for b in batches for run in (b.runs or ()))
@@ -474,6 +536,8 @@ class BatchResult(_Conversions):
             **arrays,
             wheels=wheels,
             rules=tuple(rule for b in batches for rule in b.rules),
+            settling_attitude=first.settling_attitude,
+            settling_rate=first.settling_rate,
             rate=first.rate,
             t_final=first.t_final,
             substeps=first.substeps,
@@ -540,6 +604,7 @@ def assemble_batch(
     return BatchResult(
         **flight,
         switch_count=readonly([m.switch_count for m in metrics], np.int64),
+        plant_set_changes=readonly([m.set_changes for m in metrics], np.int64),
         first_switch_time=readonly(np.where(first >= 0, first / rate, np.nan)),
         last_switch_time=readonly(np.where(last >= 0, last / rate, np.nan)),
         sign_flips=readonly([m.sign_flips for m in metrics], np.int64).reshape(n_runs, 3),
@@ -577,6 +642,10 @@ FLIGHT_RECORDS: tuple[tuple[str, tuple[str, ...], dict[str, str]], ...] = (
     ("sigma_c", ("time", "axis"), {"units": "1", "long_name": "MRP sigma_c used by the control law"}),
     ("delay_used", ("time",), {"units": "samples", "long_name": "delay used k - j*(k)"}),
     ("command", ("time", "axis"), {"units": "N m", "long_name": "commanded torque u_c before the limits"}),
+    ("sigma_measured", ("time", "axis"), {"units": "1", "long_name": "delayed measured MRP read by the controller"}),
+    ("omega_measured", ("time", "axis"), {"units": "rad/s", "long_name": "delayed measured rate read by it"}),
+    ("sigma_predicted", ("time", "axis"), {"units": "1", "long_name": "predicted MRP used by the control law"}),
+    ("omega_predicted", ("time", "axis"), {"units": "rad/s", "long_name": "predicted rate used by the control law"}),
 )
 
 
@@ -636,6 +705,10 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
         value = getattr(result, name)
         if value is not None:
             data[name] = (dims, np.asarray(value), attributes)
+    if (result.settling_attitude, result.settling_rate) != (SETTLING_ATTITUDE_DEG, SETTLING_OMEGA):
+        # the tolerances of settling_time, written when they are not the defaults
+        data["settling_attitude"] = ((), result.settling_attitude, {"units": "deg", "long_name": "settled below"})
+        data["settling_rate"] = ((), result.settling_rate, {"units": "rad/s", "long_name": "settled below"})
     attrs: dict[str, Any] = {
         **rule_fields(result.rule),
         "history": "array",
@@ -677,6 +750,8 @@ def _batch_dataset(result: BatchResult) -> xr.Dataset:
         "rate": float(result.rate),
         "t_final": float(result.t_final),
         "substeps": int(result.substeps),
+        "settling_attitude_deg": float(result.settling_attitude),
+        "settling_rate": float(result.settling_rate),
     }
     attrs["history"] = result.history if isinstance(result.history, str) else "array"
     coords = {"run": np.arange(n), "axis": AXES, "state": STATE}
