@@ -44,7 +44,8 @@ def test_the_predictor_records_its_measurement_and_prediction() -> None:
     assert np.array_equal(run.omega_measured[D:], run.omega[:-D])
     used = np.hstack((run.sigma_predicted, run.omega_predicted / 4.0))
     assert np.max(np.abs(run.command - used @ paper.GAIN.T)) <= 1e-12 * np.max(np.abs(run.command))
-    assert run.logic is None and run.sigma_c is None
+    # the predictor has no logic variable; the MRP its law used is the prediction's (tracking: the predicted error)
+    assert run.logic is None and np.array_equal(run.sigma_c, run.sigma_predicted)
 
 
 def test_records_survive_save_and_load(tmp_path) -> None:

@@ -488,12 +488,19 @@ def predictor_core_function(
         names += ["reference", "reference_error"]
         true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
     if records or reference_input:
-        # (σ_y, ω_y, σ̂, ω̂, u_c): the measurement read and the prediction of the body (tracking: of σ_B/N, ω_B/N,
-        # whose error the law used), then with a reference the true error σ_B/R at t_k (the pointing metrics')
+        # (σ_y, ω_y, σ̂, ω̂, u_c, σ_c): the measurement read, the prediction of the body (tracking: of σ_B/N,
+        # ω_B/N), the torque commanded and the MRP the law used (tracking: the predicted error σ_B/R), then with a
+        # reference the true error σ_B/R at t_k (the pointing metrics')
         body = predicted if reference_input else x_hat
         outputs.append(
             ca.vertcat(
-                y[0:3], 4 * y[3:6], body[0:3], 4 * body[3:6], command, *([true_sigma] if reference_input else [])
+                y[0:3],
+                4 * y[3:6],
+                body[0:3],
+                4 * body[3:6],
+                command,
+                x_hat[0:3],
+                *([true_sigma] if reference_input else []),
             )
         )
         output_names.append("record")
