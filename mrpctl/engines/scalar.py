@@ -76,6 +76,7 @@ from mrpctl.flight import (
     short_expr,
     stream_key,
 )
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.loop import (
     InertiaInput,
     core_function,
@@ -307,6 +308,7 @@ class Engine:
         limited: bool = True,
         disturbed: bool = True,
         torque_input: bool = False,
+        law: SteeringLaw | None = None,
     ) -> None:
         self.d = d
         self.substeps = substeps
@@ -317,6 +319,7 @@ class Engine:
         self.torque_input = torque_input and self.flight
         self._squared_peak = self.flight and not self.predictor and limited  # squared_peak of the flight sample
         self._sensor = sensor
+        self._law = law
         if predictor is not None:
             core = predictor_core_function(
                 spacecraft,
@@ -350,6 +353,7 @@ class Engine:
                 # run() takes the square root of the peak |u_c|² at the end; with limits only, where the
                 # actuator's |u_c| is a root too (measured: 15 instructions fewer with limits, 5-10 more without)
                 squared_peak=limited,
+                **({} if law is None else {"law": law}),
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -364,6 +368,7 @@ class Engine:
         elif self.flight:
             label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
             label += "_torque" if torque_input else ""
+            label += "" if law is None else "_" + law.label()
         # the scalar driver runs counted samples only: the flight samples drop the memory guard
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}", frozen_memory=not self.flight)
         min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
@@ -410,6 +415,7 @@ class Engine:
             sensor=self._sensor,
             limited=limited,
             disturbed=disturbed,
+            **({} if self._law is None else {"law": self._law}),
         )
         return engine_sample(core, d, self.sample.name() + "_vm")
 
@@ -657,6 +663,7 @@ def engine(
     limited: bool = True,
     disturbed: bool = True,
     torque_input: bool = False,
+    law: SteeringLaw | None = None,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
@@ -667,7 +674,9 @@ def engine(
     predictor needs a C compiler. The flight
     sample (``rule`` a [`Hysteretic`][mrpctl.flight.Hysteretic]) is specialised the same way, with a
     sensor port when ``sensor``, the actuator when ``limited`` and the disturbance add when
-    ``disturbed`` (`flight_structure` of a run's constants; one library per structure).
+    ``disturbed`` (`flight_structure` of a run's constants; one library per structure). ``law``: the flight
+    sample's steering law ([`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]; its numbers are compiled in,
+    one library per law); None: the PD law.
     """
     model = None if predictor is None else inertia_input(predictor)
     flight = isinstance(rule, Hysteretic)
@@ -685,6 +694,7 @@ def engine(
             substeps,
             saturation,
         ) + ((sensor, limited, disturbed, torque_input) if flight else ())
+        key += () if law is None or not flight else (law,)  # without a law the key of before
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
         key += ("torque",) if torque_input else ()  # without it the key (and the library) of before
@@ -703,6 +713,7 @@ def engine(
                 limited=limited,
                 disturbed=disturbed,
                 torque_input=torque_input,
+                **({} if law is None or not flight else {"law": law}),
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)

@@ -29,6 +29,7 @@ from mrpctl.flight import (
     selection_function,
     short_expr,
 )
+from mrpctl.flight.steering import SteeringLaw, steering_command_expr
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, plant_model
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
@@ -169,6 +170,7 @@ def flight_core_function(
     noise_form: NoiseForm = NoiseForm.ROTATION_VECTOR,
     short_measurements: bool = False,
     squared_peak: bool = False,
+    law: SteeringLaw | None = None,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
@@ -201,6 +203,9 @@ def flight_core_function(
     ``squared_peak`` the memory's last entry is the peak |u_c|² (N² m²): one square root at the end
     gives the peak |u_c| bit for bit (the correctly rounded square root is monotone: the max of the
     roots is the root of the max), instead of one a sample (the compiled engine's, ``Engine.run``).
+    With ``law`` (a [`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]) the command of step 4 is the
+    steering law's, u_c = K_ω ω̃/4 + s K_σ σ_c with s in (0, 1] the rate limit's scale
+    ([`steering_command_expr`][mrpctl.flight.steering.steering_command_expr]); None (default): the PD law.
     At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
@@ -242,7 +247,10 @@ def flight_core_function(
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
-    command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    if law is None:
+        command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    else:
+        command = steering_command_expr(law, gain, sigma_c, seen[3:6])[0]
     if limited:
         u, u_plant, saturated = actuator_function(saturation)(command, flight[0:3], flight[3], w)
         count = memory[5] + saturated

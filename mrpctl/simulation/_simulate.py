@@ -32,6 +32,7 @@ from mrpctl.flight import (
     Saturation,
     SensorModel,
 )
+from mrpctl.flight.steering import SteeringLaw, check_law
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.loop.options import (
     NO_FLIGHT_OPTIONS,
@@ -268,6 +269,7 @@ def simulate(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    law: SteeringLaw | None = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -333,6 +335,11 @@ def simulate(
         the applied torque), ``disturbance`` (constant or per sample; the plant's only) and ``sensor``;
         needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
+    law : mrpctl.flight.steering.SteeringLaw, keyword-only
+        The flight loop's saturation-aware law (``rule=Hysteretic(...)`` only): K's attitude term
+        scaled down so that the commanded rate stays below the rate from which the body can stop in
+        the remaining angle ([`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]; ``design/wheels.md``); the
+        law is the PD law K wherever that limit is not reached. None (default): the PD law.
 
     Returns
     -------
@@ -358,6 +365,7 @@ def simulate(
     history_rows, history_value = _history(history, x0, d)
     limit = _memory_limit(memory_limit)
     checked = check_predictor(predictor, rule, history, delay)
+    law = check_law(law, (rule,), gain, predictor=checked)
     if checked is None:
         options, saturation = flight_options(rule, actuator, disturbance, sensor)
         varying = varying_delay(rule, delay, d, rate, n)
@@ -386,6 +394,7 @@ def simulate(
         predictor=None if checked is None else checked.model,
         **_structure(checked, options, sensor, actuator),
         **({} if streamed is None else {"torque_input": True}),
+        **({} if law is None else {"law": law}),
     )
     if streamed is not None and not found.compiled_code:
         raise CodegenError(
@@ -466,6 +475,7 @@ def simulate_batch(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
+    law: SteeringLaw | None = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -533,6 +543,9 @@ def simulate_batch(
         thread
         pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
         (shared or per run), each run streaming its own rows.
+    law : mrpctl.flight.steering.SteeringLaw, keyword-only
+        The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
+        such runs take the scalar engine (on the thread pool), also when ``trajectories`` is False.
 
     Returns
     -------
@@ -603,6 +616,7 @@ def simulate_batch(
     checked = None
     for one in rules:
         checked = check_predictor(predictor, one, history, delay)
+    law = check_law(law, rules, gains, predictor=checked)
     per_run = _per_run_disturbances(disturbance, n_runs, n)
     shared = per_run is None
     hint = _SHARED_HINT if shared and isinstance(disturbance, list | tuple) else ""
@@ -661,7 +675,7 @@ def simulate_batch(
     any_flight = checked is not None or any(isinstance(one, Hysteretic) for one in rules)
     flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
     scalar_runs = list(range(n_runs))
-    if not trajectories and _LANES and checked is None and find_compiler() is not None:
+    if not trajectories and _LANES and checked is None and law is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -698,6 +712,7 @@ def simulate_batch(
                 predictor=None if checked is None else checked.model,
                 **structure,
                 **({"torque_input": True} if torque_input else {}),
+                **({} if law is None else {"law": law}),
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
