@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._validation import positive_scalar
+from mrpctl._validation import nonnegative_scalar, positive_scalar
 from mrpctl.errors import SpecificationError
 from mrpctl.flight.models import ActuatorModel
 from mrpctl.flight.steering import SteeringLaw
@@ -174,11 +174,7 @@ def design_for_actuator(
 
     spacecraft = check_spacecraft(spacecraft)
     tau = positive_scalar("tau", tau)
-    max_rate = float(max_rate) if isinstance(max_rate, int | float) else max_rate
-    if not isinstance(max_rate, float) or not math.isfinite(max_rate) or max_rate < 0.0:
-        raise SpecificationError(
-            f"max_rate (the envelope's largest initial rate, rad/s) must be >= 0, got {max_rate!r}"
-        )
+    max_rate = nonnegative_scalar("max_rate", max_rate)  # the envelope's largest initial rate (rad/s)
     settling_time = positive_scalar("settling_time", settling_time)
     braking = positive_scalar("braking", braking)
     if braking >= 1.0:
