@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import nonnegative_scalar, positive_scalar
+from mrpctl.design.synthesis import synthesize_pd
 from mrpctl.errors import SpecificationError
 from mrpctl.flight.models import ActuatorModel
 from mrpctl.flight.steering import SteeringLaw
@@ -169,9 +170,6 @@ def design_for_actuator(
         On a non-positive τ, a negative or non-finite ``max_rate``, ``braking`` outside (0, 1), or a
         non-positive ``settling_time``.
     """
-    # deferred: synthesis imports the LMI machinery (cvxpy on the first solve)
-    from mrpctl.design.synthesis import synthesize_pd
-
     spacecraft = check_spacecraft(spacecraft)
     tau = positive_scalar("tau", tau)
     max_rate = nonnegative_scalar("max_rate", max_rate)  # the envelope's largest initial rate (rad/s)

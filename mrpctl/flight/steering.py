@@ -41,6 +41,9 @@ class SteeringLaw:
     """The rate-limited MRP steering law (module docstring): K's attitude term scaled so that the
     commanded rate stays below the rate from which the body can stop in the remaining angle.
 
+    The law's numbers are constants of the compiled sample: each law is its own engine (compiled
+    once, cached on disk like every engine).
+
     Parameters
     ----------
     rate_limit : float
@@ -51,9 +54,6 @@ class SteeringLaw:
     lag : float
         T >= 0, the reaction time included in the stopping distance (s): the measurement delay
         plus the rate loop's time constant. Default 0.
-
-    The law's numbers are constants of the compiled sample: each law is its own engine (compiled
-    once, cached on disk like every engine).
     """
 
     rate_limit: float
