@@ -265,7 +265,7 @@ def certify_attraction(
         if not outcome.optimal:
             return math.inf, outcome.status if not outcome.error else outcome.error, None
         values = tuple(np.asarray(v.value, dtype=float) for v in (P, S, R, Z))
-        return float(gamma.value), outcome.status, values
+        return float(np.asarray(gamma.value)), outcome.status, values
 
     grid = np.logspace(-4, 4, max(int(multipliers), 3))
     tried = [(t, *attempt(float(t))) for t in grid]

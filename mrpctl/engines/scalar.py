@@ -353,7 +353,7 @@ class Engine:
                 # run() takes the square root of the peak |u_c|² at the end; with limits only, where the
                 # actuator's |u_c| is a root too (measured: 15 instructions fewer with limits, 5-10 more without)
                 squared_peak=limited,
-                **({} if law is None else {"law": law}),
+                law=law,
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -415,7 +415,7 @@ class Engine:
             sensor=self._sensor,
             limited=limited,
             disturbed=disturbed,
-            **({} if self._law is None else {"law": self._law}),
+            law=self._law,
         )
         return engine_sample(core, d, self.sample.name() + "_vm")
 
@@ -713,7 +713,7 @@ def engine(
                 limited=limited,
                 disturbed=disturbed,
                 torque_input=torque_input,
-                **({} if law is None or not flight else {"law": law}),
+                law=law if flight else None,
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)

@@ -394,7 +394,7 @@ def simulate(
         predictor=None if checked is None else checked.model,
         **_structure(checked, options, sensor, actuator),
         **({} if streamed is None else {"torque_input": True}),
-        **({} if law is None else {"law": law}),
+        law=law,
     )
     if streamed is not None and not found.compiled_code:
         raise CodegenError(
@@ -712,7 +712,7 @@ def simulate_batch(
                 predictor=None if checked is None else checked.model,
                 **structure,
                 **({"torque_input": True} if torque_input else {}),
-                **({} if law is None else {"law": law}),
+                law=law,
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
