@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import casadi as ca
@@ -187,3 +188,24 @@ def test_cli_designs_for_the_actuator(capsys: pytest.CaptureFixture[str]) -> Non
     ):
         assert main([*cubesat, *extra]) == USER_ERROR
         one_line_error(capsys, needle)
+
+
+def test_a_batch_with_the_law_equals_its_single_runs() -> None:
+    law = SteeringLaw(0.15, 0.012, 0.4)
+    x0 = np.array([[0.3, -0.2, 0.1, 0.005, 0.0, -0.002], [-0.5, 0.4, 0.2, 0.0, 0.01, 0.0]])
+    common = dict(tau=0.2, rule=Hysteretic(0.0), t_final=20.0, rate=100.0, actuator=ActuatorModel(5e-3), law=law)
+    batch = simulate_batch(CUBESAT, K, x0, trajectories=True, **common)
+    metrics = simulate_batch(CUBESAT, K, x0, **common)
+    for i in range(2):
+        single = simulate(CUBESAT, K, x0[i], **common)
+        np.testing.assert_array_equal(batch.runs[i].sigma, single.sigma)
+        np.testing.assert_array_equal(batch.runs[i].u, single.u)
+        assert metrics.max_sigma[i] == batch.max_sigma[i]
+
+
+def test_cli_json_of_the_actuator_design(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["design", "--inertia", "0.2", "0.25", "0.15", "--tau", "0.2", "--torque-limit", "5e-3", "--json"]
+    assert main(argv) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["status"] == "DESIGNED" and payload["rate_limit"] == pytest.approx(math.sqrt(math.pi * 0.012))
+    assert np.shape(payload["K"]) == (3, 6)
