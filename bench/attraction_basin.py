@@ -1,9 +1,10 @@
 """The certified region of attraction against the sampled basin, for the cubesat of bench/actuator_design.py.
 
 K = synthesize_pd(sc, 0.2, zeta=1)'s gains, ActuatorModel(5e-3), τ = 0.2 s, rule Hysteretic(0), 1000 Hz,
-constant history. 1. ``runs`` initial states on the boundary of the certified ellipsoid (scaled by
-0.999), simulated with the nonlinear compiled loop (MRP kinematics, gyroscopic torque, sample and
-hold): how many fail to settle within the horizon. 2. Along ``directions`` of those boundary points,
+constant history; the ellipsoid certified for the design's steering law too (``law=``). 1. ``runs``
+initial states on the boundary of the certified ellipsoid (scaled by 0.999), simulated with the
+nonlinear compiled loop (MRP kinematics, gyroscopic torque, sample and hold), with the PD law and
+with the steering law: how many fail to settle within the horizon. 2. Along ``directions`` of those boundary points,
 the sampled basin: the largest factor λ (bisection, 8 steps in [1, 10⁴]) with λ x_boundary settling
 within the horizon; its min, median and max are the basin's size against the ellipsoid's along the
 direction.
@@ -22,6 +23,7 @@ from mrpctl import Spacecraft, simulate_batch
 from mrpctl.design.actuator import design_for_actuator
 from mrpctl.design.attraction import AttractionRegion, certify_attraction
 from mrpctl.flight import ActuatorModel, Hysteretic
+from mrpctl.flight.steering import SteeringLaw
 
 INERTIA = np.diag([0.2, 0.25, 0.15])
 TAU, TORQUE, HORIZON = 0.2, 5e-3, 60.0
@@ -36,8 +38,12 @@ def boundary_states(region: AttractionRegion, runs: int, seed: int = 0, shrink: 
     return v * (shrink * np.sqrt(region.level / quadratic))[:, None]
 
 
-def settled(spacecraft: Spacecraft, K: np.ndarray, x0: np.ndarray, actuator: ActuatorModel) -> np.ndarray:
-    batch = simulate_batch(spacecraft, K, x0, tau=TAU, rule=Hysteretic(0.0), t_final=HORIZON, actuator=actuator)
+def settled(
+    spacecraft: Spacecraft, K: np.ndarray, x0: np.ndarray, actuator: ActuatorModel, law: SteeringLaw | None = None
+) -> np.ndarray:
+    batch = simulate_batch(
+        spacecraft, K, x0, tau=TAU, rule=Hysteretic(0.0), t_final=HORIZON, actuator=actuator, law=law
+    )
     return np.isfinite(np.asarray(batch.settling_time)) & (np.asarray(batch.settling_time) < HORIZON - 1.0)
 
 
@@ -51,7 +57,11 @@ def main() -> None:
     print(region, f"\n  ({time.perf_counter() - start:.1f} s)")
     x0 = boundary_states(region, runs)
     ok = settled(spacecraft, design.K, x0, actuator)
-    print(f"boundary of the ellipsoid: {ok.sum()}/{runs} runs settle within {HORIZON:g} s, {runs - ok.sum()} fail")
+    print(f"boundary, PD law: {ok.sum()}/{runs} runs settle within {HORIZON:g} s, {runs - ok.sum()} fail")
+    steered = settled(spacecraft, design.K, x0, actuator, design.law)
+    print(
+        f"boundary, steering law: {steered.sum()}/{runs} runs settle within {HORIZON:g} s, {runs - steered.sum()} fail"
+    )
     picked = x0[:directions]
     low, high = np.ones(directions), np.full(directions, 1e4)
     for _ in range(8):  # bisection in log λ, every direction at once

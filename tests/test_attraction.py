@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from mrpctl import Spacecraft, simulate_batch
-from mrpctl.design.attraction import AttractionStatus, attraction_blocks, certify_attraction
+from mrpctl.design.attraction import AttractionStatus, attraction_blocks, certify_attraction, linear_radius
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, Hysteretic
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.model import gain_from_pd
 
 CUBESAT = Spacecraft(np.diag([0.2, 0.25, 0.15]))
@@ -114,3 +115,20 @@ def test_blocks_in_numpy_match_a_direct_lyapunov_derivative() -> None:
 def test_bad_input_names_the_parameter(call: object, match: str) -> None:
     with pytest.raises((SpecificationError, ValueError), match=match):
         call()
+
+
+def test_with_the_steering_law_the_certificate_covers_it() -> None:
+    """With law= the ellipsoid is kept inside the attitudes where the steering law is K: the certificate is the
+    steering law's too, and 100 boundary runs with the law settle."""
+    law = SteeringLaw(0.1942, 0.012, 0.4248)
+    radius = linear_radius(law, K)
+    # the sufficient test by hand at the radius: |omega_lin| = 4 omega_n/2 |sigma| against the chord of L
+    phi = 4.0 * math.atan(radius)
+    assert pytest.approx(law.rate_command_limit(phi) / phi * 4.0 / (1.0 + radius**2), rel=1e-5) == 2 * 2.224
+    region = certify_attraction(CUBESAT, K, 0.2, ACTUATOR, law=law)
+    assert region.certified and region.steering_covered is True
+    q = np.linalg.inv(region.P)[0:3, 0:3]
+    assert math.sqrt(region.level * np.linalg.eigvalsh(q)[-1]) <= radius
+    x0 = _boundary(region, 100, seed=7)
+    batch = simulate_batch(CUBESAT, K, x0, tau=0.2, rule=Hysteretic(0.0), t_final=30.0, actuator=ACTUATOR, law=law)
+    assert np.all(np.asarray(batch.settling_time) < 29.0)

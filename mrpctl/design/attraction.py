@@ -48,7 +48,7 @@ from mrpctl.flight.steering import SteeringLaw
 from mrpctl.model import gain_matrix
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
-__all__ = ["AttractionRegion", "AttractionStatus", "attraction_blocks", "certify_attraction"]
+__all__ = ["AttractionRegion", "AttractionStatus", "attraction_blocks", "certify_attraction", "linear_radius"]
 
 _MARGIN_TOL = 1e-9
 _EPSILON = 1e-7
@@ -199,7 +199,9 @@ def certify_attraction(
         The reference shape the ellipsoid is maximised against: principal angle (rad) and rate
         (rad/s) weighted as equals (defaults π and 0.05 rad/s).
     law : SteeringLaw, keyword-only
-        A steering law with the same K: the result says whether the certificate covers it.
+        A steering law with the same K: the LMI then also keeps {xᵀPx <= 1} inside the attitudes where
+        the law is K (|σ| <= s_K, `linear_radius`), so that the certificate covers the steering law
+        (``steering_covered``, rechecked on the result).
     multipliers : int, keyword-only
         Number of values of the sector multiplier t tried (a log grid, then refined).
 
@@ -243,6 +245,12 @@ def certify_attraction(
     gamma = cp.Variable()
     mu = cp.Variable()
 
+    linear_zone: list[Any] = []
+    if law is not None:  # {yᵀ P y <= 1} inside |σ| <= 0.99 s_K: [[P, E_σᵀ], [E_σ, (0.99 s_K / d1)² I]] ⪰ 0
+        radius = 0.99 * linear_radius(law, gain) / d1
+        selector = np.hstack((np.eye(3), np.zeros((3, 3))))
+        linear_zone.append(cp.bmat([[P, selector.T], [selector, radius**2 * np.eye(3)]]) >> 0)
+
     def attempt(t: float, bound: float | None = None) -> tuple[Any, ...]:
         """min γ at the multiplier t; with ``bound`` the centring solve: the largest common margin μ of the
         strict blocks with γ <= bound (a certificate the float64 recomputation can confirm)."""
@@ -250,6 +258,7 @@ def certify_attraction(
         size = blocks["derivative"].shape[0]
         margin = _EPSILON if bound is None else mu
         constraints = [
+            *linear_zone,
             blocks["derivative"] << -margin * np.eye(size),
             blocks["domain"] >> 0,
             S >> margin * np.eye(n),
@@ -345,6 +354,25 @@ def certify_attraction(
             "torque or the sample and hold"
         ),
     )
+
+
+def linear_radius(law: SteeringLaw, K: Any) -> float:
+    """s_K: the largest |σ| up to which the steering law ``law`` is K (its rate limit not reached), by the
+    sufficient test of ``steering_covered`` (bisection to 1e-6 relative); inf when it never is reached."""
+    gain = gain_matrix(K)
+    rate_map = float(np.linalg.norm(4.0 * np.linalg.solve(gain[:, 3:6], gain[:, 0:3]), 2))
+
+    def linear(s: float) -> bool:
+        phi = 4.0 * math.atan(s)
+        return rate_map <= law.rate_command_limit(phi) / phi * 4.0 / (1.0 + s * s)
+
+    low, high = 0.0, 1.0
+    if linear(high):
+        return math.inf
+    while high - low > 1e-6 * high:
+        middle = (low + high) / 2.0
+        low, high = (middle, high) if linear(middle) else (low, middle)
+    return low
 
 
 def _steering_covered(law: SteeringLaw, gain: np.ndarray, p_x: np.ndarray, level: float) -> bool:
