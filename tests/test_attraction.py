@@ -67,7 +67,7 @@ def test_no_run_started_on_the_boundary_fails(region: object) -> None:
 
 def test_the_sampled_basin_is_larger_than_the_ellipsoid(region: object) -> None:
     """The certificate is conservative, not wrong: along 8 boundary directions the loop still settles in 60 s from
-    10 x the boundary state (bench/attraction_basin.py measures the factor: min 20.5, median 52 over 40)."""
+    10 x the boundary state (design/wheels.md: min 20.5, median 52.3 over 40 directions)."""
     x0 = 10.0 * _boundary(region, 8, seed=6)
     batch = simulate_batch(CUBESAT, K, x0, tau=0.2, rule=Hysteretic(0.0), t_final=60.0, rate=200.0, actuator=ACTUATOR)
     assert np.all(np.isfinite(np.asarray(batch.settling_time)))
