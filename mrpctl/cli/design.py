@@ -21,13 +21,16 @@ from mrpctl.cli.common import (
     add_rule_options,
     atomic_output,
     joint_json,
+    options_given,
     print_json,
     refuse_existing,
 )
 from mrpctl.cli.overrides import paper_base, spacecraft_from
 from mrpctl.design import FlownVerdict, SynthesisStatus, analyze_gains, synthesize_lmi, verify_flown
+from mrpctl.design.actuator import design_for_actuator
 from mrpctl.design.robust import RobustPDSynthesis, RobustStatus
 from mrpctl.errors import MrpctlError, SpecificationError
+from mrpctl.flight import ActuatorModel
 from mrpctl.rules import DEFAULT_DELTA, DEFAULT_RULE
 from mrpctl.scenario import check_delay, rule_from_name, scenario_toml
 from mrpctl.spacecraft import Spacecraft
@@ -58,6 +61,8 @@ def _design(args: argparse.Namespace) -> int:
         )
     positive_scalar("--tau", args.tau)
     spacecraft = spacecraft_from(args.inertia)
+    if args.torque_limit is not None or args.max_rate is not None or args.settling_time is not None:
+        return _actuator_design(args, spacecraft)
     toml_path = None if args.toml is None else Path(args.toml)
     if args.product_bound and args.inertia_tolerance is None:
         raise SpecificationError("--product-bound applies only with --inertia-tolerance TOL")
@@ -442,6 +447,49 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
     return 0
 
 
+def _actuator_design(args: argparse.Namespace, spacecraft: Spacecraft) -> int:
+    """``--torque-limit``: the steering law for the actuator and the envelope (``design_for_actuator``)."""
+    if args.torque_limit is None:
+        raise SpecificationError("--max-rate and --settling-time apply only with --torque-limit U (N m)")
+    given = options_given(
+        ("--method lmi", args.method == "lmi" or None),
+        ("--inertia-tolerance", args.inertia_tolerance),
+        ("--sampled", args.sampled),
+        ("--jitter", args.jitter),
+        ("--toml", args.toml),
+        ("--decay-rate", args.decay_rate),
+    )
+    if given:
+        raise SpecificationError(f"--torque-limit: the design for the actuator does not take {', '.join(given)}")
+    torque = positive_scalar("--torque-limit", args.torque_limit)
+    max_rate = 0.0 if args.max_rate is None else nonnegative_scalar("--max-rate", args.max_rate)
+    settling = 60.0 if args.settling_time is None else positive_scalar("--settling-time", args.settling_time)
+    order = 3 if args.order is None else args.order
+    design = design_for_actuator(
+        spacecraft, args.tau, ActuatorModel(torque), max_rate=max_rate, settling_time=settling, order=order
+    )
+    if not design.designed:
+        raise SpecificationError(f"--settling-time {settling:g}: {design.status.value}: {design.reason}")
+    if args.json:
+        print_json(
+            {
+                "status": design.status.name,
+                "K": design.K,
+                "rate_limit": design.law.rate_limit,
+                "acceleration": design.law.acceleration,
+                "lag": design.law.lag,
+                "predicted_time": design.predicted_time,
+                "lower_bound": design.lower_bound,
+                "reason": design.reason,
+            }
+        )
+        return 0
+    print(design)
+    print("K (3x6, N m) on x = [sigma; omega/4] (the law near the target):")
+    print(np.array2string(design.K, precision=6, max_line_width=200, suppress_small=False))
+    return 0
+
+
 def add_parser(commands: Any) -> None:
     parser = commands.add_parser(
         "design",
@@ -502,6 +550,21 @@ def add_parser(commands: Any) -> None:
     )
     robust.add_argument(
         "--rtol", type=float, metavar="R", help="relative width of the final omega_n bracket (default 1e-3)"
+    )
+    actuator = parser.add_argument_group(
+        "design for the actuator (the rate-limited steering law, design/wheels.md; not with the robust options)"
+    )
+    actuator.add_argument(
+        "--torque-limit", type=float, metavar="U", help="body torque limit per axis (N m): design the steering law"
+    )
+    actuator.add_argument(
+        "--max-rate", type=float, metavar="W", help="with --torque-limit: largest initial rate to recover (rad/s)"
+    )
+    actuator.add_argument(
+        "--settling-time",
+        type=float,
+        metavar="T",
+        help="with --torque-limit: the time the envelope must settle in (s); default 60",
     )
     parser.add_argument("--toml", type=Path, help="write a runnable scenario with the designed K to this file")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --toml file")

@@ -75,6 +75,7 @@ from mrpctl.flight import (
     short_expr,
     stream_key,
 )
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.flight.tracking import ReferenceStream, tracking_error_expr
 from mrpctl.loop import (
     InertiaInput,
@@ -307,6 +308,7 @@ class Engine:
         feedforward: bool = False,
         *,
         wheels: WheelCluster | None = None,
+        law: SteeringLaw | None = None,
     ) -> None:
         self.d = d
         self.wheels = wheels
@@ -319,9 +321,12 @@ class Engine:
         self.torque_input = torque_input and self.flight
         self._squared_peak = self.flight and not self.predictor and limited  # squared_peak of the flight sample
         self._sensor = sensor
+        self._law = law
         if wheels is not None:
             if not isinstance(rule, Hysteretic) or predictor is not None:
                 raise SpecificationError("wheels: the wheel cluster flies with rule=Hysteretic(...) only")
+            if law is not None:
+                raise SpecificationError("law: the steering law on a wheel cluster is not modelled yet")
             self._squared_peak = False
             core = wheel_core_function(
                 spacecraft,
@@ -372,6 +377,7 @@ class Engine:
                 # actuator's |u_c| is a root too (measured: 15 instructions fewer with limits, 5-10 more without)
                 squared_peak=limited,
                 **({"reference_input": True, "feedforward": feedforward} if reference_input else {}),
+                law=law,
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -392,6 +398,7 @@ class Engine:
             label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
             label += "_torque" if torque_input else ""
             label += ("_tracking" + ("_ff" if feedforward else "")) if reference_input else ""
+            label += "" if law is None else "_" + law.label()
         # the scalar driver runs counted samples only: the flight samples drop the memory guard
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}", frozen_memory=not self.flight)
         min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
@@ -440,6 +447,7 @@ class Engine:
             sensor=self._sensor,
             limited=limited,
             disturbed=disturbed,
+            law=self._law,
         )
         return engine_sample(core, d, self.sample.name() + "_vm")
 
@@ -713,6 +721,7 @@ def engine(
     torque_input: bool = False,
     reference_input: bool = False,
     feedforward: bool = False,
+    law: SteeringLaw | None = None,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
@@ -723,7 +732,9 @@ def engine(
     predictor needs a C compiler. The flight
     sample (``rule`` a [`Hysteretic`][mrpctl.flight.Hysteretic]) is specialised the same way, with a
     sensor port when ``sensor``, the actuator when ``limited`` and the disturbance add when
-    ``disturbed`` (`flight_structure` of a run's constants; one library per structure).
+    ``disturbed`` (`flight_structure` of a run's constants; one library per structure). ``law``: the flight
+    sample's steering law ([`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]; its numbers are compiled in,
+    one library per law); None: the PD law.
     """
     model = None if predictor is None else inertia_input(predictor)
     flight = isinstance(rule, Hysteretic)
@@ -742,6 +753,7 @@ def engine(
             saturation,
         ) + ((sensor, limited, disturbed, torque_input) if flight else ())
         key += (("tracking", feedforward),) if flight and reference_input else ()  # else the key of before
+        key += () if law is None or not flight else (law,)  # without a law the key of before
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
         key += ("torque",) if torque_input else ()  # without it the key (and the library) of before
@@ -763,6 +775,7 @@ def engine(
                 torque_input=torque_input,
                 reference_input=bool(reference_input and (flight or model is not None)),
                 feedforward=bool(feedforward and reference_input and (flight or model is not None)),
+                law=law if flight else None,
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)

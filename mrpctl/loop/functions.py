@@ -29,6 +29,7 @@ from mrpctl.flight import (
     selection_function,
     short_expr,
 )
+from mrpctl.flight.steering import SteeringLaw, steering_command_expr
 from mrpctl.flight.tracking import REFERENCE_WIDTH, feedforward_expr, tracking_error_expr
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, plant_model
 from mrpctl.spacecraft import Spacecraft
@@ -172,6 +173,7 @@ def flight_core_function(
     squared_peak: bool = False,
     reference_input: bool = False,
     feedforward: bool = False,
+    law: SteeringLaw | None = None,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
@@ -206,6 +208,9 @@ def flight_core_function(
     ``squared_peak`` the memory's last entry is the peak |u_c|² (N² m²): one square root at the end
     gives the peak |u_c| bit for bit (the correctly rounded square root is monotone: the max of the
     roots is the root of the max), instead of one a sample (the compiled engine's, ``Engine.run``).
+    With ``law`` (a [`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]) the command of step 4 is the
+    steering law's, u_c = K_ω ω̃/4 + s K_σ σ_c with s in (0, 1] the rate limit's scale
+    ([`steering_command_expr`][mrpctl.flight.steering.steering_command_expr]); None (default): the PD law.
     At sample k:
 
     1. plant bookkeeping: σ_k ← its shadow when |σ_k|² >= 1 (the ``OnCurrent`` expressions;
@@ -268,7 +273,10 @@ def flight_core_function(
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
-    command = gain @ ca.vertcat(sigma_c, rate_seen)
+    if law is None:
+        command = gain @ ca.vertcat(sigma_c, rate_seen)
+    else:
+        command = steering_command_expr(law, gain, sigma_c, rate_seen)[0]
     if feedforward:
         j_matrix = ca.DM(spacecraft.inertia) if symbols is None else symbols[2]
         command = command + feedforward_expr(j_matrix, 4 * seen[3:6], sigma_bn, omega_r_body, row[6:9], scale)

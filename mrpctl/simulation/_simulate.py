@@ -32,6 +32,7 @@ from mrpctl.flight import (
     Saturation,
     SensorModel,
 )
+from mrpctl.flight.steering import SteeringLaw, check_law
 from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime, ReferenceStream
 from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
 from mrpctl.loop.options import (
@@ -317,6 +318,7 @@ def simulate(
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
     settling_attitude: float = SETTLING_ATTITUDE_DEG,
     settling_rate: float = SETTLING_OMEGA,
+    law: SteeringLaw | None = None,
 ) -> SimulationResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -413,6 +415,11 @@ def simulate(
     settling_rate : float, keyword-only
         Rate tolerance of "settled": |ω| below this (rad/s), > 0; default 1e-3. Both are run-time
         constants of the compiled sample (no recompilation); the result records them.
+    law : mrpctl.flight.steering.SteeringLaw, keyword-only
+        The flight loop's saturation-aware law (``rule=Hysteretic(...)`` only): K's attitude term
+        scaled down so that the commanded rate stays below the rate from which the body can stop in
+        the remaining angle ([`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]; ``design/wheels.md``); the
+        law is the PD law K wherever that limit is not reached. None (default): the PD law.
 
     Returns
     -------
@@ -436,6 +443,11 @@ def simulate(
                 "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
                 "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
             )
+        if law is not None:
+            raise SpecificationError(
+                "law: the steering law on a wheel cluster is not modelled yet; fly it with an ideal body torque "
+                "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
+            )
     d = delay_samples(tau, rate)
     rate = float(rate)
     t_final, n = _samples(t_final, rate)
@@ -449,6 +461,7 @@ def simulate(
     tracked, feedforward, pointing_tolerance = tracking_options(
         reference, error_time, feedforward, pointing_tolerance, rule=rule, predictor=checked, n=n, rate=rate, d=d
     )
+    law = check_law(law, (rule,), gain, predictor=checked)
     if checked is None:
         options, saturation = flight_options(rule, actuator, disturbance, sensor)
         varying = varying_delay(rule, delay, d, rate, n)
@@ -508,6 +521,7 @@ def simulate(
         **_structure(checked, options, sensor, actuator),
         **({} if streamed is None else {"torque_input": True}),
         **({} if tracked is None else {"reference_input": True, "feedforward": feedforward}),
+        law=law,
     )
     if tracked is not None and not found.compiled_code:
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
@@ -644,6 +658,7 @@ def simulate_batch(
     settling_attitude: float = SETTLING_ATTITUDE_DEG,
     settling_rate: float = SETTLING_OMEGA,
     switches: bool = False,
+    law: SteeringLaw | None = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -737,6 +752,9 @@ def simulate_batch(
         Also keep every run's switch indices (``BatchResult.switch_indices``; at most 2**20 per run, the
         counts stay exact) without the trajectories: the runs then take the scalar engine on the thread
         pool, not the lanes (the same metrics bit for bit). With ``trajectories`` they are kept anyway.
+    law : mrpctl.flight.steering.SteeringLaw, keyword-only
+        The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
+        such runs take the scalar engine (on the thread pool), also when ``trajectories`` is False.
 
     Returns
     -------
@@ -788,6 +806,11 @@ def simulate_batch(
                 "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
                 "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
             )
+        if law is not None:
+            raise SpecificationError(
+                "law: the steering law on a wheel cluster is not modelled yet; fly it with an ideal body torque "
+                "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
+            )
     rate = positive_scalar("rate", rate)
     t_final, n = _samples(t_final, rate)
     substeps = check_substeps(substeps)
@@ -824,6 +847,7 @@ def simulate_batch(
         reference, error_time, feedforward, pointing_tolerance, rules, checked, n, rate, samples_by_run
     )
     feedforward = feedforward is True
+    law = check_law(law, rules, gains, predictor=checked)
     per_run = _per_run_disturbances(disturbance, n_runs, n)
     shared = per_run is None
     hint = _SHARED_HINT if shared and isinstance(disturbance, list | tuple) else ""
@@ -885,7 +909,7 @@ def simulate_batch(
     wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
     if reference is not None and find_compiler() is None:
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
-    if not trajectories and not switches and _LANES and checked is None and find_compiler() is not None:
+    if not trajectories and not switches and _LANES and checked is None and law is None and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -939,6 +963,7 @@ def simulate_batch(
                 **structure,
                 **({"torque_input": True} if torque_input else {}),
                 **({} if tracked_by_run[i] is None else {"reference_input": True, "feedforward": feedforward}),
+                law=law,
             )
         engines[i] = by_structure[key]
     outputs: list[RunOutput | None] = [None] * n_runs
