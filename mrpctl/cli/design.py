@@ -369,7 +369,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
             "product_bound": bound,
             "period": period,
             "tau_min": tau_min,
-            "rate": jitter_rate,
+            "delay_rate": jitter_rate,
         }
         flags = _robust_flags(tolerance, bound, period, rate, tau_min)
     if toml_path is not None:
