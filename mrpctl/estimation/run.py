@@ -1,0 +1,183 @@
+"""The sensors' random streams and the estimator compiled over a whole run (a C loop).
+
+[`sensor_streams`][mrpctl.estimation.run.sensor_streams] draws, from one seed, everything random about
+a run of N controller samples: the gyro's bias path β_k and its error e_k = (β_k + β_{k+1})/2 + σ_N n_k
+(Crassidis & Junkins' discrete gyro, σ_N² = σ_v²/h + σ_u² h/12), the star tracker's error rotations θ_k
+(N(0, R)) and which measurements arrive (every n-th sample, less the dropouts). The measured values
+are formed from the true motion: ω̃_k = (I + diag(s)) ω_k + e_k, and [B̃N] = [B̃B](θ_k) [BN].
+
+[`filter_run`][mrpctl.estimation.run.filter_run] runs the estimator's sample over given measurements: a
+``mapaccum`` of the sample over the N samples, generated as C and compiled through the project's compile path
+(``mrpctl._compile.compile_function``, cached), so one call is one C loop over the run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from mrpctl._compile import compile_function
+from mrpctl._validation import finite_array, integer, readonly
+from mrpctl.errors import SpecificationError
+from mrpctl.estimation.filters import EstimatorFunctions
+from mrpctl.estimation.sensors import Gyro, SensorClock, StarTracker
+
+__all__ = ["FilterRun", "SensorStreams", "filter_run", "filter_run_function", "sensor_streams"]
+
+
+@dataclass(frozen=True)
+class SensorStreams:
+    """The random part of the sensors over N controller samples (read-only arrays).
+
+    Attributes
+    ----------
+    bias : numpy.ndarray
+        (N + 1, 3) the true gyro bias β_k (rad/s).
+    gyro_error : numpy.ndarray
+        (N, 3) e_k: ω̃_k = (I + diag(s)) ω_k + e_k (rad/s).
+    rotation : numpy.ndarray
+        (N, 3) the star tracker's error rotation θ_k of a measurement taken at sample k (rad).
+    taken : numpy.ndarray
+        (N,) 1.0 where the tracker measures at sample k and the measurement is not lost.
+    """
+
+    bias: np.ndarray
+    gyro_error: np.ndarray
+    rotation: np.ndarray
+    taken: np.ndarray
+
+
+def sensor_streams(star_tracker: StarTracker, gyro: Gyro, clock: SensorClock, samples: int, seed: int) -> SensorStreams:
+    """Draw the streams of a run of ``samples`` controller periods from ``seed`` (NumPy's PCG64)."""
+    n = integer("samples", samples, minimum=1)
+    seed = integer("seed", seed, minimum=0)
+    rng = np.random.default_rng(seed)
+    h = clock.period
+    rate_sigma, step_sigma = gyro.sample_noise(h)
+    steps = rng.standard_normal((n, 3)) * step_sigma
+    bias = np.vstack((gyro.initial_bias, gyro.initial_bias + np.cumsum(steps, axis=0)))
+    gyro_error = 0.5 * (bias[:-1] + bias[1:]) + rate_sigma * rng.standard_normal((n, 3))
+    rotation = rng.multivariate_normal(np.zeros(3), star_tracker.covariance, size=n, method="cholesky")
+    kept = rng.random(n) >= star_tracker.dropout
+    taken = ((np.arange(n) % clock.every) == 0) & kept
+    return SensorStreams(readonly(bias), readonly(gyro_error), readonly(rotation), readonly(taken.astype(float)))
+
+
+@dataclass(frozen=True)
+class FilterRun:
+    """The estimator's outputs over a run, one row per controller sample k (read-only arrays).
+
+    Attributes
+    ----------
+    sigma, omega, bias : numpy.ndarray
+        (N, 3) the estimate now: short-set MRP σ̂_k, rate ω̂_k = ω̃_k − β̂ (rad/s), bias β̂ (rad/s).
+    covariance : numpy.ndarray
+        (N, 6, 6) the covariance of the estimate now.
+    innovation : numpy.ndarray
+        (N, 3) the innovation of the measurement that arrived at k (zero when none).
+    state : numpy.ndarray
+        (N, state size) the filter's memory after sample k (its state at t_{k+1−ℓ}).
+    """
+
+    sigma: np.ndarray
+    omega: np.ndarray
+    bias: np.ndarray
+    covariance: np.ndarray
+    innovation: np.ndarray
+    state: np.ndarray
+
+
+@lru_cache(maxsize=8)
+def _run_function(functions: EstimatorFunctions, samples: int) -> ca.Function:
+    sample = functions.sample
+    latency = functions.clock.latency
+    accumulated = sample.mapaccum("estimator_samples", samples, [0, 1] if latency else [0], [0, 1] if latency else [0])
+    state = ca.MX.sym("state", functions.state_size)
+    ring = ca.MX.sym("ring", 3, latency)
+    gyro = ca.MX.sym("gyro", 3, samples)
+    measurement = ca.MX.sym("measurement", 3, samples)
+    available = ca.MX.sym("available", 1, samples)
+    inputs = [state] + ([ring] if latency else []) + [gyro, measurement, available]
+    outputs = accumulated(*inputs)
+    if latency:
+        states, _, sigma, omega, bias, covariance, innovation = outputs
+    else:
+        states, sigma, omega, bias, covariance, innovation = outputs
+    names = ["state"] + (["ring"] if latency else []) + ["gyro", "measurement", "available"]
+    return ca.Function(
+        f"estimator_run_{functions.kind.value}",
+        inputs,
+        [states, sigma, omega, bias, covariance, innovation],
+        names,
+        ["states", "sigma", "omega", "bias", "covariance", "innovation"],
+    )
+
+
+def filter_run_function(functions: EstimatorFunctions, samples: int) -> ca.Function:
+    """The compiled run of ``samples`` estimator samples (cached per estimator and length).
+
+    ``run(state, [ring,] gyro (3 × N), measurement (3 × N), available (1 × N)) -> (states, sigma, omega,
+    bias, covariance, innovation)``, one column per sample.
+    """
+    samples = integer("samples", samples, minimum=1)
+    return _compiled(functions, samples)
+
+
+@lru_cache(maxsize=8)
+def _compiled(functions: EstimatorFunctions, samples: int) -> ca.Function:
+    return compile_function(_run_function(functions, samples)).function
+
+
+def filter_run(
+    functions: EstimatorFunctions,
+    initial_state: Any,
+    gyro: Any,
+    measurement: Any,
+    available: Any,
+    *,
+    ring: Any = None,
+) -> FilterRun:
+    """Run the estimator over N samples of gyro readings and arrived star-tracker measurements (compiled).
+
+    Parameters
+    ----------
+    functions : EstimatorFunctions
+    initial_state : array_like
+        The filter's state at t_{−ℓ} ([`initial_state`][mrpctl.estimation.EstimatorFunctions.initial_state]).
+    gyro : array_like
+        (N, 3) ω̃_k (rad/s).
+    measurement : array_like
+        (N, 3) the star tracker's MRP arriving at sample k (measured at k − ℓ); any finite value where none.
+    available : array_like
+        (N,) 1 where a measurement arrives at k, else 0.
+    ring : array_like, optional, keyword-only
+        (ℓ, 3) the gyro samples before the start (ω̃_{−ℓ} … ω̃_{−1}); default the initial bias estimate
+        (the attitude held until t = 0).
+    """
+    state = finite_array("initial_state", initial_state, (functions.state_size,))
+    gyro = finite_array("gyro", gyro, (None, 3))
+    n = gyro.shape[0]
+    measurement = finite_array("measurement", measurement, (n, 3))
+    available = finite_array("available", available, (n,))
+    if np.any((available != 0.0) & (available != 1.0)):
+        raise SpecificationError("available must hold 0 or 1 (a measurement arrives at the sample or not)")
+    latency = functions.clock.latency
+    if ring is None:
+        bias = state[functions.attitude_size : functions.attitude_size + 3]
+        ring = np.tile(bias, (latency, 1))
+    ring = finite_array("ring", ring, (latency, 3))
+    args = [state] + ([ring.T] if latency else []) + [gyro.T, measurement.T, available[None, :]]
+    out = [np.asarray(value) for value in filter_run_function(functions, n)(*args)]
+    states, sigma, omega, bias, covariance, innovation = out
+    return FilterRun(
+        sigma=readonly(sigma.T),
+        omega=readonly(omega.T),
+        bias=readonly(bias.T),
+        covariance=readonly(covariance.T.reshape(n, 6, 6).transpose(0, 2, 1)),
+        innovation=readonly(innovation.T),
+        state=readonly(states.T),
+    )
