@@ -1,15 +1,16 @@
 """An independent NumPy MEKF and MRP-EKF, written from the equations of design/estimation.md.
 
-It shares no code with ``mrpctl.estimation``: quaternions as 4 × 4 product matrices, Φ of the MEKF as the
-matrix exponential of F h (scipy), the residual's rotation vector by arctan2, the MRP propagation through
-quaternions, and the delayed measurement handled by keeping the whole history of states and re-running
-from the measurement's time. Also a truth simulator for the consistency tests.
+It shares no code with ``mrpctl.estimation``: quaternions as 4 × 4 product matrices, Φ of the MEKF as
+the matrix exponential of F h from its definition (Φ₁₁ = exp(−[ω×]h) as the rotation's direction cosine
+matrix, Φ₁₂ = −∫₀ʰ exp(−[ω×]s) ds by 8-point Gauss-Legendre quadrature), the residual's rotation vector by
+arctan2, the MRP propagation through quaternions, and the delayed measurement handled as an on-time
+filter whose posterior is replayed, in a plain loop over the whole run, to every sample's time.
+Also a truth simulator for the consistency tests.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import expm
 
 
 def cross(v):
@@ -48,6 +49,24 @@ def rotvec_of_q(q):
     return 2 * np.arctan2(v, q[0]) * q[1:] / v
 
 
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(8)
+
+
+def dcm_of_q(q):
+    """[BN] of β (scalar first): (β₀² − βᵀβ) I + 2 β βᵀ − 2 β₀ [β×]."""
+    v = q[1:]
+    return (q[0] ** 2 - v @ v) * np.eye(3) + 2 * np.outer(v, v) - 2 * q[0] * cross(v)
+
+
+def mekf_transition(w, h):
+    """Φ = exp(F h), F = [[−[ω×], −I], [0, 0]]: Φ₁₁ = exp(−[ω×]h), Φ₁₂ = −∫₀ʰ exp(−[ω×]s) ds."""
+    phi = np.eye(6)
+    phi[:3, :3] = dcm_of_q(qrot(w * h))
+    s = h * (_NODES + 1) / 2
+    phi[:3, 3:] = -(h / 2) * sum(weight * dcm_of_q(qrot(w * si)) for weight, si in zip(_WEIGHTS, s, strict=True))
+    return phi
+
+
 def qconj(q):
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 
@@ -70,10 +89,7 @@ class Mekf:
         w = g - b
         qn = qmul(qrot(w * self.h), q)
         qn = qn / np.linalg.norm(qn)
-        f = np.zeros((6, 6))
-        f[:3, :3] = -cross(w)
-        f[:3, 3:] = -np.eye(3)
-        phi = expm(f * self.h)
+        phi = mekf_transition(w, self.h)
         pn = phi @ p @ phi.T + self.q_noise
         return qn, b, 0.5 * (pn + pn.T)
 
@@ -154,29 +170,26 @@ class MrpEkf:
         return x[0]
 
 
-def run_delayed(filt, x0, pre, gyro, measurement, taken, latency):
-    """The estimate now at each sample k, from the whole history: the measurement of sample j (taken[j])
-    arrives at j + latency; the estimate now is the on-time filter's state at k − latency (all its
-    measurements) propagated over ω̃_{k−latency} … ω̃_{k−1} with no update.
+def run_delayed(filt, x0, pre, gyro, measurement, available, latency):
+    """The estimate now at each sample k with a rate-integrating gyro (reading r_k: the mean rate over
+    [t_{k−1}, t_k]) and the measurement of t_{k−ℓ} arriving at k (``available[k]``).
 
-    ``pre`` holds the latency gyro samples before t = 0; x0 is the state at t_{−latency}.
+    x0 is the posterior at t_{−ℓ−1}, ``pre`` the readings r_{−ℓ} … r_{−1}. The on-time filter runs from
+    t_{−ℓ−1}; the estimate now is its posterior at t_{k−ℓ} propagated over r_{k−ℓ+1} … r_k with no update.
     Returns (sigma, bias, covariance, innovation) with one row per sample.
     """
     n = len(gyro)
-    samples = list(pre) + list(gyro)  # samples[i] is ω̃ at t_{i − latency}
-    on_time = [x0]  # on_time[i]: prior state at t_{i − latency}
+    readings = list(pre) + list(gyro)  # readings[i] is r_{i − latency}
+    x = x0
     sig, bia, cov, inn = [], [], [], []
     for k in range(n):
-        j = k - latency  # the measurement arriving now was taken at sample j
-        x = on_time[k]
+        x = filt.propagate(x, readings[k])  # to t_{k − latency}
         y = np.zeros(3)
-        if j >= 0 and taken[j]:
+        if available[k]:
             x, y = filt.update(x, measurement[k])
-        on_time[k] = x
-        on_time.append(filt.propagate(x, samples[k]))
         now = x
-        for i in range(k, k + latency):
-            now = filt.propagate(now, samples[i])
+        for i in range(k + 1, k + latency + 1):
+            now = filt.propagate(now, readings[i])
         sig.append(filt.sigma(now))
         bia.append(now[1])
         cov.append(now[2])
@@ -185,7 +198,8 @@ def run_delayed(filt, x0, pre, gyro, measurement, taken, latency):
 
 
 def truth(n, h, omega_of_t, sigma0, bias_path, gyro_noise, scale=None):
-    """True attitude (quaternions, n + 1) under a rate held over each period, and the gyro readings."""
+    """True attitude (quaternions q_0 … q_n) under the rate ω_i = omega_of_t(i h) held over [t_i, t_{i+1}], and
+    the gyro's readings of those periods, ω_i + (β_i + β_{i+1})/2 + noise (reading i delivered at t_{i+1})."""
     scale = np.zeros(3) if scale is None else np.asarray(scale)
     q = [q_of_mrp(np.asarray(sigma0, dtype=float))]
     rates, readings = [], []

@@ -37,17 +37,40 @@ def _omega(t: float) -> np.ndarray:
     return np.array([0.05 * math.sin(0.1 * t), 0.3, -0.02])
 
 
-def _case(kind: str, samples: int, seed: int, tuning: EstimatorTuning | None = None):
-    functions = estimator_functions(kind, TRACKER, GYRO, RATE, tuning=tuning)
+def _case(
+    kind, samples, seed, *, gyro=GYRO, tuning=None, sigma0=(0.1, -0.2, 0.3), error=None, bias0=None, functions=None
+):
+    """A run with delayed updates: the truth from t_{−ℓ−1}, the readings r_{−ℓ} … r_{N−1} (r_k: the mean rate
+    over [t_{k−1}, t_k]), the measurement of t_j arriving at j + ℓ; the filter starts at t_{−ℓ−1} on the truth
+    turned by ``error`` (rad)."""
+    if functions is None:
+        functions = estimator_functions(kind, TRACKER, gyro, RATE, tuning=tuning)
     clock = functions.clock
-    streams = sensor_streams(TRACKER, GYRO, clock, samples, seed)
+    latency, h = clock.latency, clock.period
+    if bias0 is not None:
+        gyro = Gyro(gyro.rate_noise, gyro.bias_walk, bias0)
+    streams = sensor_streams(TRACKER, gyro, clock, samples + latency, seed)
     noise = streams.gyro_error - 0.5 * (streams.bias[:-1] + streams.bias[1:])
-    q_true, _, gyro = ref.truth(samples, clock.period, _omega, [0.1, -0.2, 0.3], streams.bias, noise)
-    taken = np.array([ref.compose_mrp(ref.mrp_of_q(q_true[k]), streams.rotation[k]) for k in range(samples)])
-    latency = clock.latency
+    q_true, _, readings = ref.truth(
+        samples + latency, h, lambda t: _omega(t - (latency + 1) * h), sigma0, streams.bias, noise
+    )
+    taken = np.array(
+        [ref.compose_mrp(ref.mrp_of_q(q_true[j + latency + 1]), streams.rotation[j]) for j in range(samples)]
+    )
     arriving, available = np.zeros((samples, 3)), np.zeros(samples)
     arriving[latency:], available[latency:] = taken[: samples - latency], streams.taken[: samples - latency]
-    return functions, streams, q_true, gyro, arriving, available
+    q_start = q_true[0] if error is None else ref.qmul(ref.qrot(-np.asarray(error)), q_true[0])
+    sigma_start = ref.mrp_of_q(q_start if q_start[0] >= 0 else -q_start)
+    return {
+        "functions": functions,
+        "state": functions.initial_state(sigma_start, np.zeros(3)),
+        "pre": readings[:latency],
+        "gyro": readings[latency:],
+        "arriving": arriving,
+        "available": available,
+        "q_now": q_true[latency + 1 :],
+        "bias_now": streams.bias[latency + 1 :],
+    }
 
 
 def _relative(a: np.ndarray, b: np.ndarray) -> float:
@@ -56,9 +79,9 @@ def _relative(a: np.ndarray, b: np.ndarray) -> float:
 
 @pytest.mark.parametrize("kind", ["mekf", "mrp_ekf"])
 def test_compiled_filter_matches_the_independent_numpy_filter_over_a_run_with_delayed_updates(kind):
-    functions, streams, _, gyro, arriving, available = _case(kind, 600, 1)
-    state = functions.initial_state([0.1, -0.2, 0.3], [0.0, 0.0, 0.0])
-    run = filter_run(functions, state, gyro, arriving, available)
+    case = _case(kind, 600, 1)
+    functions, state = case["functions"], case["state"]
+    run = filter_run(functions, state, case["gyro"], case["arriving"], case["available"], ring=case["pre"])
     size = functions.attitude_size
     start = (state[:size].copy(), np.zeros(3), state[size + 3 :].reshape(6, 6, order="F"))
     model = (ref.Mekf if kind == "mekf" else ref.MrpEkf)(
@@ -66,9 +89,9 @@ def test_compiled_filter_matches_the_independent_numpy_filter_over_a_run_with_de
     )
     latency = functions.clock.latency
     sigma, bias, covariance, innovation = ref.run_delayed(
-        model, start, np.zeros((latency, 3)), gyro, arriving, streams.taken, latency
+        model, start, case["pre"], case["gyro"], case["arriving"], case["available"], latency
     )
-    assert latency == 5 and available.sum() > 100  # delayed updates, some lost
+    assert latency == 5 and case["available"].sum() > 100  # delayed updates, some lost
     assert np.sum(np.sum(sigma**2, axis=1) > 0.9) > 0  # the run passes near |σ| = 1 (and switches)
     if kind == "mrp_ekf":
         assert np.sum(np.abs(np.diff(sigma, axis=0)) > 0.5) > 0  # shadow switches happened
@@ -99,26 +122,24 @@ def test_shadow_set_covariance_mapping_is_the_jacobian_of_the_switching_map():
 
 @pytest.mark.parametrize("kind", ["mekf", "mrp_ekf"])
 def test_a_delayed_update_equals_the_on_time_update_replayed_forward(kind):
-    functions, _, _, gyro, arriving, available = _case(kind, 300, 2)
+    case = _case(kind, 300, 2)
+    functions, state = case["functions"], case["state"]
     latency = functions.clock.latency
     on_time_tracker = StarTracker(TRACKER.noise, TRACKER.rate, 0.0, dropout=TRACKER.dropout)
     on_time = estimator_functions(kind, on_time_tracker, GYRO, RATE, tuning=EstimatorTuning.from_sensors(TRACKER, GYRO))
-    state = functions.initial_state([0.1, -0.2, 0.3], [0.0, 0.0, 0.0])
-    delayed = filter_run(functions, state, gyro, arriving, available)
-    # the on-time filter starts at t_{−ℓ} on the same state: its sample i is time t_{i−ℓ}, where it reads
-    # ω̃_{i−ℓ} (the pre-start samples first) and the measurement of t_{i−ℓ}, the one the delayed filter gets at i
-    on_gyro = np.vstack((np.zeros((latency, 3)), gyro))[: len(gyro)]
-    on_run = filter_run(on_time, state, on_gyro, arriving, available)
-    # on_run.state[i] is the on-time prior at t_{i+1−ℓ}; sample k's estimate is on-time posterior at t_{k−ℓ}
-    # (= the prior at t_{k−ℓ} updated, i.e. on_run's row k − 1 updated) propagated over ω̃_{k−ℓ} … ω̃_{k−1}
-    propagate = functions.propagate
-    worst = 0.0
+    gyro, arriving, available = case["gyro"], case["arriving"], case["available"]
+    delayed = filter_run(functions, state, gyro, arriving, available, ring=case["pre"])
+    # the on-time filter starts on the same state at t_{−ℓ−1}: its sample i is time t_{i−ℓ}, where it reads
+    # r_{i−ℓ} and the measurement of t_{i−ℓ}, the one the delayed filter gets at i; its state after sample i is
+    # the posterior at t_{i−ℓ}, which replayed over r_{i−ℓ+1} … r_i must be the delayed filter's estimate at i
+    readings = np.vstack((case["pre"], gyro))  # readings[i] = r_{i−ℓ}
+    on_run = filter_run(on_time, state, readings[: len(gyro)], arriving, available)
     size = functions.attitude_size
-    for k in range(latency + 1, len(gyro), 7):
-        x = np.array(on_run.state[k - 1])  # prior at t_{k−ℓ} after the update of t_{k−1−ℓ}: re-apply k's update
-        x = np.array(on_time.update(x, arriving[k], available[k])[0]).ravel()
-        for j in range(k - latency, k):
-            x = np.array(propagate(x, gyro[j])).ravel()
+    worst = 0.0
+    for k in range(latency, len(gyro), 7):
+        x = np.array(on_run.state[k])
+        for i in range(k + 1, k + latency + 1):
+            x = np.array(functions.propagate(x, readings[i])).ravel()
         if kind == "mekf":
             q = x[:4] if x[0] >= 0 else -x[:4]
             sigma = q[1:] / (1 + q[0])
@@ -129,43 +150,71 @@ def test_a_delayed_update_equals_the_on_time_update_replayed_forward(kind):
     assert worst < 1e-13
 
 
+def _qmul(a, b):
+    """β of C(a) C(b) over rows (scalar first)."""
+    scalar = a[:, 0] * b[:, 0] - np.sum(a[:, 1:] * b[:, 1:], axis=1)
+    vector = a[:, :1] * b[:, 1:] + b[:, :1] * a[:, 1:] - np.cross(a[:, 1:], b[:, 1:])
+    return np.column_stack((scalar, vector))
+
+
+def _qrot(theta):
+    angle = np.linalg.norm(theta, axis=1, keepdims=True)
+    safe = np.where(angle > 0, angle, 1.0)
+    return np.column_stack((np.cos(angle / 2), np.where(angle > 0, np.sin(angle / 2) / safe, 0.5) * theta))
+
+
+def _q_of_mrp(sigma):
+    squared = np.sum(sigma**2, axis=1, keepdims=True)
+    return np.column_stack(((1 - squared) / (1 + squared), 2 * sigma / (1 + squared)))
+
+
+def _rotvec(q):
+    q = np.where(q[:, :1] < 0, -q, q)
+    norm = np.linalg.norm(q[:, 1:], axis=1, keepdims=True)
+    return np.where(norm > 0, 2 * np.arctan2(norm, q[:, :1]) / np.where(norm > 0, norm, 1.0), 2.0) * q[:, 1:]
+
+
 def _nees_runs(kind: str, runs: int, samples: int):
-    """Monte Carlo runs with the initial error drawn from P₀: NEES of the estimate now, bias errors, sigmas."""
+    """Monte Carlo runs with the initial errors drawn from P₀: NEES of the estimate now, bias errors, sigmas.
+
+    The true motion is the same in every run (the tumble of `_omega` from σ₀); each run draws its own initial
+    errors, bias, gyro noise, star-tracker noise and dropouts."""
     tuning = EstimatorTuning.from_sensors(TRACKER, WALKING_GYRO, attitude_error=50 * ARCSEC, bias_error=1e-4)
-    functions = estimator_functions(kind, TRACKER, WALKING_GYRO, RATE, tuning=tuning)
+    functions = estimator_functions(kind, TRACKER, WALKING_GYRO, RATE, tuning=tuning)  # built and compiled once
     clock = functions.clock
-    h, latency = clock.period, clock.latency
+    latency, h = clock.latency, clock.period
+    total = samples + latency  # periods from t_{−ℓ−1}
+    omega = np.array([_omega((i - latency - 1) * h) for i in range(total)])
+    q_true, _, _ = ref.truth(
+        total,
+        h,
+        lambda t: _omega(t - (latency + 1) * h),
+        (0.1, -0.2, 0.3),
+        np.zeros((total + 1, 3)),
+        np.zeros((total, 3)),
+    )
+    q_now = q_true[latency + 1 :]
     rng = np.random.default_rng(11)
     nees = np.empty((runs, samples))
     bias_error = np.empty((runs, samples, 3))
     bias_sigma = np.empty((runs, samples, 3))
     for run in range(runs):
-        gyro_model = Gyro(WALKING_GYRO.rate_noise, WALKING_GYRO.bias_walk, rng.normal(0.0, 1e-4, 3))
-        streams = sensor_streams(TRACKER, gyro_model, clock, samples + latency, 100 + run)
-        omega = np.array([_omega((k - latency) * h) for k in range(samples + latency)])
-        noise = streams.gyro_error - 0.5 * (streams.bias[:-1] + streams.bias[1:])
-        # truth from t_{−ℓ}: q_true[i] at t_{i−ℓ}, vectorised over the run
-        q = [ref.q_of_mrp(np.array([0.1, -0.2, 0.3]))]
-        for k in range(samples + latency):
-            qn = ref.qmul(ref.qrot(omega[k] * h), q[-1])
-            q.append(qn / np.linalg.norm(qn))
-        q_true = np.array(q)
-        readings = omega + 0.5 * (streams.bias[:-1] + streams.bias[1:]) + noise
+        gyro = Gyro(WALKING_GYRO.rate_noise, WALKING_GYRO.bias_walk, rng.normal(0.0, 1e-4, 3))
         error0 = rng.normal(0.0, 50 * ARCSEC, 3)
-        q_hat0 = ref.qmul(ref.qrot(-error0), q_true[0])
-        sigma0 = ref.mrp_of_q(q_hat0 if q_hat0[0] >= 0 else -q_hat0)
-        state = functions.initial_state(sigma0, np.zeros(3))
-        taken = np.array(
-            [ref.compose_mrp(ref.mrp_of_q(q_true[k]), streams.rotation[k]) for k in range(samples + latency)]
-        )
-        # the run's sample k (k = 0 … N−1) is time t_k: gyro row k + ℓ, the measurement of t_{k−ℓ} arrives
-        gyro = readings[latency:]
-        arriving = taken[:samples]
-        available = streams.taken[:samples].copy()
-        out = filter_run(functions, state, gyro, arriving, available, ring=readings[:latency])
-        q_hat = np.array([ref.q_of_mrp(sigma) for sigma in out.sigma])
-        dtheta = np.array([ref.rotvec_of_q(ref.qmul(q_true[k + latency], ref.qconj(q_hat[k]))) for k in range(samples)])
-        db = streams.bias[latency : samples + latency] - out.bias
+        streams = sensor_streams(TRACKER, gyro, clock, total, 100 + run)
+        readings = omega + streams.gyro_error  # r_{i−ℓ}: the mean rate over period i plus its error
+        taken = _qmul(_qrot(streams.rotation[:samples]), q_now)  # the measurement of t_j
+        taken = np.where(taken[:, :1] < 0, -taken, taken)
+        arriving, available = np.zeros((samples, 3)), np.zeros(samples)
+        arriving[latency:] = (taken[:, 1:] / (1 + taken[:, :1]))[: samples - latency]
+        available[latency:] = streams.taken[: samples - latency]
+        q_start = ref.qmul(ref.qrot(-error0), q_true[0])
+        sigma_start = ref.mrp_of_q(q_start if q_start[0] >= 0 else -q_start)
+        state = functions.initial_state(sigma_start, np.zeros(3))
+        out = filter_run(functions, state, readings[latency:], arriving, available, ring=readings[:latency])
+        q_hat = _q_of_mrp(out.sigma)
+        dtheta = _rotvec(_qmul(q_now, q_hat * np.array([1.0, -1.0, -1.0, -1.0])))
+        db = streams.bias[latency + 1 :] - out.bias
         p = np.array(out.covariance)
         if kind == "mrp_ekf":  # its covariance is on δσ: map to δθ = 4 B(σ)⁻¹ δσ
             t = np.tile(np.eye(6), (samples, 1, 1))

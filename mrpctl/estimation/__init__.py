@@ -14,19 +14,22 @@ from __future__ import annotations
 
 from mrpctl.estimation.filters import (
     COVARIANCE_SIZE,
+    Estimator,
     EstimatorFunctions,
     EstimatorKind,
     EstimatorTuning,
     estimator_functions,
     farrenkopf_steady_state,
+    relative_rotation_expr,
     shadow_jacobian_expr,
 )
 from mrpctl.estimation.run import FilterRun, SensorStreams, filter_run, filter_run_function, sensor_streams
-from mrpctl.estimation.sensors import ARCSEC, Gyro, SensorClock, StarTracker
+from mrpctl.estimation.sensors import ARCSEC, Gyro, SensorClock, Sensors, StarTracker
 
 __all__ = [
     "ARCSEC",
     "COVARIANCE_SIZE",
+    "Estimator",
     "EstimatorFunctions",
     "EstimatorKind",
     "EstimatorTuning",
@@ -34,11 +37,13 @@ __all__ = [
     "Gyro",
     "SensorClock",
     "SensorStreams",
+    "Sensors",
     "StarTracker",
     "estimator_functions",
     "farrenkopf_steady_state",
     "filter_run",
     "filter_run_function",
+    "relative_rotation_expr",
     "sensor_streams",
     "shadow_jacobian_expr",
 ]

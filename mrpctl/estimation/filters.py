@@ -17,18 +17,21 @@ MRP-EKF (additive EKF on the MRP σ, Karlgaard & Schaub)
     the covariance is mapped with the switching map's Jacobian S = (2σ̂σ̂ᵀ − |σ̂|² I)/|σ̂|⁴:
     P ← M P Mᵀ, M = diag(S, I) (Karlgaard & Schaub's shadow-set covariance mapping).
 
+The gyro is rate-integrating: its reading ω̃_k, delivered at sample k, is the mean rate over the period
+[t_{k−1}, t_k] (the attitude increment over h), and it propagates the estimate over that period.
+
 The delayed update by buffered re-propagation (one ``sample`` per controller period): the filter's memory is
-its state at t_{k−ℓ} (before any measurement of that time) and the ring of the ℓ gyro samples
-ω̃_{k−ℓ} … ω̃_{k−1}. At sample k, the measurement of t_{k−ℓ} that arrives now updates that state; the
-posterior is propagated by ω̃_{k−ℓ} (the next memory) and then replayed over the rest of the ring to t_k:
-the estimate now. It is the estimate a filter with the measurement on time would hold, replayed forward.
+its posterior at t_{k−ℓ−1} and the ring of the ℓ gyro readings ω̃_{k−ℓ} … ω̃_{k−1}. At sample k the memory is
+propagated by ω̃_{k−ℓ} to t_{k−ℓ}, updated by the measurement of t_{k−ℓ} that arrives now (the next memory),
+then replayed over ω̃_{k−ℓ+1} … ω̃_k to t_k: the estimate now. It is the estimate a filter with the
+measurement on time would hold, replayed forward.
 """
 
 from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import casadi as ca
@@ -42,11 +45,13 @@ from mrpctl.mrp import b_matrix_expr, skew_expr
 
 __all__ = [
     "COVARIANCE_SIZE",
+    "Estimator",
     "EstimatorFunctions",
     "EstimatorKind",
     "EstimatorTuning",
     "estimator_functions",
     "farrenkopf_steady_state",
+    "relative_rotation_expr",
     "shadow_jacobian_expr",
 ]
 
@@ -248,6 +253,14 @@ def _process_noise(tuning: EstimatorTuning, h: float) -> np.ndarray:
     )
 
 
+def relative_rotation_expr(sigma_from: Any, sigma_to: Any) -> Any:
+    """The rotation vector (rad) of C(σ_to) C(σ_from)ᵀ: the body's rotation from one attitude to the next (SX)."""
+    q_from = quaternion_from_mrp_expr(sigma_from)
+    return _rotation_vector_of_quaternion(
+        _quaternion_product(quaternion_from_mrp_expr(sigma_to), ca.vertcat(q_from[0], -q_from[1:4]))
+    )
+
+
 def shadow_jacobian_expr(sigma: Any) -> Any:
     """S = ∂σˢ/∂σ = (2 σσᵀ − |σ|² I)/|σ|⁴ of the shadow map σˢ = −σ/|σ|² (SX; σ ≠ 0)."""
     squared = ca.dot(sigma, sigma)
@@ -353,9 +366,10 @@ class EstimatorFunctions:
         with ``available`` = 0 the state is returned unchanged.
     sample : casadi.Function
         ``sample(state, ring, gyro, measurement, available) -> (state_next, ring_next, sigma, omega, bias,
-        covariance, innovation)``: one controller period with the delayed update and the replay; ``ring``
-        is 3 × ℓ (left out when ℓ = 0), ``sigma`` the short-set MRP of the estimate now, ``omega`` = ω̃_k − β̂,
-        ``covariance`` the covariance now (replayed; 36, column-major).
+        covariance, innovation)``: one controller period with the delayed update and the replay; ``state`` the
+        posterior at t_{k−ℓ−1}, ``ring`` the readings ω̃_{k−ℓ} … ω̃_{k−1} (3 × ℓ, left out when ℓ = 0), ``gyro``
+        ω̃_k, ``sigma`` the short-set MRP of the estimate now, ``omega`` = ω̃_k − β̂, ``covariance`` the
+        covariance now (replayed; 36, column-major).
     """
 
     kind: EstimatorKind
@@ -461,17 +475,13 @@ def estimator_functions(
 
     latency = clock.latency
     ring = ca.SX.sym("ring", 3, latency)
-    posterior = update(state, measurement, available)
-    lag_attitude, lag_bias, lag_p = unpack(posterior[0])
-    samples = [ring[:, j] for j in range(latency)] + [gyro_now]
-    next_attitude, next_p = prop(lag_attitude, lag_bias, lag_p, samples[0], h, q)
-    state_next = pack(next_attitude, lag_bias, next_p)
-    if latency == 0:
-        now_attitude, now_p = lag_attitude, lag_p
-    else:
-        now_attitude, now_p = next_attitude, next_p
-        for j in range(1, latency):
-            now_attitude, now_p = prop(now_attitude, lag_bias, now_p, samples[j], h, q)
+    readings = [ring[:, j] for j in range(latency)] + [gyro_now]  # delivered at k − ℓ … k
+    prior_attitude, prior_p = prop(attitude, bias, p, readings[0], h, q)
+    posterior = update(pack(prior_attitude, bias, prior_p), measurement, available)
+    state_next = posterior[0]
+    now_attitude, now_bias, now_p = unpack(state_next)
+    for reading in readings[1:]:
+        now_attitude, now_p = prop(now_attitude, now_bias, now_p, reading, h, q)
     if kind is EstimatorKind.MEKF:
         sign = ca.if_else(now_attitude[0] >= 0, 1.0, -1.0)
         sigma_now = sign * now_attitude[1:4] / (1 + sign * now_attitude[0])
@@ -481,7 +491,7 @@ def estimator_functions(
     names = ["state"] + (["ring"] if latency else []) + ["gyro", "measurement", "available"]
     outputs = [state_next] + ([ca.horzcat(ring[:, 1:], gyro_now)] if latency else [])
     output_names = ["state_next"] + (["ring_next"] if latency else [])
-    outputs += [sigma_now, gyro_now - lag_bias, lag_bias, ca.reshape(now_p, COVARIANCE_SIZE, 1), posterior[1]]
+    outputs += [sigma_now, gyro_now - now_bias, now_bias, ca.reshape(now_p, COVARIANCE_SIZE, 1), posterior[1]]
     output_names += ["sigma", "omega", "bias", "covariance", "innovation"]
     sample = ca.Function("estimator_sample", inputs, outputs, names, output_names)
     return EstimatorFunctions(
@@ -494,3 +504,82 @@ def estimator_functions(
         update=update,
         sample=sample,
     )
+
+
+@dataclass(frozen=True)
+class Estimator:
+    """The estimator of an estimated loop (``simulate(..., sensors=..., estimator=...)``).
+
+    Parameters
+    ----------
+    kind : EstimatorKind or str
+        ``"mekf"`` (default) or ``"mrp_ekf"``.
+    tuning : EstimatorTuning, optional
+        Default [`EstimatorTuning.from_sensors`][mrpctl.estimation.EstimatorTuning.from_sensors] with the
+        initial errors below.
+    initial_sigma : array_like, optional
+        The initial attitude estimate σ̂₀ (the true σ₀ when None: an attitude known at the start).
+    initial_bias : array_like
+        The initial bias estimate β̂₀ (rad/s). Default zero.
+    attitude_error, bias_error : float, optional
+        1σ of the initial errors (rad, rad/s) for the default tuning; None: Farrenkopf's steady state.
+    """
+
+    kind: EstimatorKind | str = EstimatorKind.MEKF
+    tuning: EstimatorTuning | None = None
+    initial_sigma: Any = None
+    initial_bias: Any = (0.0, 0.0, 0.0)
+    attitude_error: float | None = None
+    bias_error: float | None = None
+
+    def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "kind", EstimatorKind(self.kind))
+        except ValueError:
+            raise SpecificationError(f"kind: one of 'mekf', 'mrp_ekf', got {self.kind!r}") from None
+        if self.tuning is not None and not isinstance(self.tuning, EstimatorTuning):
+            raise SpecificationError(f"tuning must be an EstimatorTuning, got {type(self.tuning).__name__}")
+        if self.initial_sigma is not None:
+            object.__setattr__(self, "initial_sigma", readonly(finite_array("initial_sigma", self.initial_sigma, (3,))))
+        object.__setattr__(self, "initial_bias", readonly(finite_array("initial_bias", self.initial_bias, (3,))))
+        for name in ("attitude_error", "bias_error"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, positive_scalar(name, value))
+
+    def functions(self, star_tracker: StarTracker, gyro: Gyro, controller_rate: float) -> EstimatorFunctions:
+        """The estimator's Functions for these sensors at the controller rate."""
+        tuning = self.tuning
+        if tuning is None:
+            tuning = EstimatorTuning.from_sensors(
+                star_tracker, gyro, attitude_error=self.attitude_error, bias_error=self.bias_error
+            )
+        key = (
+            self.kind,
+            _value_key(star_tracker),
+            _value_key(gyro),
+            float(controller_rate),
+            tuning.rate_noise,
+            tuning.bias_walk,
+            np.asarray(tuning.measurement_covariance).tobytes(),
+            np.asarray(tuning.initial_covariance).tobytes(),
+        )
+        found = _FUNCTIONS.get(key)
+        if found is None:
+            found = estimator_functions(self.kind, star_tracker, gyro, controller_rate, tuning=tuning)
+            if len(_FUNCTIONS) >= 16:
+                _FUNCTIONS.pop(next(iter(_FUNCTIONS)))
+            _FUNCTIONS[key] = found
+        return found
+
+
+def _value_key(value: Any) -> tuple[Any, ...]:
+    """A dataclass value's fields, exactly (arrays by their bytes)."""
+    return tuple(
+        None if getattr(value, f.name) is None else np.asarray(getattr(value, f.name), dtype=float).tobytes()
+        for f in fields(value)
+    )
+
+
+#: Built estimators by (kind, sensors, rate, tuning): the same Functions (and so the same compiled run) again.
+_FUNCTIONS: dict[tuple[Any, ...], EstimatorFunctions] = {}

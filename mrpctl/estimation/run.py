@@ -1,8 +1,9 @@
 """The sensors' random streams and the estimator compiled over a whole run (a C loop).
 
 [`sensor_streams`][mrpctl.estimation.run.sensor_streams] draws, from one seed, everything random about
-a run of N controller samples: the gyro's bias path β_k and its error e_k = (β_k + β_{k+1})/2 + σ_N n_k
-(Crassidis & Junkins' discrete gyro, σ_N² = σ_v²/h + σ_u² h/12), the star tracker's error rotations θ_k
+a run of N controller samples: the gyro's bias path β_k and the error e_k = (β_{k−1} + β_k)/2 + σ_N n_k of
+the reading delivered at sample k (the mean rate over [t_{k−1}, t_k]; Crassidis & Junkins' discrete gyro,
+σ_N² = σ_v²/h + σ_u² h/12), the star tracker's error rotations θ_k
 (N(0, R)) and which measurements arrive (every n-th sample, less the dropouts). The measured values
 are formed from the true motion: ω̃_k = (I + diag(s)) ω_k + e_k, and [B̃N] = [B̃B](θ_k) [BN].
 
@@ -36,9 +37,9 @@ class SensorStreams:
     Attributes
     ----------
     bias : numpy.ndarray
-        (N + 1, 3) the true gyro bias β_k (rad/s).
+        (N + 1, 3) the true gyro bias (rad/s), row i at t_{i−1} (row k + 1 at sample k).
     gyro_error : numpy.ndarray
-        (N, 3) e_k: ω̃_k = (I + diag(s)) ω_k + e_k (rad/s).
+        (N, 3) e_k: ω̃_k = (I + diag(s)) ω̄_k + e_k, ω̄_k the mean rate over [t_{k−1}, t_k] (rad/s).
     rotation : numpy.ndarray
         (N, 3) the star tracker's error rotation θ_k of a measurement taken at sample k (rad).
     taken : numpy.ndarray
@@ -80,7 +81,7 @@ class FilterRun:
     innovation : numpy.ndarray
         (N, 3) the innovation of the measurement that arrived at k (zero when none).
     state : numpy.ndarray
-        (N, state size) the filter's memory after sample k (its state at t_{k+1−ℓ}).
+        (N, state size) the filter's memory after sample k (its posterior at t_{k−ℓ}).
     """
 
     sigma: np.ndarray
@@ -147,15 +148,16 @@ def filter_run(
     ----------
     functions : EstimatorFunctions
     initial_state : array_like
-        The filter's state at t_{−ℓ} ([`initial_state`][mrpctl.estimation.EstimatorFunctions.initial_state]).
+        The filter's posterior at t_{−ℓ−1}
+        ([`initial_state`][mrpctl.estimation.EstimatorFunctions.initial_state]).
     gyro : array_like
-        (N, 3) ω̃_k (rad/s).
+        (N, 3) ω̃_k (rad/s), the mean rate over [t_{k−1}, t_k] delivered at sample k.
     measurement : array_like
         (N, 3) the star tracker's MRP arriving at sample k (measured at k − ℓ); any finite value where none.
     available : array_like
         (N,) 1 where a measurement arrives at k, else 0.
     ring : array_like, optional, keyword-only
-        (ℓ, 3) the gyro samples before the start (ω̃_{−ℓ} … ω̃_{−1}); default the initial bias estimate
+        (ℓ, 3) the gyro readings before the start (ω̃_{−ℓ} … ω̃_{−1}); default the initial bias estimate
         (the attitude held until t = 0).
     """
     state = finite_array("initial_state", initial_state, (functions.state_size,))

@@ -28,7 +28,7 @@ import numpy as np
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
 
-__all__ = ["ARCSEC", "Gyro", "SensorClock", "StarTracker"]
+__all__ = ["ARCSEC", "Gyro", "SensorClock", "Sensors", "StarTracker"]
 
 #: One arcsecond in radians.
 ARCSEC = math.pi / (180.0 * 3600.0)
@@ -212,3 +212,27 @@ class Gyro:
         """
         h = positive_scalar("period", period)
         return math.sqrt(self.rate_noise**2 / h + self.bias_walk**2 * h / 12.0), self.bias_walk * math.sqrt(h)
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """The sensors of an estimated loop: a star tracker, a gyro, and the seed of their noise.
+
+    Parameters
+    ----------
+    star_tracker : StarTracker
+    gyro : Gyro
+    seed : int
+        Seed (>= 0) of the run's sensor noise (NumPy's PCG64). Default 0.
+    """
+
+    star_tracker: StarTracker
+    gyro: Gyro
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.star_tracker, StarTracker):
+            raise SpecificationError(f"star_tracker must be a StarTracker, got {type(self.star_tracker).__name__}")
+        if not isinstance(self.gyro, Gyro):
+            raise SpecificationError(f"gyro must be a Gyro, got {type(self.gyro).__name__}")
+        object.__setattr__(self, "seed", integer("seed", self.seed, minimum=0))

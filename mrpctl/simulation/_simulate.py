@@ -10,7 +10,7 @@ import queue
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -22,6 +22,7 @@ from mrpctl.engines.lanes import DEFAULT_WIDTH
 from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples
 from mrpctl.engines.stats import HISTORY_KINDS, STATS_SIZE
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+from mrpctl.estimation import Estimator, Sensors
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
     ActuatorModel,
@@ -48,6 +49,7 @@ from mrpctl.loop.options import (
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._guards import check_step_rotation
+from mrpctl.simulation.estimated import EstimatedResult, simulate_estimated_as_simulate
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
@@ -249,6 +251,56 @@ def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: 
 
 
 # ======================================================================= simulate
+@overload
+def simulate(
+    spacecraft: Spacecraft,
+    K: Any,
+    x0: Any,
+    *,
+    tau: float,
+    rule: SwitchingRule,
+    t_final: float,
+    rate: float = ...,
+    history: Any = ...,
+    substeps: int = ...,
+    keep_every: int | None = ...,
+    memory_limit: float | None = ...,
+    progress: Callable[[int, int], Any] | None = ...,
+    actuator: ActuatorModel | None = ...,
+    disturbance: Any = ...,
+    sensor: SensorModel | None = ...,
+    delay: DelayModel | None = ...,
+    predictor: Predictor | None = ...,
+    sensors: None = ...,
+    estimator: None = ...,
+) -> SimulationResult: ...
+
+
+@overload
+def simulate(
+    spacecraft: Spacecraft,
+    K: Any,
+    x0: Any,
+    *,
+    tau: float,
+    rule: SwitchingRule,
+    t_final: float,
+    rate: float = ...,
+    history: Any = ...,
+    substeps: int = ...,
+    keep_every: int | None = ...,
+    memory_limit: float | None = ...,
+    progress: Callable[[int, int], Any] | None = ...,
+    actuator: ActuatorModel | None = ...,
+    disturbance: Any = ...,
+    sensor: SensorModel | None = ...,
+    delay: DelayModel | None = ...,
+    predictor: Predictor | None = ...,
+    sensors: Sensors,
+    estimator: Estimator | None = ...,
+) -> EstimatedResult: ...
+
+
 def simulate(
     spacecraft: Spacecraft,
     K: Any,
@@ -268,7 +320,9 @@ def simulate(
     sensor: SensorModel | None = None,
     delay: DelayModel | None = None,
     predictor: Predictor | None = None,
-) -> SimulationResult:
+    sensors: Sensors | None = None,
+    estimator: Estimator | None = None,
+) -> SimulationResult | EstimatedResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
     The model and the engine: ``design/switching.md``. A run is a few calls of compiled C
@@ -333,10 +387,19 @@ def simulate(
         the applied torque), ``disturbance`` (constant or per sample; the plant's only) and ``sensor``;
         needs ``history="constant"``, no
         ``delay`` model, and a C compiler. The result's ``sigma``, ``omega`` are the plant's state.
+    sensors : mrpctl.estimation.Sensors, keyword-only
+        A late star tracker and a rate-integrating gyro: the loop then flies the control law on the
+        estimator's attitude and rate (``design/estimation.md``), with ``rule=Hysteretic(...)`` on the
+        estimate and ``tau`` the star tracker's latency; the other flight options do not apply. Returns an
+        [`EstimatedResult`][mrpctl.simulation.estimated.EstimatedResult] (true, measured and estimated states,
+        covariance, innovations). None (default): the loop above, unchanged.
+    estimator : mrpctl.estimation.Estimator, keyword-only
+        The estimator of that loop (with ``sensors``); default the MEKF.
 
     Returns
     -------
     SimulationResult
+        Or an [`EstimatedResult`][mrpctl.simulation.estimated.EstimatedResult] with ``sensors``.
 
     Raises
     ------
@@ -345,6 +408,20 @@ def simulate(
         integer, wrong shapes, unknown history, substeps outside 1..64, keep_every < 1),
         or when the kept arrays would exceed ``memory_limit``.
     """
+    if sensors is not None or estimator is not None:
+        others = {"actuator": actuator, "disturbance": disturbance, "sensor": sensor, "delay": delay}
+        others |= {"predictor": predictor, "progress": progress, "memory_limit": memory_limit}
+        if sensors is None:
+            raise SpecificationError("estimator: give the sensors it estimates from (sensors=Sensors(...))")
+        given = [name for name, value in others.items() if value is not None]
+        if given or history != "constant" or keep_every != 1:
+            given += ["history"] if history != "constant" else []
+            given += ["keep_every"] if keep_every != 1 else []
+            raise SpecificationError(f"{', '.join(given)}: not options of the estimated loop (sensors=...)")
+        return simulate_estimated_as_simulate(
+            spacecraft, K, x0, tau=tau, rule=rule, t_final=t_final, rate=rate, substeps=substeps,
+            sensors=sensors, estimator=estimator,
+        )  # fmt: skip
     spacecraft = check_spacecraft(spacecraft)
     gain = gain_matrix(K)
     x0 = finite_array("x0", x0, (STATE_SIZE,))
