@@ -77,7 +77,7 @@ class FilterRun:
     sigma, omega, bias : numpy.ndarray
         (N, 3) the estimate now: short-set MRP σ̂_k, rate ω̂_k = ω̃_k − β̂ (rad/s), bias β̂ (rad/s).
     covariance : numpy.ndarray
-        (N, 6, 6) the covariance of the estimate now.
+        (N, 6, 6) the covariance of the estimate now: on (δθ, Δβ) for the MEKF, (δσ, Δβ) for the MRP-EKF.
     innovation : numpy.ndarray
         (N, 3) the innovation of the measurement that arrived at k (zero when none).
     state : numpy.ndarray

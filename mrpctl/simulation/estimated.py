@@ -55,7 +55,8 @@ class EstimatedResult:
     bias_hat : numpy.ndarray
         (N, 3) the estimated bias (zero without an estimator).
     covariance : numpy.ndarray
-        (N, 6, 6) the estimate's covariance (zero without an estimator).
+        (N, 6, 6) the estimate's covariance (zero without an estimator), on (δθ, Δβ) for the MEKF and on
+        (δσ, Δβ) for the MRP-EKF.
     innovation : numpy.ndarray
         (N, 3) the innovation of the measurement arriving at the sample (zero when none).
     u : numpy.ndarray
