@@ -13,8 +13,9 @@ stay nominal. Three controllers on the same sensors (``mrpctl.loop.estimated``):
 
 Per case, ``seeds`` sensor-noise seeds (default 10): pointing RMS (principal angle of the true attitude)
 over t ∈ [150, 300] s, and the settling time (the last time the pointing error exceeds 0.01 rad), mean over
-the seeds. Then the cost of one sample (CPU time of the compiled run over 30 000 samples, median of 5):
-the MEKF loop's sample against the same loop's plain sample (a).
+the seeds. Then the cost of one sample (CPU time of the whole call over 30 001 samples, median of 5): the
+MEKF and MRP-EKF loops' samples against the same loop's plain sample (a), and against ``simulate``'s flight loop
+(Hysteretic(0) with a noisy, biased sensor at the same rate and substeps: the compiled engine's plain sample).
 
 ``python bench/estimation_loop.py [seeds]`` prints the markdown table of ``design/estimation.md``.
 """
@@ -24,27 +25,32 @@ from __future__ import annotations
 import statistics
 import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
 
-from mrpctl import paper
-from mrpctl.estimation import Estimator, Gyro, Sensors, StarTracker
+from mrpctl import paper, simulate
+from mrpctl.estimation import ARCSEC, Estimator, Gyro, Sensors, StarTracker
+from mrpctl.flight import Hysteretic, SensorModel
+from mrpctl.loop.estimated import estimated_sample
 from mrpctl.simulation.estimated import simulate_estimated
 from mrpctl.spacecraft import Spacecraft
 
 TRACKER = StarTracker.from_arcsec(10.0, 2.0, 0.5)
 GYRO = Gyro(1e-5, 1e-7, (5e-4, -3e-4, 2e-4))
 ESTIMATOR = Estimator(attitude_error=1e-3, bias_error=2e-3)
+MRP_ESTIMATOR = Estimator(kind="mrp_ekf", attitude_error=1e-3, bias_error=2e-3)
 RATE, SUBSTEPS, T_FINAL = 10.0, 4, 300.0
 MODES = (
-    ("(a) PD on the delayed star tracker", "pd"),
-    ("(b) model predictor", "predictor"),
-    ("(c) MEKF loop", "estimator"),
+    ("(a) PD on the delayed star tracker", "pd", ESTIMATOR),
+    ("(b) model predictor", "predictor", ESTIMATOR),
+    ("(c) MEKF loop", "estimator", ESTIMATOR),
+    ("(c') MRP-EKF loop", "estimator", MRP_ESTIMATOR),
 )
 SETTLED = 0.01
 
 
-def metrics(mode: str, scale: float, seed: int) -> tuple[float, float]:
+def metrics(mode: str, estimator: Estimator, scale: float, seed: int) -> tuple[float, float]:
     plant = Spacecraft(np.array(paper.INERTIA) * scale)
     run = simulate_estimated(
         plant,
@@ -53,7 +59,7 @@ def metrics(mode: str, scale: float, seed: int) -> tuple[float, float]:
         sensors=Sensors(TRACKER, GYRO, seed),
         t_final=T_FINAL,
         rate=RATE,
-        estimator=ESTIMATOR,
+        estimator=estimator,
         substeps=SUBSTEPS,
         mode=mode,
         model_spacecraft=paper.SPACECRAFT,
@@ -65,34 +71,82 @@ def metrics(mode: str, scale: float, seed: int) -> tuple[float, float]:
     return rms, settling
 
 
-def cost(mode: str) -> float:
-    sensors = Sensors(TRACKER, GYRO, 0)
-    common = dict(sensors=sensors, t_final=3000.0, rate=RATE, estimator=ESTIMATOR, substeps=SUBSTEPS, mode=mode)
-    simulate_estimated(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **common)  # build and compile once
+def _median_cpu(call: Callable[[], object]) -> float:
+    call()  # build and compile once
     times = []
     for _ in range(5):
         start = time.process_time()
-        simulate_estimated(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **common)
+        call()
         times.append(time.process_time() - start)
-    return statistics.median(times) / 30001
+    return statistics.median(times)
+
+
+def cost(mode: str, estimator: Estimator = ESTIMATOR) -> float:
+    """CPU seconds per sample of the estimated loop over 30 001 samples (the whole call)."""
+    common = dict(sensors=Sensors(TRACKER, GYRO, 0), t_final=3000.0, rate=RATE, substeps=SUBSTEPS)
+    return (
+        _median_cpu(
+            lambda: simulate_estimated(
+                paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, estimator=estimator, mode=mode, **common
+            )
+        )
+        / 30001
+    )
+
+
+def flight_cost() -> float:
+    """CPU seconds per sample of simulate's flight loop (Hysteretic(0), a noisy biased sensor, no delay model)
+    at the same rate, substeps and length: the plain sample of the compiled engine."""
+    sensor = SensorModel(
+        attitude_noise=10 * ARCSEC, rate_noise=GYRO.sample_noise(1 / RATE)[0], gyro_bias=GYRO.initial_bias
+    )
+    return (
+        _median_cpu(
+            lambda: simulate(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                paper.INITIAL_STATE,
+                tau=0.5,
+                rule=Hysteretic(),
+                t_final=3000.0,
+                rate=RATE,
+                substeps=SUBSTEPS,
+                sensor=sensor,
+            )
+        )
+        / 30001
+    )
 
 
 def main(seeds: int) -> None:
     arcsec = 180 * 3600 / np.pi
     print(f"| controller | inertia | pointing RMS, t >= 150 s (arcsec) | settling time to {SETTLED} rad (s) |")
     print("|---|---|---|---|")
-    for label, mode in MODES:
+    for label, mode, estimator in MODES:
         for scale in (1.0, 1.1, 0.9):
-            values = np.array([metrics(mode, scale, seed) for seed in range(seeds)])
+            values = np.array([metrics(mode, estimator, scale, seed) for seed in range(seeds)])
             rms, settling = values.mean(axis=0)
             name = "nominal" if scale == 1.0 else f"{scale - 1:+.0%}"
             print(f"| {label} | {name} | {rms * arcsec:.1f} | {settling:.1f} |")
-    plain, estimated = cost("pd"), cost("estimator")
+    lean = Estimator(attitude_error=1e-3, bias_error=2e-3, covariance_now=False)
+    plain, flight = cost("pd"), flight_cost()
     print()
     print(
-        f"cost per sample (whole run, CPU): plain (a) {plain * 1e6:.2f} us, MEKF loop {estimated * 1e6:.2f} us "
-        f"({estimated / plain:.2f}x)"
+        f"cost per sample (CPU, whole call over 30 001 samples): the estimated loop's plain sample (a) "
+        f"{plain * 1e6:.2f} us"
     )
+    print(f"simulate's flight loop (the compiled engine's plain sample): {flight * 1e6:.2f} us")
+    functions = ESTIMATOR.functions(TRACKER, GYRO, RATE)
+    plain_size = estimated_sample(paper.SPACECRAFT, functions, SUBSTEPS, "pd")[0].n_instructions()
+    for label, estimator in (("MEKF", ESTIMATOR), ("MEKF, covariance at t_m", lean), ("MRP-EKF", MRP_ESTIMATOR)):
+        seconds = cost("estimator", estimator)
+        size = estimated_sample(paper.SPACECRAFT, estimator.functions(TRACKER, GYRO, RATE), SUBSTEPS, "estimator")[
+            0
+        ].n_instructions()
+        print(
+            f"{label} loop: {seconds * 1e6:.2f} us ({seconds / plain:.2f}x (a), {seconds / flight:.2f}x the engine's); "
+            f"{size} SX instructions against {plain_size} ({size / plain_size:.2f}x)"
+        )
 
 
 if __name__ == "__main__":

@@ -295,3 +295,18 @@ def test_boresight_noise_and_clock():
     clock = tracker.clock(10.0)
     assert (clock.every, clock.latency) == (5, 5)
     assert math.isclose(clock.period, 0.1)
+
+
+@pytest.mark.parametrize("kind", ["mekf", "mrp_ekf"])
+def test_without_the_covariance_now_the_estimate_is_the_same_and_the_covariance_the_posteriors(kind):
+    case = _case(kind, 200, 5)
+    lean = estimator_functions(kind, TRACKER, GYRO, RATE, covariance_now=False)
+    inputs = (case["state"], case["gyro"], case["arriving"], case["available"])
+    full = filter_run(case["functions"], *inputs, ring=case["pre"])
+    cheap = filter_run(lean, *inputs, ring=case["pre"])
+    assert np.array_equal(full.sigma, cheap.sigma)
+    assert np.array_equal(full.bias, cheap.bias)
+    size = lean.attitude_size
+    posterior = cheap.state[:, size + 3 :].reshape(-1, 6, 6).transpose(0, 2, 1)
+    assert np.array_equal(cheap.covariance, posterior)
+    assert lean.sample.n_instructions() < 0.5 * case["functions"].sample.n_instructions()

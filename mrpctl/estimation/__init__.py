@@ -23,7 +23,14 @@ from mrpctl.estimation.filters import (
     relative_rotation_expr,
     shadow_jacobian_expr,
 )
-from mrpctl.estimation.run import FilterRun, SensorStreams, filter_run, filter_run_function, sensor_streams
+from mrpctl.estimation.run import (
+    FilterRun,
+    NativeFunction,
+    SensorStreams,
+    filter_run,
+    filter_run_function,
+    sensor_streams,
+)
 from mrpctl.estimation.sensors import ARCSEC, Gyro, SensorClock, Sensors, StarTracker
 
 __all__ = [
@@ -35,6 +42,7 @@ __all__ = [
     "EstimatorTuning",
     "FilterRun",
     "Gyro",
+    "NativeFunction",
     "SensorClock",
     "SensorStreams",
     "Sensors",

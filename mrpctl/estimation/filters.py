@@ -410,6 +410,7 @@ def estimator_functions(
     *,
     tuning: EstimatorTuning | None = None,
     buffer: int | None = None,
+    covariance_now: bool = True,
 ) -> EstimatorFunctions:
     """Build the estimator ``kind`` for the sensors on the controller's clock.
 
@@ -424,6 +425,11 @@ def estimator_functions(
         Default [`EstimatorTuning.from_sensors`][mrpctl.estimation.EstimatorTuning.from_sensors].
     buffer : int, optional, keyword-only
         The gyro buffer's length (samples), at least the latency; default the latency itself.
+    covariance_now : bool, keyword-only
+        True (default): the sample's ``covariance`` is the covariance now, replayed with the estimate (ℓ
+        covariance propagations more a sample). False: the replay carries the estimate only, and
+        ``covariance`` is the posterior's at the measurement time t_{k−ℓ} (in the posterior's MRP set for the
+        MRP-EKF); the estimate is the same.
     """
     try:
         kind = EstimatorKind(kind)
@@ -481,7 +487,8 @@ def estimator_functions(
     state_next = posterior[0]
     now_attitude, now_bias, now_p = unpack(state_next)
     for reading in readings[1:]:
-        now_attitude, now_p = prop(now_attitude, now_bias, now_p, reading, h, q)
+        now_attitude, replayed = prop(now_attitude, now_bias, now_p if covariance_now else None, reading, h, q)
+        now_p = replayed if covariance_now else now_p
     if kind is EstimatorKind.MEKF:
         sign = ca.if_else(now_attitude[0] >= 0, 1.0, -1.0)
         sigma_now = sign * now_attitude[1:4] / (1 + sign * now_attitude[0])
@@ -523,6 +530,9 @@ class Estimator:
         The initial bias estimate β̂₀ (rad/s). Default zero.
     attitude_error, bias_error : float, optional
         1σ of the initial errors (rad, rad/s) for the default tuning; None: Farrenkopf's steady state.
+    covariance_now : bool
+        Record the covariance now (True, default) or at the measurement time (False: a cheaper sample, see
+        [`estimator_functions`][mrpctl.estimation.estimator_functions]).
     """
 
     kind: EstimatorKind | str = EstimatorKind.MEKF
@@ -531,8 +541,11 @@ class Estimator:
     initial_bias: Any = (0.0, 0.0, 0.0)
     attitude_error: float | None = None
     bias_error: float | None = None
+    covariance_now: bool = True
 
     def __post_init__(self) -> None:
+        if not isinstance(self.covariance_now, bool):
+            raise SpecificationError(f"covariance_now must be True or False, got {self.covariance_now!r}")
         try:
             object.__setattr__(self, "kind", EstimatorKind(self.kind))
         except ValueError:
@@ -563,10 +576,13 @@ class Estimator:
             tuning.bias_walk,
             np.asarray(tuning.measurement_covariance).tobytes(),
             np.asarray(tuning.initial_covariance).tobytes(),
+            self.covariance_now,
         )
         found = _FUNCTIONS.get(key)
         if found is None:
-            found = estimator_functions(self.kind, star_tracker, gyro, controller_rate, tuning=tuning)
+            found = estimator_functions(
+                self.kind, star_tracker, gyro, controller_rate, tuning=tuning, covariance_now=self.covariance_now
+            )
             if len(_FUNCTIONS) >= 16:
                 _FUNCTIONS.pop(next(iter(_FUNCTIONS)))
             _FUNCTIONS[key] = found

@@ -14,6 +14,7 @@ are formed from the true motion: ω̃_k = (I + diag(s)) ω_k + e_k, and [B̃N] =
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -27,7 +28,7 @@ from mrpctl.errors import SpecificationError
 from mrpctl.estimation.filters import EstimatorFunctions
 from mrpctl.estimation.sensors import Gyro, SensorClock, StarTracker
 
-__all__ = ["FilterRun", "SensorStreams", "filter_run", "filter_run_function", "sensor_streams"]
+__all__ = ["FilterRun", "NativeFunction", "SensorStreams", "filter_run", "filter_run_function", "sensor_streams"]
 
 
 @dataclass(frozen=True)
@@ -183,3 +184,51 @@ def filter_run(
         innovation=readonly(innovation.T),
         state=readonly(states.T),
     )
+
+
+class NativeFunction:
+    """A compiled CasADi Function called through ctypes on NumPy buffers (no DM conversion).
+
+    The generated C entry point ``name(arg, res, iw, w, mem)`` of a Function with dense inputs and
+    outputs: inputs are passed as contiguous float64 arrays in CasADi's column-major order (a (rows, N) port
+    as an (N, rows) C-ordered array), outputs are written into arrays this class allocates.
+    """
+
+    def __init__(self, function: ca.Function, library: Any) -> None:
+        for index in range(function.n_in()):
+            if not function.sparsity_in(index).is_dense():
+                raise SpecificationError(f"{function.name()}: input {index} is not dense")
+        for index in range(function.n_out()):
+            if not function.sparsity_out(index).is_dense():
+                raise SpecificationError(f"{function.name()}: output {index} is not dense")
+        self.name = function.name()
+        self._dll = ctypes.CDLL(str(library))
+        self._call = getattr(self._dll, self.name)
+        self._call.restype = ctypes.c_int
+        self._call.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
+        work = getattr(self._dll, f"{self.name}_work")
+        work.restype = ctypes.c_int
+        sizes = [ctypes.c_longlong() for _ in range(4)]
+        work(*[ctypes.byref(size) for size in sizes])
+        self._sizes = [int(size.value) for size in sizes]
+        self.in_shapes = [function.size_in(i) for i in range(function.n_in())]
+        self.out_shapes = [function.size_out(i) for i in range(function.n_out())]
+
+    def __call__(self, *inputs: Any) -> list[np.ndarray]:
+        """The outputs as (columns, rows) C-ordered arrays (the transpose of CasADi's (rows, columns))."""
+        arrays = []
+        for (rows, columns), value in zip(self.in_shapes, inputs, strict=True):
+            array = np.ascontiguousarray(np.asarray(value, dtype=float).reshape(-1, order="F"))
+            if array.size != rows * columns:
+                raise SpecificationError(f"{self.name}: an input of {array.size} values, expected {rows} x {columns}")
+            arrays.append(array)
+        outputs = [np.empty((columns, rows)) for rows, columns in self.out_shapes]
+        n_arg, n_res, n_iw, n_w = self._sizes
+        arg = (ctypes.c_void_p * max(n_arg, 1))(*[a.ctypes.data for a in arrays])
+        res = (ctypes.c_void_p * max(n_res, 1))(*[o.ctypes.data for o in outputs])
+        iw = np.zeros(max(n_iw, 1), dtype=np.int64)
+        w = np.zeros(max(n_w, 1))
+        status = self._call(arg, res, iw.ctypes.data, w.ctypes.data, 0)
+        if status != 0:
+            raise SpecificationError(f"{self.name}: the compiled function returned {status}")
+        return outputs

@@ -10,16 +10,19 @@ measurement to arrive and the raw gyro rate, and ``"predictor"``, mrpctl's model
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from mrpctl import mrp
-from mrpctl._compile import compile_function
+from mrpctl._compile import SIMULATION_FLAGS, compile_function
 from mrpctl._validation import finite_array, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
-from mrpctl.estimation import Estimator, EstimatorFunctions, Sensors, sensor_streams
+from mrpctl.estimation import Estimator, EstimatorFunctions, NativeFunction, Sensors, sensor_streams
 from mrpctl.flight import Hysteretic
 from mrpctl.loop import check_substeps
 from mrpctl.loop.estimated import ESTIMATED_MODES, ESTIMATED_RECORD, EstimatedLayout, estimated_run_function
@@ -102,6 +105,17 @@ class EstimatedResult:
         norm = np.linalg.norm(vector, axis=1)
         factor = np.where(norm > 0, 2 * np.arctan2(norm, scalar) / np.where(norm > 0, norm, 1.0), 2.0)
         return factor[:, None] * vector
+
+
+@lru_cache(maxsize=8)
+def _compiled(run: ca.Function) -> Callable[..., Any]:
+    """The run compiled with the simulator's flags (generated, hashed and loaded once per run Function),
+    called through ctypes on NumPy buffers (CasADi's virtual machine when there is no compiler)."""
+    compiled = compile_function(run, flags=SIMULATION_FLAGS)
+    if compiled.library is None:
+        function = compiled.function
+        return lambda *args: [np.asarray(value).T for value in function(*args)]
+    return NativeFunction(run, compiled.library)
 
 
 def _quaternion(sigma: np.ndarray) -> np.ndarray:
@@ -206,7 +220,7 @@ def simulate_estimated(
     streams = sensor_streams(sensors.star_tracker, sensors.gyro, functions.clock, n, sensors.seed)
     noise = np.vstack((streams.gyro_error.T, streams.rotation.T, streams.taken[None, :]))
     run, layout = estimated_run_function(spacecraft, functions, substeps, mode, n)
-    compiled = compile_function(run).function
+    compiled = _compiled(run)
     j, j_m = np.diag(spacecraft.inertia).copy(), np.diag(model_spacecraft.inertia).copy()
     out = compiled(
         x0,
@@ -220,7 +234,7 @@ def simulate_estimated(
         j_m,
         np.diag(model_spacecraft.inertia_inverse).copy(),
     )
-    records = np.asarray(out[2]).T
+    records = out[2]
     parts: dict[str, np.ndarray] = {}
     start = 0
     for name, size in ESTIMATED_RECORD:
