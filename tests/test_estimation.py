@@ -10,11 +10,13 @@ import pytest
 from scipy.stats import chi2
 
 from mrpctl import mrp
-from mrpctl.errors import SpecificationError
+from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.estimation import (
     ARCSEC,
+    Estimator,
     EstimatorTuning,
     Gyro,
+    Sensors,
     StarTracker,
     estimator_functions,
     farrenkopf_steady_state,
@@ -116,8 +118,8 @@ def test_shadow_set_covariance_mapping_is_the_jacobian_of_the_switching_map():
         )
         analytic = np.array(jacobian(sigma))
         assert np.max(np.abs(analytic - numeric)) < 1e-8 * np.max(np.abs(numeric))
-    # and the filter's switch maps P by it: a covariance propagated through a crossing stays the one
-    # the linearised shadow map gives (checked by the reference filter, whose mapping is written apart)
+    # the filters' switches map P by it: the run against the reference (whose mapping is written apart)
+    # crosses |σ| = 1 six times, test_compiled_filter_matches_the_independent_numpy_filter_over_a_run_...
 
 
 @pytest.mark.parametrize("kind", ["mekf", "mrp_ekf"])
@@ -282,10 +284,18 @@ def test_farrenkopf_steady_state_is_the_filters_own_steady_state():
         (lambda: EstimatorTuning(1e-5, 1e-7, np.eye(3), -np.eye(6)), "initial_covariance"),
         (lambda: EstimatorTuning(1e-5, 1e-7, np.triu(np.ones((3, 3))), np.eye(6)), "measurement_covariance"),
         (lambda: estimator_functions("ukf", TRACKER, GYRO, RATE), "kind"),
+        (lambda: Estimator(kind="ukf"), "kind"),
+        (lambda: Estimator(covariance_now=1), "covariance_now"),
+        (lambda: Estimator(initial_bias=(0, 0)), "initial_bias"),
+        (lambda: Estimator(attitude_error=0.0), "attitude_error"),
+        (lambda: Sensors(TRACKER, GYRO, seed=-1), "seed"),
+        (lambda: Sensors(GYRO, TRACKER), "star_tracker"),
+        (lambda: EstimatorTuning(float("nan"), 1e-7, np.eye(3), np.eye(6)), "rate_noise"),
+        (lambda: StarTracker(1e-5, 20.0, 0.5).clock(10.0), "rate"),
     ],
 )
 def test_bad_sensor_and_filter_input_is_refused_naming_the_parameter(build, name):
-    with pytest.raises(SpecificationError, match=name):
+    with pytest.raises((SpecificationError, DimensionError), match=name):
         build()
 
 
