@@ -82,6 +82,12 @@ def test_the_loops_plant_and_control_law(run):
     assert np.max(np.abs(run.gyro - run.omega)) < 0.1  # a mean rate, not the rate at the sample
 
 
+def test_the_estimation_error_is_the_rotation_from_the_estimate_to_the_truth(run):
+    expected = mrp.to_rotation_vector(mrp.subtract(run.sigma, run.sigma_hat))  # σ(true / estimate)
+    assert np.max(np.abs(run.estimation_error - expected)) < 1e-12
+    assert np.max(np.abs(run.estimation_error[:100])) > 1e-5  # compared in the tumble, not only near 0
+
+
 def test_the_estimate_stays_within_its_three_sigma_after_convergence(run, kind):
     after = run.t >= 20.0
     error = run.estimation_error[after]

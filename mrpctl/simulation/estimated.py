@@ -99,7 +99,8 @@ class EstimatedResult:
         q_true = _quaternion(self.sigma)
         q_hat = _quaternion(self.sigma_hat)
         scalar = np.sum(q_true * q_hat, axis=1)
-        vector = q_hat[:, :1] * q_true[:, 1:] - q_true[:, :1] * q_hat[:, 1:] - np.cross(q_true[:, 1:], q_hat[:, 1:])
+        # q_true ⊗ q̂⁻¹ (scalar first): the vector part q̂₀ q_v − q₀ q̂_v + q_v × q̂_v
+        vector = q_hat[:, :1] * q_true[:, 1:] - q_true[:, :1] * q_hat[:, 1:] + np.cross(q_true[:, 1:], q_hat[:, 1:])
         sign = np.where(scalar < 0, -1.0, 1.0)[:, None]
         scalar, vector = np.abs(scalar), vector * sign
         norm = np.linalg.norm(vector, axis=1)
