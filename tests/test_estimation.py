@@ -320,3 +320,29 @@ def test_without_the_covariance_now_the_estimate_is_the_same_and_the_covariance_
     posterior = cheap.state[:, size + 3 :].reshape(-1, 6, 6).transpose(0, 2, 1)
     assert np.array_equal(cheap.covariance, posterior)
     assert lean.sample.n_instructions() < 0.5 * case["functions"].sample.n_instructions()
+
+
+def test_the_exported_sample_is_the_sample_and_its_c_compiles(tmp_path):
+    import json
+
+    import casadi as ca
+
+    from mrpctl._compile import compile_source
+    from mrpctl.estimation.export import export_estimator
+
+    functions = estimator_functions("mekf", TRACKER, GYRO, RATE)
+    folder = export_estimator(functions, tmp_path / "estimator")
+    loaded = ca.Function.load(str(folder / "estimator_sample.casadi"))
+    rng = np.random.default_rng(0)
+    state = functions.initial_state([0.2, -0.1, 0.3], [1e-4, 0, 0])
+    args = [state, rng.normal(size=(3, 5)) * 0.1, rng.normal(size=3) * 0.1, [0.2, -0.1, 0.31], 1.0]
+    for mine, theirs in zip(functions.sample(*args), loaded(*args), strict=True):
+        assert np.array_equal(np.asarray(mine), np.asarray(theirs))
+    manifest = json.loads((folder / "manifest.json").read_text())
+    assert [port["name"] for port in manifest["inputs"]] == functions.sample.name_in()
+    assert [port["name"] for port in manifest["outputs"]] == functions.sample.name_out()
+    assert manifest["clock"] == {"period_s": 0.1, "tracker_every_samples": 5, "latency_samples": 5}
+    assert compile_source((folder / "estimator_sample.c").read_text(), "estimator_export_check").exists()
+    assert np.array_equal(np.loadtxt(folder / "initial_state.txt"), functions.initial_state([0, 0, 0], [0, 0, 0]))
+    export_estimator(functions, folder)  # replaced whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["estimator"]

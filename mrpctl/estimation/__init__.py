@@ -5,7 +5,8 @@
 * [`filters`][mrpctl.estimation.filters]: the MEKF and the MRP-based EKF with shadow-set switching as
   CasADi Functions (pure SX), the delayed star-tracker update by buffered re-propagation, the tuning
   (Farrenkopf's steady state as the default initial covariance);
-* [`run`][mrpctl.estimation.run]: the sensors' streams and the filter compiled over a whole run.
+* [`run`][mrpctl.estimation.run]: the sensors' streams and the filter compiled over a whole run;
+* [`export`][mrpctl.estimation.export]: the estimator's sample as a CasADi Function, C source and a manifest.
 
 The equations, the shadow-set covariance mapping and the measurements are in ``design/estimation.md``.
 """
