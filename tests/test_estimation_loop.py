@@ -48,8 +48,8 @@ def run(kind) -> EstimatedResult:
     )
 
 
-def test_the_loops_estimator_is_the_standalone_filter_on_the_recorded_sensors(run, kind):
-    functions = ESTIMATORS[kind].functions(TRACKER, GYRO, RATE)
+def _check_against_standalone(run, estimator, tracker):
+    functions = estimator.functions(tracker, GYRO, RATE)
     latency = functions.clock.latency
     n = len(run.t)
     arriving, available = np.zeros((n, 3)), np.zeros(n)
@@ -62,6 +62,28 @@ def test_the_loops_estimator_is_the_standalone_filter_on_the_recorded_sensors(ru
     assert np.max(np.abs(alone.sigma - run.sigma_hat)) < 1e-12
     assert np.max(np.abs(alone.covariance - run.covariance)) < 1e-12 * np.max(np.abs(run.covariance))
     assert np.max(np.abs(alone.omega - run.omega_hat)) < 1e-12
+
+
+def test_the_loops_estimator_is_the_standalone_filter_on_the_recorded_sensors(run, kind):
+    _check_against_standalone(run, ESTIMATORS[kind], TRACKER)
+
+
+@pytest.mark.parametrize("mode", ["estimator", "pd", "predictor"])
+def test_a_loop_without_latency(mode):
+    tracker = StarTracker.from_arcsec(10.0, 2.0, 0.0, dropout=0.05)
+    result = simulate_estimated(
+        paper.SPACECRAFT,
+        paper.GAIN,
+        paper.INITIAL_STATE,
+        sensors=Sensors(tracker, GYRO, seed=4),
+        t_final=30.0,
+        rate=RATE,
+        estimator=ESTIMATOR,
+        mode=mode,
+    )
+    assert np.all(np.isfinite(result.sigma)) and result.pointing_error[-1] < result.pointing_error[0]
+    if mode == "estimator":
+        _check_against_standalone(result, ESTIMATOR, tracker)
 
 
 def test_the_loops_plant_and_control_law(run):

@@ -167,7 +167,8 @@ def estimated_sample(
         parts["model"] = ca.vertcat(short_expr(z_next[0:3]), z_next[3:6])
     x_next = step(x_meas, u, j, j_inv)
     parts["mean_rate"] = relative_rotation_expr(sigma, x_next[0:3]) / h
-    memory_next = ca.vertcat(*[parts[name] for name in layout.slices])
+    # the rings of a loop without latency are empty
+    memory_next = ca.vertcat(*[parts.get(name, ca.SX(0, 1)) for name in layout.slices])
     record = ca.vertcat(x_meas, measured, taken, gyro, sigma_seen, omega_c, bias, covariance, innovation, u, switched)
     sample = ca.Function(
         "estimated_sample",
