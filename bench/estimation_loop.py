@@ -17,7 +17,10 @@ the seeds. Then the cost of one sample (CPU time of the whole call over 30 001 s
 MEKF and MRP-EKF loops' samples against the same loop's plain sample (a), and against ``simulate``'s flight loop
 (Hysteretic(0) with a noisy, biased sensor at the same rate and substeps: the compiled engine's plain sample).
 
-``python bench/estimation_loop.py [seeds]`` prints the markdown table of ``design/estimation.md``.
+``python bench/estimation_loop.py [seeds]`` prints the markdown table of ``design/estimation.md``;
+``python bench/estimation_loop.py figures FOLDER`` writes the estimation error of one MEKF loop run with its
+±3σ envelope and the NEES of 100 runs (seeds 0..99, nominal inertia) with its 95 % χ² band, and prints the
+NEES's statistics after t = 20 s.
 """
 
 from __future__ import annotations
@@ -149,5 +152,48 @@ def main(seeds: int) -> None:
         )
 
 
+def figures(folder: str) -> None:
+    from pathlib import Path
+
+    from scipy.stats import chi2
+
+    from mrpctl.plots import plot_estimation_error, plot_nees, save_figure
+
+    runs = []
+    for seed in range(100):
+        runs.append(
+            simulate_estimated(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                paper.INITIAL_STATE,
+                sensors=Sensors(TRACKER, GYRO, seed),
+                t_final=T_FINAL,
+                rate=RATE,
+                estimator=ESTIMATOR,
+                substeps=SUBSTEPS,
+            )
+        )
+    first = runs[0]
+    sigma = np.sqrt(np.diagonal(first.covariance, axis1=1, axis2=2)[:, :3])
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    figure = plot_estimation_error(first.t, first.estimation_error, sigma, title="MEKF loop, tau = 0.5 s, 2 Hz tracker")
+    save_figure(figure, out / "estimation_error.png")
+    nees = []
+    for run in runs:
+        e = np.concatenate((run.estimation_error, run.bias - run.bias_hat), axis=1)
+        nees.append(np.einsum("ki,ki->k", e, np.linalg.solve(run.covariance, e[:, :, None])[:, :, 0]))
+    nees_array = np.array(nees)
+    save_figure(plot_nees(first.t, nees_array, dimension=6, title="MEKF loop, 100 runs"), out / "nees.png")
+    after = first.t >= 20.0
+    average = nees_array[:, after].mean(axis=0)
+    low, high = chi2.ppf([0.025, 0.975], 600) / 100
+    inside = np.mean((average >= low) & (average <= high))
+    print(f"closed-loop NEES after 20 s: inside the 95% band on {inside:.1%}, grand mean {average.mean():.3f}")
+
+
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 10)
+    if len(sys.argv) > 2 and sys.argv[1] == "figures":
+        figures(sys.argv[2])
+    else:
+        main(int(sys.argv[1]) if len(sys.argv) > 1 else 10)
