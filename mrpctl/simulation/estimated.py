@@ -20,7 +20,7 @@ import numpy as np
 
 from mrpctl import mrp
 from mrpctl._compile import SIMULATION_FLAGS, compile_function
-from mrpctl._validation import finite_array, positive_scalar, readonly
+from mrpctl._validation import available_memory, finite_array, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
 from mrpctl.estimation import Estimator, EstimatorFunctions, NativeFunction, Sensors, sensor_streams
 from mrpctl.flight import Hysteretic
@@ -217,6 +217,14 @@ def simulate_estimated(
     n = math.floor(t_final * rate + 1e-9) + 1
     if n > _MAX_SAMPLES:
         raise SpecificationError(f"t_final: {n} samples are more than one run takes ({_MAX_SAMPLES})")
+    # the records, their views and copies in the result, the noise: about 3 copies of the records' doubles
+    needed = 8 * n * (3 * sum(size for _, size in ESTIMATED_RECORD) + 20)
+    available = available_memory()
+    if available is not None and needed > 0.5 * available:
+        raise SpecificationError(
+            f"t_final: a run of {n} samples needs about {needed / 2**20:.0f} MiB, more than half of the "
+            f"{available / 2**20:.0f} MiB available; shorten the run or lower the rate"
+        )
     functions = estimator.functions(sensors.star_tracker, sensors.gyro, rate)
     streams = sensor_streams(sensors.star_tracker, sensors.gyro, functions.clock, n, sensors.seed)
     noise = np.vstack((streams.gyro_error.T, streams.rotation.T, streams.taken[None, :]))
