@@ -25,6 +25,7 @@ from mrpctl.estimation.filters import (
     shadow_jacobian_expr,
 )
 from mrpctl.estimation.run import (
+    CHUNK,
     FilterRun,
     NativeFunction,
     SensorStreams,
@@ -36,6 +37,7 @@ from mrpctl.estimation.sensors import ARCSEC, Gyro, SensorClock, Sensors, StarTr
 
 __all__ = [
     "ARCSEC",
+    "CHUNK",
     "COVARIANCE_SIZE",
     "Estimator",
     "EstimatorFunctions",

@@ -8,8 +8,8 @@ the reading delivered at sample k (the mean rate over [t_{k−1}, t_k]; Crassidi
 are formed from the true motion: ω̃_k = (I + diag(s)) ω_k + e_k, and [B̃N] = [B̃B](θ_k) [BN].
 
 [`filter_run`][mrpctl.estimation.run.filter_run] runs the estimator's sample over given measurements: a
-``mapaccum`` of the sample over the N samples, generated as C and compiled through the project's compile path
-(``mrpctl._compile.compile_function``, cached), so one call is one C loop over the run.
+``mapaccum`` of the sample over `CHUNK` samples, generated as C and compiled through the project's compile path
+(``mrpctl._compile.compile_function``, cached), called chunk after chunk: each call is one C loop.
 """
 
 from __future__ import annotations
@@ -28,7 +28,20 @@ from mrpctl.errors import SpecificationError
 from mrpctl.estimation.filters import EstimatorFunctions
 from mrpctl.estimation.sensors import Gyro, SensorClock, StarTracker
 
-__all__ = ["FilterRun", "NativeFunction", "SensorStreams", "filter_run", "filter_run_function", "sensor_streams"]
+__all__ = [
+    "CHUNK",
+    "FilterRun",
+    "NativeFunction",
+    "SensorStreams",
+    "filter_run",
+    "filter_run_function",
+    "sensor_streams",
+]
+
+
+#: Samples of one compiled call: a run is a sequence of calls of one compiled chunk (compiled once per estimator,
+#: whatever the run's length).
+CHUNK = 4096
 
 
 @dataclass(frozen=True)
@@ -173,9 +186,23 @@ def filter_run(
         bias = state[functions.attitude_size : functions.attitude_size + 3]
         ring = np.tile(bias, (latency, 1))
     ring = finite_array("ring", ring, (latency, 3))
-    args = [state] + ([ring.T] if latency else []) + [gyro.T, measurement.T, available[None, :]]
-    out = [np.asarray(value) for value in filter_run_function(functions, n)(*args)]
-    states, sigma, omega, bias, covariance, innovation = out
+    readings = np.vstack((ring, gyro))  # readings[i] = ω̃_{i−ℓ}: the ring at sample s is readings[s : s + ℓ]
+    run = filter_run_function(functions, CHUNK)
+    columns: list[list[np.ndarray]] = [[] for _ in range(6)]
+    for start in range(0, n, CHUNK):
+        stop = min(start + CHUNK, n)
+        pad = CHUNK - (stop - start)  # the last chunk runs on zeros past the end; those samples are dropped
+
+        def block(values: np.ndarray, width: int, start: int = start, stop: int = stop, pad: int = pad) -> np.ndarray:
+            return np.vstack((values[start:stop], np.zeros((pad, width)))).T
+
+        args = [state] + ([readings[start : start + latency].T] if latency else [])
+        args += [block(gyro, 3), block(measurement, 3), block(available[:, None], 1)]
+        out = [np.asarray(value) for value in run(*args)]
+        for column, value in zip(columns, out, strict=True):
+            column.append(value[:, : stop - start])
+        state = out[0][:, stop - start - 1]
+    states, sigma, omega, bias, covariance, innovation = (np.hstack(column) for column in columns)
     return FilterRun(
         sigma=readonly(sigma.T),
         omega=readonly(omega.T),

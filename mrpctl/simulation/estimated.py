@@ -22,7 +22,7 @@ from mrpctl import mrp
 from mrpctl._compile import SIMULATION_FLAGS, compile_function
 from mrpctl._validation import available_memory, finite_array, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
-from mrpctl.estimation import Estimator, EstimatorFunctions, NativeFunction, Sensors, sensor_streams
+from mrpctl.estimation import CHUNK, Estimator, EstimatorFunctions, NativeFunction, Sensors, sensor_streams
 from mrpctl.flight import Hysteretic
 from mrpctl.loop import check_substeps
 from mrpctl.loop.estimated import ESTIMATED_MODES, ESTIMATED_RECORD, EstimatedLayout, estimated_run_function
@@ -228,13 +228,10 @@ def simulate_estimated(
     functions = estimator.functions(sensors.star_tracker, sensors.gyro, rate)
     streams = sensor_streams(sensors.star_tracker, sensors.gyro, functions.clock, n, sensors.seed)
     noise = np.vstack((streams.gyro_error.T, streams.rotation.T, streams.taken[None, :]))
-    run, layout = estimated_run_function(spacecraft, functions, substeps, mode, n)
+    run, layout = estimated_run_function(spacecraft, functions, substeps, mode, CHUNK)
     compiled = _compiled(run)
     j, j_m = np.diag(spacecraft.inertia).copy(), np.diag(model_spacecraft.inertia).copy()
-    out = compiled(
-        x0,
-        _initial_memory(layout, functions, estimator, x0),
-        noise,
+    constants = (
         gain,
         rule.delta,
         j,
@@ -243,7 +240,17 @@ def simulate_estimated(
         j_m,
         np.diag(model_spacecraft.inertia_inverse).copy(),
     )
-    records = out[2]
+    x, memory = x0, _initial_memory(layout, functions, estimator, x0)
+    blocks = []
+    for start in range(0, n, CHUNK):
+        stop = min(start + CHUNK, n)
+        # one compiled chunk of CHUNK samples, called chunk after chunk; the last one runs on zero noise past
+        # the end, and those samples are dropped
+        chunk = np.hstack((noise[:, start:stop], np.zeros((noise.shape[0], CHUNK - (stop - start)))))
+        x_end, memory_end, block = compiled(x, memory, chunk, *constants)
+        blocks.append(block[: stop - start])
+        x, memory = x_end.ravel(), memory_end.ravel()
+    records = np.vstack(blocks)
     parts: dict[str, np.ndarray] = {}
     start = 0
     for name, size in ESTIMATED_RECORD:
