@@ -146,3 +146,15 @@ def test_options_of_the_estimated_loop_are_checked(options, name):
     arguments.update(options)
     with pytest.raises(SpecificationError, match=name):
         simulate(paper.SPACECRAFT, paper.GAIN, np.zeros(STATE_SIZE), **arguments)
+
+
+def test_the_how_to_runs_as_written(capsys):
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "how-to" / "estimation.md").read_text(encoding="utf-8")
+    code = page.split("```python\n", 1)[1].split("```", 1)[0]
+    exec(compile(code, "docs/how-to/estimation.md", "exec"), {})
+    printed = capsys.readouterr().out
+    assert "pointing at the end" in printed and "within 3 sigma" in printed
+    share = float(printed.split("within 3 sigma: ")[1].split("%")[0])
+    assert share > 95.0
