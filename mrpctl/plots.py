@@ -28,6 +28,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from scipy.stats import chi2
 
 from mrpctl.errors import DimensionError, SpecificationError
 
@@ -93,7 +94,9 @@ __all__ = [
     "plot_attitude",
     "plot_batch",
     "plot_distributions",
+    "plot_estimation_error",
     "plot_monte_carlo",
+    "plot_nees",
     "plot_noise_study",
     "plot_response",
     "plot_sweep",
@@ -895,3 +898,91 @@ def save_figure(fig: Figure, path: str | Path, *, dpi: int = 110) -> Path:
 
         plt.close(fig)
     return path
+
+
+# ------------------------------------------------------------------------------ estimation
+_ARCSEC = math.pi / (180.0 * 3600.0)
+
+
+def plot_estimation_error(t: Any, error: Any, sigma: Any, *, title: str | None = None, ax: Any = None) -> Figure:
+    """The attitude estimation error about each body axis with the filter's ±3σ envelope, in arcsec.
+
+    Parameters
+    ----------
+    t : array_like
+        (N,) times (s).
+    error : array_like
+        (N, 3) the estimation error δθ (rad), e.g. ``EstimatedResult.estimation_error``.
+    sigma : array_like
+        (N, 3) the filter's 1σ of δθ about each axis (rad): the square roots of the covariance's diagonal.
+    title : str, optional, keyword-only
+    ax : sequence of 3 Axes, optional, keyword-only
+    """
+    t = np.asarray(t, dtype=float)
+    error = np.asarray(error, dtype=float)
+    sigma = np.asarray(sigma, dtype=float)
+    if t.ndim != 1 or error.shape != (t.size, 3) or sigma.shape != (t.size, 3):
+        raise DimensionError(
+            f"t (N,), error and sigma (N, 3): got t {t.shape}, error {error.shape}, sigma {sigma.shape}"
+        )
+    fig, axes = _new_axes(3, ax, figsize=(8.0, 6.0))
+    for axis, a in enumerate(axes):
+        envelope = 3 * sigma[:, axis] / _ARCSEC
+        a.fill_between(t, -envelope, envelope, color="0.85", label="±3σ of the filter")
+        a.plot(t, error[:, axis] / _ARCSEC, lw=0.8, label=f"δθ{_SUB[axis]}")
+        a.set_ylabel(f"δθ{_SUB[axis]} (arcsec)")
+        # the scale of the converged filter: the start's wide envelope is clipped, not allowed to flatten the rest
+        scale = 1.5 * max(
+            float(np.quantile(envelope, 0.95)), float(np.quantile(np.abs(error[:, axis]), 0.95)) / _ARCSEC
+        )
+        if scale > 0 and np.isfinite(scale):
+            a.set_ylim(-scale, scale)
+        inside = float(np.mean(np.abs(error[:, axis]) <= 3 * sigma[:, axis]))
+        a.set_title(f"within ±3σ on {inside:.1%} of the samples", fontsize=8, loc="right")
+        _legend_outside(a)
+    axes[-1].set_xlabel("t (s)")
+    if title:
+        fig.suptitle(_typeset(title))
+    return fig
+
+
+def plot_nees(
+    t: Any, nees: Any, *, dimension: int, title: str | None = None, ax: Any = None, level: float = 0.95
+) -> Figure:
+    """The NEES averaged over Monte Carlo runs against time, with its two-sided χ² band.
+
+    With R runs of a consistent filter of ``dimension`` states, R times the average is χ² with R · dimension
+    degrees of freedom: the band is its ``level`` interval divided by R.
+
+    Parameters
+    ----------
+    t : array_like
+        (N,) times (s).
+    nees : array_like
+        (R, N) the normalised estimation error squared of each run at each time.
+    dimension : int, keyword-only
+        The state dimension (6 for attitude and bias).
+    """
+    t = np.asarray(t, dtype=float)
+    nees = np.asarray(nees, dtype=float)
+    if t.ndim != 1 or nees.ndim != 2 or nees.shape[1] != t.size:
+        raise DimensionError(f"t (N,) and nees (R, N): got t {t.shape}, nees {nees.shape}")
+    if not (isinstance(dimension, int) and dimension >= 1):
+        raise SpecificationError(f"dimension must be a positive integer, got {dimension!r}")
+    if not 0.0 < level < 1.0:
+        raise SpecificationError(f"level must be in (0, 1), got {level!r}")
+    runs = nees.shape[0]
+    low, high = chi2.ppf([(1 - level) / 2, (1 + level) / 2], runs * dimension) / runs
+    average = nees.mean(axis=0)
+    fig, (a,) = _new_axes(1, ax, figsize=(8.0, 3.5))
+    a.axhspan(low, high, color="0.85", label=f"{level:.0%} χ² band ({runs} runs)")
+    a.axhline(dimension, color="0.4", lw=0.8, ls="--", label=f"state dimension {dimension}")
+    a.plot(t, average, lw=0.8, label="NEES, average over runs")
+    inside = float(np.mean((average >= low) & (average <= high)))
+    a.set_title(f"inside the band on {inside:.1%} of the samples; mean {average.mean():.3f}", fontsize=8, loc="right")
+    a.set_xlabel("t (s)")
+    a.set_ylabel("NEES")
+    _legend_outside(a)
+    if title:
+        fig.suptitle(_typeset(title))
+    return fig

@@ -10,7 +10,7 @@ import queue
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -22,6 +22,7 @@ from mrpctl.engines.lanes import DEFAULT_WIDTH
 from mrpctl.engines.scalar import STATE_BLOCK, engine, rule_key, slice_samples, tracking_memory, wheel_engine
 from mrpctl.engines.stats import HISTORY_KINDS, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, STATS_SIZE, settling_bounds
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+from mrpctl.estimation import Estimator, Sensors
 from mrpctl.flight import (
     FLIGHT_MEMORY_SIZE,
     ActuatorModel,
@@ -60,6 +61,7 @@ from mrpctl.simulation._wheels import (
     wheel_result,
     wheel_run_bytes,
 )
+from mrpctl.simulation.estimated import EstimatedResult, simulate_estimated_as_simulate
 from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
@@ -292,6 +294,72 @@ def _tracked_by_run(
 
 
 # ======================================================================= simulate
+@overload
+def simulate(
+    spacecraft: Spacecraft,
+    K: Any,
+    x0: Any,
+    *,
+    tau: float,
+    rule: SwitchingRule,
+    t_final: float,
+    rate: float = ...,
+    history: Any = ...,
+    substeps: int = ...,
+    keep_every: int | None = ...,
+    memory_limit: float | None = ...,
+    progress: Callable[[int, int], Any] | None = ...,
+    actuator: ActuatorModel | None = ...,
+    disturbance: Any = ...,
+    sensor: SensorModel | None = ...,
+    delay: DelayModel | None = ...,
+    predictor: Predictor | None = ...,
+    wheels: WheelCluster | None = ...,
+    reference: Any = ...,
+    error_time: ErrorTime | None = ...,
+    feedforward: bool = ...,
+    pointing_tolerance: float = ...,
+    settling_attitude: float = ...,
+    settling_rate: float = ...,
+    law: SteeringLaw | None = ...,
+    sensors: None = ...,
+    estimator: None = ...,
+) -> SimulationResult: ...
+
+
+@overload
+def simulate(
+    spacecraft: Spacecraft,
+    K: Any,
+    x0: Any,
+    *,
+    tau: float,
+    rule: SwitchingRule,
+    t_final: float,
+    rate: float = ...,
+    history: Any = ...,
+    substeps: int = ...,
+    keep_every: int | None = ...,
+    memory_limit: float | None = ...,
+    progress: Callable[[int, int], Any] | None = ...,
+    actuator: ActuatorModel | None = ...,
+    disturbance: Any = ...,
+    sensor: SensorModel | None = ...,
+    delay: DelayModel | None = ...,
+    predictor: Predictor | None = ...,
+    wheels: WheelCluster | None = ...,
+    reference: Any = ...,
+    error_time: ErrorTime | None = ...,
+    feedforward: bool = ...,
+    pointing_tolerance: float = ...,
+    settling_attitude: float = ...,
+    settling_rate: float = ...,
+    law: SteeringLaw | None = ...,
+    sensors: Sensors,
+    estimator: Estimator | None = ...,
+) -> EstimatedResult: ...
+
+
 def simulate(
     spacecraft: Spacecraft,
     K: Any,
@@ -319,7 +387,9 @@ def simulate(
     settling_attitude: float = SETTLING_ATTITUDE_DEG,
     settling_rate: float = SETTLING_OMEGA,
     law: SteeringLaw | None = None,
-) -> SimulationResult:
+    sensors: Sensors | None = None,
+    estimator: Estimator | None = None,
+) -> SimulationResult | EstimatedResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
     The model and the engine: ``design/switching.md``. A run is a few calls of compiled C
@@ -420,10 +490,19 @@ def simulate(
         scaled down so that the commanded rate stays below the rate from which the body can stop in
         the remaining angle ([`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]; ``design/wheels.md``); the
         law is the PD law K wherever that limit is not reached. None (default): the PD law.
+    sensors : mrpctl.estimation.Sensors, keyword-only
+        A late star tracker and a rate-integrating gyro: the loop then flies the control law on the
+        estimator's attitude and rate (``design/estimation.md``), with ``rule=Hysteretic(...)`` on the
+        estimate and ``tau`` the star tracker's latency; the other flight options do not apply. Returns an
+        [`EstimatedResult`][mrpctl.simulation.estimated.EstimatedResult] (true, measured and estimated states,
+        covariance, innovations). None (default): the loop above, unchanged.
+    estimator : mrpctl.estimation.Estimator, keyword-only
+        The estimator of that loop (with ``sensors``); default the MEKF.
 
     Returns
     -------
     SimulationResult
+        Or an [`EstimatedResult`][mrpctl.simulation.estimated.EstimatedResult] with ``sensors``.
 
     Raises
     ------
@@ -432,6 +511,21 @@ def simulate(
         integer, wrong shapes, unknown history, substeps outside 1..64, keep_every < 1),
         or when the kept arrays would exceed ``memory_limit``.
     """
+    if sensors is not None or estimator is not None:
+        others = {"actuator": actuator, "disturbance": disturbance, "sensor": sensor, "delay": delay}
+        others |= {"predictor": predictor, "progress": progress, "memory_limit": memory_limit}
+        others |= {"wheels": wheels, "reference": reference, "law": law}
+        if sensors is None:
+            raise SpecificationError("estimator: give the sensors it estimates from (sensors=Sensors(...))")
+        given = [name for name, value in others.items() if value is not None]
+        if given or history != "constant" or keep_every != 1:
+            given += ["history"] if history != "constant" else []
+            given += ["keep_every"] if keep_every != 1 else []
+            raise SpecificationError(f"{', '.join(given)}: not options of the estimated loop (sensors=...)")
+        return simulate_estimated_as_simulate(
+            spacecraft, K, x0, tau=tau, rule=rule, t_final=t_final, rate=rate, substeps=substeps,
+            sensors=sensors, estimator=estimator,
+        )  # fmt: skip
     spacecraft = check_spacecraft(spacecraft)
     gain = gain_matrix(K)
     x0 = finite_array("x0", x0, (STATE_SIZE,))

@@ -1,0 +1,199 @@
+"""The estimated loop against PD on the delayed star tracker and the model predictor; the estimator's cost.
+
+The paper's spacecraft, gain and initial tumble (Φ = 171.7° about x at 0.46 rad/s), a 2 Hz star tracker of
+10 arcsec (1σ per axis) delivered τ = 0.5 s late, a rate-integrating gyro (σ_v = 1e-5 rad/√s, σ_u = 1e-7
+rad/s^{3/2}, initial bias (5, −3, 2)·1e-4 rad/s), the controller at 10 Hz (4 RK4 substeps), the controller-side
+rule Hysteretic(0). The true inertia is the nominal one, +10 % or −10 %; the gain and the predictor's model
+stay nominal. Three controllers on the same sensors (``mrpctl.loop.estimated``):
+
+* (a) PD on the delayed star tracker: the last measurement to arrive (held) and the raw gyro rate;
+* (b) the model predictor: the last arrived measurement carried to now by the nominal model copy;
+* (c) the MEKF loop: PD on the MEKF's estimate (delayed update by buffered re-propagation), started with
+  1σ errors of 1e-3 rad and 2e-3 rad/s.
+
+Per case, ``seeds`` sensor-noise seeds (default 10): pointing RMS (principal angle of the true attitude)
+over t ∈ [150, 300] s, and the settling time (the last time the pointing error exceeds 0.01 rad), mean over
+the seeds. Then the cost of one sample (CPU time of the whole call over 30 001 samples, median of 5): the
+MEKF and MRP-EKF loops' samples against the same loop's plain sample (a), and against ``simulate``'s flight loop
+(Hysteretic(0) with a noisy, biased sensor at the same rate and substeps: the compiled engine's plain sample).
+
+``python bench/estimation_loop.py [seeds]`` prints the markdown table of ``design/estimation.md``;
+``python bench/estimation_loop.py figures FOLDER`` writes the estimation error of one MEKF loop run with its
+±3σ envelope and the NEES of 100 runs (seeds 0..99, nominal inertia) with its 95 % χ² band, and prints the
+NEES's statistics after t = 20 s.
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from mrpctl import paper, simulate
+from mrpctl.estimation import ARCSEC, Estimator, Gyro, Sensors, StarTracker
+from mrpctl.flight import Hysteretic, SensorModel
+from mrpctl.loop.estimated import estimated_sample
+from mrpctl.simulation.estimated import simulate_estimated
+from mrpctl.spacecraft import Spacecraft
+
+TRACKER = StarTracker.from_arcsec(10.0, 2.0, 0.5)
+GYRO = Gyro(1e-5, 1e-7, (5e-4, -3e-4, 2e-4))
+ESTIMATOR = Estimator(attitude_error=1e-3, bias_error=2e-3)
+MRP_ESTIMATOR = Estimator(kind="mrp_ekf", attitude_error=1e-3, bias_error=2e-3)
+RATE, SUBSTEPS, T_FINAL = 10.0, 4, 300.0
+MODES = (
+    ("(a) PD on the delayed star tracker", "pd", ESTIMATOR),
+    ("(b) model predictor", "predictor", ESTIMATOR),
+    ("(c) MEKF loop", "estimator", ESTIMATOR),
+    ("(c') MRP-EKF loop", "estimator", MRP_ESTIMATOR),
+)
+SETTLED = 0.01
+
+
+def metrics(mode: str, estimator: Estimator, scale: float, seed: int) -> tuple[float, float]:
+    plant = Spacecraft(np.array(paper.INERTIA) * scale)
+    run = simulate_estimated(
+        plant,
+        paper.GAIN,
+        paper.INITIAL_STATE,
+        sensors=Sensors(TRACKER, GYRO, seed),
+        t_final=T_FINAL,
+        rate=RATE,
+        estimator=estimator,
+        substeps=SUBSTEPS,
+        mode=mode,
+        model_spacecraft=paper.SPACECRAFT,
+    )
+    error = run.pointing_error
+    rms = float(np.sqrt(np.mean(error[run.t >= 150.0] ** 2)))
+    above = np.nonzero(error > SETTLED)[0]
+    settling = float(run.t[above[-1] + 1]) if len(above) else 0.0
+    return rms, settling
+
+
+def _median_cpu(call: Callable[[], object]) -> float:
+    call()  # build and compile once
+    times = []
+    for _ in range(5):
+        start = time.process_time()
+        call()
+        times.append(time.process_time() - start)
+    return statistics.median(times)
+
+
+def cost(mode: str, estimator: Estimator = ESTIMATOR) -> float:
+    """CPU seconds per sample of the estimated loop over 30 001 samples (the whole call)."""
+    common = dict(sensors=Sensors(TRACKER, GYRO, 0), t_final=3000.0, rate=RATE, substeps=SUBSTEPS)
+    return (
+        _median_cpu(
+            lambda: simulate_estimated(
+                paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, estimator=estimator, mode=mode, **common
+            )
+        )
+        / 30001
+    )
+
+
+def flight_cost() -> float:
+    """CPU seconds per sample of simulate's flight loop (Hysteretic(0), a noisy biased sensor, no delay model)
+    at the same rate, substeps and length: the plain sample of the compiled engine."""
+    sensor = SensorModel(
+        attitude_noise=10 * ARCSEC, rate_noise=GYRO.sample_noise(1 / RATE)[0], gyro_bias=GYRO.initial_bias
+    )
+    return (
+        _median_cpu(
+            lambda: simulate(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                paper.INITIAL_STATE,
+                tau=0.5,
+                rule=Hysteretic(),
+                t_final=3000.0,
+                rate=RATE,
+                substeps=SUBSTEPS,
+                sensor=sensor,
+            )
+        )
+        / 30001
+    )
+
+
+def main(seeds: int) -> None:
+    arcsec = 180 * 3600 / np.pi
+    print(f"| controller | inertia | pointing RMS, t >= 150 s (arcsec) | settling time to {SETTLED} rad (s) |")
+    print("|---|---|---|---|")
+    for label, mode, estimator in MODES:
+        for scale in (1.0, 1.1, 0.9):
+            values = np.array([metrics(mode, estimator, scale, seed) for seed in range(seeds)])
+            rms, settling = values.mean(axis=0)
+            name = "nominal" if scale == 1.0 else f"{scale - 1:+.0%}"
+            print(f"| {label} | {name} | {rms * arcsec:.1f} | {settling:.1f} |")
+    lean = Estimator(attitude_error=1e-3, bias_error=2e-3, covariance_now=False)
+    plain, flight = cost("pd"), flight_cost()
+    print()
+    print(
+        f"cost per sample (CPU, whole call over 30 001 samples): the estimated loop's plain sample (a) "
+        f"{plain * 1e6:.2f} us"
+    )
+    print(f"simulate's flight loop (the compiled engine's plain sample): {flight * 1e6:.2f} us")
+    functions = ESTIMATOR.functions(TRACKER, GYRO, RATE)
+    plain_size = estimated_sample(paper.SPACECRAFT, functions, SUBSTEPS, "pd")[0].n_instructions()
+    for label, estimator in (("MEKF", ESTIMATOR), ("MEKF, covariance at t_m", lean), ("MRP-EKF", MRP_ESTIMATOR)):
+        seconds = cost("estimator", estimator)
+        size = estimated_sample(paper.SPACECRAFT, estimator.functions(TRACKER, GYRO, RATE), SUBSTEPS, "estimator")[
+            0
+        ].n_instructions()
+        print(
+            f"{label} loop: {seconds * 1e6:.2f} us ({seconds / plain:.2f}x (a), {seconds / flight:.2f}x the engine's); "
+            f"{size} SX instructions against {plain_size} ({size / plain_size:.2f}x)"
+        )
+
+
+def figures(folder: str) -> None:
+    from pathlib import Path
+
+    from scipy.stats import chi2
+
+    from mrpctl.plots import plot_estimation_error, plot_nees, save_figure
+
+    runs = []
+    for seed in range(100):
+        runs.append(
+            simulate_estimated(
+                paper.SPACECRAFT,
+                paper.GAIN,
+                paper.INITIAL_STATE,
+                sensors=Sensors(TRACKER, GYRO, seed),
+                t_final=T_FINAL,
+                rate=RATE,
+                estimator=ESTIMATOR,
+                substeps=SUBSTEPS,
+            )
+        )
+    first = runs[0]
+    sigma = np.sqrt(np.diagonal(first.covariance, axis1=1, axis2=2)[:, :3])
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    figure = plot_estimation_error(first.t, first.estimation_error, sigma, title="MEKF loop, tau = 0.5 s, 2 Hz tracker")
+    save_figure(figure, out / "estimation_error.png")
+    nees = []
+    for run in runs:
+        e = np.concatenate((run.estimation_error, run.bias - run.bias_hat), axis=1)
+        nees.append(np.einsum("ki,ki->k", e, np.linalg.solve(run.covariance, e[:, :, None])[:, :, 0]))
+    nees_array = np.array(nees)
+    save_figure(plot_nees(first.t, nees_array, dimension=6, title="MEKF loop, 100 runs"), out / "nees.png")
+    after = first.t >= 20.0
+    average = nees_array[:, after].mean(axis=0)
+    low, high = chi2.ppf([0.025, 0.975], 600) / 100
+    inside = np.mean((average >= low) & (average <= high))
+    print(f"closed-loop NEES after 20 s: inside the 95% band on {inside:.1%}, grand mean {average.mean():.3f}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 2 and sys.argv[1] == "figures":
+        figures(sys.argv[2])
+    else:
+        main(int(sys.argv[1]) if len(sys.argv) > 1 else 10)
