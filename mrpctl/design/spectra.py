@@ -305,7 +305,87 @@ def spectral_abscissa(A0: Any, A: Any = (), tau: Any = (), *, nodes: int | None 
     return spectrum.abscissa
 
 
+def decoupled_blocks(*matrices: np.ndarray) -> list[np.ndarray]:
+    """Index sets of the diagonal blocks that the square matrices share (connected components of the
+    graph with an edge i–j wherever some matrix has a nonzero (i, j) or (j, i) entry)."""
+    n = matrices[0].shape[0]
+    link = np.zeros((n, n), dtype=bool)
+    for m in matrices:
+        link |= (m != 0) | (m.T != 0)
+    seen = np.zeros(n, dtype=bool)
+    blocks = []
+    for i in range(n):
+        if seen[i]:
+            continue
+        stack, members = [i], []
+        seen[i] = True
+        while stack:
+            j = stack.pop()
+            members.append(j)
+            for k in np.flatnonzero(link[j] & ~seen):
+                seen[k] = True
+                stack.append(int(k))
+        blocks.append(np.array(sorted(members)))
+    return blocks
+
+
 def _spectrum(system: DelaySystem, count: int, nodes: int | None) -> Spectrum:
+    blocks = decoupled_blocks(system.A0, *system.A)
+    if len(blocks) > 1:
+        return _merged(system, blocks, count, nodes)
+    return _spectrum_block(system, count, nodes)
+
+
+def _merged(system: DelaySystem, blocks: list[np.ndarray], count: int, nodes: int | None) -> Spectrum:
+    """The spectrum of a block-diagonal system: the union of the blocks' spectra (each certified alone)."""
+    parts = []
+    for idx in blocks:
+        sub = DelaySystem(
+            A0=readonly(system.A0[np.ix_(idx, idx)]),
+            A=tuple(readonly(a[np.ix_(idx, idx)]) for a in system.A),
+            tau=system.tau,
+        )
+        parts.append(_spectrum_block(sub, count, nodes))
+    line = max(p.count_line for p in parts)
+    roots = np.concatenate([p.roots for p in parts])
+    mult = np.concatenate([p.multiplicities for p in parts])
+    radii = np.concatenate([p.radii for p in parts])
+    # identical blocks give the same root: merge (multiplicities add)
+    merged: list[list[Any]] = []
+    for s, m, r in zip(roots, mult, radii, strict=True):
+        for entry in merged:
+            if abs(entry[0] - s) <= 1e-9 * (1.0 + abs(s)):
+                entry[1] += m
+                entry[2] = max(entry[2], r)
+                break
+        else:
+            merged.append([complex(s), int(m), float(r)])
+    merged.sort(key=lambda e: (-e[0].real, -e[0].imag))
+    complete = [e for e in merged if e[0].real > line]  # every root right of the common line
+    keep = complete
+    if len(complete) > count:
+        edge = complete[count - 1][0].real
+        keep = [e for e in complete if e[0].real >= edge - 1e-12 * (1.0 + abs(edge))]
+        dropped = [e[0].real for e in complete if e not in keep]
+        if dropped:
+            line = 0.5 * (keep[-1][0].real + max(dropped))
+    out = np.array([e[0] for e in keep], dtype=complex)
+    ok = all(p.certified for p in parts)
+    listed_line = line
+    listed = int(sum(e[1] for e in keep))
+    return Spectrum(
+        system=system,
+        roots=readonly(out, dtype=complex),
+        multiplicities=readonly(np.array([e[1] for e in keep], dtype=int), dtype=int),
+        radii=readonly(np.array([e[2] for e in keep])),
+        backward_errors=readonly(np.array([_backward(system, s) for s in out])),
+        count_line=float(listed_line),
+        counted=listed if ok else None,
+        nodes=max(p.nodes for p in parts),
+    )
+
+
+def _spectrum_block(system: DelaySystem, count: int, nodes: int | None) -> Spectrum:
     delayed = [(a, t) for a, t in zip(system.A, system.tau, strict=True) if t > 0.0]
     a0 = system.A0 + sum((a for a, t in zip(system.A, system.tau, strict=True) if t == 0.0), np.zeros_like(system.A0))
     tau_max = max((t for _, t in delayed), default=0.0)
