@@ -240,3 +240,18 @@ def test_bad_input_is_refused_naming_the_parameter() -> None:
         loop_margins_delayed(THIRD_ORDER_A, THIRD_ORDER_B, np.ones((1, 2)), 0.1)
     with pytest.raises(SpecificationError, match="tau"):
         loop_margins_delayed(THIRD_ORDER_A, THIRD_ORDER_B, THIRD_ORDER_K, math.inf)
+
+
+def test_hinf_pd_synthesis_beats_the_paper_gain_is_certified_and_locally_optimal() -> None:
+    from mrpctl.design.performance import synthesize_hinf_pd
+
+    result = synthesize_hinf_pd(paper.SPACECRAFT, paper.TAU, starts=1)
+    a, a_d, b, c = torque_to_attitude(paper.SPACECRAFT, paper.GAIN)
+    assert result.exact.value < hinf_norm(a, a_d, paper.TAU, b, c).value
+    assert result.certified.certified and result.certified.value >= result.exact.value
+    inertia = np.diag(paper.INERTIA)
+    for dw, dz in ((1.02, 1.0), (0.98, 1.0), (1.0, 1.02), (1.0, 0.98)):
+        w, z = result.omega_n * dw, result.zeta * dz
+        k = 4.0 * inertia @ np.hstack((-(w**2) * np.eye(3), -2.0 * z * w * np.eye(3)))
+        a, a_d, b, c = torque_to_attitude(paper.SPACECRAFT, k)
+        assert hinf_norm(a, a_d, paper.TAU, b, c).value >= result.exact.value * (1.0 - 1e-6)
