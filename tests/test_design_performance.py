@@ -255,3 +255,30 @@ def test_hinf_pd_synthesis_beats_the_paper_gain_is_certified_and_locally_optimal
         k = 4.0 * inertia @ np.hstack((-(w**2) * np.eye(3), -2.0 * z * w * np.eye(3)))
         a, a_d, b, c = torque_to_attitude(paper.SPACECRAFT, k)
         assert hinf_norm(a, a_d, paper.TAU, b, c).value >= result.exact.value * (1.0 - 1e-6)
+
+
+def test_pointing_budget_matches_a_monte_carlo_of_the_nonlinear_flight_loop() -> None:
+    # the compiled nonlinear loop (sampled at 200 Hz, delay of 100 samples) with a white torque held per sample
+    # (variance G/2 * rate: the intensity G/2) and star-tracker noise of 1-sigma a sqrt(rate / 2) per sample
+    from mrpctl import simulate
+    from mrpctl.flight import Hysteretic, SensorModel
+
+    rate, t_final, psd, asd = 200.0, 6000.0, 1e-6, 1e-5
+    samples = round(rate * t_final) + 1
+    rows = np.random.default_rng(4).normal(size=(samples, 3)) * math.sqrt(psd / 2 * rate)
+    run = simulate(
+        paper.SPACECRAFT,
+        paper.GAIN,
+        np.zeros(6),
+        tau=paper.TAU,
+        rule=Hysteretic(0.0),
+        t_final=t_final,
+        rate=rate,
+        disturbance=rows,
+        sensor=SensorModel(attitude_noise=asd * math.sqrt(rate / 2), seed=3),
+        keep_every=20,
+    )
+    theta = 4.0 * np.asarray(run.sigma)[np.asarray(run.t) > 60.0]
+    measured = 3.0 * np.sqrt(np.var(theta, axis=0)) * ARCSEC
+    budget = pointing_budget(paper.SPACECRAFT, paper.GAIN, paper.TAU, torque_psd=psd, attitude_noise=asd)
+    assert np.allclose(measured, budget.three_sigma, rtol=0.05)
