@@ -175,12 +175,20 @@ class AxisMargin:
         Gain crossover frequency ω_c (rad/s), |L(iω_c)| = 1.
     delay_margin : float
         PM / ω_c (s): the largest delay the axis tolerates.
+    gain_margin : float
+        Gain margin of the delay-free loop as python-control computes it (``math.inf`` when the
+        phase never crosses −180°, as for every PD axis without delay); the delayed loop's margins
+        are in [`mrpctl.design.performance`][mrpctl.design.performance].
+    phase_crossover : float
+        Frequency (rad/s) of that gain margin (nan when it is infinite).
     """
 
     axis: int
     phase_margin: float
     crossover: float
     delay_margin: float
+    gain_margin: float = math.inf
+    phase_crossover: float = math.nan
 
     def __str__(self) -> str:
         return (
@@ -252,11 +260,20 @@ def loop_margins(spacecraft: Spacecraft, K: Any) -> LoopMargins:
     axes = []
     for i in range(3):
         loop = control.tf([-k2[i, i], -k1[i, i]], [1.0, 0.0, 0.0])
-        _, pm_deg, _, wc = control.margin(loop)
+        gm, pm_deg, wpc, wc = control.margin(loop)
         pm = math.radians(float(pm_deg)) if np.isfinite(pm_deg) else math.inf
         wc = float(wc) if np.isfinite(wc) else math.nan
         tau = pm / wc if np.isfinite(pm) and np.isfinite(wc) and wc > 0 else math.inf
-        axes.append(AxisMargin(axis=i, phase_margin=pm, crossover=wc, delay_margin=max(tau, 0.0)))
+        axes.append(
+            AxisMargin(
+                axis=i,
+                phase_margin=pm,
+                crossover=wc,
+                delay_margin=max(tau, 0.0),
+                gain_margin=float(gm) if np.isfinite(gm) else math.inf,
+                phase_crossover=float(wpc) if np.isfinite(wpc) else math.nan,
+            )
+        )
     return LoopMargins(axes=tuple(axes))
 
 

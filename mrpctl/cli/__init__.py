@@ -1,7 +1,7 @@
 """The ``mrpctl`` command: a thin layer over the public API that maps errors to exit codes.
 
 One module per subcommand family adds its parsers and handlers: `init` (``example``, ``init``),
-`design`, `verify`, `simulate` (``simulate``, ``sweep``), `reproduce`, `export` and `campaign`;
+`design`, `verify`, `analyze`, `simulate` (``simulate``, ``sweep``), `reproduce`, `export` and `campaign`;
 `common` holds the shared options, the output helpers and the mapping of errors to exit codes,
 `overrides` the scenario the options give, `limits` the memory and time refused before a run.
 """
@@ -12,7 +12,7 @@ import argparse
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from mrpctl.cli import campaign, design, export, init, reproduce, simulate, verify
+from mrpctl.cli import analyze, campaign, design, export, init, reproduce, simulate, verify
 from mrpctl.cli.common import (
     EXIT_BROKEN_PIPE,
     EXIT_CODES,
@@ -46,6 +46,7 @@ SUBCOMMANDS: tuple[Callable[[Any], Any], ...] = (
     init.add_init,
     design.add_parser,
     verify.add_parser,
+    analyze.add_parser,
     simulate.add_simulate,
     simulate.add_sweep,
     reproduce.add_parser,
