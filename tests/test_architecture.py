@@ -38,7 +38,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ),
     (
         "plant and flight-loop models",
-        ("mrpctl.model", "mrpctl.switching", "mrpctl.flight", "mrpctl.clock", "mrpctl.paper"),
+        ("mrpctl.model", "mrpctl.switching", "mrpctl.flight", "mrpctl.clock", "mrpctl.paper", "mrpctl.guidance"),
     ),
     ("linear analysis and synthesis", ("mrpctl.design",)),
     ("the predictor and the rules by name", ("mrpctl.predictor", "mrpctl.rules")),
