@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from mrpctl import paper
-from mrpctl.design import delay_margin
+from mrpctl.design import delay_margin, max_stable_delay_samples
 from mrpctl.design.tracking import (
     certify_orbit_rates,
     orbit_rate_vertices,
@@ -255,3 +255,14 @@ def test_orbit_rate_vertices_hold_the_loops_and_certify_the_range() -> None:
     # soundness at a delay no loop of the range survives: the certificate must fail there
     assert not certify_orbit_rates(sc, slow_k, 1.05 * max(exact), rates, order=1).certified
     assert delay_margin(*vertices[2]).margin > tau
+
+
+def test_blocks_split_the_loop_as_the_physics_does() -> None:
+    inertial = tracking_linearization(paper.SPACECRAFT, paper.GAIN)
+    nadir = tracking_linearization(paper.SPACECRAFT, paper.GAIN, NadirPointing(ORBIT_500))
+    assert inertial.blocks == ((0, 3), (1, 4), (2, 5))
+    assert nadir.blocks == ((0, 1, 3, 4), (2, 5))  # roll-yaw coupled, pitch alone
+    assert tracking_linearization(_full_inertia(), paper.GAIN, NadirPointing(ORBIT_500)).blocks == (tuple(range(6)),)
+    # the blocks' answer equals the whole loop's where the whole-loop test is sound (20 Hz)
+    whole = max_stable_delay_samples(nadir.A, nadir.B, nadir.loop_gain, 0.05)
+    assert nadir.max_stable_delay_samples(0.05) == whole
