@@ -59,7 +59,7 @@ def paper_table(nadir: NadirPointing) -> list[str]:
         margin = loop.delay_margin().margin
         d = loop.max_stable_delay_samples(SEARCH_PERIOD, d_limit=1000)
         rho = loop.sampled_stability(PERIOD, delay_samples=d_paper).spectral_radius
-        blocks = " + ".join(f"{len(b) // 2}-axis" for b in loop.blocks)
+        blocks = " + ".join(f"{len(b)}x{len(b)}" for b in loop.blocks)
         lines.append(
             f"| {name} | {blocks} | {margin:.9g} | {_certified(loop, 1)} | {_certified(loop, 2)} | "
             f"{d} ({d * SEARCH_PERIOD:.4g} s) | {rho:.9f} |"

@@ -629,6 +629,20 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     Unknown keys raise a [`SpecificationError`][mrpctl.SpecificationError] naming the key. ``base``: the
     folder relative file names (``[disturbance] torque_file``, ``[delay] sequence_file``) are taken
     from ([`load_scenario`][mrpctl.load_scenario]: the scenario file's folder; None: the working directory).
+
+    The optional ``[reference]`` table sets [`Scenario.reference`][mrpctl.Scenario], the guidance
+    profile the loop tracks (``design/tracking.md``), by its ``type``:
+
+    * ``"inertial"``: ``sigma`` (σ_R/N, a short-set MRP);
+    * ``"slew"``: ``start`` (σ, default the origin), ``target`` (σ, the short way) or ``axis`` (unit,
+      start-frame components) and ``angle_deg``, ``rate_limit`` (rad/s), ``acceleration_limit``
+      (rad/s²), ``t_start`` (s, default 0);
+    * ``"nadir"``: the Hill frame (x radial out, y along-track, z orbit normal) of a circular orbit given
+      by one of ``orbit_rate`` (rad/s), ``altitude`` (m above the Earth's equatorial radius) or ``radius``
+      (m), ``mu`` (m³/s², default the Earth's) with the last two, and ``inclination_deg``, ``raan_deg``,
+      ``latitude_deg`` (argument of latitude at t = 0), each default 0;
+    * ``"file"``: ``file``, a .csv or .npy file of n = floor(t_final · rate) + 1 rows of 9 numbers
+      (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
     """
     _check_keys(
         "", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, _REFERENCE_TABLE}
