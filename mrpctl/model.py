@@ -26,7 +26,7 @@ import numpy as np
 
 from mrpctl._validation import finite_array, readonly
 from mrpctl.errors import SpecificationError
-from mrpctl.mrp import b_matrix_expr, skew_expr
+from mrpctl.mrp import add_expr, b_matrix_expr, dcm_expr, skew_expr, subtract_expr
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.wheels import WheelCluster
 
@@ -37,10 +37,12 @@ __all__ = [
     "dynamics_expr",
     "gain_from_pd",
     "gain_matrix",
+    "gravity_gradient_expr",
     "pd_from_gain",
     "plant_model",
     "state",
     "state_parts",
+    "tracking_error_dynamics_expr",
     "wheel_dynamics_expr",
     "wheel_hub_inertia",
 ]
@@ -133,6 +135,94 @@ def wheel_dynamics_expr(
     speeds_dot = torque / js - axes.T @ omega_dot
     sigma_dot = b_matrix_expr(sigma) @ omega / 4
     return ca.vertcat(sigma_dot, omega_dot / 4), speeds_dot
+
+
+def gravity_gradient_expr(sigma_BN: Any, r_hat_N: Any, n: Any, inertia: Any) -> Any:
+    """The gravity-gradient torque 3 n² r̂_B × (J r̂_B) (N m, body frame) as a CasADi expression.
+
+    r̂_B = [BN](σ_BN) r̂_N is the unit vector from the Earth's centre to the spacecraft in body
+    components, n the orbit rate (rad/s; n² = μ/r³ on a circular orbit of radius r) and J the
+    inertia (kg m², body frame). The torque of a rigid body in a central inverse-square field to first
+    order in its size (Schaub & Junkins, *Analytical Mechanics of Space Systems*, gravity-gradient
+    torque; Basilisk's ``GravityGradientEffector``).
+
+    Parameters
+    ----------
+    sigma_BN : casadi.SX or casadi.MX
+        Attitude σ_B/N (3).
+    r_hat_N : casadi.SX, casadi.MX or array_like
+        Unit position vector in N components (3); it is used as given (not normalised).
+    n : float or casadi expression
+        Orbit rate (rad/s).
+    inertia : array_like or casadi expression
+        J, 3 × 3 (kg m²).
+    """
+    sigma_BN, r_hat_N, inertia = (_casadi(v) for v in (sigma_BN, r_hat_N, inertia))
+    r_b = dcm_expr(sigma_BN) @ r_hat_N
+    return 3 * n**2 * ca.cross(r_b, inertia @ r_b)
+
+
+def _casadi(value: Any) -> Any:
+    """``value`` unchanged if a CasADi expression, else a ca.DM (a NumPy vector would be a row in ``@``)."""
+    if isinstance(value, ca.SX | ca.MX | ca.DM):
+        return value
+    return ca.DM(np.asarray(value, dtype=float))
+
+
+def tracking_error_dynamics_expr(
+    spacecraft: Spacecraft,
+    e: Any,
+    u: Any,
+    sigma_RN: Any,
+    omega_RN_N: Any,
+    domega_RN_N: Any,
+    *,
+    torque: Any = None,
+) -> Any:
+    """ė of the tracking error e = [σ_B/R; ω_B/R/4] (body components) as a CasADi expression.
+
+    Built by composition, without a hand-written error equation: the body state
+    x = [σ_B/N; ω_B/N/4] is rebuilt from e and the reference (σ_B/N = σ_R/N ⊕ σ_B/R,
+    ω_B/N = ω_B/R + [BN] ω_R/N), its derivative is [`dynamics_expr`][mrpctl.model.dynamics_expr]
+    with the torque u + L, and ė is the chain rule of the error map
+    e = g(x, σ_R/N, ω_R/N) = [σ_B/N ⊖ σ_R/N; (ω_B/N − [BN] ω_R/N)/4] along the body and the
+    reference motion (σ̇_R/N = ¼ B(σ_R/N) [RN] ω_R/N, ω̇_R/N given).
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft
+        Its inertia J.
+    e : casadi.SX or casadi.MX
+        Tracking error [σ_B/R; ω_B/R/4] (6).
+    u : casadi.SX or casadi.MX
+        Control torque (3, N m, body frame).
+    sigma_RN, omega_RN_N, domega_RN_N : casadi.SX, casadi.MX or array_like
+        Reference attitude (MRP), rate (rad/s) and acceleration (rad/s²), the rates in N components
+        (Basilisk's ``AttRefMsgPayload``: ``sigma_RN``, ``omega_RN_N``, ``domega_RN_N``).
+    torque : callable, optional
+        ``torque(sigma_BN) -> L``: an environment torque (N m, body frame) of the body attitude, for
+        instance ``lambda s: gravity_gradient_expr(s, r_hat_N, n, J)``. None: no torque.
+    """
+    sc = check_spacecraft(spacecraft)
+    sigma_RN, omega_RN_N, domega_RN_N = (_casadi(v) for v in (sigma_RN, omega_RN_N, domega_RN_N))
+    x_s = ca.SX.sym("x", STATE_SIZE)
+    sr_s = ca.SX.sym("sigma_RN", 3)
+    wr_s = ca.SX.sym("omega_RN_N", 3)
+    sigma_b, omega_b = x_s[0:3], 4 * x_s[3:6]
+    error = ca.vertcat(subtract_expr(sigma_b, sr_s), (omega_b - dcm_expr(sigma_b) @ wr_s) / 4)
+    maps = ca.Function(
+        "error_map",
+        [x_s, sr_s, wr_s],
+        [ca.jacobian(error, x_s), ca.jacobian(error, sr_s), ca.jacobian(error, wr_s)],
+    )
+    sigma_BN = add_expr(sigma_RN, e[0:3])
+    omega_BN = 4 * e[3:6] + dcm_expr(sigma_BN) @ omega_RN_N
+    x = ca.vertcat(sigma_BN, omega_BN / 4)
+    load = u if torque is None else u + torque(sigma_BN)
+    x_dot = dynamics_expr(sc, x, load)
+    sigma_R_dot = b_matrix_expr(sigma_RN) @ (dcm_expr(sigma_RN) @ omega_RN_N) / 4
+    d_x, d_sigma_R, d_omega_R = maps(x, sigma_RN, omega_RN_N)
+    return d_x @ x_dot + d_sigma_R @ sigma_R_dot + d_omega_R @ domega_RN_N
 
 
 @dataclass(frozen=True, eq=False)

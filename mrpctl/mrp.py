@@ -33,9 +33,11 @@ from mrpctl.errors import SpecificationError
 
 __all__ = [
     "add",
+    "add_expr",
     "b_matrix",
     "b_matrix_expr",
     "b_matrix_inverse",
+    "dcm_expr",
     "from_dcm",
     "from_principal_rotation",
     "from_quaternion",
@@ -47,6 +49,7 @@ __all__ = [
     "skew",
     "skew_expr",
     "subtract",
+    "subtract_expr",
     "to_dcm",
     "to_principal_rotation",
     "to_quaternion",
@@ -81,6 +84,41 @@ def b_matrix_expr(sigma: Any) -> Any:
 def shadow_expr(sigma: Any) -> Any:
     """The shadow set σˢ = −σ / |σ|² as a CasADi expression (undefined at σ = 0)."""
     return -sigma / ca.dot(sigma, sigma)
+
+
+def dcm_expr(sigma: Any) -> Any:
+    """[BN] = I + (8 [σ×]² − 4 (1 − σ²) [σ×]) / (1 + σ²)² as a CasADi expression (the NumPy
+    [`to_dcm`][mrpctl.mrp.to_dcm])."""
+    s = skew_expr(sigma)
+    sq = ca.dot(sigma, sigma)
+    return ca.DM.eye(3) + (8 * (s @ s) - 4 * (1 - sq) * s) / (1 + sq) ** 2
+
+
+def add_expr(sigma1: Any, sigma2: Any) -> Any:
+    """σ(F/N) from σ1 = σ(B/N) and σ2 = σ(F/B) as a CasADi expression: ``[FN] = [FB][BN]``.
+
+    Schaub & Junkins' composition formula
+    σ = ((1 − |σ1|²) σ2 + (1 − |σ2|²) σ1 − 2 σ2 × σ1) / (1 + |σ1|² |σ2|² − 2 σ1·σ2);
+    the set it returns is not shortened, and the denominator vanishes for the one pair whose
+    composition is a rotation by exactly 2π (for short sets: σ2 = −σ1's shadow). The NumPy
+    [`add`][mrpctl.mrp.add] returns the short set.
+    """
+    s1 = ca.dot(sigma1, sigma1)
+    s2 = ca.dot(sigma2, sigma2)
+    cross = ca.cross(sigma2, sigma1)
+    return ((1 - s1) * sigma2 + (1 - s2) * sigma1 - 2 * cross) / (1 + s1 * s2 - 2 * ca.dot(sigma1, sigma2))
+
+
+def subtract_expr(sigma: Any, sigma1: Any) -> Any:
+    """σ(F/B) from σ = σ(F/N) and σ1 = σ(B/N) as a CasADi expression: ``[FB] = [FN][BN]ᵀ``.
+
+    σ(F/B) = ((1 − |σ1|²) σ − (1 − |σ|²) σ1 + 2 σ × σ1) / (1 + |σ1|² |σ|² + 2 σ1·σ) (Schaub &
+    Junkins); not shortened (the NumPy [`subtract`][mrpctl.mrp.subtract] returns the short set).
+    """
+    s = ca.dot(sigma, sigma)
+    s1 = ca.dot(sigma1, sigma1)
+    cross = ca.cross(sigma, sigma1)
+    return ((1 - s1) * sigma - (1 - s) * sigma1 + 2 * cross) / (1 + s1 * s + 2 * ca.dot(sigma1, sigma))
 
 
 @lru_cache(maxsize=1)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
@@ -22,6 +23,14 @@ from mrpctl._validation import (
 )
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
+from mrpctl.guidance import (
+    CircularOrbit,
+    EigenaxisSlew,
+    FileReference,
+    GuidanceProfile,
+    InertialPointing,
+    NadirPointing,
+)
 from mrpctl.loop import delay_samples
 from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
 from mrpctl.predictor import OnPredicted, Predictor
@@ -65,6 +74,15 @@ _PREDICTOR_TABLE = "predictor"
 _FLIGHT_TABLES = {"actuator", "sensor", "disturbance", "delay"}
 #: The inertia uncertainty that ``mrpctl verify`` certifies (any rule; the simulation flies the nominal J).
 _UNCERTAINTY_TABLE = "uncertainty"
+#: The guidance profile the loop tracks (optional; none: regulation to the inertial origin).
+_REFERENCE_TABLE = "reference"
+#: The keys of [reference] for each of its types (``type`` itself is allowed for all).
+_REFERENCE_KEYS = {
+    "inertial": {"sigma"},
+    "slew": {"start", "target", "axis", "angle_deg", "rate_limit", "acceleration_limit", "t_start"},
+    "nadir": {"orbit_rate", "altitude", "radius", "mu", "inclination_deg", "raan_deg", "latitude_deg"},
+    "file": {"file"},
+}
 _KEYS = {
     "spacecraft": {"inertia"},
     "gains": {"K", "k_sigma", "k_omega", "K1", "K2"},
@@ -157,6 +175,14 @@ class Scenario:
         default 4 atan(1e-2) = 2.2918° (|σ| < 1e-2).
     settling_rate : float
         Rate tolerance of the settling time (rad/s; file key ``settling_rate``), default 1e-3.
+    reference : GuidanceProfile or None
+        The reference motion the loop tracks (``[reference]``): an
+        [`InertialPointing`][mrpctl.guidance.InertialPointing],
+        [`EigenaxisSlew`][mrpctl.guidance.EigenaxisSlew],
+        [`NadirPointing`][mrpctl.guidance.NadirPointing] or
+        [`FileReference`][mrpctl.guidance.FileReference]. None: regulation to the inertial origin.
+        [`simulate`][mrpctl.Scenario.simulate] flies the tracking loop on it
+        (``simulate(..., reference=...)``: the controller-side rule or the predictor).
     """
 
     name: str
@@ -178,6 +204,7 @@ class Scenario:
     uncertainty: InertiaUncertainty | None = None
     settling_attitude: float = SETTLING_ATTITUDE_DEG
     settling_rate: float = SETTLING_OMEGA
+    reference: GuidanceProfile | None = None
 
     @property
     def flight_options(self) -> dict[str, Any]:
@@ -203,6 +230,7 @@ class Scenario:
 
     def simulate(self) -> SimulationResult:
         """Run the scenario with [`mrpctl.simulate`][mrpctl.simulation.simulate]."""
+        tracking = {} if self.reference is None else {"reference": self.reference}
         return simulate(
             self.spacecraft,
             self.K,
@@ -216,6 +244,7 @@ class Scenario:
             settling_attitude=self.settling_attitude,
             settling_rate=self.settling_rate,
             **self.run_options,
+            **tracking,
         )
 
     def __str__(self) -> str:
@@ -229,6 +258,7 @@ class Scenario:
                 f"  t_final = {self.t_final:g} s, {self.substeps} RK4 substep(s) per sample",
                 *(f"  {value}" for value in self.run_options.values()),
                 *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
+                *([f"  reference: {self.reference}"] if self.reference is not None else []),
             )
         )
 
@@ -615,8 +645,24 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     Unknown keys raise a [`SpecificationError`][mrpctl.SpecificationError] naming the key. ``base``: the
     folder relative file names (``[disturbance] torque_file``, ``[delay] sequence_file``) are taken
     from ([`load_scenario`][mrpctl.load_scenario]: the scenario file's folder; None: the working directory).
+
+    The optional ``[reference]`` table sets [`Scenario.reference`][mrpctl.Scenario], the guidance
+    profile the loop tracks (``design/tracking.md``), by its ``type``:
+
+    * ``"inertial"``: ``sigma`` (σ_R/N, a short-set MRP);
+    * ``"slew"``: ``start`` (σ, default the origin), ``target`` (σ, the short way) or ``axis`` (unit,
+      start-frame components) and ``angle_deg``, ``rate_limit`` (rad/s), ``acceleration_limit``
+      (rad/s²), ``t_start`` (s, default 0);
+    * ``"nadir"``: the Hill frame (x radial out, y along-track, z orbit normal) of a circular orbit given
+      by one of ``orbit_rate`` (rad/s), ``altitude`` (m above the Earth's equatorial radius) or ``radius``
+      (m), ``mu`` (m³/s², default the Earth's) with the last two, and ``inclination_deg``, ``raan_deg``,
+      ``latitude_deg`` (argument of latitude at t = 0), each default 0;
+    * ``"file"``: ``file``, a .csv or .npy file of n = floor(t_final · rate) + 1 rows of 9 numbers
+      (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
     """
-    _check_keys("", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE})
+    _check_keys(
+        "", data, _TOP_KEYS | _TABLES | _FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, _REFERENCE_TABLE}
+    )
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")
@@ -669,6 +715,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         uncertainty=_uncertainty_table(data, spacecraft),
         settling_attitude=settle_attitude,
         settling_rate=settle_rate,
+        reference=_reference_table(data, rate, _Horizon(None if base is None else Path(base), samples)),
         **flight,
     )
 
@@ -696,6 +743,108 @@ def _uncertainty_table(data: dict[str, Any], spacecraft: Spacecraft) -> InertiaU
             "axes); give the 3 principal values"
         )
     return uncertainty
+
+
+def _reference_table(data: dict[str, Any], rate: float, horizon: _Horizon) -> GuidanceProfile | None:
+    """The [reference] table (optional) as a guidance profile; every error names [reference] and the key.
+
+    ``type = "inertial"``: ``sigma`` (σ_R/N, short set). ``type = "slew"``: ``start`` (σ, default the
+    origin), ``target`` (σ) or ``axis`` (unit) and ``angle_deg``, ``rate_limit`` (rad/s),
+    ``acceleration_limit`` (rad/s²), ``t_start`` (s, default 0). ``type = "nadir"``: one of
+    ``orbit_rate`` (rad/s), ``altitude`` (m above the Earth's equatorial radius) or ``radius`` (m), with
+    ``mu`` (m³/s², default the Earth's) for the last two, and ``inclination_deg``, ``raan_deg``,
+    ``latitude_deg`` (the argument of latitude at t = 0), each default 0. ``type = "file"``: ``file``, a
+    .csv or .npy file of n rows of 9 numbers (σ_R/N, ω_R/N, ω̇_R/N, N components), n = floor(t_final ·
+    rate) + 1, relative to the scenario file.
+    """
+    if _REFERENCE_TABLE not in data:
+        return None
+    table = data[_REFERENCE_TABLE]
+    if not isinstance(table, dict):
+        raise SpecificationError(f"[reference] must be a table of the scenario, got {table!r}")
+    kind = table.get("type")
+    if not isinstance(kind, str) or kind not in _REFERENCE_KEYS:
+        raise SpecificationError(f"[reference] needs type, one of {sorted(_REFERENCE_KEYS)}, got {kind!r}")
+    _check_keys(_REFERENCE_TABLE, table, _REFERENCE_KEYS[kind] | {"type"})
+    try:
+        return _REFERENCE_BUILDERS[kind](table, rate, horizon)
+    except (SpecificationError, DimensionError) as exc:
+        raise type(exc)(f"[reference] {exc}") from exc
+
+
+def _needs(table: dict[str, Any], kind: str, *keys: str) -> None:
+    missing = [key for key in keys if key not in table]
+    if missing:
+        raise SpecificationError(f"type = {kind!r} needs {' and '.join(missing)}")
+
+
+def _inertial_reference(table: dict[str, Any], rate: float, horizon: _Horizon) -> InertialPointing:
+    _needs(table, "inertial", "sigma")
+    return InertialPointing(table["sigma"])
+
+
+def _slew_reference(table: dict[str, Any], rate: float, horizon: _Horizon) -> EigenaxisSlew:
+    _needs(table, "slew", "rate_limit", "acceleration_limit")
+    if ("target" in table) == ("axis" in table or "angle_deg" in table):
+        raise SpecificationError("type = 'slew' needs target (an MRP), or axis and angle_deg, one of them")
+    options: dict[str, Any] = {
+        "start": table.get("start", (0.0, 0.0, 0.0)),
+        "rate_limit": table["rate_limit"],
+        "acceleration_limit": table["acceleration_limit"],
+        "t_start": table.get("t_start", 0.0),
+    }
+    if "target" in table:
+        options["target"] = table["target"]
+    else:
+        _needs(table, "slew", "axis", "angle_deg")
+        options["axis"] = table["axis"]
+        options["angle"] = math.radians(finite_scalar("angle_deg", table["angle_deg"]))
+    return EigenaxisSlew(**options)
+
+
+def _nadir_reference(table: dict[str, Any], rate: float, horizon: _Horizon) -> NadirPointing:
+    given = [key for key in ("orbit_rate", "altitude", "radius") if key in table]
+    if len(given) != 1:
+        raise SpecificationError(
+            "type = 'nadir' needs one of orbit_rate (rad/s), altitude (m) or radius (m), got "
+            + (", ".join(given) if given else "none")
+        )
+    if "mu" in table and given[0] == "orbit_rate":
+        raise SpecificationError("mu applies with altitude or radius, not with orbit_rate")
+    angles = {
+        name: math.radians(finite_scalar(f"{name}_deg", table.get(f"{name}_deg", 0.0)))
+        for name in ("inclination", "raan", "latitude")
+    }
+    mu = {"mu": table["mu"]} if "mu" in table else {}
+    if given[0] == "orbit_rate":
+        orbit = CircularOrbit(table["orbit_rate"], **angles)
+    elif given[0] == "altitude":
+        orbit = CircularOrbit.from_altitude(table["altitude"], **mu, **angles)
+    else:
+        orbit = CircularOrbit.from_radius(table["radius"], **mu, **angles)
+    return NadirPointing(orbit)
+
+
+def _file_reference(table: dict[str, Any], rate: float, horizon: _Horizon) -> FileReference:
+    _needs(table, "file", "file")
+    rows = samples_file(table["file"], "file", base=horizon.base)
+    if rows.ndim != 2 or rows.shape != (horizon.samples, 9):
+        raise DimensionError(
+            f"file: expected n rows of 9 numbers (sigma_RN, omega_RN_N in rad/s, domega_RN_N in rad/s^2, N "
+            f"components), one per measurement sample: shape (n, 9) = ({horizon.samples}, 9) with n = "
+            f"floor(t_final * rate) + 1, but the file has shape {rows.shape}"
+        )
+    path = Path(str(table["file"]))
+    source = str(path if path.is_absolute() or horizon.base is None else horizon.base / path)
+    return FileReference(rows=rows, rate=rate, source=source)
+
+
+_REFERENCE_BUILDERS: dict[str, Callable[[dict[str, Any], float, _Horizon], GuidanceProfile]] = {
+    "inertial": _inertial_reference,
+    "slew": _slew_reference,
+    "nadir": _nadir_reference,
+    "file": _file_reference,
+}
 
 
 def check_delay(tau: float, rate: float) -> None:
@@ -832,6 +981,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
         model_inertia = np.diag(model.inertia) if model.is_diagonal else model.inertia
         lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
     lines += _flight_toml(scenario)
+    lines += _reference_toml(scenario.reference)
     if scenario.uncertainty is not None:
         lines += [
             "",
@@ -840,6 +990,46 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
             f"product_bound = {_toml_value(scenario.uncertainty.product_bound)}  # |J_ij|, kg m^2",
         ]
     return "\n".join(lines) + "\n"
+
+
+def _reference_toml(reference: GuidanceProfile | None) -> list[str]:
+    """The [reference] table of a scenario's guidance profile (none when the scenario regulates)."""
+    if reference is None:
+        return []
+    lines = ["", "[reference]"]
+    if isinstance(reference, InertialPointing):
+        lines += ['type = "inertial"', f"sigma = {_toml_value(reference.sigma)}  # sigma_RN"]
+    elif isinstance(reference, EigenaxisSlew):
+        lines += ['type = "slew"', f"start = {_toml_value(reference.start)}  # sigma_RN at t_start"]
+        if reference.target is not None:
+            lines.append(f"target = {_toml_value(reference.target)}  # the short way")
+        else:
+            lines += [
+                f"axis = {_toml_value(reference.axis)}  # unit eigenaxis, start-frame components",
+                f"angle_deg = {_toml_value(math.degrees(float(reference.angle or 0.0)))}",
+            ]
+        lines += [
+            f"rate_limit = {_toml_value(reference.rate_limit)}  # rad/s",
+            f"acceleration_limit = {_toml_value(reference.acceleration_limit)}  # rad/s^2",
+            f"t_start = {_toml_value(reference.t_start)}  # s",
+        ]
+    elif isinstance(reference, NadirPointing):
+        orbit = reference.orbit
+        lines += [
+            'type = "nadir"  # the Hill frame: x radial out, y along-track, z orbit normal',
+            f"orbit_rate = {_toml_value(orbit.rate)}  # rad/s",
+            f"inclination_deg = {_toml_value(math.degrees(orbit.inclination))}",
+            f"raan_deg = {_toml_value(math.degrees(orbit.raan))}",
+            f"latitude_deg = {_toml_value(math.degrees(orbit.latitude))}  # argument of latitude at t = 0",
+        ]
+    elif isinstance(reference, FileReference) and reference.source:
+        lines += ['type = "file"', f"file = {_toml_value(reference.source)}  # n rows of 9, one per sample"]
+    else:
+        raise SpecificationError(
+            f"reference: a {type(reference).__name__} is not written into a scenario file; save its rows "
+            "(mrpctl.guidance.reference_samples) as a .npy or .csv file and name it in [reference] file"
+        )
+    return lines
 
 
 def _flight_toml(scenario: Scenario) -> list[str]:

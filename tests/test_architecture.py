@@ -46,6 +46,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "mrpctl.clock",
             "mrpctl.paper",
             "mrpctl.estimation",
+            "mrpctl.guidance",
         ),
     ),
     ("linear analysis and synthesis", ("mrpctl.design",)),
