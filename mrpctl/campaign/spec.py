@@ -598,6 +598,11 @@ def parse_campaign(
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
     if "rule" not in data:
         raise SpecificationError(f"[rule] needs type, one of {sorted([*RULE_NAMES, 'hysteretic'])}")
+    if "reference" in scenario_part:
+        raise SpecificationError(
+            "[reference]: campaigns of the tracking loop are not run yet; remove [reference] (the runs regulate "
+            "to the origin), or run simulate_batch(..., reference=...) on the dispersed inputs"
+        )
     flight_tables = sorted(set(scenario_part) & {"actuator", "sensor", "disturbance", "delay"})
     if flight_tables:  # scenario-style flight tables would be dropped by the runner: refuse, never drop them
         raise SpecificationError(

@@ -18,6 +18,11 @@ __all__ = ["add_parser"]
 
 def _export(args: argparse.Namespace) -> int:
     scenario = apply_flight_options(apply_overrides(load_scenario(args.scenario), args), args)
+    if scenario.reference is not None:
+        raise SpecificationError(
+            "[reference]: the command exports the regulation controller; export the tracking controller with "
+            "mrpctl.export(..., tracking=True) in Python (its reference ports are the profile's rows)"
+        )
     check_history_fits(scenario)
     if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
         raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")

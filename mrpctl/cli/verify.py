@@ -234,6 +234,12 @@ def _verify(args: argparse.Namespace) -> int:
             )
         scenario: Scenario | None = load_scenario(args.scenario)
         assert scenario is not None
+        if scenario.reference is not None:
+            raise SpecificationError(
+                "[reference]: verify certifies the regulation loop only; the tracking loop's linearisation and "
+                "its margins are mrpctl.design.tracking's (design/tracking.md): remove [reference] to verify "
+                "the regulation loop"
+            )
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         scenario = None
