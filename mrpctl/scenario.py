@@ -230,7 +230,6 @@ class Scenario:
 
     def simulate(self) -> SimulationResult:
         """Run the scenario with [`mrpctl.simulate`][mrpctl.simulation.simulate]."""
-        tracking = {} if self.reference is None else {"reference": self.reference}
         return simulate(
             self.spacecraft,
             self.K,
@@ -243,8 +242,8 @@ class Scenario:
             substeps=self.substeps,
             settling_attitude=self.settling_attitude,
             settling_rate=self.settling_rate,
+            reference=self.reference,
             **self.run_options,
-            **tracking,
         )
 
     def __str__(self) -> str:
