@@ -16,7 +16,8 @@ gains of σ̈ = K₁ σ + K₂ σ̇ (``design/conventions.md``).
 
 **The conversions** (every one in this module, each exact in floating point: a negation and a
 multiplication or division by 4, a power of two, change no bit unless a value overflows or
-underflows; the negation is written 0 − v, so a zero entry stays +0):
+underflows; the sign of a zero entry flips with the negation, so K → (P_σ, P_ω) → K keeps
+every bit, and P_σ = 70.11 I₃ gives the −0.0 off-diagonal entries of −70.11 I₃):
 
     x = [σ; ω/4],            (σ, ω) = (x[0:3], 4 x[3:6])
     K = [−P_σ, −4 P_ω],      P_σ = −K[:, 0:3],  P_ω = −K[:, 3:6] / 4
@@ -161,8 +162,8 @@ class PDGains:
     Examples
     --------
     >>> gains = PDGains(attitude=70.11, rate=40.77)       # the paper's K, physically
-    >>> gains.gain()[0]
-    array([ -70.11,    0.  ,    0.  , -163.08,    0.  ,    0.  ])
+    >>> gains.gain()[0, [0, 3]]
+    array([ -70.11, -163.08])
     """
 
     attitude: np.ndarray = field(repr=False)
@@ -217,7 +218,7 @@ def gain_parts(K: Any) -> tuple[np.ndarray, np.ndarray]:
     """(P_σ, P_ω) = (−K[..., 0:3], −K[..., 3:6] / 4) of paper-form gains K (..., 3, 6): the attitude
     gains (N m) and rate gains (N m s) of u = −P_σ σ − P_ω ω, each (..., 3, 3); exact."""
     k = finite_array("K", K, (None, 3, 6))
-    return 0.0 - k[..., 0:3], (0.0 - k[..., 3:6]) / RATE_SCALE
+    return -k[..., 0:3], -k[..., 3:6] / RATE_SCALE
 
 
 def gain_from_parts(attitude: Any, rate: Any) -> np.ndarray:
@@ -225,7 +226,7 @@ def gain_from_parts(attitude: Any, rate: Any) -> np.ndarray:
     of [`gain_parts`][mrpctl.conventions.gain_parts]; exact)."""
     p_sigma = finite_array("attitude", attitude, (None, 3, 3))
     p_omega = finite_array("rate", rate, (None, 3, 3))
-    return np.concatenate((0.0 - p_sigma, 0.0 - RATE_SCALE * p_omega), axis=-1)
+    return np.concatenate((-p_sigma, -RATE_SCALE * p_omega), axis=-1)
 
 
 def gain_from_pd(spacecraft: Spacecraft, K1: Any, K2: Any) -> np.ndarray:

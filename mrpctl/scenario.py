@@ -19,10 +19,11 @@ from mrpctl._validation import (
     positive_scalar,
     readonly,
 )
+from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.loop import delay_samples
-from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
+from mrpctl.model import gain_matrix
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
 from mrpctl.simulation import SimulationResult, simulate
@@ -56,7 +57,7 @@ _FLIGHT_TABLES = {"actuator", "sensor", "disturbance", "delay"}
 _UNCERTAINTY_TABLE = "uncertainty"
 _KEYS = {
     "spacecraft": {"inertia"},
-    "gains": {"K", "k_sigma", "k_omega", "K1", "K2"},
+    "gains": {"K", "k_sigma", "k_omega", "K1", "K2", "attitude", "rate"},
     "initial": {"sigma", "principal_angle_deg", "axis", "omega"},
     "rule": {"type", "eps", "alpha", "delta"},
     "actuator": {"u_max", "u_norm", "saturation"},
@@ -111,9 +112,11 @@ class Scenario:
     spacecraft : Spacecraft
         The plant.
     K : numpy.ndarray
-        (3, 6) feedback gain on x = [σ; ω/4], u = K x(t − τ).
+        (3, 6) feedback gain on x = [σ; ω/4], u = K x(t − τ) (the paper's form; the physical
+        gains are [`gains`][mrpctl.Scenario.gains]).
     x0 : numpy.ndarray
-        Initial state [σ₀; ω₀/4]; also the constant initial function φ(θ) = x0.
+        Initial state [σ₀; ω₀/4]; also the constant initial function φ(θ) = x0 (the physical
+        σ₀, ω₀ are [`sigma0`][mrpctl.Scenario.sigma0], [`omega0`][mrpctl.Scenario.omega0]).
     tau : float
         Measurement delay τ (s).
     rule : SwitchingRule
@@ -162,6 +165,21 @@ class Scenario:
     uncertainty: InertiaUncertainty | None = None
 
     @property
+    def gains(self) -> PDGains:
+        """K as physical gains: u = −P_σ σ − P_ω ω, P_σ = −K[:, :3] (N m), P_ω = −K[:, 3:] / 4 (N m s)."""
+        return PDGains.from_gain(self.K)
+
+    @property
+    def sigma0(self) -> np.ndarray:
+        """(3,) initial MRPs σ₀."""
+        return readonly(state_parts(self.x0)[0])
+
+    @property
+    def omega0(self) -> np.ndarray:
+        """(3,) initial body rates ω₀ (rad/s)."""
+        return readonly(state_parts(self.x0)[1])
+
+    @property
     def flight_options(self) -> dict[str, Any]:
         """The flight models that are set, as keywords of [`mrpctl.simulate`][mrpctl.simulation.simulate] and
         [`mrpctl.export`][mrpctl._export.export]."""
@@ -199,7 +217,7 @@ class Scenario:
         )
 
     def __str__(self) -> str:
-        sigma0, omega0 = self.x0[:3], 4.0 * self.x0[3:]
+        sigma0, omega0 = self.sigma0, self.omega0
         return "\n".join(
             (
                 f"scenario {self.name}: {self.description}".rstrip(": "),
@@ -539,12 +557,20 @@ def _table(data: dict[str, Any], name: str) -> dict[str, Any]:
 
 
 def _gain(spacecraft: Spacecraft, gains: dict[str, Any]) -> np.ndarray:
-    forms = [k for k in (("K",), ("k_sigma", "k_omega"), ("K1", "K2")) if any(key in gains for key in k)]
+    forms = [
+        k
+        for k in (("K",), ("k_sigma", "k_omega"), ("K1", "K2"), ("attitude", "rate"))
+        if any(key in gains for key in k)
+    ]
     if len(forms) != 1 or not all(key in gains for key in forms[0]):
         raise SpecificationError(
-            "[gains] must give exactly one of: K (3x6, on x = [sigma; omega/4]); "
-            "k_sigma and k_omega (K = [k_sigma I3, k_omega I3]); K1 and K2 (loop gains)"
+            "[gains] must give exactly one of: attitude and rate (the physical PD gains of u = -P_sigma sigma - "
+            "P_omega omega: P_sigma in N m, P_omega in N m s, each > 0 as a scalar or 3 per-axis values, or a 3x3 "
+            "matrix); K (3x6, on x = [sigma; omega/4]); k_sigma and k_omega (K = [k_sigma I3, k_omega I3]); K1 and "
+            "K2 (loop gains)"
         )
+    if forms[0] == ("attitude", "rate"):
+        return np.array(PDGains(attitude=gains["attitude"], rate=gains["rate"]).gain())
     if forms[0] == ("K",):
         return gain_matrix(gains["K"])
     if forms[0] == ("k_sigma", "k_omega"):
@@ -737,8 +763,10 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
     """The scenario as a TOML file that [`load_scenario`][mrpctl.load_scenario] reads back to the same scenario.
 
     Floats are written with ``repr`` (shortest round-trip form), so K, J and x0 come back
-    bit for bit; the gain is written as the full 3×6 K, with the per-axis loop gains
-    K₁, K₂ as a comment when they are diagonal.
+    bit for bit. The gain is written in its physical form, ``attitude`` = P_σ and ``rate`` = P_ω
+    (per axis when diagonal and positive, else 3×3), when that form reads back to the same K
+    bit for bit (always, but for a −0.0 entry or a rate entry that underflows), else as the full
+    3×6 K; the other forms (K, and the per-axis loop gains K₁, K₂ when diagonal) as comments.
     """
     if isinstance(scenario.rule, OnPredicted) and scenario.predictor is None:
         raise SpecificationError(
@@ -748,7 +776,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
     k1, k2 = pd_from_gain(scenario.spacecraft, scenario.K)
     inertia = scenario.spacecraft.inertia
     inertia_value = np.diag(inertia) if scenario.spacecraft.is_diagonal else inertia
-    sigma0, omega0 = scenario.x0[:3], 4.0 * scenario.x0[3:]
+    sigma0, omega0 = scenario.sigma0, scenario.omega0
     lines = [f"# {line}" if line else "#" for line in comment.splitlines()]
     lines += [
         f"name = {_toml_value(scenario.name)}",
@@ -763,14 +791,11 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
         f"inertia = {_toml_value(inertia_value)}  # kg m^2",
         "",
         "[gains]",
-        "# u = K x(t - tau) on x = [sigma; omega/4], K = [4 J K1, 4 J K2] (N m), row by row",
     ]
     if np.array_equal(k1, np.diag(np.diag(k1))) and np.array_equal(k2, np.diag(np.diag(k2))):
         lines.append(f"# per axis: K1 = {_toml_value(np.diag(k1))} (1/s^2), K2 = {_toml_value(np.diag(k2))} (1/s)")
-    lines.append("K = [")
-    lines += [f"    {_toml_value(row)}," for row in scenario.K]
+    lines += _gain_toml(scenario.K)
     lines += [
-        "]",
         "",
         "[initial]",
         f"sigma = {_toml_value(sigma0)}",
@@ -803,6 +828,34 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
             f"product_bound = {_toml_value(scenario.uncertainty.product_bound)}  # |J_ij|, kg m^2",
         ]
     return "\n".join(lines) + "\n"
+
+
+def _gain_toml(K: np.ndarray) -> list[str]:
+    """The [gains] lines of K: the physical attitude and rate gains (per axis, else 3x3) when they read back to K
+    bit for bit (the sign of every zero included), else K itself."""
+    gains = PDGains.from_gain(K)
+    paper_rows = ["    " + _toml_value(row) + "," for row in K]
+    forms = [(gains.attitude, gains.rate)]
+    if gains.is_diagonal and bool(np.all(np.diag(gains.attitude) > 0) and np.all(np.diag(gains.rate) > 0)):
+        forms.insert(0, (np.diag(gains.attitude), np.diag(gains.rate)))
+    for attitude, rate in forms:
+        back = PDGains(attitude=attitude, rate=rate).gain()
+        if np.array_equal(np.signbit(back), np.signbit(K)) and np.array_equal(back, K):
+            return [
+                "# u = -P_sigma sigma - P_omega omega: attitude = P_sigma (N m), rate = P_omega (N m s)",
+                f"attitude = {_toml_value(attitude)}",
+                f"rate = {_toml_value(rate)}",
+                "# the paper's form u = K x(t - tau) on x = [sigma; omega/4], K = [-P_sigma, -4 P_omega]:",
+                "# K = [",
+                *("#" + row for row in paper_rows),
+                "# ]",
+            ]
+    return [
+        "# u = K x(t - tau) on x = [sigma; omega/4], K = [4 J K1, 4 J K2] (N m), row by row",
+        "K = [",
+        *paper_rows,
+        "]",
+    ]
 
 
 def _flight_toml(scenario: Scenario) -> list[str]:
@@ -865,15 +918,21 @@ substeps = 1       # RK4 substeps per measurement period
 inertia = [12.0, 15.0, 9.0]
 
 [gains]
-# u = K x(t - tau) on x = [sigma; omega/4]. Give exactly one of:
-#   K = [[...6 values...], [...], [...]]      the full 3x6 gain (N m)
-#   k_sigma, k_omega                          K = [k_sigma I3, k_omega I3]; scalars or 3 per-axis values
+# Give exactly one of:
+#   attitude, rate                            the PD gains of u = -P_sigma sigma - P_omega omega (Basilisk's
+#                                             mrpFeedback K and P): attitude = P_sigma (N m), rate = P_omega
+#                                             (N m s, on omega in rad/s); scalars or 3 per-axis values (> 0),
+#                                             or 3x3 matrices
 #   K1, K2                                    loop gains of sigma'' = K1 sigma + K2 sigma' (K = [4 J K1, 4 J K2]);
 #                                             scalars, 3 per-axis values or 3x3 matrices
+#   K = [[...6 values...], [...], [...]]      the paper's full 3x6 gain of u = K x on x = [sigma; omega/4] (N m),
+#                                             K = [-P_sigma, -4 P_omega]
+#   k_sigma, k_omega                          K = [k_sigma I3, k_omega I3]; scalars or 3 per-axis values
 # `mrpctl design --inertia 12 15 9 --tau 0.2 --toml s.toml` writes certified gains.
-# These are critically damped (zeta = 1) at omega_n = 0.8 rad/s: K1 = -0.64, K2 = -1.6.
-K1 = -0.64
-K2 = -1.6
+# These are critically damped (zeta = 1) at omega_n = 0.8 rad/s (K1 = -0.64, K2 = -1.6 per axis):
+# P_sigma = 4 J omega_n^2 and P_omega = 2 zeta omega_n J for J = [12, 15, 9].
+attitude = [30.72, 38.4, 23.04]
+rate = [19.2, 24.0, 14.4]
 
 [initial]
 # Either sigma = [s1, s2, s3] (MRPs), or principal_angle_deg and axis.
