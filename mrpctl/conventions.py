@@ -31,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from mrpctl._validation import finite_array, readonly
@@ -39,6 +40,7 @@ from mrpctl.spacecraft import Spacecraft
 
 __all__ = [
     "RATE_SCALE",
+    "STATE_PORTS",
     "PDGains",
     "feedback_gain",
     "gain_from_parts",
@@ -46,6 +48,8 @@ __all__ = [
     "gain_parts",
     "initial_state",
     "pd_from_gain",
+    "physical_function",
+    "physical_port_names",
     "state",
     "state_parts",
 ]
@@ -248,3 +252,98 @@ def _loop_block(name: str, value: Any) -> np.ndarray:
     if array.shape == (3,):
         return np.diag(array)
     return finite_array(name, array, (3, 3))
+
+
+# ------------------------------------------------------------------- ports of CasADi Functions
+#: The ports of the loop's CasADi Functions ([`mrpctl.loop.closed_loop_functions`][mrpctl.loop.closed_loop_functions])
+#: that carry paper-form states x = [σ; ω/4], one 6-row block per state (the predictor's 12-row delay-line entries
+#: hold the measurement and the model copy): what [`physical_function`][mrpctl.conventions.physical_function] splits.
+STATE_PORTS = frozenset(
+    {
+        "x",
+        "xdot",
+        "x_meas",
+        "x_next",
+        "x_delayed",
+        "x_end",
+        "x_true",
+        "x_hat",
+        "y",
+        "z",
+        "z_delayed",
+        "z_next",
+        "measurement",
+        "measurements",
+        "states",
+        "history",
+        "ring",
+    }
+)
+
+
+def physical_port_names(name: str, rows: int) -> tuple[str, ...]:
+    """The physical ports of a state port ``name`` with ``rows`` rows: σ and ω per 6-row state block.
+
+    ``x`` → ``sigma``, ``omega``; ``x_<s>`` → ``sigma_<s>``, ``omega_<s>``; ``xdot`` → ``sigma_dot``,
+    ``omega_dot``; any other name → ``<name>_sigma``, ``<name>_omega``. A second block (the predictor's
+    model copy z in a 12-row delay-line entry) adds ``z_`` to both names (``sigma_delayed``,
+    ``omega_delayed``, ``z_sigma_delayed``, ``z_omega_delayed``).
+    """
+    if rows % 6 or rows == 0:
+        raise DimensionError(f"{name}: a state port holds 6-row blocks [sigma; omega/4], got {rows} rows")
+    if name == "xdot":
+        pair = ("sigma_dot", "omega_dot")
+    elif name == "x" or name.startswith("x_"):
+        pair = ("sigma" + name[1:], "omega" + name[1:])
+    else:
+        pair = (f"{name}_sigma", f"{name}_omega")
+    names: list[str] = []
+    for block in range(rows // 6):
+        names += [("z_" * block) + each for each in pair]
+    return tuple(names)
+
+
+def physical_function(function: ca.Function) -> ca.Function:
+    """``function`` with every state port ([`STATE_PORTS`][mrpctl.conventions.STATE_PORTS]) split into σ (3 rows)
+    and ω (3 rows, rad/s; ω̇ in rad/s² for ``xdot``), same name, the other ports unchanged.
+
+    Inside, x = [σ; ω/4] is formed from the inputs and ω = 4 x[3:6] from the outputs: both exact, so the
+    result equals ``function`` on the converted values bit for bit. Memory vectors (``memory``) stay as
+    they are (the controller's own layout; the predictor's holds its model copy z = [σ; ω/4]).
+    """
+    inputs: list[Any] = []
+    input_names: list[str] = []
+    arguments: list[Any] = []
+    for i in range(function.n_in()):
+        name = function.name_in(i)
+        rows, columns = function.size_in(i)
+        if name not in STATE_PORTS:
+            symbol = ca.MX.sym(name, rows, columns)
+            inputs.append(symbol)
+            input_names.append(name)
+            arguments.append(symbol)
+            continue
+        names = physical_port_names(name, rows)
+        blocks = []
+        for k in range(0, len(names), 2):
+            sigma = ca.MX.sym(names[k], 3, columns)
+            omega = ca.MX.sym(names[k + 1], 3, columns)
+            inputs += [sigma, omega]
+            input_names += [names[k], names[k + 1]]
+            blocks += [sigma, omega / RATE_SCALE]
+        arguments.append(ca.vertcat(*blocks))
+    results = function.call(arguments)
+    outputs: list[Any] = []
+    output_names: list[str] = []
+    for i, value in enumerate(results):
+        name = function.name_out(i)
+        if name not in STATE_PORTS:
+            outputs.append(value)
+            output_names.append(name)
+            continue
+        names = physical_port_names(name, function.size_out(i)[0])
+        for k in range(0, len(names), 2):
+            start = 3 * k
+            outputs += [value[start : start + 3, :], RATE_SCALE * value[start + 3 : start + 6, :]]
+            output_names += [names[k], names[k + 1]]
+    return ca.Function(function.name(), inputs, outputs, input_names, output_names)

@@ -25,6 +25,7 @@ from mrpctl.cli.common import (
     refuse_existing,
 )
 from mrpctl.cli.overrides import paper_base, spacecraft_from
+from mrpctl.conventions import PDGains
 from mrpctl.design import FlownVerdict, SynthesisStatus, analyze_gains, synthesize_lmi, verify_flown
 from mrpctl.design.robust import RobustPDSynthesis, RobustStatus
 from mrpctl.errors import MrpctlError, SpecificationError
@@ -32,6 +33,27 @@ from mrpctl.scenario import check_delay, rule_from_name, scenario_toml
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = ["add_parser"]
+
+
+def _physical_json(K: np.ndarray) -> dict[str, Any]:
+    """K's physical gains for the JSON: u = -P_sigma sigma - P_omega omega (N m, N m s)."""
+    gains = PDGains.from_gain(K)
+    return {"attitude_gain": gains.attitude, "rate_gain": gains.rate}
+
+
+def _print_physical(K: np.ndarray) -> None:
+    """K's physical gains, u = -P_sigma sigma - P_omega omega (per axis when diagonal, else 3x3)."""
+    gains = PDGains.from_gain(K)
+    if gains.is_diagonal:
+        print(
+            "physical: u = -P_sigma sigma - P_omega omega, attitude gain P_sigma = "
+            f"{np.array2string(np.diag(gains.attitude), precision=6)} N m, rate gain P_omega = "
+            f"{np.array2string(np.diag(gains.rate), precision=6)} N m s (per axis)"
+        )
+        return
+    print("physical: u = -P_sigma sigma - P_omega omega, attitude gain P_sigma (N m) and rate gain P_omega (N m s):")
+    print(np.array2string(gains.attitude, precision=6, max_line_width=200, suppress_small=False))
+    print(np.array2string(gains.rate, precision=6, max_line_width=200, suppress_small=False))
 
 
 def _damping_kind(zeta: float) -> str:
@@ -116,6 +138,7 @@ def _design(args: argparse.Namespace) -> int:
                 "zeta": design.gains.zeta,
                 "decay_rate": decay,
                 "K": K,
+                **_physical_json(K),
                 "K1": k1,
                 "K2": k2,
                 "certified": design.certificate.certified if design.certificate is not None else False,
@@ -129,6 +152,7 @@ def _design(args: argparse.Namespace) -> int:
     print(design)
     print("K (3x6, N m) on x = [sigma; omega/4], u = K x(t - tau):")
     print(np.array2string(K, precision=6, max_line_width=200, suppress_small=False))
+    _print_physical(K)
     print("per axis, sigma'' = K1 sigma + K2 sigma' (K = [4 J K1, 4 J K2]):")
     for axis in analysis.axes:
         print(
@@ -315,6 +339,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
                 "omega_n": result.omega_n,
                 "zeta": result.gains.zeta,
                 "K": K,
+                **_physical_json(K),
                 "K1": np.diag(analysis.K1),
                 "K2": np.diag(analysis.K2),
                 "certified": cert is not None and cert.certified,
@@ -331,6 +356,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         print(cert)
     print("K (3x6, N m) on x = [sigma; omega/4], u = K x(t - tau):")
     print(np.array2string(K, precision=6, max_line_width=200, suppress_small=False))
+    _print_physical(K)
     for axis in analysis.axes:
         print(
             f"  axis {axis.axis}: K1 = {axis.K1:.6g} 1/s^2, K2 = {axis.K2:.6g} 1/s, omega_n = {axis.omega_n:.6g} "
@@ -411,6 +437,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
                 "decay_rate": alpha,
                 "epsilon": result.epsilon,
                 "K": K,
+                **_physical_json(K),
                 "K1": np.diag(analysis.K1) if analysis.axes else None,
                 "K2": np.diag(analysis.K2) if analysis.axes else None,
                 "certified": cert is not None and cert.certified,
@@ -427,6 +454,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
         print(cert)
     print("K (3x6, N m) on x = [sigma; omega/4], u = K x(t - tau):")
     print(np.array2string(K, precision=6, max_line_width=200, suppress_small=False))
+    _print_physical(K)
     for axis in analysis.axes:
         print(
             f"  axis {axis.axis}: K1 = {axis.K1:.6g} 1/s^2, K2 = {axis.K2:.6g} 1/s, omega_n = {axis.omega_n:.6g} "
