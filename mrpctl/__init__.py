@@ -11,8 +11,9 @@ imported on the first LMI solve and matplotlib only by [`mrpctl.plots`][mrpctl.p
 
 from __future__ import annotations
 
-from mrpctl import design, errors, loop, model, mrp, paper, simulation
+from mrpctl import conventions, design, errors, loop, model, mrp, paper, simulation
 from mrpctl._export import ExportResult, export
+from mrpctl.conventions import PDGains
 from mrpctl.errors import (
     CodegenError,
     CompilerWarning,
@@ -47,6 +48,7 @@ __all__ = [
     "OnCurrent",
     "OnDelayed",
     "OnPredicted",
+    "PDGains",
     "PlantModel",
     "Predictor",
     "Scenario",
@@ -56,6 +58,7 @@ __all__ = [
     "SwitchingRule",
     "__version__",
     "closed_loop_functions",
+    "conventions",
     "design",
     "errors",
     "export",
