@@ -304,7 +304,7 @@ def physical_port_names(name: str, rows: int) -> tuple[str, ...]:
 
 
 def physical_function(function: ca.Function) -> ca.Function:
-    """``function`` with every state port ([`STATE_PORTS`][mrpctl.conventions.STATE_PORTS]) split into σ (3 rows)
+    """``function`` with every state port (``STATE_PORTS``) split into σ (3 rows)
     and ω (3 rows, rad/s; ω̇ in rad/s² for ``xdot``), same name, the other ports unchanged.
 
     Inside, x = [σ; ω/4] is formed from the inputs and ω = 4 x[3:6] from the outputs: both exact, so the

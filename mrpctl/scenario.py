@@ -759,15 +759,18 @@ def _toml_value(value: Any) -> str:
     return repr(float(value))
 
 
-def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
+def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = False) -> str:
     """The scenario as a TOML file that [`load_scenario`][mrpctl.load_scenario] reads back to the same scenario.
 
     Floats are written with ``repr`` (shortest round-trip form), so K, J and x0 come back
-    bit for bit. The gain is written in its physical form, ``attitude`` = P_σ and ``rate`` = P_ω
-    (per axis when diagonal and positive, else 3×3), when that form reads back to the same K
-    bit for bit (always, but for a −0.0 entry or a rate entry that underflows), else as the full
-    3×6 K; the other forms (K, and the per-axis loop gains K₁, K₂ when diagonal) as comments.
+    bit for bit. The gain is written as the full 3×6 K, its physical gains P_σ, P_ω and (when
+    diagonal) the per-axis loop gains K₁, K₂ as comments; with ``physical=True`` it is written in
+    its physical form, ``attitude`` = P_σ and ``rate`` = P_ω (per axis when diagonal and positive,
+    else 3×3), when that form reads back to the same K bit for bit (always, but for a rate entry
+    that underflows), with K as a comment.
     """
+    if not isinstance(physical, bool):
+        raise SpecificationError(f"physical must be True or False, got {physical!r}")
     if isinstance(scenario.rule, OnPredicted) and scenario.predictor is None:
         raise SpecificationError(
             "rule: 'on-predicted' needs the scenario's predictor (the controller's model) to be written as a "
@@ -794,7 +797,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
     ]
     if np.array_equal(k1, np.diag(np.diag(k1))) and np.array_equal(k2, np.diag(np.diag(k2))):
         lines.append(f"# per axis: K1 = {_toml_value(np.diag(k1))} (1/s^2), K2 = {_toml_value(np.diag(k2))} (1/s)")
-    lines += _gain_toml(scenario.K)
+    lines += _gain_toml(scenario.K, physical)
     lines += [
         "",
         "[initial]",
@@ -830,11 +833,22 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def _gain_toml(K: np.ndarray) -> list[str]:
-    """The [gains] lines of K: the physical attitude and rate gains (per axis, else 3x3) when they read back to K
-    bit for bit (the sign of every zero included), else K itself."""
+def _gain_toml(K: np.ndarray, physical: bool) -> list[str]:
+    """The [gains] lines of K: with ``physical`` the attitude and rate gains (per axis, else 3x3) when they read
+    back to K bit for bit (the sign of every zero included), else K itself with the physical gains as comments."""
     gains = PDGains.from_gain(K)
     paper_rows = ["    " + _toml_value(row) + "," for row in K]
+    if not physical:
+        shown = (np.diag(gains.attitude), np.diag(gains.rate)) if gains.is_diagonal else (gains.attitude, gains.rate)
+        return [
+            "# u = K x(t - tau) on x = [sigma; omega/4], K = [4 J K1, 4 J K2] (N m), row by row",
+            "# physically u = -P_sigma sigma - P_omega omega, K = [-P_sigma, -4 P_omega]:",
+            f"#   attitude = {_toml_value(shown[0])}  # P_sigma, N m",
+            f"#   rate = {_toml_value(shown[1])}  # P_omega, N m s",
+            "K = [",
+            *paper_rows,
+            "]",
+        ]
     forms = [(gains.attitude, gains.rate)]
     if gains.is_diagonal and bool(np.all(np.diag(gains.attitude) > 0) and np.all(np.diag(gains.rate) > 0)):
         forms.insert(0, (np.diag(gains.attitude), np.diag(gains.rate)))

@@ -230,13 +230,17 @@ def test_scenario_toml_writes_the_physical_form_and_reads_back_bit_for_bit() -> 
     base = load_scenario("paper_fig4_on_delayed")
     for K in (base.K, rng.normal(size=(3, 6)) * 50, np.diag([-1.0, -2.0, -3.0]) @ np.hstack((np.eye(3), np.eye(3)))):
         scenario = replace(base, K=np.asarray(K))
-        text = scenario_toml(scenario)
+        assert "\nK = [" in scenario_toml(scenario)  # the paper's K by default, the physical gains as comments
+        text = scenario_toml(scenario, physical=True)
         assert "\nattitude = " in text and "\nrate = " in text and "\nK = [" not in text
         back = parse_scenario(tomllib.loads(text))
         assert _same_bytes(back.K, scenario.K)
-    assert "attitude = [70.11, 70.11, 70.11]" in scenario_toml(base)
+    assert "\nattitude = [70.11, 70.11, 70.11]" in scenario_toml(base, physical=True)
+    assert "#   attitude = [70.11, 70.11, 70.11]" in scenario_toml(base)
     unstable = replace(base, K=-base.K)  # positive K entries: written as 3x3 matrices, still exact
-    assert _same_bytes(parse_scenario(tomllib.loads(scenario_toml(unstable))).K, unstable.K)
+    assert _same_bytes(parse_scenario(tomllib.loads(scenario_toml(unstable, physical=True))).K, unstable.K)
+    with pytest.raises(SpecificationError, match="physical must be True or False"):
+        scenario_toml(base, physical="yes")
 
 
 # ------------------------------------------------------------------------------ command line

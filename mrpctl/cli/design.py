@@ -152,7 +152,6 @@ def _design(args: argparse.Namespace) -> int:
     print(design)
     print("K (3x6, N m) on x = [sigma; omega/4], u = K x(t - tau):")
     print(np.array2string(K, precision=6, max_line_width=200, suppress_small=False))
-    _print_physical(K)
     print("per axis, sigma'' = K1 sigma + K2 sigma' (K = [4 J K1, 4 J K2]):")
     for axis in analysis.axes:
         print(
@@ -163,6 +162,7 @@ def _design(args: argparse.Namespace) -> int:
         print("  axes coupled: K1, K2 are not diagonal")
     if decay is not None:
         print(f"certified decay rate {float(decay):.6g} 1/s")
+    _print_physical(K)
     if written is not None:
         if written_verdict is not None:
             print(written_verdict)
@@ -356,12 +356,12 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
         print(cert)
     print("K (3x6, N m) on x = [sigma; omega/4], u = K x(t - tau):")
     print(np.array2string(K, precision=6, max_line_width=200, suppress_small=False))
-    _print_physical(K)
     for axis in analysis.axes:
         print(
             f"  axis {axis.axis}: K1 = {axis.K1:.6g} 1/s^2, K2 = {axis.K2:.6g} 1/s, omega_n = {axis.omega_n:.6g} "
             f"rad/s, zeta = {axis.zeta:.4g} ({_damping_kind(axis.zeta)}) at the nominal inertia"
         )
+    _print_physical(K)
     if written is not None:
         if written_verdict is not None:
             print(written_verdict)
@@ -454,7 +454,6 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
         print(cert)
     print("K (3x6, N m) on x = [sigma; omega/4], u = K x(t - tau):")
     print(np.array2string(K, precision=6, max_line_width=200, suppress_small=False))
-    _print_physical(K)
     for axis in analysis.axes:
         print(
             f"  axis {axis.axis}: K1 = {axis.K1:.6g} 1/s^2, K2 = {axis.K2:.6g} 1/s, omega_n = {axis.omega_n:.6g} "
@@ -462,6 +461,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
         )
     if not analysis.axes:
         print("  axes coupled: K1, K2 are not diagonal")
+    _print_physical(K)
     if written is not None:
         if written_verdict is not None:
             print(written_verdict)
