@@ -386,3 +386,30 @@ def test_python_control_in_physical_form() -> None:
     assert np.allclose(np.sort_complex(np.linalg.eigvals(physical_loop.A + physical_loop.A_d)), poles, atol=1e-12)
     pade = np.sort_complex(paper_loop.pade(4).poles())
     assert np.allclose(np.sort_complex(physical_loop.pade(4).poles()), pade, atol=1e-9)
+
+
+# ------------------------------------------------------------------------------ campaigns
+def test_a_campaign_with_physical_gains_runs_the_paper_form_bit_for_bit() -> None:
+    from mrpctl.campaign import parse_campaign, run_inputs, simulate_chunk
+
+    base = {
+        "name": "units",
+        "count": 4,
+        "seed": 1,
+        "tau": 0.05,
+        "rate": 100.0,
+        "t_final": 1.0,
+        "spacecraft": {"inertia": [140.0, 100.0, 80.0]},
+        "rule": {"type": "on-delayed"},
+        "initial": {"sigma": [0.5, 0.0, 0.0], "omega": [0.1, 0.0, 0.0]},
+        "dispersions": {"rate": {"magnitude": [0.0, 0.2]}, "gains": {"scale": [0.9, 1.1]}},
+    }
+    physical = parse_campaign({**base, "gains": {"attitude": 70.11, "rate": 40.77}})
+    paper_form = parse_campaign({**base, "gains": {"k_sigma": -70.11, "k_omega": -163.08}})
+    assert _same_bytes(physical.base.K, paper_form.base.K)
+    inputs = run_inputs(physical, 0, 4)
+    assert _same_bytes(inputs.omega0, run_inputs(paper_form, 0, 4).omega0)
+    # the rate dispersion is in rad/s: |omega0 - [0.1, 0, 0]| within the magnitude interval
+    assert np.all(np.linalg.norm(inputs.omega0 - [0.1, 0.0, 0.0], axis=1) <= 0.2 + 1e-15)
+    a, b = simulate_chunk(physical, 0, 4, threads=1), simulate_chunk(paper_form, 0, 4, threads=1)
+    assert a.keys() == b.keys() and all(_same_bytes(a[key], b[key]) for key in a)
