@@ -11,8 +11,9 @@ imported on the first LMI solve and matplotlib only by [`mrpctl.plots`][mrpctl.p
 
 from __future__ import annotations
 
-from mrpctl import design, errors, loop, model, mrp, paper, simulation
+from mrpctl import conventions, design, errors, loop, model, mrp, paper, simulation
 from mrpctl._export import ExportResult, export, export_wheel_controller
+from mrpctl.conventions import PDGains
 from mrpctl.errors import (
     CodegenError,
     CompilerWarning,
@@ -48,6 +49,7 @@ __all__ = [
     "OnCurrent",
     "OnDelayed",
     "OnPredicted",
+    "PDGains",
     "PlantModel",
     "Predictor",
     "Scenario",
@@ -58,6 +60,7 @@ __all__ = [
     "WheelCluster",
     "__version__",
     "closed_loop_functions",
+    "conventions",
     "design",
     "errors",
     "export",

@@ -40,6 +40,7 @@ import casadi as ca
 
 from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_library, compiler_version, find_compiler
 from mrpctl.clock import delay_samples
+from mrpctl.conventions import PDGains, physical_function
 from mrpctl.errors import CodegenError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, SensorModel
 from mrpctl.flight.tracking import ErrorTime
@@ -193,6 +194,23 @@ _PREDICTOR_TORQUE_DESCRIPTIONS = {
 }
 
 
+# The manifest's state and ports of export(..., physical=True).
+_PHYSICAL_STATE = (
+    "sigma (3): MRPs sigma_BN (dimensionless) and omega (3): body rate omega_BN in body components (rad/s), "
+    "as separate ports; inside the Functions x = [sigma; omega/4] (the descriptions below use x)"
+)
+_PHYSICAL_PORTS = {
+    "form": "physical",
+    "rule": "every port holding states x = [sigma; omega/4] is split into sigma and omega (rad/s) per 6-row "
+    "block: x -> sigma, omega; x_<s> -> sigma_<s>, omega_<s>; xdot -> sigma_dot, omega_dot (rad/s^2); "
+    "other names -> <name>_sigma, <name>_omega; a second block (the predictor's model copy z in the 12-row "
+    "delay-line entries) -> z_sigma..., z_omega... (mrpctl.conventions.physical_port_names)",
+    "conversion": "x = [sigma; omega/4] and omega = 4 x[3:6], exact in floating point",
+    "unchanged": "the memory vectors (the controller's own layout; the predictor's holds its model copy z = "
+    "[sigma; omega/4]), u, noise (theta rad; eta rad/s), torque",
+}
+
+
 # =============================================================================== result
 @dataclass(frozen=True)
 class ExportResult:
@@ -272,6 +290,7 @@ def export(
     tracking: bool = False,
     error_time: ErrorTime = ErrorTime.MEASUREMENT,
     feedforward: bool = False,
+    physical: bool = False,
 ) -> ExportResult:
     """Write the closed loop's CasADi Functions to ``out_dir`` as ``.casadi`` files, C code and a library.
 
@@ -326,6 +345,14 @@ def export(
         Default False.
     compile : bool, keyword-only
         Build the shared library when a C compiler is found (default True).
+    physical : bool, keyword-only
+        Give every Function state ports in physical units: each port that carries x = [σ; ω/4]
+        (``x``, ``x_meas``, ``x_next``, ``history``, ...) becomes two, σ (3 rows) and ω (3 rows,
+        rad/s), named by [`mrpctl.conventions.physical_port_names`][mrpctl.conventions.physical_port_names]
+        (``sigma``, ``omega``, ``sigma_meas``, ``omega_meas``, ``history_sigma``, ...); the other ports and
+        the Function names stay ([`mrpctl.conventions.physical_function`][mrpctl.conventions.physical_function]:
+        bit for bit the default export on the converted values). The manifest's ``ports`` says which form.
+        Default False: the paper's x = [σ; ω/4].
 
     Returns
     -------
@@ -349,6 +376,7 @@ def export(
     """
     overwrite = _flag("overwrite", overwrite)
     compile = _flag("compile", compile)
+    physical = _flag("physical", physical)
     closed = closed_loop_functions(
         spacecraft,
         K,
@@ -370,6 +398,8 @@ def export(
     _clean_leftovers(target)  # first: it may put back a folder that a killed export had moved aside
     _check_folder(folder, overwrite)
     functions = closed.functions()
+    if physical:
+        functions = {name: physical_function(function) for name, function in functions.items()}
     in_place = _in_place(target)
     staging = _staging_folder(target, in_place)
     try:
@@ -889,6 +919,15 @@ def _manifest(
         manifest["flight"] = _flight_manifest(closed, closed.flight)
     if closed.tracking is not None:
         manifest["tracking"] = _tracking_manifest(closed.tracking)
+    if "sigma" in functions["step"].name_in():  # export(..., physical=True)
+        manifest["state"] = _PHYSICAL_STATE
+        manifest["ports"] = _PHYSICAL_PORTS
+        gains = PDGains.from_gain(closed.K)
+        manifest["parameters"]["attitude_gain"] = gains.attitude.tolist()  # N m
+        manifest["parameters"]["rate_gain"] = gains.rate.tolist()  # N m s
+        manifest["parameters"]["gain_law"] = (
+            "u = -attitude_gain sigma - rate_gain omega = K x (K = [-P_sigma, -4 P_omega])"
+        )
     return manifest
 
 

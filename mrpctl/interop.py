@@ -13,7 +13,10 @@ convert a
 * [`basilisk_mrp_feedback`][mrpctl.interop.basilisk_mrp_feedback] maps K to the scalar gains of Basilisk's
 ``mrpFeedback``.
 
-Conventions: x = [σ; ω/4] (σ dimensionless, ω in rad/s), u in N m, τ in s.
+Conventions: x = [σ; ω/4] (σ dimensionless, ω in rad/s), u in N m, τ in s; with ``physical=True``,
+[`delayed_loop`][mrpctl.interop.delayed_loop] and [`to_time_response`][mrpctl.interop.to_time_response] use the
+physical state [σ; ω] (ω in rad/s), labelled `PHYSICAL_LABELS` (``sigma1``-``sigma3``, ``omega1``-``omega3``).
+The conversions are those of [`mrpctl.conventions`][mrpctl.conventions].
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import control
 import numpy as np
 
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, readonly
+from mrpctl.conventions import RATE_SCALE, gain_from_parts, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.model import gain_matrix, pd_from_gain, plant_model
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
@@ -34,6 +38,7 @@ if TYPE_CHECKING:
     from mrpctl.simulation import SimulationResult
 
 __all__ = [
+    "PHYSICAL_LABELS",
     "STATE_LABELS",
     "AxisMargin",
     "BasiliskGains",
@@ -51,6 +56,8 @@ __all__ = [
 
 #: State names of x = [σ; ω/4] used on every python-control system and response.
 STATE_LABELS = ("sigma1", "sigma2", "sigma3", "omega1/4", "omega2/4", "omega3/4")
+#: State names of the physical state [σ; ω] (ω in rad/s), with ``physical=True``.
+PHYSICAL_LABELS = ("sigma1", "sigma2", "sigma3", "omega1", "omega2", "omega3")
 INPUT_LABELS = ("u1", "u2", "u3")
 
 
@@ -126,35 +133,48 @@ class DelayedLoop:
         return f"delayed loop xdot = A x + B K x(t - tau), tau = {self.tau:g} s (6 states, 3 inputs)"
 
 
-def delayed_loop(spacecraft: Spacecraft, K: Any, tau: Any = 0.0) -> DelayedLoop:
+def delayed_loop(spacecraft: Spacecraft, K: Any, tau: Any = 0.0, *, physical: bool = False) -> DelayedLoop:
     """The loop linearised at x = 0 as a ``control.StateSpace`` plant, its gain and its delay.
 
     Parameters
     ----------
     spacecraft : Spacecraft
-    K : array_like
-        (3, 6) gain on x = [σ; ω/4] (N m), convention K = [4 J K₁, 4 J K₂].
+    K : array_like or PDGains
+        (3, 6) gain on x = [σ; ω/4] (N m), convention K = [4 J K₁, 4 J K₂], or the physical
+        [`PDGains`][mrpctl.conventions.PDGains].
     tau : float
         Measurement delay τ >= 0 (s).
+    physical : bool, keyword-only
+        The plant in the physical state [σ; ω] (ω in rad/s, labels `PHYSICAL_LABELS`):
+        A = [[0, ¼ I₃], [0, 0]], B = [0; J⁻¹], and the gain on it [−P_σ, −P_ω] = [K_σ, K_ω/4]
+        (u = −P_σ σ − P_ω ω); the same loop (the same poles and margins). Default False.
 
     Returns
     -------
     DelayedLoop
         ``plant.A`` and ``plant.B`` are exactly [`mrpctl.model.plant_model`][mrpctl.model.plant_model]'s A and B,
-        so ``B @ K`` is [`mrpctl.design.linearized_loop`][mrpctl.design.linearized_loop]'s A_d.
+        so ``B @ K`` is [`mrpctl.design.linearized_loop`][mrpctl.design.linearized_loop]'s A_d (without
+        ``physical``; with it, the same matrices in the state [σ; ω]).
     """
     sc = check_spacecraft(spacecraft)
     k = gain_matrix(K)
     delay = nonnegative_scalar("tau", tau)
+    if not isinstance(physical, bool):
+        raise SpecificationError(f"physical must be True or False, got {physical!r}")
     model = plant_model(sc)
+    a, b, labels = np.array(model.A), np.array(model.B), STATE_LABELS
+    if physical:  # z = S x with S = diag(I, 4 I): A -> S A S^-1, B -> S B, K -> K S^-1
+        scale = np.diag([1.0, 1.0, 1.0, RATE_SCALE, RATE_SCALE, RATE_SCALE])
+        a, b, labels = scale @ a / scale.diagonal(), scale @ b, PHYSICAL_LABELS
+        k = k / scale.diagonal()
     plant = control.ss(
-        np.array(model.A),
-        np.array(model.B),
+        a,
+        b,
         np.eye(6),
         np.zeros((6, 3)),
         inputs=list(INPUT_LABELS),
-        outputs=list(STATE_LABELS),
-        states=list(STATE_LABELS),
+        outputs=list(labels),
+        states=list(labels),
         name="mrpctl_plant",
     )
     return DelayedLoop(plant=plant, K=readonly(k), tau=delay)
@@ -278,22 +298,27 @@ def loop_margins(spacecraft: Spacecraft, K: Any) -> LoopMargins:
 
 
 # ------------------------------------------------------------------------------ runs
-def to_time_response(result: SimulationResult) -> control.TimeResponseData:
+def to_time_response(result: SimulationResult, *, physical: bool = False) -> control.TimeResponseData:
     """A run as ``control.TimeResponseData``: time t (s), states and outputs x = [σ; ω/4], inputs u (N m).
 
     The torque u is held over [t_k, t_{k+1}) (zero-order hold); python-control draws it
-    by linear interpolation. The title names the rule and τ.
+    by linear interpolation. The title names the rule and τ. With ``physical=True`` the states
+    and outputs are [σ; ω] (ω in rad/s), labelled `PHYSICAL_LABELS` (``sigma1``-``sigma3``,
+    ``omega1``-``omega3``): the result's own ``sigma`` and ``omega``.
     """
+    if not isinstance(physical, bool):
+        raise SpecificationError(f"physical must be True or False, got {physical!r}")
     t = np.asarray(result.t, dtype=float)
-    x = np.asarray(result.x, dtype=float)
+    x = np.hstack((result.sigma, result.omega)) if physical else np.asarray(result.x, dtype=float)
     u = np.asarray(result.u, dtype=float)
+    labels = PHYSICAL_LABELS if physical else STATE_LABELS
     return control.TimeResponseData(
         t.copy(),
         x.T.copy(),
         x.T.copy(),
         u.T.copy(),
-        output_labels=list(STATE_LABELS),
-        state_labels=list(STATE_LABELS),
+        output_labels=list(labels),
+        state_labels=list(labels),
         input_labels=list(INPUT_LABELS),
         title=f"{result.rule}, tau = {result.tau:g} s",
         sysname="mrpctl",
@@ -302,7 +327,8 @@ def to_time_response(result: SimulationResult) -> control.TimeResponseData:
 
 def from_time_response(response: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, x, u) arrays from a ``control.TimeResponseData`` with the labels of
-    [`to_time_response`][mrpctl.interop.to_time_response].
+    [`to_time_response`][mrpctl.interop.to_time_response] (either form: physical outputs [σ; ω] are
+    converted to x).
 
     Returns
     -------
@@ -315,16 +341,19 @@ def from_time_response(response: Any) -> tuple[np.ndarray, np.ndarray, np.ndarra
     """
     if not isinstance(response, control.TimeResponseData):
         raise SpecificationError(f"response must be a control.TimeResponseData, got {type(response).__name__}")
-    if tuple(response.output_labels) != STATE_LABELS or tuple(response.input_labels) != INPUT_LABELS:
+    outputs = tuple(response.output_labels)
+    if outputs not in (STATE_LABELS, PHYSICAL_LABELS) or tuple(response.input_labels) != INPUT_LABELS:
         raise SpecificationError(
-            f"response must have outputs {list(STATE_LABELS)} and inputs {list(INPUT_LABELS)}, got "
-            f"{list(response.output_labels)} and {list(response.input_labels)}"
+            f"response must have outputs {list(STATE_LABELS)} (or {list(PHYSICAL_LABELS)}) and inputs "
+            f"{list(INPUT_LABELS)}, got {list(response.output_labels)} and {list(response.input_labels)}"
         )
     t = finite_array("response.time", response.time, (None,))
     x = np.asarray(response.outputs, dtype=float).T
     u = np.asarray(response.inputs, dtype=float).T
     if x.shape != (len(t), 6) or u.shape != (len(t), 3):
         raise DimensionError(f"response must hold (6, {len(t)}) outputs and (3, {len(t)}) inputs")
+    if outputs == PHYSICAL_LABELS:
+        x = state(x[:, 0:3], x[:, 3:6])
     return readonly(t), readonly(x), readonly(u)
 
 
@@ -449,17 +478,17 @@ def gain_from_basilisk(K_bsk: Any, P_bsk: Any) -> np.ndarray:
     """mrpctl's (3, 6) K = [−K_bsk I₃, −4 P_bsk I₃] from Basilisk's scalar ``K`` and ``P``."""
     k = finite_scalar("K_bsk", K_bsk)
     p = finite_scalar("P_bsk", P_bsk)
-    return readonly(np.hstack((-k * np.eye(3), -4.0 * p * np.eye(3))))
+    return readonly(gain_from_parts(k * np.eye(3), p * np.eye(3)))
 
 
 def basilisk_state(x: Any) -> tuple[np.ndarray, np.ndarray]:
     """(sigma_BN, omega_BN_B) in Basilisk's names from x = [σ; ω/4] (ω in rad/s)."""
-    state = finite_array("x", x, (6,))
-    return readonly(state[:3]), readonly(4.0 * state[3:])
+    sigma, omega = state_parts(finite_array("x", x, (6,)))
+    return readonly(sigma), readonly(omega)
 
 
 def state_from_basilisk(sigma_BN: Any, omega_BN_B: Any) -> np.ndarray:
     """x = [σ; ω/4] from Basilisk's sigma_BN and omega_BN_B (rad/s)."""
     sigma = finite_array("sigma_BN", sigma_BN, (3,))
     omega = finite_array("omega_BN_B", omega_BN_B, (3,))
-    return readonly(np.concatenate((sigma, omega / 4.0)))
+    return readonly(state(sigma, omega))

@@ -24,7 +24,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mrpctl._validation import finite_array, readonly
+from mrpctl._validation import readonly
+from mrpctl.conventions import feedback_gain, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import SpecificationError
 from mrpctl.mrp import add_expr, b_matrix_expr, dcm_expr, skew_expr, subtract_expr
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
@@ -272,41 +273,7 @@ def plant_model(spacecraft: Spacecraft) -> PlantModel:
     )
 
 
-def state(sigma: Any, omega: Any) -> np.ndarray:
-    """x = [σ; ω/4] from σ (..., 3) and ω (..., 3) in rad/s; shape (..., 6)."""
-    sigma = finite_array("sigma", sigma, (None, 3))
-    omega = finite_array("omega", omega, (None, 3))
-    sigma, omega = np.broadcast_arrays(sigma, omega)
-    return np.concatenate((sigma, omega / 4.0), axis=-1)
-
-
-def state_parts(x: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(σ, ω) from x = [σ; ω/4], shape (..., 6); ω in rad/s."""
-    x = finite_array("x", x, (None, STATE_SIZE))
-    return x[..., 0:3], 4.0 * x[..., 3:6]
-
-
 def gain_matrix(K: Any) -> np.ndarray:
-    """Check that K is a finite (3, 6) feedback gain acting on x = [σ; ω/4]."""
-    return finite_array("K", K, (INPUT_SIZE, STATE_SIZE))
-
-
-def gain_from_pd(spacecraft: Spacecraft, K1: Any, K2: Any) -> np.ndarray:
-    """K = [4 J K₁, 4 J K₂] from the loop gains of σ̈ = K₁ σ + K₂ σ̇ (each 3×3 or 3-vector)."""
-    k1 = _block("K1", K1)
-    k2 = _block("K2", K2)
-    return 4.0 * spacecraft.inertia @ np.hstack((k1, k2))
-
-
-def pd_from_gain(spacecraft: Spacecraft, K: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(K₁, K₂) = J⁻¹ K / 4 split into its σ and σ̇ blocks (the inverse of
-    [`gain_from_pd`][mrpctl.model.gain_from_pd])."""
-    loop = spacecraft.inertia_inverse @ gain_matrix(K) / 4.0
-    return loop[:, 0:3], loop[:, 3:6]
-
-
-def _block(name: str, value: Any) -> np.ndarray:
-    array = finite_array(name, value)
-    if array.shape == (3,):
-        return np.diag(array)
-    return finite_array(name, array, (3, 3))
+    """Check that K is a finite (3, 6) feedback gain acting on x = [σ; ω/4]; a physical
+    [`PDGains`][mrpctl.conventions.PDGains] is converted to it (K = [−P_σ, −4 P_ω])."""
+    return feedback_gain(K)

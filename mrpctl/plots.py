@@ -30,6 +30,7 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from scipy.stats import chi2
 
+from mrpctl.conventions import state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 
 
@@ -606,8 +607,8 @@ def plot_sweep(
 
 def _initial_angle_and_rate(x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Principal angle Φ = 4 arctan|σ₀| (deg) and |ω₀| (rad/s) of (N, 6) initial states x = [σ; ω/4]."""
-    sigma = np.linalg.norm(x0[:, :3], axis=1)
-    return np.degrees(4.0 * np.arctan(sigma)), 4.0 * np.linalg.norm(x0[:, 3:], axis=1)
+    sigma0, omega0 = state_parts(x0)
+    return np.degrees(4.0 * np.arctan(np.linalg.norm(sigma0, axis=1))), np.linalg.norm(omega0, axis=1)
 
 
 def plot_monte_carlo(batch: BatchView, *, title: str | None = None, ax: Any = None) -> Figure:

@@ -18,6 +18,7 @@ from mrpctl import mrp, paper
 from mrpctl._predictor_study import predictor_study
 from mrpctl._validation import integer, nonnegative_scalar, positive_scalar
 from mrpctl.claims import Claim, Verdict
+from mrpctl.conventions import state
 from mrpctl.design import analyze_gains, linearized_loop
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
@@ -420,8 +421,8 @@ def perturbed_states(
     delta_omega = nonnegative_scalar("rate", rate) * generator.uniform(-1.0, 1.0, (count, 3))
     sigma0 = paper.INITIAL_STATE[:3]
     sigma = mrp.add(np.broadcast_to(sigma0, (count, 3)), mrp.from_rotation_vector(theta))
-    omega = 4.0 * paper.INITIAL_STATE[3:] + delta_omega
-    return np.hstack((sigma, omega / 4.0))
+    omega = paper.INITIAL_OMEGA + delta_omega
+    return state(sigma, omega)
 
 
 def _flight_runs(t_final: float) -> dict[str, SimulationResult]:

@@ -21,6 +21,7 @@ from mrpctl._validation import (
     positive_scalar,
     readonly,
 )
+from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.guidance import (
@@ -32,7 +33,7 @@ from mrpctl.guidance import (
     NadirPointing,
 )
 from mrpctl.loop import delay_samples
-from mrpctl.model import gain_from_pd, gain_matrix, pd_from_gain, state
+from mrpctl.model import gain_matrix
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationResult, settling_tolerances, simulate
@@ -85,7 +86,7 @@ _REFERENCE_KEYS = {
 }
 _KEYS = {
     "spacecraft": {"inertia"},
-    "gains": {"K", "k_sigma", "k_omega", "K1", "K2"},
+    "gains": {"K", "k_sigma", "k_omega", "K1", "K2", "attitude", "rate"},
     "initial": {"sigma", "principal_angle_deg", "axis", "omega"},
     "rule": {"type", "eps", "alpha", "delta"},
     "actuator": {"u_max", "u_norm", "saturation"},
@@ -140,9 +141,11 @@ class Scenario:
     spacecraft : Spacecraft
         The plant.
     K : numpy.ndarray
-        (3, 6) feedback gain on x = [σ; ω/4], u = K x(t − τ).
+        (3, 6) feedback gain on x = [σ; ω/4], u = K x(t − τ) (the paper's form; the physical
+        gains are [`gains`][mrpctl.Scenario.gains]).
     x0 : numpy.ndarray
-        Initial state [σ₀; ω₀/4]; also the constant initial function φ(θ) = x0.
+        Initial state [σ₀; ω₀/4]; also the constant initial function φ(θ) = x0 (the physical
+        σ₀, ω₀ are [`sigma0`][mrpctl.Scenario.sigma0], [`omega0`][mrpctl.Scenario.omega0]).
     tau : float
         Measurement delay τ (s).
     rule : SwitchingRule
@@ -207,6 +210,21 @@ class Scenario:
     reference: GuidanceProfile | None = None
 
     @property
+    def gains(self) -> PDGains:
+        """K as physical gains: u = −P_σ σ − P_ω ω, P_σ = −K[:, :3] (N m), P_ω = −K[:, 3:] / 4 (N m s)."""
+        return PDGains.from_gain(self.K)
+
+    @property
+    def sigma0(self) -> np.ndarray:
+        """(3,) initial MRPs σ₀."""
+        return readonly(state_parts(self.x0)[0])
+
+    @property
+    def omega0(self) -> np.ndarray:
+        """(3,) initial body rates ω₀ (rad/s)."""
+        return readonly(state_parts(self.x0)[1])
+
+    @property
     def flight_options(self) -> dict[str, Any]:
         """The flight models that are set, as keywords of [`mrpctl.simulate`][mrpctl.simulation.simulate] and
         [`mrpctl.export`][mrpctl._export.export]."""
@@ -247,7 +265,7 @@ class Scenario:
         )
 
     def __str__(self) -> str:
-        sigma0, omega0 = self.x0[:3], 4.0 * self.x0[3:]
+        sigma0, omega0 = self.sigma0, self.omega0
         return "\n".join(
             (
                 f"scenario {self.name}: {self.description}".rstrip(": "),
@@ -587,12 +605,20 @@ def _table(data: dict[str, Any], name: str) -> dict[str, Any]:
 
 
 def _gain(spacecraft: Spacecraft, gains: dict[str, Any]) -> np.ndarray:
-    forms = [k for k in (("K",), ("k_sigma", "k_omega"), ("K1", "K2")) if any(key in gains for key in k)]
+    forms = [
+        k
+        for k in (("K",), ("k_sigma", "k_omega"), ("K1", "K2"), ("attitude", "rate"))
+        if any(key in gains for key in k)
+    ]
     if len(forms) != 1 or not all(key in gains for key in forms[0]):
         raise SpecificationError(
-            "[gains] must give exactly one of: K (3x6, on x = [sigma; omega/4]); "
-            "k_sigma and k_omega (K = [k_sigma I3, k_omega I3]); K1 and K2 (loop gains)"
+            "[gains] must give exactly one of: attitude and rate (the physical PD gains of u = -P_sigma sigma - "
+            "P_omega omega: P_sigma in N m, P_omega in N m s, each > 0 as a scalar or 3 per-axis values, or a 3x3 "
+            "matrix); K (3x6, on x = [sigma; omega/4]); k_sigma and k_omega (K = [k_sigma I3, k_omega I3]); K1 and "
+            "K2 (loop gains)"
         )
+    if forms[0] == ("attitude", "rate"):
+        return np.array(PDGains(attitude=gains["attitude"], rate=gains["rate"]).gain())
     if forms[0] == ("K",):
         return gain_matrix(gains["K"])
     if forms[0] == ("k_sigma", "k_omega"):
@@ -908,13 +934,18 @@ def _toml_value(value: Any) -> str:
     return repr(float(value))
 
 
-def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
+def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = False) -> str:
     """The scenario as a TOML file that [`load_scenario`][mrpctl.load_scenario] reads back to the same scenario.
 
     Floats are written with ``repr`` (shortest round-trip form), so K, J and x0 come back
-    bit for bit; the gain is written as the full 3×6 K, with the per-axis loop gains
-    K₁, K₂ as a comment when they are diagonal.
+    bit for bit. The gain is written as the full 3×6 K, its physical gains P_σ, P_ω and (when
+    diagonal) the per-axis loop gains K₁, K₂ as comments; with ``physical=True`` it is written in
+    its physical form, ``attitude`` = P_σ and ``rate`` = P_ω (per axis when diagonal and positive,
+    else 3×3), when that form reads back to the same K bit for bit (always, but for a rate entry
+    that underflows), with K as a comment.
     """
+    if not isinstance(physical, bool):
+        raise SpecificationError(f"physical must be True or False, got {physical!r}")
     if isinstance(scenario.rule, OnPredicted) and scenario.predictor is None:
         raise SpecificationError(
             "rule: 'on-predicted' needs the scenario's predictor (the controller's model) to be written as a "
@@ -923,7 +954,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
     k1, k2 = pd_from_gain(scenario.spacecraft, scenario.K)
     inertia = scenario.spacecraft.inertia
     inertia_value = np.diag(inertia) if scenario.spacecraft.is_diagonal else inertia
-    sigma0, omega0 = scenario.x0[:3], 4.0 * scenario.x0[3:]
+    sigma0, omega0 = scenario.sigma0, scenario.omega0
     lines = [f"# {line}" if line else "#" for line in comment.splitlines()]
     lines += [
         f"name = {_toml_value(scenario.name)}",
@@ -948,14 +979,11 @@ def scenario_toml(scenario: Scenario, *, comment: str = "") -> str:
         f"inertia = {_toml_value(inertia_value)}  # kg m^2",
         "",
         "[gains]",
-        "# u = K x(t - tau) on x = [sigma; omega/4], K = [4 J K1, 4 J K2] (N m), row by row",
     ]
     if np.array_equal(k1, np.diag(np.diag(k1))) and np.array_equal(k2, np.diag(np.diag(k2))):
         lines.append(f"# per axis: K1 = {_toml_value(np.diag(k1))} (1/s^2), K2 = {_toml_value(np.diag(k2))} (1/s)")
-    lines.append("K = [")
-    lines += [f"    {_toml_value(row)}," for row in scenario.K]
+    lines += _gain_toml(scenario.K, physical)
     lines += [
-        "]",
         "",
         "[initial]",
         f"sigma = {_toml_value(sigma0)}",
@@ -1031,6 +1059,45 @@ def _reference_toml(reference: GuidanceProfile | None) -> list[str]:
     return lines
 
 
+def _gain_toml(K: np.ndarray, physical: bool) -> list[str]:
+    """The [gains] lines of K: with ``physical`` the attitude and rate gains (per axis, else 3x3) when they read
+    back to K bit for bit (the sign of every zero included), else K itself with the physical gains as comments."""
+    gains = PDGains.from_gain(K)
+    paper_rows = ["    " + _toml_value(row) + "," for row in K]
+    if not physical:
+        shown = (np.diag(gains.attitude), np.diag(gains.rate)) if gains.is_diagonal else (gains.attitude, gains.rate)
+        return [
+            "# u = K x(t - tau) on x = [sigma; omega/4], K = [4 J K1, 4 J K2] (N m), row by row",
+            "# physically u = -P_sigma sigma - P_omega omega, K = [-P_sigma, -4 P_omega]:",
+            f"#   attitude = {_toml_value(shown[0])}  # P_sigma, N m",
+            f"#   rate = {_toml_value(shown[1])}  # P_omega, N m s",
+            "K = [",
+            *paper_rows,
+            "]",
+        ]
+    forms = [(gains.attitude, gains.rate)]
+    if gains.is_diagonal and bool(np.all(np.diag(gains.attitude) > 0) and np.all(np.diag(gains.rate) > 0)):
+        forms.insert(0, (np.diag(gains.attitude), np.diag(gains.rate)))
+    for attitude, rate in forms:
+        back = PDGains(attitude=attitude, rate=rate).gain()
+        if np.array_equal(np.signbit(back), np.signbit(K)) and np.array_equal(back, K):
+            return [
+                "# u = -P_sigma sigma - P_omega omega: attitude = P_sigma (N m), rate = P_omega (N m s)",
+                f"attitude = {_toml_value(attitude)}",
+                f"rate = {_toml_value(rate)}",
+                "# the paper's form u = K x(t - tau) on x = [sigma; omega/4], K = [-P_sigma, -4 P_omega]:",
+                "# K = [",
+                *("#" + row for row in paper_rows),
+                "# ]",
+            ]
+    return [
+        "# u = K x(t - tau) on x = [sigma; omega/4], K = [4 J K1, 4 J K2] (N m), row by row",
+        "K = [",
+        *paper_rows,
+        "]",
+    ]
+
+
 def _flight_toml(scenario: Scenario) -> list[str]:
     """The [actuator], [sensor], [disturbance] and [delay] tables of ``scenario`` (those that are set)."""
     lines: list[str] = []
@@ -1093,15 +1160,21 @@ substeps = 1       # RK4 substeps per measurement period
 inertia = [12.0, 15.0, 9.0]
 
 [gains]
-# u = K x(t - tau) on x = [sigma; omega/4]. Give exactly one of:
-#   K = [[...6 values...], [...], [...]]      the full 3x6 gain (N m)
-#   k_sigma, k_omega                          K = [k_sigma I3, k_omega I3]; scalars or 3 per-axis values
+# Give exactly one of:
+#   attitude, rate                            the PD gains of u = -P_sigma sigma - P_omega omega (Basilisk's
+#                                             mrpFeedback K and P): attitude = P_sigma (N m), rate = P_omega
+#                                             (N m s, on omega in rad/s); scalars or 3 per-axis values (> 0),
+#                                             or 3x3 matrices
 #   K1, K2                                    loop gains of sigma'' = K1 sigma + K2 sigma' (K = [4 J K1, 4 J K2]);
 #                                             scalars, 3 per-axis values or 3x3 matrices
+#   K = [[...6 values...], [...], [...]]      the paper's full 3x6 gain of u = K x on x = [sigma; omega/4] (N m),
+#                                             K = [-P_sigma, -4 P_omega]
+#   k_sigma, k_omega                          K = [k_sigma I3, k_omega I3]; scalars or 3 per-axis values
 # `mrpctl design --inertia 12 15 9 --tau 0.2 --toml s.toml` writes certified gains.
-# These are critically damped (zeta = 1) at omega_n = 0.8 rad/s: K1 = -0.64, K2 = -1.6.
-K1 = -0.64
-K2 = -1.6
+# These are critically damped (zeta = 1) at omega_n = 0.8 rad/s (K1 = -0.64, K2 = -1.6 per axis):
+# P_sigma = 4 J omega_n^2 and P_omega = 2 zeta omega_n J for J = [12, 15, 9].
+attitude = [30.72, 38.4, 23.04]
+rate = [19.2, 24.0, 14.4]
 
 [initial]
 # Either sigma = [s1, s2, s3] (MRPs), or principal_angle_deg and axis.

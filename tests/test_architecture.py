@@ -30,6 +30,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "mrpctl._validation",
             "mrpctl.mrp",
             "mrpctl.spacecraft",
+            "mrpctl.conventions",
             "mrpctl.claims",
             "mrpctl.provenance",
             "mrpctl._compile",

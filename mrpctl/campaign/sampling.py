@@ -244,7 +244,7 @@ def run_inputs(spec: CampaignSpec, start: int, stop: int | None = None) -> RunIn
         gain_quantile[j] = generator.random()
         inertia[j], attempts[j] = _inertia(spec, generator, index)
 
-    base_sigma, base_omega = spec.base.x0[:3], 4.0 * spec.base.x0[3:]
+    base_sigma, base_omega = spec.base.sigma0, spec.base.omega0
     if spec.attitude is None:
         sigma0 = np.tile(base_sigma, (n, 1))
     else:

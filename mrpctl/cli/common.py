@@ -228,6 +228,22 @@ def add_plant_options(parser: argparse.ArgumentParser, default: str) -> None:
         metavar="Kij",
         help="the full 3x6 gain on x = [sigma; omega/4]: 18 numbers K11 ... K16 K21 ... K36, row by row (N m)",
     )
+    parser.add_argument(
+        "--attitude-gain",
+        type=float,
+        nargs="+",
+        metavar="P",
+        help="physical PD gains u = -P_sigma sigma - P_omega omega (Basilisk's mrpFeedback K, P; with --rate-gain): "
+        "the attitude gain P_sigma (N m), 1 value or 3 per axis (> 0) or 9 (3x3, row by row); K = [-P_sigma, "
+        "-4 P_omega]",
+    )
+    parser.add_argument(
+        "--rate-gain",
+        type=float,
+        nargs="+",
+        metavar="P",
+        help="the rate gain P_omega (N m s, on omega in rad/s) with --attitude-gain: 1, 3 or 9 values",
+    )
 
 
 def options_given(*options: tuple[str, object]) -> list[str]:

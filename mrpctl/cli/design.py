@@ -26,6 +26,7 @@ from mrpctl.cli.common import (
     refuse_existing,
 )
 from mrpctl.cli.overrides import paper_base, spacecraft_from
+from mrpctl.conventions import PDGains
 from mrpctl.design import FlownVerdict, SynthesisStatus, analyze_gains, synthesize_lmi, verify_flown
 from mrpctl.design.actuator import design_for_actuator
 from mrpctl.design.robust import RobustPDSynthesis, RobustStatus
@@ -36,6 +37,27 @@ from mrpctl.scenario import check_delay, rule_from_name, scenario_toml
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = ["add_parser"]
+
+
+def _physical_json(K: np.ndarray) -> dict[str, Any]:
+    """K's physical gains for the JSON: u = -P_sigma sigma - P_omega omega (N m, N m s)."""
+    gains = PDGains.from_gain(K)
+    return {"attitude_gain": gains.attitude, "rate_gain": gains.rate}
+
+
+def _print_physical(K: np.ndarray) -> None:
+    """K's physical gains, u = -P_sigma sigma - P_omega omega (per axis when diagonal, else 3x3)."""
+    gains = PDGains.from_gain(K)
+    if gains.is_diagonal:
+        print(
+            "physical: u = -P_sigma sigma - P_omega omega, attitude gain P_sigma = "
+            f"{np.array2string(np.diag(gains.attitude), precision=6)} N m, rate gain P_omega = "
+            f"{np.array2string(np.diag(gains.rate), precision=6)} N m s (per axis)"
+        )
+        return
+    print("physical: u = -P_sigma sigma - P_omega omega, attitude gain P_sigma (N m) and rate gain P_omega (N m s):")
+    print(np.array2string(gains.attitude, precision=6, max_line_width=200, suppress_small=False))
+    print(np.array2string(gains.rate, precision=6, max_line_width=200, suppress_small=False))
 
 
 def _damping_kind(zeta: float) -> str:
@@ -122,6 +144,7 @@ def _design(args: argparse.Namespace) -> int:
                 "zeta": design.gains.zeta,
                 "decay_rate": decay,
                 "K": K,
+                **_physical_json(K),
                 "K1": k1,
                 "K2": k2,
                 "certified": design.certificate.certified if design.certificate is not None else False,
@@ -145,6 +168,7 @@ def _design(args: argparse.Namespace) -> int:
         print("  axes coupled: K1, K2 are not diagonal")
     if decay is not None:
         print(f"certified decay rate {float(decay):.6g} 1/s")
+    _print_physical(K)
     if written is not None:
         if written_verdict is not None:
             print(written_verdict)
@@ -321,6 +345,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
                 "omega_n": result.omega_n,
                 "zeta": result.gains.zeta,
                 "K": K,
+                **_physical_json(K),
                 "K1": np.diag(analysis.K1),
                 "K2": np.diag(analysis.K2),
                 "certified": cert is not None and cert.certified,
@@ -342,6 +367,7 @@ def _robust_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: 
             f"  axis {axis.axis}: K1 = {axis.K1:.6g} 1/s^2, K2 = {axis.K2:.6g} 1/s, omega_n = {axis.omega_n:.6g} "
             f"rad/s, zeta = {axis.zeta:.4g} ({_damping_kind(axis.zeta)}) at the nominal inertia"
         )
+    _print_physical(K)
     if written is not None:
         if written_verdict is not None:
             print(written_verdict)
@@ -417,6 +443,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
                 "decay_rate": alpha,
                 "epsilon": result.epsilon,
                 "K": K,
+                **_physical_json(K),
                 "K1": np.diag(analysis.K1) if analysis.axes else None,
                 "K2": np.diag(analysis.K2) if analysis.axes else None,
                 "certified": cert is not None and cert.certified,
@@ -440,6 +467,7 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
         )
     if not analysis.axes:
         print("  axes coupled: K1, K2 are not diagonal")
+    _print_physical(K)
     if written is not None:
         if written_verdict is not None:
             print(written_verdict)

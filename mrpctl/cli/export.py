@@ -36,6 +36,7 @@ def _export(args: argparse.Namespace) -> int:
         substeps=scenario.substeps,
         overwrite=args.overwrite,
         compile=not args.no_compile,
+        physical=args.physical,
         **scenario.run_options,
     )
     if args.json:
@@ -64,6 +65,12 @@ def add_parser(commands: Any) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--overwrite", action="store_true", help="replace a non-empty output folder")
     parser.add_argument("--no-compile", action="store_true", help="write sources only, no shared library")
+    parser.add_argument(
+        "--physical",
+        action="store_true",
+        help="state ports in physical units: sigma and omega (rad/s) instead of x = [sigma; omega/4] "
+        "(x -> sigma, omega; x_meas -> sigma_meas, omega_meas; history -> history_sigma, history_omega; ...)",
+    )
     add_rule_options(parser)
     parser.add_argument("--tau", type=float, help="override the delay (s)")
     add_flight_options(parser)

@@ -14,9 +14,9 @@ import numpy as np
 
 from mrpctl._validation import finite_array, integer, positive_scalar
 from mrpctl.cli.common import options_given
+from mrpctl.conventions import PDGains, state
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
-from mrpctl.model import state
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.reproduction import paper_scenarios
 from mrpctl.rules import DEFAULT_DELTA, DEFAULT_RULE
@@ -63,8 +63,45 @@ def _per_axis_gain(option: str, values: Sequence[float]) -> np.ndarray:
     raise DimensionError(f"{option}: expected 1 value or 3 (one per axis) but found {len(values)}")
 
 
+def _physical_block(option: str, values: Sequence[float]) -> Any:
+    """A gain of --attitude-gain or --rate-gain as PDGains takes it: 1 value, 3 per axis or 9 (3x3, row by row)."""
+    if len(values) == 1:
+        return float(values[0])
+    if len(values) == 3:
+        return np.asarray(values, dtype=float)
+    if len(values) == 9:
+        return np.reshape(np.asarray(values, dtype=float), (3, 3))
+    raise DimensionError(f"{option}: expected 1 value, 3 (one per axis) or 9 (a 3x3 matrix) but found {len(values)}")
+
+
+def _physical_gain(args: argparse.Namespace) -> np.ndarray | None:
+    """K from --attitude-gain and --rate-gain (u = -P_sigma sigma - P_omega omega); None when neither was given."""
+    attitude, rate = getattr(args, "attitude_gain", None), getattr(args, "rate_gain", None)
+    if attitude is None and rate is None:
+        return None
+    paper_form = options_given(("--K", args.K), ("--k-sigma", args.k_sigma), ("--k-omega", args.k_omega))
+    if paper_form:
+        raise SpecificationError(
+            f"--attitude-gain/--rate-gain and {paper_form[0]} both give the gain; give one form "
+            "(the physical gains, or the paper's K on x = [sigma; omega/4])"
+        )
+    if attitude is None or rate is None:
+        raise SpecificationError("--attitude-gain and --rate-gain go together (u = -P_sigma sigma - P_omega omega)")
+    p_sigma = _physical_block("--attitude-gain", attitude)
+    p_omega = _physical_block("--rate-gain", rate)
+    try:
+        gains = PDGains(attitude=p_sigma, rate=p_omega)
+    except (SpecificationError, DimensionError) as exc:
+        option = "--rate-gain" if str(exc).startswith("rate") else "--attitude-gain"
+        raise type(exc)(f"{option}: {exc}") from exc
+    return np.array(gains.gain())
+
+
 def gain_from_args(args: argparse.Namespace) -> np.ndarray | None:
-    """K from --K or --k-sigma/--k-omega; None when none of them was given."""
+    """K from --attitude-gain/--rate-gain (physical), --K or --k-sigma/--k-omega; None when none of them was given."""
+    physical = _physical_gain(args)
+    if physical is not None:
+        return physical
     if args.K is not None:
         if args.k_sigma is not None or args.k_omega is not None:
             raise SpecificationError("--K gives the whole gain: do not combine it with --k-sigma/--k-omega")
@@ -80,7 +117,12 @@ def gain_from_args(args: argparse.Namespace) -> np.ndarray | None:
 
 def plant_given(args: argparse.Namespace) -> list[str]:
     return options_given(
-        ("--inertia", args.inertia), ("--K", args.K), ("--k-sigma", args.k_sigma), ("--k-omega", args.k_omega)
+        ("--inertia", args.inertia),
+        ("--K", args.K),
+        ("--k-sigma", args.k_sigma),
+        ("--k-omega", args.k_omega),
+        ("--attitude-gain", getattr(args, "attitude_gain", None)),
+        ("--rate-gain", getattr(args, "rate_gain", None)),
     )
 
 
@@ -117,7 +159,7 @@ def scenario_from_args(args: argparse.Namespace, *, file: Path | str | None) -> 
     if gain is not None:
         changes["K"] = finite_array("--K", gain, (3, 6))
     if sigma is not None or omega is not None:
-        changes["x0"] = state(base.x0[:3] if sigma is None else sigma, 4.0 * base.x0[3:] if omega is None else omega)
+        changes["x0"] = state(base.sigma0 if sigma is None else sigma, base.omega0 if omega is None else omega)
     return replace(base, **changes) if changes else base
 
 

@@ -29,6 +29,7 @@ from mrpctl.cli.common import (
 )
 from mrpctl.cli.limits import check_run_fits, check_sweep_fits
 from mrpctl.cli.overrides import apply_flight_options, apply_overrides, scenario_from_args
+from mrpctl.conventions import state_parts
 from mrpctl.design import linearized_loop
 from mrpctl.errors import SpecificationError
 from mrpctl.predictor import OnPredicted
@@ -82,8 +83,10 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "name": scenario.name,
         "inertia": scenario.spacecraft.inertia,
         "K": scenario.K,
-        "sigma0": scenario.x0[:3],
-        "omega0": 4.0 * scenario.x0[3:],
+        "attitude_gain": scenario.gains.attitude,
+        "rate_gain": scenario.gains.rate,
+        "sigma0": scenario.sigma0,
+        "omega0": scenario.omega0,
         "tau": scenario.tau,
         "rate": scenario.rate,
         "t_final": scenario.t_final,
@@ -137,7 +140,8 @@ def add_simulate(commands: Any) -> None:
         description=(
             "Simulate one closed-loop run: a scenario file, a shipped scenario by name "
             f"({names}), or without a file the paper's example (rule hysteretic, delta = {DEFAULT_DELTA:g}) changed by "
-            "--inertia, --K/--k-sigma/--k-omega, --sigma/--omega and the run options."
+            "--inertia, the gains (--attitude-gain/--rate-gain in physical form, or the paper's "
+            "--K/--k-sigma/--k-omega), --sigma/--omega (rad/s) and the run options."
         ),
         formatter_class=Formatter,
         epilog=EXIT_CODES,
@@ -260,7 +264,7 @@ def _sweep(args: argparse.Namespace) -> int:
             )
             batches.append(batch)
             for i in range(len(part)):
-                sigma0, omega0 = x0[i, :3], 4.0 * x0[i, 3:]
+                sigma0, omega0 = state_parts(x0[i])
                 rows.append(
                     (
                         float(values[start + i]),

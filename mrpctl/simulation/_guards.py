@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 
+from mrpctl.conventions import state_parts
 from mrpctl.errors import StepWarning
 
 #: Largest rotation per RK4 step (rad). RK4's error on a rotation of θ per step is ~θ⁵ a step (θ⁴ per rad
@@ -16,7 +17,7 @@ MAX_STEP_ROTATION = 0.1
 
 def check_step_rotation(states: np.ndarray, rate: float, substeps: int) -> None:
     """Warn when |ω| h / substeps of any initial state (x = [σ; ω/4]) is above ``MAX_STEP_ROTATION``."""
-    omega = 4.0 * float(np.max(np.linalg.norm(np.reshape(states, (-1, 6))[:, 3:6], axis=1)))
+    omega = float(np.max(np.linalg.norm(state_parts(np.reshape(states, (-1, 6)))[1], axis=1)))
     step = omega / (rate * substeps)
     if step > MAX_STEP_ROTATION:
         needed = int(np.ceil(omega / (rate * MAX_STEP_ROTATION)))

@@ -16,6 +16,7 @@ import numpy as np
 
 from mrpctl._compile import find_compiler
 from mrpctl._validation import available_memory, finite_array, finite_scalar, integer, positive_scalar, readonly
+from mrpctl.conventions import PDGains, feedback_gain, initial_state
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.engines.common import RunOutput
 from mrpctl.engines.lanes import DEFAULT_WIDTH
@@ -298,7 +299,7 @@ def _tracked_by_run(
 def simulate(
     spacecraft: Spacecraft,
     K: Any,
-    x0: Any,
+    x0: Any = ...,
     *,
     tau: float,
     rule: SwitchingRule,
@@ -322,6 +323,8 @@ def simulate(
     settling_attitude: float = ...,
     settling_rate: float = ...,
     law: SteeringLaw | None = ...,
+    sigma0: Any = ...,
+    omega0: Any = ...,
     sensors: None = ...,
     estimator: None = ...,
 ) -> SimulationResult: ...
@@ -331,7 +334,7 @@ def simulate(
 def simulate(
     spacecraft: Spacecraft,
     K: Any,
-    x0: Any,
+    x0: Any = ...,
     *,
     tau: float,
     rule: SwitchingRule,
@@ -355,6 +358,8 @@ def simulate(
     settling_attitude: float = ...,
     settling_rate: float = ...,
     law: SteeringLaw | None = ...,
+    sigma0: Any = ...,
+    omega0: Any = ...,
     sensors: Sensors,
     estimator: Estimator | None = ...,
 ) -> EstimatedResult: ...
@@ -363,7 +368,7 @@ def simulate(
 def simulate(
     spacecraft: Spacecraft,
     K: Any,
-    x0: Any,
+    x0: Any = None,
     *,
     tau: float,
     rule: SwitchingRule,
@@ -389,6 +394,8 @@ def simulate(
     law: SteeringLaw | None = None,
     sensors: Sensors | None = None,
     estimator: Estimator | None = None,
+    sigma0: Any = None,
+    omega0: Any = None,
 ) -> SimulationResult | EstimatedResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -400,10 +407,12 @@ def simulate(
     ----------
     spacecraft : Spacecraft
         The plant (inertia J in kg m²).
-    K : array_like
-        (3, 6) gain on x = [σ; ω/4] (N m).
-    x0 : array_like
-        (6,) initial state x = [σ; ω/4] (ω in rad/s; see [`mrpctl.model.state`][mrpctl.model.state]).
+    K : array_like or PDGains
+        (3, 6) gain on x = [σ; ω/4] (N m), or the physical gains
+        [`PDGains`][mrpctl.conventions.PDGains] of u = −P_σ σ − P_ω ω (K = [−P_σ, −4 P_ω], exact).
+    x0 : array_like, optional
+        (6,) initial state x = [σ; ω/4] (ω in rad/s; see [`mrpctl.conventions.state`][mrpctl.conventions.state]);
+        or give ``sigma0`` and ``omega0`` instead.
     tau : float, keyword-only
         Measurement delay τ >= 0 (s), a whole number of periods 1/rate.
     rule : SwitchingRule, keyword-only
@@ -498,6 +507,9 @@ def simulate(
         covariance, innovations). None (default): the loop above, unchanged.
     estimator : mrpctl.estimation.Estimator, keyword-only
         The estimator of that loop (with ``sensors``); default the MEKF.
+    sigma0, omega0 : array_like, keyword-only
+        The initial state in physical form instead of ``x0``: (3,) MRPs σ₀ and (3,) body rates ω₀
+        (rad/s; default zero); the run is bit for bit the one of x0 = [σ₀; ω₀/4].
 
     Returns
     -------
@@ -511,6 +523,7 @@ def simulate(
         integer, wrong shapes, unknown history, substeps outside 1..64, keep_every < 1),
         or when the kept arrays would exceed ``memory_limit``.
     """
+    x0 = initial_state(x0, sigma0, omega0)
     if sensors is not None or estimator is not None:
         others = {"actuator": actuator, "disturbance": disturbance, "sensor": sensor, "delay": delay}
         others |= {"predictor": predictor, "progress": progress, "memory_limit": memory_limit}
@@ -528,7 +541,6 @@ def simulate(
         )  # fmt: skip
     spacecraft = check_spacecraft(spacecraft)
     gain = gain_matrix(K)
-    x0 = finite_array("x0", x0, (STATE_SIZE,))
     rule = check_rule(rule)
     if wheels is not None:
         wheels = check_wheel_run(wheels, spacecraft, rule, actuator=actuator, predictor=predictor)
@@ -717,6 +729,16 @@ def _broadcast(name: str, count: int, n: int) -> None:
         raise DimensionError(f"{name}: expected {expected} but found {count}")
 
 
+def _batch_gains(K: Any) -> np.ndarray:
+    """simulate_batch's gains as an array: K itself ((3, 6) or (N, 3, 6), checked by the caller), or one
+    [`PDGains`][mrpctl.conventions.PDGains] or a sequence of them (each converted to its K)."""
+    if isinstance(K, PDGains):
+        return feedback_gain(K)
+    if isinstance(K, list | tuple) and any(isinstance(item, PDGains) for item in K):
+        return np.stack([feedback_gain(item) for item in K]) if K else finite_array("K", K)
+    return finite_array("K", K)
+
+
 def _threads(threads: Any) -> int:
     if threads is None:
         return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -726,7 +748,7 @@ def _threads(threads: Any) -> int:
 def simulate_batch(
     spacecraft: Spacecraft | Sequence[Spacecraft],
     K: Any,
-    x0: Any,
+    x0: Any = None,
     *,
     tau: Any,
     rule: SwitchingRule | Sequence[SwitchingRule],
@@ -753,6 +775,8 @@ def simulate_batch(
     settling_rate: float = SETTLING_OMEGA,
     switches: bool = False,
     law: SteeringLaw | None = None,
+    sigma0: Any = None,
+    omega0: Any = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -772,10 +796,11 @@ def simulate_batch(
     ----------
     spacecraft : Spacecraft or sequence of Spacecraft
         The plant, or one per run.
-    K : array_like
-        (3, 6) or (N, 3, 6) gains on x = [σ; ω/4].
-    x0 : array_like
-        (6,) or (N, 6) initial states x = [σ; ω/4].
+    K : array_like, PDGains or sequence of PDGains
+        (3, 6) or (N, 3, 6) gains on x = [σ; ω/4], or physical gains
+        ([`PDGains`][mrpctl.conventions.PDGains], one or one per run; K = [−P_σ, −4 P_ω], exact).
+    x0 : array_like, optional
+        (6,) or (N, 6) initial states x = [σ; ω/4]; or give ``sigma0`` and ``omega0`` instead.
     tau : float or array_like, keyword-only
         Delay(s) (s), each a whole number of periods 1/rate; runs of the same structure
         (spacecraft, delay) share one compiled engine.
@@ -849,6 +874,10 @@ def simulate_batch(
     law : mrpctl.flight.steering.SteeringLaw, keyword-only
         The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
         such runs take the scalar engine (on the thread pool), also when ``trajectories`` is False.
+    sigma0, omega0 : array_like, keyword-only
+        The initial states in physical form instead of ``x0``: (3,) or (N, 3) MRPs σ₀ and (3,) or
+        (N, 3) body rates ω₀ (rad/s; default zero), broadcast against each other; each run is bit
+        for bit the one of x0 = [σ₀; ω₀/4].
 
     Returns
     -------
@@ -862,12 +891,12 @@ def simulate_batch(
         raise SpecificationError("spacecraft: give a Spacecraft or a non-empty sequence of them")
     for i, each in enumerate(crafts):
         check_spacecraft(each, "spacecraft" if len(crafts) == 1 else f"spacecraft[{i}]")
-    states = finite_array("x0", x0, (None, STATE_SIZE)).reshape(-1, STATE_SIZE)
-    gains = finite_array("K", K)
+    states = initial_state(x0, sigma0, omega0, batch=True).reshape(-1, STATE_SIZE)
+    gains = _batch_gains(K)
     if gains.shape == (INPUT_SIZE, STATE_SIZE):
         gains = gains[None]
     if gains.ndim != 3 or gains.shape[1:] != (INPUT_SIZE, STATE_SIZE):
-        raise DimensionError(f"K: expected shape (3, 6) or (N, 3, 6) but found {np.shape(K)}")
+        raise DimensionError(f"K: expected shape (3, 6) or (N, 3, 6) but found {gains.shape}")
     delays = np.atleast_1d(finite_array("tau", tau))
     if delays.ndim != 1:
         raise DimensionError(f"tau: expected a scalar or shape (N,) but found {delays.shape}")

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mrpctl._validation import readonly, sealed
+from mrpctl.conventions import RATE_SCALE, PDGains, gain_parts, state_parts
 from mrpctl.engines.common import RunOutput
 from mrpctl.engines.stats import DIVERGENCE_BOUND, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, Metrics
 from mrpctl.errors import SpecificationError
@@ -263,7 +264,22 @@ class SimulationResult(_Conversions):
     @property
     def x(self) -> np.ndarray:
         """(m, 6) states x = [σ; ω/4] of the kept samples."""
-        return np.hstack((self.sigma, self.omega / 4.0))
+        return np.hstack((self.sigma, self.omega / RATE_SCALE))
+
+    @property
+    def sigma0(self) -> np.ndarray:
+        """(3,) initial MRPs σ₀ (the x0 of the run, physically)."""
+        return readonly(state_parts(self.x0)[0])
+
+    @property
+    def omega0(self) -> np.ndarray:
+        """(3,) initial body rates ω₀ (rad/s)."""
+        return readonly(state_parts(self.x0)[1])
+
+    @property
+    def gains(self) -> PDGains:
+        """The run's K as physical gains: u = −P_σ σ − P_ω ω, P_σ = −K[:, :3] (N m), P_ω = −K[:, 3:] / 4 (N m s)."""
+        return PDGains.from_gain(self.K)
 
     def plot(self, **kwargs: Any) -> Any:
         """Plot the run: [`mrpctl.plots.plot_response`][mrpctl.plots.plot_response] (``kwargs`` passed on)."""
@@ -366,7 +382,7 @@ def assemble_run(
     return SimulationResult(
         t=sealed(t),
         sigma=sealed(measurements[:, 0:3]),
-        omega=sealed(4.0 * measurements[:, 3:6]),
+        omega=sealed(RATE_SCALE * measurements[:, 3:6]),
         u=sealed(u),
         switch_indices=readonly(indices, np.int64),
         switch_times=readonly(indices / rate),
@@ -492,6 +508,26 @@ class BatchResult(_Conversions):
 
     def __len__(self) -> int:
         return len(self.switch_count)
+
+    @property
+    def sigma0(self) -> np.ndarray:
+        """(N, 3) initial MRPs σ₀ of the runs."""
+        return readonly(state_parts(self.x0)[0])
+
+    @property
+    def omega0(self) -> np.ndarray:
+        """(N, 3) initial body rates ω₀ of the runs (rad/s)."""
+        return readonly(state_parts(self.x0)[1])
+
+    @property
+    def attitude_gain(self) -> np.ndarray:
+        """(N, 3, 3) attitude gains P_σ = −K[:, :, :3] of u = −P_σ σ − P_ω ω (N m)."""
+        return readonly(gain_parts(self.K)[0])
+
+    @property
+    def rate_gain(self) -> np.ndarray:
+        """(N, 3, 3) rate gains P_ω = −K[:, :, 3:] / 4 (N m s, on ω in rad/s)."""
+        return readonly(gain_parts(self.K)[1])
 
     @classmethod
     def concatenate(cls, batches: Sequence[BatchResult]) -> BatchResult:
@@ -731,7 +767,7 @@ def _batch_dataset(result: BatchResult) -> xr.Dataset:
     x0 = np.asarray(result.x0)
     data: dict[str, Any] = {
         "sigma0": (("run", "axis"), x0[:, :3], {"units": "1"}),
-        "omega0": (("run", "axis"), 4.0 * x0[:, 3:], {"units": "rad/s"}),
+        "omega0": (("run", "axis"), RATE_SCALE * x0[:, 3:], {"units": "rad/s"}),
         "K": (("run", "input", "state"), np.asarray(result.K), {"units": "N m"}),
         "tau": (("run",), np.asarray(result.tau), {"units": "s"}),
         "rule": (("run",), np.array([str(rule) for rule in result.rules], dtype=object)),
@@ -821,7 +857,7 @@ def to_pandas(result: SimulationResult | BatchResult) -> pd.DataFrame:
         for i in range(3):
             columns[f"sigma0_{i + 1}"] = x0[:, i]
         for i in range(3):
-            columns[f"omega0_{i + 1}"] = 4.0 * x0[:, 3 + i]
+            columns[f"omega0_{i + 1}"] = RATE_SCALE * x0[:, 3 + i]
         columns["tau"] = np.asarray(batch.tau)
         columns["rule"] = [str(rule) for rule in batch.rules]
         for name in (
