@@ -16,11 +16,13 @@ import time
 from mrpctl import paper
 from mrpctl.design import delay_margin, linearized_loop
 from mrpctl.design.performance import (
-    h2_norm,
     hinf_bound,
     hinf_norm,
-    pointing_budget,
     spacecraft_margins,
+)
+from mrpctl.design.pointing import (
+    h2_norm,
+    pointing_budget,
     synthesize_hinf_pd,
     torque_to_attitude,
 )

@@ -20,11 +20,13 @@ from mrpctl.cli.common import (
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
 from mrpctl.design.performance import (
-    h2_norm,
     hinf_bound,
     hinf_norm,
-    pointing_budget,
     spacecraft_margins,
+)
+from mrpctl.design.pointing import (
+    h2_norm,
+    pointing_budget,
     torque_to_attitude,
 )
 from mrpctl.design.spectra import characteristic_roots, plot_spectrum

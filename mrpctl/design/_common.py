@@ -168,3 +168,17 @@ def axis_a() -> np.ndarray:
     plant = plant_model(Spacecraft(np.ones(3)))
     # The (σ₁, ω₁/4) block of A is [[0, 1], [0, 0]]; in (σ, τσ̇) and t/τ it is the same matrix.
     return np.array(plant.A[np.ix_((0, 3), (0, 3))], dtype=float)
+
+
+def real_matrix(name: str, value: Any, rows: int | None = None, cols: int | None = None) -> np.ndarray:
+    """``value`` as a finite 2-D array (a scalar is 1 × 1, a vector a column unless ``cols`` asks for a row), of
+    ``rows`` × ``cols`` when given; DimensionError naming ``name`` otherwise."""
+    m = finite_array(name, value)
+    if m.ndim == 0:
+        m = m.reshape(1, 1)
+    if m.ndim == 1:
+        m = m.reshape(-1, 1) if cols is None or cols == 1 else m.reshape(1, -1)
+    if m.ndim != 2 or (rows is not None and m.shape[0] != rows) or (cols is not None and m.shape[1] != cols):
+        want = f"({rows if rows is not None else 'any'}, {cols if cols is not None else 'any'})"
+        raise DimensionError(f"{name}: expected shape {want} but found {m.shape}")
+    return m
