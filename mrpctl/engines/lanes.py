@@ -66,11 +66,12 @@ from mrpctl._validation import available_memory as _available_memory  # patched 
 from mrpctl._validation import integer
 from mrpctl.engines.isa import host_isa_flags
 from mrpctl.engines.lane_code import LaneProgram, emit_lanes
+from mrpctl.engines.lane_streams import lane_reference_rows, lane_torque_rows, noise_and_torque_rows, tracking_rows
 from mrpctl.engines.scalar import engine_sample, noise_rows, rule_key
 from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
-from mrpctl.flight.tracking import REFERENCE_WIDTH, ReferenceStream
+from mrpctl.flight.tracking import ReferenceStream
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_structure
 from mrpctl.loop.wheels import wheel_core_function
@@ -810,7 +811,7 @@ def closed_loop_batches(
                 raise DimensionError(f"reference: this lane engine takes one reference per run ({runs})")
             shared_torque = disturbance if isinstance(disturbance, Disturbance) else None
             stream = functools.partial(
-                _lane_references,
+                lane_reference_rows,
                 sensor if noisy else None,
                 noise_columns,
                 shared_torque,
@@ -823,9 +824,7 @@ def closed_loop_batches(
             if per_lane:
                 raise SpecificationError("reference: a shared reference with per-run torques is not supported")
             torque = disturbance if isinstance(disturbance, Disturbance) else None
-            stream = functools.partial(
-                _with_reference, sensor if noisy else None, noise_columns, torque, reference, rate
-            )
+            stream = functools.partial(tracking_rows, sensor if noisy else None, noise_columns, torque, reference, rate)
         elif reference is not None:
             raise SpecificationError("reference: this lane engine takes one shared reference")
         elif per_lane:
@@ -833,12 +832,14 @@ def closed_loop_batches(
             if len(torques) != runs or not all(isinstance(w, Disturbance) for w in torques):
                 raise DimensionError(f"disturbance: this lane engine takes one Disturbance per run ({runs})")
             stream = functools.partial(
-                _lane_torques, sensor if noisy else None, noise_columns, torques, rate, engine.width
+                lane_torque_rows, sensor if noisy else None, noise_columns, torques, rate, engine.width
             )
         elif isinstance(disturbance, Disturbance):
-            stream = functools.partial(_noise_and_torque, sensor if noisy else None, noise_columns, disturbance, rate)
+            stream = functools.partial(
+                noise_and_torque_rows, sensor if noisy else None, noise_columns, disturbance, rate
+            )
         elif sensor is not None and noisy:
-            stream = functools.partial(_noise_rows, sensor)
+            stream = functools.partial(noise_rows, sensor)
         if delay is not None:
             schedule = functools.partial(newest_arrived_slice, delay, rate, engine.d)
     elif flight_options is not None or sensor is not None or delay is not None:
@@ -854,106 +855,6 @@ def closed_loop_batches(
         stream=stream,
         schedule=schedule,
     )
-
-
-def _noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
-    return noise_rows(sensor, k0, k1)  # SensorModel.noise_rows drawn by the C code (the same bits)
-
-
-def _noise_and_torque(
-    sensor: SensorModel | None, noise_columns: int, disturbance: Disturbance, rate: float, k0: int, k1: int
-) -> np.ndarray:
-    """The stream rows of a slice: the noise (``noise_columns``: NOISE_SIZE, zero without a noisy sensor;
-    0 for a sample without a sensor) and the torque w_k, side by side."""
-    rows = np.zeros((k1 - k0, noise_columns + 3))
-    if sensor is not None:
-        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
-    rows[:, noise_columns:] = disturbance.samples(k0, k1, rate)
-    return rows
-
-
-def _with_reference(
-    sensor: SensorModel | None,
-    noise_columns: int,
-    disturbance: Disturbance | None,
-    reference: ReferenceStream,
-    rate: float,
-    k0: int,
-    k1: int,
-) -> np.ndarray:
-    """The stream rows of a slice of a tracking sample: the noise and the torque as in `_noise_and_torque`
-    (the torque's 3 columns only with one), then the reference at t_k (9) and at the error time (9)."""
-    torque_columns = 0 if disturbance is None else 3
-    start = noise_columns + torque_columns
-    rows = np.zeros((k1 - k0, start + 2 * REFERENCE_WIDTH))
-    if sensor is not None:
-        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
-    if disturbance is not None:
-        rows[:, noise_columns:start] = disturbance.samples(k0, k1, rate)
-    now, error = reference.rows(k0, k1)
-    rows[:, start : start + REFERENCE_WIDTH] = now
-    rows[:, start + REFERENCE_WIDTH :] = error
-    return rows
-
-
-def _lane_references(
-    sensor: SensorModel | None,
-    noise_columns: int,
-    shared_torque: Disturbance | None,
-    torques: Sequence[Disturbance] | None,
-    references: Sequence[ReferenceStream],
-    rate: float,
-    width: int,
-    k0: int,
-    k1: int,
-    runs: np.ndarray,
-) -> np.ndarray:
-    """The stream rows of a slice for the W ``runs`` of a batch of a tracking sample with per-lane references:
-    the shared noise and the shared torque (if any), then the per-lane torques (if any, 3 W), then each lane's
-    reference at t_k (9 W) and at the error time (9 W) (nonzero j of lane l at its offset + j W + l)."""
-    shared = noise_columns + (3 if shared_torque is not None else 0)
-    per_lane = (3 if torques is not None else 0) + 2 * REFERENCE_WIDTH
-    rows = np.zeros((k1 - k0, shared + per_lane * width))
-    if sensor is not None:
-        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
-    if shared_torque is not None:
-        rows[:, noise_columns:shared] = shared_torque.samples(k0, k1, rate)
-    offset = shared
-    if torques is not None:
-        lanes = np.zeros((k1 - k0, 3, width))
-        for lane, run in enumerate(runs):
-            lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)
-        rows[:, offset : offset + 3 * width] = lanes.reshape(k1 - k0, 3 * width)
-        offset += 3 * width
-    now = np.zeros((k1 - k0, REFERENCE_WIDTH, width))
-    error = np.zeros((k1 - k0, REFERENCE_WIDTH, width))
-    for lane, run in enumerate(runs):
-        now[:, :, lane], error[:, :, lane] = references[int(run)].rows(k0, k1)
-    rows[:, offset : offset + REFERENCE_WIDTH * width] = now.reshape(k1 - k0, REFERENCE_WIDTH * width)
-    rows[:, offset + REFERENCE_WIDTH * width :] = error.reshape(k1 - k0, REFERENCE_WIDTH * width)
-    return rows
-
-
-def _lane_torques(
-    sensor: SensorModel | None,
-    noise_columns: int,
-    torques: Sequence[Disturbance],
-    rate: float,
-    width: int,
-    k0: int,
-    k1: int,
-    runs: np.ndarray,
-) -> np.ndarray:
-    """The stream rows of a slice for the W ``runs`` of a batch: the shared noise (``noise_columns``, as in
-    `_noise_and_torque`), then each lane's own torque w_k (nonzero j of lane l at noise_columns + j W + l)."""
-    rows = np.zeros((k1 - k0, noise_columns + 3 * width))
-    if sensor is not None:
-        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
-    lanes = np.empty((k1 - k0, 3, width))
-    for lane, run in enumerate(runs):
-        lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)
-    rows[:, noise_columns:] = lanes.reshape(k1 - k0, 3 * width)
-    return rows
 
 
 def lane_stats(batches: LaneBatches) -> np.ndarray:

@@ -1,0 +1,111 @@
+"""The stream rows of the lane engine, one slice at a time: the sensor noise (drawn by ``noise.c``), the
+torque of each sample and, for a tracking sample, the reference rows, shared by the lanes of a batch or each
+lane's own (a nonzero j of lane l at its offset + j W + l), in the layout ``LaneEngine`` streams them."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from mrpctl.engines.scalar import noise_rows
+from mrpctl.flight import Disturbance, SensorModel
+from mrpctl.flight.tracking import REFERENCE_WIDTH, ReferenceStream
+
+__all__ = ["lane_reference_rows", "lane_torque_rows", "noise_and_torque_rows", "tracking_rows"]
+
+
+def noise_and_torque_rows(
+    sensor: SensorModel | None, noise_columns: int, disturbance: Disturbance, rate: float, k0: int, k1: int
+) -> np.ndarray:
+    """The stream rows of a slice: the noise (``noise_columns``: NOISE_SIZE, zero without a noisy sensor;
+    0 for a sample without a sensor) and the torque w_k, side by side."""
+    rows = np.zeros((k1 - k0, noise_columns + 3))
+    if sensor is not None:
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
+    rows[:, noise_columns:] = disturbance.samples(k0, k1, rate)
+    return rows
+
+
+def tracking_rows(
+    sensor: SensorModel | None,
+    noise_columns: int,
+    disturbance: Disturbance | None,
+    reference: ReferenceStream,
+    rate: float,
+    k0: int,
+    k1: int,
+) -> np.ndarray:
+    """The stream rows of a slice of a tracking sample: the noise and the torque as in `noise_and_torque_rows`
+    (the torque's 3 columns only with one), then the reference at t_k (9) and at the error time (9)."""
+    torque_columns = 0 if disturbance is None else 3
+    start = noise_columns + torque_columns
+    rows = np.zeros((k1 - k0, start + 2 * REFERENCE_WIDTH))
+    if sensor is not None:
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
+    if disturbance is not None:
+        rows[:, noise_columns:start] = disturbance.samples(k0, k1, rate)
+    now, error = reference.rows(k0, k1)
+    rows[:, start : start + REFERENCE_WIDTH] = now
+    rows[:, start + REFERENCE_WIDTH :] = error
+    return rows
+
+
+def lane_reference_rows(
+    sensor: SensorModel | None,
+    noise_columns: int,
+    shared_torque: Disturbance | None,
+    torques: Sequence[Disturbance] | None,
+    references: Sequence[ReferenceStream],
+    rate: float,
+    width: int,
+    k0: int,
+    k1: int,
+    runs: np.ndarray,
+) -> np.ndarray:
+    """The stream rows of a slice for the W ``runs`` of a batch of a tracking sample with per-lane references:
+    the shared noise and the shared torque (if any), then the per-lane torques (if any, 3 W), then each lane's
+    reference at t_k (9 W) and at the error time (9 W) (nonzero j of lane l at its offset + j W + l)."""
+    shared = noise_columns + (3 if shared_torque is not None else 0)
+    per_lane = (3 if torques is not None else 0) + 2 * REFERENCE_WIDTH
+    rows = np.zeros((k1 - k0, shared + per_lane * width))
+    if sensor is not None:
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
+    if shared_torque is not None:
+        rows[:, noise_columns:shared] = shared_torque.samples(k0, k1, rate)
+    offset = shared
+    if torques is not None:
+        lanes = np.zeros((k1 - k0, 3, width))
+        for lane, run in enumerate(runs):
+            lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)
+        rows[:, offset : offset + 3 * width] = lanes.reshape(k1 - k0, 3 * width)
+        offset += 3 * width
+    now = np.zeros((k1 - k0, REFERENCE_WIDTH, width))
+    error = np.zeros((k1 - k0, REFERENCE_WIDTH, width))
+    for lane, run in enumerate(runs):
+        now[:, :, lane], error[:, :, lane] = references[int(run)].rows(k0, k1)
+    rows[:, offset : offset + REFERENCE_WIDTH * width] = now.reshape(k1 - k0, REFERENCE_WIDTH * width)
+    rows[:, offset + REFERENCE_WIDTH * width :] = error.reshape(k1 - k0, REFERENCE_WIDTH * width)
+    return rows
+
+
+def lane_torque_rows(
+    sensor: SensorModel | None,
+    noise_columns: int,
+    torques: Sequence[Disturbance],
+    rate: float,
+    width: int,
+    k0: int,
+    k1: int,
+    runs: np.ndarray,
+) -> np.ndarray:
+    """The stream rows of a slice for the W ``runs`` of a batch: the shared noise (``noise_columns``, as in
+    `noise_and_torque_rows`), then each lane's own torque w_k (nonzero j of lane l at noise_columns + j W + l)."""
+    rows = np.zeros((k1 - k0, noise_columns + 3 * width))
+    if sensor is not None:
+        rows[:, :noise_columns] = noise_rows(sensor, k0, k1)  # drawn by noise.c
+    lanes = np.empty((k1 - k0, 3, width))
+    for lane, run in enumerate(runs):
+        lanes[:, :, lane] = torques[int(run)].samples(k0, k1, rate)
+    rows[:, noise_columns:] = lanes.reshape(k1 - k0, 3 * width)
+    return rows
