@@ -23,7 +23,7 @@ A second table: ``simulate_batch`` of 32 perturbations of the paper case, metric
 option and with no option (an ideal sensor, no limits, no disturbance: the flight sample's
 cheapest structure), on the lane engine (the default: W runs per C call, the noise and the
 jitter schedule generated once per slice for the W lanes) and on the scalar engine
-(``_simulate._LANES = False``: one run per C call, the noise per run), runs/s in CPU time on one
+(``_batch._LANES = False``: one run per C call, the noise per run), runs/s in CPU time on one
 thread, min over the rounds (``bench/flight.py batch [rounds]``: this table alone, default 3).
 Measured (design/flight.md, phase 7; three pairs of ``batch 3``, before = the commit before the
 lane engine's specialisation by structure, run alternately on the same shared 2-core machine):
@@ -53,7 +53,7 @@ import numpy as np
 
 from mrpctl import OnCurrent, paper, simulate, simulate_batch
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel, newest_arrived_slice
-from mrpctl.simulation import _simulate
+from mrpctl.simulation import _batch, _simulate
 
 T_FINAL = 60.0
 TAU = 0.5
@@ -245,7 +245,7 @@ def batch_table(rounds: int, runs: int = 32) -> None:
     x0 = np.array(paper.INITIAL_STATE) + np.hstack((rng.normal(0, 0.01, (runs, 3)), rng.normal(0, 0.005, (runs, 3))))
 
     def batch(lanes: bool, options: dict[str, Any]) -> object:
-        _simulate._LANES = lanes
+        _batch._LANES = lanes
         try:
             return simulate_batch(
                 paper.SPACECRAFT,
@@ -259,7 +259,7 @@ def batch_table(rounds: int, runs: int = 32) -> None:
                 **options,
             )
         finally:
-            _simulate._LANES = True
+            _batch._LANES = True
 
     engines = (("lane engine", True), ("scalar engine", False))
     cases = [(case, label, lanes) for case in BATCH_OPTIONS for label, lanes in engines]

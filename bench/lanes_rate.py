@@ -33,7 +33,7 @@ from mrpctl.engines import isa as host_isa
 from mrpctl.engines import lanes as _vectorize
 from mrpctl.engines import scalar as _engine
 from mrpctl.loop import core_function, delay_samples, inertia_input
-from mrpctl.simulation import _simulate
+from mrpctl.simulation import _budget
 from mrpctl.switching import DelayAware
 
 
@@ -42,7 +42,7 @@ def main() -> None:
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 3
     rule = DelayAware()
     d = delay_samples(vector.TAU, vector.RATE)
-    n = _simulate._samples(vector.T_FINAL, vector.RATE)[1]
+    n = _budget._samples(vector.T_FINAL, vector.RATE)[1]
     x0 = vector.tumbling_batch(runs)
     gains = np.broadcast_to(paper.GAIN, (runs, 3, 6))
     memory0 = np.full(runs, rule.initial_memory(delay_samples=d))

@@ -6,7 +6,7 @@ attitudes uniform on SO(3) (scipy ``Rotation.random``), body rates uniform in a 
 
 * ``simulate_batch`` without trajectories, which runs the lane engine (W = the default),
 * the lane engine alone (``simulate_lanes``) for several W, with and without fusion, and ISA flags,
-* the scalar engine (``simulate_batch`` with ``_simulate._LANES = False``: the thread pool
+* the scalar engine (``simulate_batch`` with ``_batch._LANES = False``: the thread pool
   over one C call per run and slice),
 * a hand-written structure-of-arrays C loop of the same closed loop (DelayAware rule,
   u = K m_{k-d}, RK4, the same statistics but the peak torque), W = 8 and 16 lanes, on the same
@@ -45,7 +45,7 @@ from mrpctl.engines import lanes as _vectorize
 from mrpctl.engines import scalar as _engine
 from mrpctl.loop import core_function, delay_samples, inertia_input
 from mrpctl.model import state
-from mrpctl.simulation import BatchResult, _simulate, simulate_batch
+from mrpctl.simulation import BatchResult, _batch, _budget, simulate_batch
 from mrpctl.switching import DelayAware
 
 T_FINAL = 60.0
@@ -228,7 +228,7 @@ def main() -> None:
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 3
     rule = DelayAware()
     d = delay_samples(TAU, RATE)
-    n = _simulate._samples(T_FINAL, RATE)[1]
+    n = _budget._samples(T_FINAL, RATE)[1]
     x0 = tumbling_batch(runs)
     gains = np.broadcast_to(paper.GAIN, (runs, 3, 6))
     scalar_runs = max(8, runs // 4)
@@ -280,13 +280,13 @@ def main() -> None:
     batch_label = f"simulate_batch (lanes, W={_vectorize.DEFAULT_WIDTH})"
 
     def batch(states: np.ndarray, threads: int, lanes: bool) -> BatchResult:
-        _simulate._LANES = lanes
+        _batch._LANES = lanes
         try:
             return simulate_batch(
                 paper.SPACECRAFT, paper.GAIN, states, tau=TAU, rule=rule, t_final=T_FINAL, rate=RATE, threads=threads
             )
         finally:
-            _simulate._LANES = True
+            _batch._LANES = True
 
     batched = batch(x0[:checked], 1, True)
     assert np.array_equal(batched.switch_count, [round(row[2]) for row in reference])

@@ -755,11 +755,11 @@ def test_batches_of_millions_of_runs_are_refused_before_their_per_run_objects_ar
     """A second audit: 3e7 metrics-only runs took 9 GB and 109 s of per-run objects before the refusal, and a
     trajectory batch's per-run results (≈ 5 KB each, measured) were not counted (4e5 runs: 0.52 GB estimated,
     2.45 GB used)."""
-    from mrpctl.simulation import _simulate
+    from mrpctl.simulation import _batch
 
     converted: list[float] = []
-    original = _simulate.delay_samples
-    monkeypatch.setattr(_simulate, "delay_samples", lambda tau, rate: converted.append(tau) or original(tau, rate))
+    original = _batch.delay_samples
+    monkeypatch.setattr(_batch, "delay_samples", lambda tau, rate: converted.append(tau) or original(tau, rate))
     with pytest.raises(SpecificationError, match=r"for 3000000 runs .*give fewer runs per call"):
         simulate_batch(SC, K, X0, tau=np.full(3_000_000, 0.01), rule=Hysteretic(0.1), t_final=0.02, memory_limit=1e8)
     assert converted == []  # refused before the first run's delay was converted

@@ -141,12 +141,12 @@ def test_records_are_absent_where_they_do_not_apply() -> None:
 
 def test_the_memory_estimate_counts_the_records() -> None:
     from mrpctl.errors import SpecificationError
-    from mrpctl.simulation import _simulate
+    from mrpctl.simulation import _budget
 
     n, d = 201, 5
     common = dict(tau=0.05, rate=100.0, t_final=2.0, keep_every=1)
-    plain = _simulate.run_bytes(n, 1) + _simulate.workspace_bytes(n, d, 1)
-    flight = _simulate.run_bytes(n, 1, flight=True) + _simulate.workspace_bytes(n, d, 1)
+    plain = _budget.run_bytes(n, 1) + _budget.workspace_bytes(n, d, 1)
+    flight = _budget.run_bytes(n, 1, flight=True) + _budget.workspace_bytes(n, d, 1)
     run = simulate(
         paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, rule=Hysteretic(0.1), memory_limit=flight, **common
     )

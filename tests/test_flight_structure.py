@@ -11,7 +11,7 @@ from mrpctl import paper, simulate, simulate_batch
 from mrpctl.engines import scalar as _engine
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.loop.options import flight_constants, flight_structure
-from mrpctl.simulation import _simulate
+from mrpctl.simulation import _batch, _simulate
 
 X0 = np.array(paper.INITIAL_STATE, dtype=float)
 LIMITS = ActuatorModel([20.0, 25.0, 30.0], norm_max=35.0)
@@ -28,6 +28,7 @@ def _bytes(result: Any) -> list[bytes]:
 
 def _full(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(_simulate, "flight_structure", lambda options, sensor: dict(FULL))
+    monkeypatch.setattr(_batch, "flight_structure", lambda options, sensor: dict(FULL))
 
 
 CASES = [

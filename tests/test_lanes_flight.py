@@ -15,7 +15,7 @@ from mrpctl import OnCurrent, paper, simulate, simulate_batch
 from mrpctl._compile import find_compiler
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
-from mrpctl.simulation import BatchResult, _simulate
+from mrpctl.simulation import BatchResult, _batch
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="the lane engine needs a C compiler")
 
@@ -41,11 +41,11 @@ def _dispersed(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _both(*args, **kwargs) -> tuple[BatchResult, BatchResult]:
     lanes = simulate_batch(*args, **kwargs)
-    _simulate._LANES = False
+    _batch._LANES = False
     try:
         scalar = simulate_batch(*args, **kwargs)
     finally:
-        _simulate._LANES = True
+        _batch._LANES = True
     return lanes, scalar
 
 
@@ -103,7 +103,7 @@ def test_a_noise_slice_boundary_inside_the_horizon_changes_no_bit(monkeypatch):
     x0, gains = _dispersed(8, 9)
     kwargs = dict(tau=0.05, rate=100.0, rule=Hysteretic(0.1), t_final=12.0, sensor=SENSOR)
     whole = simulate_batch(paper.SPACECRAFT, gains, x0, **kwargs)
-    monkeypatch.setattr(_simulate, "slice_samples", lambda substeps: 97)  # lane slices of 97 samples
+    monkeypatch.setattr(_batch, "slice_samples", lambda substeps: 97)  # lane slices of 97 samples
     sliced = simulate_batch(paper.SPACECRAFT, gains, x0, **kwargs)
     _assert_same_bits(whole, sliced)
 

@@ -23,7 +23,7 @@ from mrpctl.engines.scalar import engine
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE, ActuatorModel, Disturbance, Hysteretic, SensorModel
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, flight_structure
-from mrpctl.simulation import BatchResult, _simulate
+from mrpctl.simulation import BatchResult, _batch
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="the lane engine needs a C compiler")
 
@@ -76,7 +76,7 @@ def _both(monkeypatch: pytest.MonkeyPatch, *args, **kwargs) -> tuple[BatchResult
         patch.setattr(_vectorize, "lane_engine", spy)
         lanes = simulate_batch(*args, **kwargs)
     with monkeypatch.context() as patch:
-        patch.setattr(_simulate, "_LANES", False)
+        patch.setattr(_batch, "_LANES", False)
         scalar = simulate_batch(*args, **kwargs)
     return lanes, scalar, built
 

@@ -22,7 +22,7 @@ import mrpctl
 from mrpctl import paper, plots
 from mrpctl.engines import scalar as _engine
 from mrpctl.errors import SpecificationError
-from mrpctl.simulation import MAX_SUBSTEPS, SimulationResult, _simulate, simulate, simulate_batch
+from mrpctl.simulation import MAX_SUBSTEPS, SimulationResult, _budget, _simulate, simulate, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, OnDelayed, SwitchingRule
 
@@ -148,9 +148,9 @@ def test_a_run_that_would_not_fit_is_refused_up_front() -> None:
             memory_limit=1e8,
         )  # fmt: skip
     # the way out: every 1000th sample is about 10 MB (+ at most 17 MB of switch instants)
-    assert _simulate.run_bytes(100_000_001, 1000) < 3e7
-    assert _simulate.run_bytes(100_000_001, None) <= _simulate.SWITCH_LIMIT * 16
-    assert _simulate._memory_limit(None) > 0
+    assert _budget.run_bytes(100_000_001, 1000) < 3e7
+    assert _budget.run_bytes(100_000_001, None) <= _budget.SWITCH_LIMIT * 16
+    assert _budget._memory_limit(None) > 0
 
 
 def test_a_long_delay_stores_one_history_column() -> None:

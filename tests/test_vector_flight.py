@@ -99,7 +99,7 @@ def test_the_virtual_machine_runs_noise_and_bias_bit_for_bit_and_refuses_jitter_
     from mrpctl.engines import scalar as _engine
     from mrpctl.errors import CodegenError
     from mrpctl.flight import ActuatorModel, Hysteretic
-    from mrpctl.simulation import _simulate
+    from mrpctl.simulation import _batch
 
     noisy = SensorModel(attitude_noise=0.01, rate_noise=1e-4, gyro_bias=[1e-4, -2e-4, 5e-5], seed=3)
     cases = [
@@ -113,7 +113,7 @@ def test_the_virtual_machine_runs_noise_and_bias_bit_for_bit_and_refuses_jitter_
     ]
     assert len(compiled[0].switch_indices) >= 3  # the noise makes the delta = 0 rule switch
     monkeypatch.setattr(_compile, "find_compiler", lambda: None)
-    monkeypatch.setattr(_simulate, "find_compiler", lambda: None)
+    monkeypatch.setattr(_batch, "find_compiler", lambda: None)
     _engine.clear_engines()
     try:
         with warnings.catch_warnings():

@@ -25,7 +25,7 @@ from mrpctl.engines.stats import STATS_SIZE, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.loop import InertiaInput, core_function
 from mrpctl.model import state
-from mrpctl.simulation import _simulate, simulate_batch
+from mrpctl.simulation import _batch, _simulate, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, NoSwitching, OnCurrent, OnDelayed, SwitchingRule
 
@@ -380,7 +380,7 @@ def test_lane_engine_reads_its_ports_and_checks_inputs(monkeypatch: pytest.Monke
 def scalar_batch(monkeypatch: pytest.MonkeyPatch, *args, **kwargs):
     """simulate_batch on the scalar engine (one C call per run and slice): the reference."""
     with monkeypatch.context() as patch:
-        patch.setattr(_simulate, "_LANES", False)
+        patch.setattr(_batch, "_LANES", False)
         return simulate_batch(*args, **kwargs)
 
 
@@ -478,7 +478,7 @@ def test_simulate_batch_lanes_stop_between_slices(rng: np.random.Generator, monk
     assert not packed.run(0, hook(True))
     assert calls == [300 * 3]
 
-    monkeypatch.setattr(_simulate, "slice_samples", lambda substeps: 1000)
+    monkeypatch.setattr(_batch, "slice_samples", lambda substeps: 1000)
     seen: list[int] = []
 
     def progress(done: int, total: int) -> None:

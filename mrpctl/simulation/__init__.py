@@ -12,7 +12,9 @@ from __future__ import annotations
 
 from mrpctl.engines.stats import DIVERGENCE_BOUND, HISTORY_KINDS, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SETTLING_SIGMA
 from mrpctl.loop import MAX_SUBSTEPS, ClosedLoopFunctions, closed_loop_functions, delay_samples
-from mrpctl.simulation._simulate import SWITCH_LIMIT, settling_tolerances, simulate, simulate_batch
+from mrpctl.simulation._batch import simulate_batch
+from mrpctl.simulation._budget import SWITCH_LIMIT
+from mrpctl.simulation._simulate import settling_tolerances, simulate
 from mrpctl.simulation.results import BatchResult, SimulationResult
 
 __all__ = [

@@ -1,0 +1,885 @@
+"""``simulate_batch``: many runs on the lanes or the scalar engine, on a thread pool."""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+import queue
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from typing import Any
+
+import numpy as np
+
+from mrpctl._compile import find_compiler
+from mrpctl._validation import finite_array, integer, positive_scalar, readonly
+from mrpctl.conventions import PDGains, feedback_gain, initial_state
+from mrpctl.engines import lanes as lane_engines
+from mrpctl.engines.common import RunOutput
+from mrpctl.engines.lanes import DEFAULT_WIDTH
+from mrpctl.engines.scalar import engine, rule_key, slice_samples, tracking_memory, wheel_engine
+from mrpctl.engines.stats import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, STATS_SIZE
+from mrpctl.errors import CodegenError, DimensionError, SpecificationError
+from mrpctl.flight import (
+    FLIGHT_MEMORY_SIZE,
+    ActuatorModel,
+    DelayModel,
+    Disturbance,
+    Hysteretic,
+    Saturation,
+    SensorModel,
+)
+from mrpctl.flight.steering import SteeringLaw, check_law
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime, ReferenceStream
+from mrpctl.loop import check_rule, check_substeps, delay_samples, inertia_input
+from mrpctl.loop.options import (
+    NO_FLIGHT_OPTIONS,
+    as_disturbance,
+    check_predictor,
+    flight_constants,
+    flight_memory,
+    flight_options,
+    flight_structure,
+    predictor_constants,
+    predictor_disturbance,
+    varying_delay,
+)
+from mrpctl.loop.wheels import wheel_memory
+from mrpctl.model import INPUT_SIZE, STATE_SIZE
+from mrpctl.predictor import Predictor
+from mrpctl.simulation._budget import (
+    SWITCH_LIMIT,
+    _batch_run_bytes,
+    _check_memory,
+    _keep_every,
+    _memory_limit,
+    _samples,
+    jitter_bytes,
+    lane_bytes,
+    workspace_bytes,
+)
+from mrpctl.simulation._guards import check_step_rotation
+from mrpctl.simulation._simulate import _history, _streamed_disturbance, _structure, settling_tolerances
+from mrpctl.simulation._tracking import tracking_options
+from mrpctl.simulation._wheels import (
+    check_wheel_run,
+    wheel_record,
+    wheel_result,
+)
+from mrpctl.simulation.results import BatchResult, SimulationResult, assemble_batch, assemble_run
+from mrpctl.spacecraft import Spacecraft, check_spacecraft
+from mrpctl.switching import SwitchingRule
+from mrpctl.wheels import WheelCluster
+
+#: Metrics-only batches (``trajectories=False``) of compiled code run on the lane engine
+#: (`mrpctl.engines.lanes`); False runs them on the scalar engine (tests, benchmarks).
+_LANES = True
+_LOGGER = logging.getLogger(__name__)
+
+
+#: Appended to a shared torque series' row-count error in simulate_batch (a list of lists is one (n, 3) series).
+_SHARED_HINT = (
+    "; a list of lists is one torque series shared by the runs: for one constant torque per run give a list of "
+    "(3,) arrays or Disturbance objects (or a (runs, n, 3) array for per-run series)"
+)
+
+
+def _per_run_disturbances(disturbance: Any, n_runs: int, n: int) -> list[Disturbance | None] | None:
+    """simulate_batch's per-run disturbances, or None when one disturbance is shared by the runs.
+
+    Per run: a list or tuple of 1 or N items of which at least one is None, a [`Disturbance`][mrpctl.flight.Disturbance]
+    or a NumPy array (each item as [`simulate`][mrpctl.simulation.simulate] takes it), or a (N, n, 3) array (each run's
+    rows a read-only view, not a copy). Anything else is shared (a (3,) torque, (n, 3) rows, a
+    [`Disturbance`][mrpctl.flight.Disturbance]).
+    """
+    if disturbance is None or isinstance(disturbance, Disturbance):
+        return None
+    if isinstance(disturbance, list | tuple) and any(
+        item is None or isinstance(item, Disturbance | np.ndarray) for item in disturbance
+    ):
+        _broadcast("disturbance", len(disturbance), n_runs)
+        items = list(disturbance) * (n_runs if len(disturbance) == 1 else 1)
+        return [_one_disturbance(item, f"disturbance[{i}]") for i, item in enumerate(items)]
+    if isinstance(disturbance, np.ndarray) and disturbance.ndim == 3:
+        if disturbance.shape[0] not in (1, n_runs) or disturbance.shape[1:] != (n, 3):
+            raise DimensionError(
+                f"disturbance: a per-run per-sample torque has shape (runs, n, 3) = ({n_runs}, {n}, 3) "
+                f"(or (1, {n}, 3)) but found {disturbance.shape}"
+            )
+        return [
+            Disturbance.rows_view(disturbance[i if len(disturbance) > 1 else 0], f"disturbance[{i}]")
+            for i in range(n_runs)
+        ]
+    return None
+
+
+def _one_disturbance(item: Any, name: str) -> Disturbance | None:
+    """One run's disturbance as a Disturbance (float64 (n, 3) rows viewed, not copied), or None."""
+    if item is None or isinstance(item, Disturbance):
+        return item
+    if isinstance(item, np.ndarray) and item.ndim == 2:
+        return Disturbance.rows_view(item, name)
+    try:
+        return Disturbance(item)
+    except ValueError as error:
+        raise type(error)(f"{name}: {error}") from error
+
+
+def _tracked_by_run(
+    reference: Any,
+    error_time: Any,
+    feedforward: Any,
+    pointing_tolerance: Any,
+    rules: Sequence[SwitchingRule],
+    checked: Any,
+    n: int,
+    rate: float,
+    samples_by_run: Sequence[int],
+) -> list[ReferenceStream | None]:
+    """simulate_batch's reference of each run (None: regulation), checked once per (reference, delay)."""
+    runs = len(rules)
+    per_run = isinstance(reference, list | tuple)
+    if per_run:
+        _broadcast("reference", len(reference), runs)
+    items = (list(reference) * (runs if len(reference) == 1 else 1)) if per_run else [reference] * runs
+    made: dict[tuple[int, int], ReferenceStream | None] = {}
+    out: list[ReferenceStream | None] = []
+    for i in range(runs):
+        key = (id(items[i]), samples_by_run[i])
+        if key not in made:
+            made[key] = tracking_options(
+                items[i], error_time, feedforward, pointing_tolerance, rule=rules[i], predictor=checked, n=n,
+                rate=rate, d=samples_by_run[i], name=f"reference[{i}]" if per_run else "reference",
+            )[0]  # fmt: skip
+        out.append(made[key])
+    return out
+
+
+def _broadcast(name: str, count: int, n: int) -> None:
+    if count not in (1, n):
+        expected = "1 entry" if n == 1 else f"1 or {n} entries (one per run)"
+        raise DimensionError(f"{name}: expected {expected} but found {count}")
+
+
+def _batch_gains(K: Any) -> np.ndarray:
+    """simulate_batch's gains as an array: K itself ((3, 6) or (N, 3, 6), checked by the caller), or one
+    [`PDGains`][mrpctl.conventions.PDGains] or a sequence of them (each converted to its K)."""
+    if isinstance(K, PDGains):
+        return feedback_gain(K)
+    if isinstance(K, list | tuple) and any(isinstance(item, PDGains) for item in K):
+        return np.stack([feedback_gain(item) for item in K]) if K else finite_array("K", K)
+    return finite_array("K", K)
+
+
+def _threads(threads: Any) -> int:
+    if threads is None:
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return integer("threads", threads, minimum=1)
+
+
+def simulate_batch(
+    spacecraft: Spacecraft | Sequence[Spacecraft],
+    K: Any,
+    x0: Any = None,
+    *,
+    tau: Any,
+    rule: SwitchingRule | Sequence[SwitchingRule],
+    t_final: float,
+    rate: float = 1000.0,
+    history: Any = "constant",
+    substeps: int = 1,
+    trajectories: bool = False,
+    keep_every: int | None = 1,
+    threads: int | None = None,
+    memory_limit: float | None = None,
+    progress: Callable[[int, int], Any] | None = None,
+    actuator: ActuatorModel | None = None,
+    disturbance: Any = None,
+    sensor: SensorModel | None = None,
+    delay: DelayModel | None = None,
+    predictor: Predictor | None = None,
+    wheels: WheelCluster | None = None,
+    reference: Any = None,
+    error_time: ErrorTime | None = None,
+    feedforward: bool = False,
+    pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE,
+    settling_attitude: float = SETTLING_ATTITUDE_DEG,
+    settling_rate: float = SETTLING_OMEGA,
+    switches: bool = False,
+    law: SteeringLaw | None = None,
+    sigma0: Any = None,
+    omega0: Any = None,
+) -> BatchResult:
+    """Simulate many runs at once on several threads.
+
+    Compiled runs are spread over a pool of worker threads, each with its own buffers
+    (reused from run to run), calling the generated library slice by slice; Ctrl-C (or an
+    exception from ``progress``) sets a stop flag that the workers check between slices.
+    Without ``trajectories`` the runs go to the lane engine (`mrpctl.engines.lanes`): the
+    same sample vectorised across runs, W = 8 runs per C call, each run's metrics bit for bit
+    those of the scalar engine (about 5x its runs/s per core; ``design/campaigns.md``).
+    Without a C compiler the runs are evaluated one after the other in CasADi's virtual
+    machine.
+
+    Any of ``spacecraft``, ``x0``, ``K``, ``tau`` and ``rule`` may be given once (shared)
+    or once per run.
+
+    Parameters
+    ----------
+    spacecraft : Spacecraft or sequence of Spacecraft
+        The plant, or one per run.
+    K : array_like, PDGains or sequence of PDGains
+        (3, 6) or (N, 3, 6) gains on x = [σ; ω/4], or physical gains
+        ([`PDGains`][mrpctl.conventions.PDGains], one or one per run; K = [−P_σ, −4 P_ω], exact).
+    x0 : array_like, optional
+        (6,) or (N, 6) initial states x = [σ; ω/4]; or give ``sigma0`` and ``omega0`` instead.
+    tau : float or array_like, keyword-only
+        Delay(s) (s), each a whole number of periods 1/rate; runs of the same structure
+        (spacecraft, delay) share one compiled engine.
+    rule : SwitchingRule or sequence of SwitchingRule, keyword-only
+        One rule, or one per run (their parameters, such as ε, may differ).
+    t_final, rate, history, substeps
+        As in [`simulate`][mrpctl.simulation.simulate]; ``history`` is shared by all runs (an array is allowed
+        only when all runs have the same delay).
+    trajectories : bool, keyword-only
+        Also return every run as a [`SimulationResult`][mrpctl.SimulationResult] (memory: about 104 bytes per
+        kept sample and run).
+    keep_every : int or None, keyword-only
+        With ``trajectories``, the samples kept per run, as in [`simulate`][mrpctl.simulation.simulate].
+    threads : int, keyword-only
+        Worker threads; default: the CPUs available to this process.
+    memory_limit : float, keyword-only
+        As in [`simulate`][mrpctl.simulation.simulate], for all the runs kept.
+    progress : callable, keyword-only
+        ``progress(samples_done, samples_total)``, called from the calling thread while
+        the workers run; an exception raised by it stops the batch and propagates.
+
+    actuator, sensor, delay : keyword-only
+        The flight loop's models (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run; each rule
+        must then be a [`mrpctl.flight.Hysteretic`][mrpctl.flight.Hysteretic]. Without trajectories flight runs take
+        the lane engine too (noise and jitter streamed per slice, shared by the lanes), bit
+        for bit the scalar engine's; the result then has ``saturated_fraction`` and
+        ``peak_command``.
+    disturbance : keyword-only
+        The body-frame torque w (N m), shared by every run in any form [`simulate`][mrpctl.simulation.simulate] takes
+        (constant (3,), (n, 3) rows, ``Disturbance(function=w)`` of the sample times), or one per
+        run: a list or tuple of N items, each None, a [`mrpctl.flight.Disturbance`][mrpctl.flight.Disturbance] or a
+        NumPy
+        array ((3,) or (n, 3)), or a (N, n, 3) array. Nothing of size (N, n, 3) is made that was not
+        given: a shared per-sample torque is evaluated slice by slice (a function on the slice's
+        times) and streamed, a given (N, n, 3) array is read through views. Each run equals
+        [`simulate`][mrpctl.simulation.simulate] with its own disturbance bit for bit. Metrics-only runs take the lane
+        engine, a shared torque's rows streamed beside the noise, per-run torques as a per-lane
+        stream.
+    predictor : mrpctl.Predictor, keyword-only
+        The predictor controller (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run; each rule must
+        then be a [`mrpctl.OnPredicted`][mrpctl.predictor.OnPredicted]. Predictor runs take the scalar engine (on the
+        thread
+        pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
+        (shared or per run), each run streaming its own rows.
+    wheels : mrpctl.wheels.WheelCluster, keyword-only
+        Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
+        no ``actuator``, no ``predictor``): the runs take the scalar engine on the thread pool, and the result's
+        ``wheels`` holds each run's wheel metrics (and, with ``trajectories``, its wheel speeds and torques).
+    reference : keyword-only
+        Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
+        [`Hysteretic`][mrpctl.flight.Hysteretic]): one reference shared by the runs (an (n, 9) array, read
+        through views, or an object with ``samples(t)``), or a list of N of them, one per run. Metrics-only runs
+        take the lane engine: a shared reference's rows streamed beside the noise and a shared torque,
+        per-run references (or a shared one beside per-run torques) a per-lane stream of each run's rows; each
+        run equals [`simulate`][mrpctl.simulation.simulate] with its reference bit for bit. The batch's
+        ``settling_time`` and ``max_sigma`` are then those of the true error σ_B/R, ω_B/R; the pointing metrics
+        are in ``runs`` (``trajectories=True``).
+    error_time, feedforward, pointing_tolerance : keyword-only
+        As in [`simulate`][mrpctl.simulation.simulate], shared by the runs.
+
+    settling_attitude : float, keyword-only
+        Attitude tolerance of "settled": the principal angle Φ (deg) with |σ| = tan(Φ/4), in (0, 180];
+        default 4 atan(1e-2) = 2.2918° (|σ| < 1e-2).
+    settling_rate : float, keyword-only
+        Rate tolerance of "settled": |ω| below this (rad/s), > 0; default 1e-3. Both are run-time
+        constants of the compiled sample (no recompilation); the result records them.
+    switches : bool, keyword-only
+        Also keep every run's switch indices (``BatchResult.switch_indices``; at most 2**20 per run, the
+        counts stay exact) without the trajectories: the runs then take the scalar engine on the thread
+        pool, not the lanes (the same metrics bit for bit). With ``trajectories`` they are kept anyway.
+    law : mrpctl.flight.steering.SteeringLaw, keyword-only
+        The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
+        such runs take the scalar engine (on the thread pool), also when ``trajectories`` is False.
+    sigma0, omega0 : array_like, keyword-only
+        The initial states in physical form instead of ``x0``: (3,) or (N, 3) MRPs σ₀ and (3,) or
+        (N, 3) body rates ω₀ (rad/s; default zero), broadcast against each other; each run is bit
+        for bit the one of x0 = [σ₀; ω₀/4].
+
+    Returns
+    -------
+    BatchResult
+    """
+    settle_attitude, settle_rate, settling = settling_tolerances(settling_attitude, settling_rate)
+    if not isinstance(switches, bool):
+        raise SpecificationError(f"switches must be True or False, got {switches!r}")
+    crafts = (spacecraft,) if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
+    if not crafts:
+        raise SpecificationError("spacecraft: give a Spacecraft or a non-empty sequence of them")
+    for i, each in enumerate(crafts):
+        check_spacecraft(each, "spacecraft" if len(crafts) == 1 else f"spacecraft[{i}]")
+    states = initial_state(x0, sigma0, omega0, batch=True).reshape(-1, STATE_SIZE)
+    gains = _batch_gains(K)
+    if gains.shape == (INPUT_SIZE, STATE_SIZE):
+        gains = gains[None]
+    if gains.ndim != 3 or gains.shape[1:] != (INPUT_SIZE, STATE_SIZE):
+        raise DimensionError(f"K: expected shape (3, 6) or (N, 3, 6) but found {gains.shape}")
+    delays = np.atleast_1d(finite_array("tau", tau))
+    if delays.ndim != 1:
+        raise DimensionError(f"tau: expected a scalar or shape (N,) but found {delays.shape}")
+    rules = (rule,) if isinstance(rule, SwitchingRule) else tuple(rule)
+    if not rules:
+        raise SpecificationError("rule: give a switching rule or a non-empty sequence of rules")
+    for one in rules:
+        check_rule(one)
+    n_runs = max(len(states), len(gains), len(delays), len(rules), len(crafts))
+    if len(states) == 0:
+        raise DimensionError("x0: expected at least one initial state (shape (6,) or (N, 6)) but found none")
+    for name, count in (
+        ("spacecraft", len(crafts)),
+        ("x0", len(states)),
+        ("K", len(gains)),
+        ("tau", len(delays)),
+        ("rule", len(rules)),
+    ):
+        _broadcast(name, count, n_runs)
+    states = np.broadcast_to(states, (n_runs, STATE_SIZE))
+    gains = np.broadcast_to(gains, (n_runs, INPUT_SIZE, STATE_SIZE))
+    delays = np.broadcast_to(delays, (n_runs,))
+    rules = rules * n_runs if len(rules) == 1 else rules
+    crafts = crafts * n_runs if len(crafts) == 1 else crafts
+    if wheels is not None:
+        for pair in {(id(c), id(r)): (c, r) for c, r in zip(crafts, rules, strict=True)}.values():
+            wheels = check_wheel_run(wheels, pair[0], pair[1], actuator=actuator, predictor=predictor)
+        if reference is not None:
+            raise SpecificationError(
+                "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
+                "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
+            )
+        if law is not None:
+            raise SpecificationError(
+                "law: the steering law on a wheel cluster is not modelled yet; fly it with an ideal body torque "
+                "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
+            )
+    rate = positive_scalar("rate", rate)
+    t_final, n = _samples(t_final, rate)
+    substeps = check_substeps(substeps)
+    check_step_rotation(states, rate, substeps)
+    threads = _threads(threads)
+    keep = _keep_every(keep_every) if trajectories else None
+    limit = _memory_limit(memory_limit)
+    # what the runs need whatever their delays, checked before any per-run object is made (30 million runs took
+    # 9 GB and 109 s of those before the refusal)
+    _check_memory(
+        n_runs * _batch_run_bytes(n, keep, trajectories, records=False), limit, t_final=t_final, keep_every=keep,
+        runs=n_runs,
+    )  # fmt: skip
+    samples_by_run = [delay_samples(value, rate) for value in delays]
+    if not isinstance(history, str) and len(set(samples_by_run)) > 1:
+        raise SpecificationError("history: an array history needs all runs to have the same tau")
+    histories = [_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
+    workers = min(threads, n_runs)
+    width = 1 if predictor is None else 2
+    records = trajectories and (
+        predictor is not None or reference is not None or any(isinstance(one, Hysteretic) for one in rules)
+    )
+    estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width)
+    estimate += n_runs * _batch_run_bytes(n, keep, trajectories, records=records)
+    if not trajectories and _LANES:
+        estimate += lane_bytes(n_runs, max(samples_by_run), workers)
+    _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
+
+    saturation = Saturation.SCALE
+    checked = None
+    for one in rules:
+        checked = check_predictor(predictor, one, history, delay)
+    tracked_by_run = _tracked_by_run(
+        reference, error_time, feedforward, pointing_tolerance, rules, checked, n, rate, samples_by_run
+    )
+    feedforward = feedforward is True
+    law = check_law(law, rules, gains, predictor=checked)
+    per_run = _per_run_disturbances(disturbance, n_runs, n)
+    shared = per_run is None
+    hint = _SHARED_HINT if shared and isinstance(disturbance, list | tuple) else ""
+    if shared and disturbance is not None and not isinstance(disturbance, Disturbance) and checked is None:
+        disturbance = as_disturbance(disturbance)  # checked and copied once, shared by the runs
+    items = [disturbance] * n_runs if per_run is None else per_run
+    options_by_run: list[np.ndarray | None] = [None] * n_runs
+    streamed_by_run: list[Disturbance | None] = [None] * n_runs
+    predictor_by_run: list[np.ndarray | None] = [None] * n_runs  # the predictor sample's constants per run
+    if checked is None:
+        for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
+            options_by_run[i], saturation = flight_options(one, actuator, items[i], sensor)
+            streamed_by_run[i] = (
+                _streamed_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]", hint)
+                if (i == 0 or not shared)
+                else streamed_by_run[0]
+            )
+        varying = [varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
+        jitter = jitter_bytes(varying[0], max(samples_by_run))  # one delay model for every run
+        _check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
+    else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
+        for i in range(n_runs):
+            if i == 0 or not shared:
+                item = predictor_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]")
+                options_by_run[i], saturation = flight_constants(actuator, item, sensor)
+                streamed_by_run[i] = None if item is None or item.constant else item
+            else:
+                options_by_run[i], streamed_by_run[i] = options_by_run[0], streamed_by_run[0]
+        varying = [None] * n_runs
+        made: dict[tuple[int, float], np.ndarray] = {}  # by (id of the run's constants, tau): alive during the call
+        for i in range(n_runs):
+            made_key = (id(options_by_run[i]), float(delays[i]))
+            if made_key not in made:
+                made[made_key] = predictor_constants(options_by_run[i], float(delays[i]), checked.model)
+            predictor_by_run[i] = made[made_key]
+    if any(each is not None for each in streamed_by_run):
+        if find_compiler() is None:
+            raise CodegenError(
+                "disturbance: a per-sample torque needs the compiled engine "
+                "(install a C compiler: gcc or cc, or set CC)"
+            )
+
+        # each worker's torque rows of one slice (the lanes: W runs' rows side by side)
+        rows = INPUT_SIZE * (1 if trajectories or checked is not None else DEFAULT_WIDTH)
+        _check_memory(
+            estimate + workers * min(slice_samples(substeps), n) * rows * 8,
+            limit,
+            t_final=t_final,
+            keep_every=keep,
+            runs=n_runs,
+        )
+
+    stats = np.full((n_runs, STATS_SIZE), np.nan)
+    # the flight rule's and the predictor's runs keep the actuator's accumulators (the predictor's memory begins
+    # with the flight sample's FLIGHT_MEMORY_SIZE entries)
+    any_flight = checked is not None or any(isinstance(one, Hysteretic) for one in rules)
+    flight_rows = np.full((n_runs, FLIGHT_MEMORY_SIZE), np.nan) if any_flight else None
+    scalar_runs = list(range(n_runs))
+    wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
+    if reference is not None and find_compiler() is None:
+        raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
+    if not trajectories and not switches and _LANES and checked is None and law is None and find_compiler() is not None:
+        scalar_runs = _run_lanes(
+            stats,
+            flight_rows,
+            crafts=crafts,
+            rules=rules,
+            samples_by_run=samples_by_run,
+            states=states,
+            gains=gains,
+            history=history,
+            histories=histories,
+            n=n,
+            rate=rate,
+            substeps=substeps,
+            threads=threads,
+            progress=progress,
+            flight=(options_by_run, saturation, sensor, varying),
+            torques=(streamed_by_run, shared),
+            wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
+            tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
+            settling=settling,
+        )
+
+    by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
+    engines: dict[int, Any] = {}
+    for i in scalar_runs:
+        structure = _structure(checked, options_by_run[i], sensor, actuator)
+        torque_input = streamed_by_run[i] is not None
+        tracking = tracked_by_run[i] is not None
+        key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input, tracking)
+        if key not in by_structure and wheels is not None:
+            by_structure[key] = wheel_engine(
+                crafts[i],
+                rules[i],
+                samples_by_run[i],
+                1.0 / rate,
+                substeps,
+                wheels=wheels,
+                sensor=structure["sensor"],
+                disturbed=structure["disturbed"],
+                torque_input=torque_input,
+            )
+        if key not in by_structure:
+            by_structure[key] = engine(
+                crafts[i],
+                rules[i],
+                samples_by_run[i],
+                1.0 / rate,
+                substeps,
+                saturation,
+                predictor=None if checked is None else checked.model,
+                **structure,
+                **({"torque_input": True} if torque_input else {}),
+                **({} if tracked_by_run[i] is None else {"reference_input": True, "feedforward": feedforward}),
+                law=law,
+            )
+        engines[i] = by_structure[key]
+    outputs: list[RunOutput | None] = [None] * n_runs
+    stop_flag = threading.Event()
+    done_samples = [0] * workers
+    work: queue.SimpleQueue[int] = queue.SimpleQueue()
+    for i in scalar_runs:
+        work.put(i)
+
+    def worker(slot: int) -> None:
+        spaces: dict[int, Any] = {}
+        previous = 0
+
+        def stop(done: int) -> bool:
+            done_samples[slot] = previous + done
+            return stop_flag.is_set()
+
+        while not stop_flag.is_set():
+            try:
+                i = work.get_nowait()
+            except queue.Empty:
+                return
+            found = engines[i]
+            space = spaces.get(id(found))
+            if space is None:
+                space = spaces[id(found)] = found.workspace(n, switches=trajectories or switches)
+            d = samples_by_run[i]
+            outputs[i] = found.run(
+                states[i],
+                rules[i].initial_memory(delay_samples=d),
+                histories[i][0],
+                gains[i],
+                np.array(rules[i].parameters()),
+                n,
+                spacecraft=crafts[i],
+                keep_every=keep,
+                workspace=space,
+                switch_limit=n if keep == 1 else SWITCH_LIMIT,
+                stop=stop,
+                flight_options=options_by_run[i] if checked is None else predictor_by_run[i],
+                sensor=sensor,
+                delay=varying[i],
+                rate=rate,
+                **({} if streamed_by_run[i] is None else {"disturbance": streamed_by_run[i]}),
+                **({} if tracked_by_run[i] is None else {"reference": tracked_by_run[i]}),
+                settling=settling,
+            )
+            previous += n
+            done_samples[slot] = previous
+
+    if scalar_runs:
+        compiled = all(each.compiled_code for each in engines.values())
+        count = workers if compiled else 1  # the virtual machine: one run after the other
+        jobs: list[Callable[[], None]] = [functools.partial(worker, slot) for slot in range(count)]
+        _run_polled(jobs, progress, done_samples, n * len(scalar_runs), stop_flag, count)
+        for i in scalar_runs:
+            output = outputs[i]
+            assert output is not None
+            stats[i] = output.stats
+            if flight_rows is not None and output.memory is not None and output.memory.size >= FLIGHT_MEMORY_SIZE:
+                flight_rows[i] = output.memory[:FLIGHT_MEMORY_SIZE]
+            if wheel_rows is not None and output.memory is not None:
+                wheel_rows[i] = output.memory
+
+    indices: tuple[np.ndarray, ...] | None = None
+    if switches and not trajectories:
+        kept = [outputs[i] for i in range(n_runs)]
+        indices = tuple(
+            readonly(np.zeros(0) if o is None or o.switch_indices is None else o.switch_indices, np.int64) for o in kept
+        )
+    runs: list[SimulationResult] | None = None
+    if trajectories:
+        runs = []
+        for i, output in enumerate(outputs):
+            assert output is not None
+            stream = tracked_by_run[i]
+            runs.append(
+                assemble_run(
+                    output,
+                    n=n,
+                    keep_every=keep,
+                    common=dict(
+                        spacecraft=crafts[i],
+                        K=readonly(gains[i]),
+                        tau=float(delays[i]),
+                        rate=rate,
+                        delay_samples=samples_by_run[i],
+                        rule=rules[i],
+                        history=histories[i][1],
+                        substeps=substeps,
+                        t_final=t_final,
+                        x0=readonly(states[i]),
+                        predictor=checked,
+                        **({} if stream is None else {"error_time": stream.error_time, "feedforward": feedforward}),
+                        settling_attitude=settle_attitude,
+                        settling_rate=settle_rate,
+                    ),
+                    pointing_tolerance=None if stream is None else float(pointing_tolerance),
+                )
+            )
+    wheel_records = None
+    if wheels is not None:
+        cluster = wheels
+        if runs is not None:
+            runs = [wheel_result(run, outputs[i], cluster, rate=rate) for i, run in enumerate(runs)]
+            wheel_records = tuple(run.wheels for run in runs if run.wheels is not None)
+        else:
+            assert wheel_rows is not None
+            wheel_records = tuple(wheel_record(row, None, cluster, rate=rate, kept=0) for row in wheel_rows)
+    return assemble_batch(
+        stats,
+        n=n,
+        rate=rate,
+        runs=runs,
+        flight_memory=flight_rows,
+        wheels=wheel_records,
+        common=dict(
+            x0=readonly(states),
+            K=readonly(gains),
+            tau=readonly(delays),
+            rules=tuple(rules),
+            spacecraft=tuple(crafts),
+            t_final=t_final,
+            substeps=substeps,
+            history=history if isinstance(history, str) else readonly(history),
+            settling_attitude=settle_attitude,
+            settling_rate=settle_rate,
+            switch_indices=indices if runs is None else tuple(run.switch_indices for run in runs),
+        ),
+    )
+
+
+def _run_lanes(
+    stats: np.ndarray,
+    flight_rows: np.ndarray | None,
+    *,
+    crafts: Sequence[Spacecraft],
+    rules: Sequence[SwitchingRule],
+    samples_by_run: list[int],
+    states: np.ndarray,
+    gains: np.ndarray,
+    history: Any,
+    histories: list[tuple[np.ndarray, Any]],
+    n: int,
+    rate: float,
+    substeps: int,
+    threads: int,
+    progress: Callable[[int, int], Any] | None,
+    flight: tuple[list[np.ndarray | None], Saturation, SensorModel | None, list[DelayModel | None]],
+    torques: tuple[list[Disturbance | None], bool],
+    wheels: tuple[WheelCluster, np.ndarray] | None = None,
+    tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
+    settling: tuple[float, float] | None = None,
+) -> list[int]:
+    """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
+    layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
+    runs' `flight_structure`), W runs per C call, the batches on the thread
+    pool; write the rows of ``stats`` (and of ``flight_rows``: the flight sample's memory).
+    ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
+    ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
+    streamed beside the noise; else each lane is streamed its run's rows). Returns the runs left
+    to the scalar engine (a rule without lane form). ``wheels``: every run on this wheel cluster
+    (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it.
+    ``tracking``: each run's reference, the feedforward and
+    whether the references are per run (then, or beside per-run torques, each lane is streamed its own rows;
+    a shared one is streamed beside the noise)."""
+    options_by_run, saturation, sensor, varying = flight
+    streamed_by_run, shared = torques
+    tracked_by_run, feedforward, per_run_reference = (
+        ([None] * len(crafts), False, False) if tracking is None else tracking
+    )
+
+    groups: dict[Any, list[int]] = {}
+    keys: dict[tuple[int, int, int, bool], Any] = {}  # objects alive during the call: id() is safe
+    left: list[int] = []
+    for i in range(len(crafts)):
+        own_torque = streamed_by_run[i] is not None and not shared  # streamed per lane
+        memo = (id(crafts[i]), id(rules[i]), samples_by_run[i], own_torque)
+        key = keys.get(memo)
+        if key is None:
+            d = samples_by_run[i]
+            key = keys[memo] = (inertia_input(crafts[i]), type(rules[i]), rule_key(rules[i], d), d, own_torque)
+            if wheels is not None:  # J is a constant of a wheel library
+                key += (crafts[i].inertia.tobytes(),)
+            if tracked_by_run[i] is not None:  # a shared reference: the group's; per run: one per lane
+                key += (None if per_run_reference or own_torque else id(tracked_by_run[i]),)
+        groups.setdefault(key, []).append(i)
+    packs: list[tuple[list[int], lane_engines.LaneBatches]] = []
+    step = slice_samples(substeps)
+    for members in groups.values():
+        first = members[0]
+        d = samples_by_run[first]
+        is_flight = isinstance(rules[first], Hysteretic)
+        own_torque = is_flight and streamed_by_run[first] is not None and not shared
+        torque: Any = streamed_by_run[first] if is_flight else None
+        reference: Any = tracked_by_run[first] if is_flight else None
+        own_reference = reference is not None and (per_run_reference or own_torque)
+        if own_reference:
+            reference = [tracked_by_run[i] for i in members]
+        if own_torque:
+            torque = [streamed_by_run[i] for i in members]
+        options = _lane_options(options_by_run, members) if is_flight else None
+        # the group's structure: the union over its runs (flight_structure of their rows), as the scalar engine's
+        structure = flight_structure(options, sensor) if is_flight else {}
+        try:
+            if wheels is not None:
+                lanes = lane_engines.wheel_lane_engine(
+                    crafts[first],
+                    d,
+                    1.0 / rate,
+                    substeps,
+                    wheels=wheels[0],
+                    sensor=structure["sensor"],
+                    disturbed=structure["disturbed"],
+                    torque_input=torque is not None,
+                    torque_per_lane=own_torque,
+                )
+            else:
+                lanes = lane_engines.lane_engine(
+                    crafts[first],
+                    rules[first],
+                    d,
+                    1.0 / rate,
+                    substeps,
+                    saturation=saturation,
+                    torque_input=torque is not None,
+                    torque_per_lane=own_torque,
+                    **structure,
+                    **(
+                        {}
+                        if reference is None
+                        else {
+                            "reference_input": True,
+                            "feedforward": feedforward,
+                            "reference_per_lane": own_reference,
+                        }
+                    ),
+                )
+        except CodegenError as error:
+            _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
+            left.extend(members)
+            continue
+        if isinstance(history, str) or d == 0:  # one row per run (constant, zero-input; d = 0: unused)
+            rows = np.stack([histories[i][0][0] for i in members])[:, :, None]
+        else:  # the array history is shared: a view, copied W runs at a time
+            rows = np.broadcast_to(histories[first][0].T, (len(members), STATE_SIZE, d))
+        if wheels is not None:  # the flight memory, then the wheel speeds and the wheel accumulators at 0
+            memory0 = np.array([wheel_memory(flight_memory(states[i], histories[i][0], d), wheels[0]) for i in members])
+        elif is_flight:  # h = c = +1 and the sigma seen at k = 0, as Engine.run starts a flight run
+            memory0 = np.array([flight_memory(states[i], histories[i][0], d) for i in members])
+            if reference is not None:  # the controller's previous MRP is the error σ_B/R it sees at k = 0
+                streams = reference if own_reference else [reference] * len(members)
+                sigmas = [tracking_memory(row[2:5], stream) for row, stream in zip(memory0, streams, strict=True)]
+                memory0[:, 2:5] = sigmas
+        else:
+            memory0 = np.array([rules[i].initial_memory(delay_samples=d) for i in members], dtype=float)
+        packs.append(
+            (
+                members,
+                lane_engines.closed_loop_batches(
+                    lanes,
+                    states[members],
+                    memory0,
+                    rows,
+                    gains[members],
+                    np.array([rules[i].parameters() for i in members], dtype=float),
+                    n,
+                    spacecraft=[crafts[i] for i in members],
+                    threads=threads,
+                    slice_samples=step,
+                    flight_options=options,
+                    sensor=sensor if is_flight else None,
+                    delay=varying[first] if is_flight else None,
+                    rate=rate,
+                    disturbance=torque,
+                    **({} if reference is None else {"reference": reference}),
+                    settling=settling,
+                ),
+            )
+        )
+    if not packs:
+        return left
+    work: queue.SimpleQueue[tuple[int, int]] = queue.SimpleQueue()
+    for g, (_, packed) in enumerate(packs):
+        for b in range(packed.count):
+            work.put((g, b))
+    units = sum(packed.count for _, packed in packs)
+    workers = min(threads, units)
+    done_samples = [0] * workers
+    stop_flag = threading.Event()
+
+    def worker(slot: int) -> None:
+        previous = 0
+
+        def stop(done: int) -> bool:
+            done_samples[slot] = previous + done
+            return stop_flag.is_set()
+
+        while not stop_flag.is_set():
+            try:
+                g, b = work.get_nowait()
+            except queue.Empty:
+                return
+            packed = packs[g][1]
+            if not packed.run(b, stop):
+                return
+            previous += packed.lanes(b) * n
+            done_samples[slot] = previous
+
+    total = n * sum(len(members) for members, _ in packs)
+    jobs: list[Callable[[], None]] = [functools.partial(worker, slot) for slot in range(workers)]
+    _run_polled(jobs, progress, done_samples, total, stop_flag, workers)
+    for members, packed in packs:
+        stats[members] = lane_engines.lane_stats(packed)
+        if wheels is not None:  # the wheel sample's memory: the flight sample's ten entries, then the wheels'
+            memory = lane_engines.lane_memory(packed)
+            wheels[1][members] = memory
+            if flight_rows is not None:
+                flight_rows[members] = memory[:, :FLIGHT_MEMORY_SIZE]
+        elif flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
+            flight_rows[members] = lane_engines.lane_memory(packed)
+    return left
+
+
+def _lane_options(options_by_run: list[np.ndarray | None], members: list[int]) -> np.ndarray | None:
+    """The flight constants of a lane group: one shared row, or (members, 10) when they differ by run."""
+    rows = [options_by_run[i] for i in members]
+    if all(row is rows[0] for row in rows):
+        return rows[0]
+    return np.array([NO_FLIGHT_OPTIONS if row is None else row for row in rows])
+
+
+def _run_polled(
+    jobs: list[Callable[[], None]],
+    progress: Callable[[int, int], Any] | None,
+    done_samples: list[int],
+    total: int,
+    stop_flag: threading.Event,
+    count: int,
+) -> None:
+    """Run ``jobs`` on ``count`` threads; the calling thread waits (so Ctrl-C reaches it),
+    calls ``progress`` and, on any exception, sets ``stop_flag`` and waits for the workers
+    (each stops within one slice) before re-raising."""
+    pool = ThreadPoolExecutor(max_workers=count)
+    try:
+        futures = [pool.submit(job) for job in jobs]
+        reported = -1
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, timeout=0.05, return_when=FIRST_EXCEPTION)
+            for future in finished:
+                future.result()  # a worker's exception propagates
+            if progress is not None:
+                done = sum(done_samples)
+                if done != reported:
+                    reported = done
+                    progress(done, total)
+    except BaseException:
+        stop_flag.set()
+        raise
+    finally:
+        pool.shutdown(wait=True)
