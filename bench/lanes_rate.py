@@ -42,7 +42,7 @@ def main() -> None:
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 3
     rule = DelayAware()
     d = delay_samples(vector.TAU, vector.RATE)
-    n = _budget._samples(vector.T_FINAL, vector.RATE)[1]
+    n = _budget.sample_horizon(vector.T_FINAL, vector.RATE)[1]
     x0 = vector.tumbling_batch(runs)
     gains = np.broadcast_to(paper.GAIN, (runs, 3, 6))
     memory0 = np.full(runs, rule.initial_memory(delay_samples=d))

@@ -228,7 +228,7 @@ def main() -> None:
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 3
     rule = DelayAware()
     d = delay_samples(TAU, RATE)
-    n = _budget._samples(T_FINAL, RATE)[1]
+    n = _budget.sample_horizon(T_FINAL, RATE)[1]
     x0 = tumbling_batch(runs)
     gains = np.broadcast_to(paper.GAIN, (runs, 3, 6))
     scalar_runs = max(8, runs // 4)

@@ -20,16 +20,12 @@ become ``mrpctl__...``), so the generated code links next to other CasADi code. 
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import logging
 import math
 import os
-import re
-import secrets
 import shutil
-import stat
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -38,10 +34,21 @@ from typing import Any
 
 import casadi as ca
 
-from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, abandoned, build_library, compiler_version, find_compiler
+from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, build_library, compiler_version, find_compiler
+from mrpctl._publish import (
+    check_folder,
+    clean_leftovers,
+    file_digest,
+    folder_path,
+    in_place_only,
+    publish,
+    publish_in_place,
+    staging_folder,
+    write_file,
+)
 from mrpctl.clock import delay_samples
 from mrpctl.conventions import PDGains, physical_function
-from mrpctl.errors import CodegenError, SpecificationError
+from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, SensorModel
 from mrpctl.flight.tracking import ErrorTime
 from mrpctl.loop import (
@@ -393,20 +400,20 @@ def export(
         error_time=error_time,
         feedforward=feedforward,
     )
-    folder = _path(out_dir)
+    folder = folder_path(out_dir)
     target = Path(os.path.realpath(folder))  # a symbolic link stays, its target is replaced
-    _clean_leftovers(target)  # first: it may put back a folder that a killed export had moved aside
-    _check_folder(folder, overwrite)
+    clean_leftovers(target)  # first: it may put back a folder that a killed export had moved aside
+    check_folder(folder, overwrite)
     functions = closed.functions()
     if physical:
         functions = {name: physical_function(function) for name, function in functions.items()}
-    in_place = _in_place(target)
-    staging = _staging_folder(target, in_place)
+    in_place = in_place_only(target)
+    staging = staging_folder(target, in_place)
     try:
         names: list[str] = []
         for name, function in functions.items():
             path = staging / f"{name}.casadi"
-            _write(path, lambda path=path, function=function: function.save(str(path)))
+            write_file(path, lambda path=path, function=function: function.save(str(path)))
             names.append(path.name)
         names += _write_c_code(staging, functions)
         compiler, reason = _build_library(staging, compile)
@@ -414,12 +421,12 @@ def export(
             names.append(LIBRARY_NAME)
         manifest = _manifest(closed, functions, staging, names, compiler, reason)
         manifest_path = staging / MANIFEST_NAME
-        _write(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
+        write_file(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
         names.append(MANIFEST_NAME)
         if in_place:
-            _publish_in_place(staging, target, names)
+            publish_in_place(staging, target, names, frozenset(_export_names()), MANIFEST_NAME)
         else:
-            _publish(staging, target)
+            publish(staging, target, frozenset(_export_names()))
     finally:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)
@@ -515,17 +522,17 @@ def export_wheel_controller(
         ),
         "wheel_step": wheel_step_function(spacecraft, wheels, period, substeps),
     }  # fmt: skip
-    folder = _path(out_dir)
+    folder = folder_path(out_dir)
     target = Path(os.path.realpath(folder))
-    _clean_leftovers(target)
-    _check_folder(folder, overwrite)
-    in_place = _in_place(target)
-    staging = _staging_folder(target, in_place)
+    clean_leftovers(target)
+    check_folder(folder, overwrite)
+    in_place = in_place_only(target)
+    staging = staging_folder(target, in_place)
     try:
         names: list[str] = []
         for name, function in functions.items():
             path = staging / f"{name}.casadi"
-            _write(path, lambda path=path, function=function: function.save(str(path)))
+            write_file(path, lambda path=path, function=function: function.save(str(path)))
             names.append(path.name)
         names += _write_c_code(staging, functions)
         compiler, reason = _build_library(staging, compile)
@@ -582,7 +589,7 @@ def export_wheel_controller(
                 "compiler": _compiler_description(compiler) if compiler is not None else None,
                 "flags": [*DEFAULT_FLAGS, "-lm"],
             },
-            "files": {name: _file_digest(staging / name) for name in sorted(names)},
+            "files": {name: file_digest(staging / name) for name in sorted(names)},
             "content_hash": {
                 "algorithm": "sha256",
                 "covers": "every file listed in 'files' (all written files except manifest.json)",
@@ -590,12 +597,12 @@ def export_wheel_controller(
             },
         }
         manifest_path = staging / MANIFEST_NAME
-        _write(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
+        write_file(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
         names.append(MANIFEST_NAME)
         if in_place:
-            _publish_in_place(staging, target, names)
+            publish_in_place(staging, target, names, frozenset(_export_names()), MANIFEST_NAME)
         else:
-            _publish(staging, target)
+            publish(staging, target, frozenset(_export_names()))
     finally:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)
@@ -617,7 +624,7 @@ def content_hash(folder: str | os.PathLike[str], names: Any) -> str:
     gives the same value.
     """
     folder = Path(folder)
-    lines = [f"{_file_digest(folder / name)}  {name}\n" for name in sorted(names)]
+    lines = [f"{file_digest(folder / name)}  {name}\n" for name in sorted(names)]
     return hashlib.sha256("".join(lines).encode()).hexdigest()
 
 
@@ -640,164 +647,6 @@ def _export_names() -> tuple[str, ...]:
     return (*names, SOURCE_NAME, HEADER_NAME, LIBRARY_NAME, MANIFEST_NAME)
 
 
-def _path(out_dir: Any) -> Path:
-    try:
-        return Path(out_dir)
-    except TypeError as exc:
-        raise SpecificationError(f"out_dir must be a path, got {out_dir!r}") from exc
-
-
-def _check_folder(folder: Path, overwrite: bool) -> None:
-    """Refuse ``folder`` if it is a file, or a non-empty folder without ``overwrite``."""
-    if folder.exists() and not folder.is_dir():
-        raise SpecificationError(f"out_dir {str(folder)!r} exists and is not a folder")
-    if folder.is_dir():
-        try:
-            present = sorted(entry.name for entry in folder.iterdir())
-        except OSError as exc:
-            raise CodegenError(f"cannot read the export folder out_dir {str(folder)!r}: {exc}") from exc
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise CodegenError(f"the export folder out_dir {str(folder)!r} is not writable")
-        if present and not overwrite:
-            shown = ", ".join(present[:5]) + (", ..." if len(present) > 5 else "")
-            raise SpecificationError(
-                f"out_dir {str(folder)!r} is not empty ({len(present)} entries: {shown}); "
-                "choose an empty or new folder, or pass overwrite=True to replace a previous export"
-            )
-
-
-def _in_place(target: Path) -> bool:
-    """True when ``target`` cannot be swapped: the working directory (or above it), a mount point,
-    or its parent is not writable. Files are then replaced one by one inside it."""
-    if not target.is_dir():
-        return False
-    cwd = Path(os.path.realpath(os.getcwd()))
-    if cwd == target or target in cwd.parents or os.path.ismount(target):
-        return True
-    return not os.access(target.parent, os.W_OK | os.X_OK)
-
-
-def _staging_folder(target: Path, in_place: bool) -> Path:
-    """A new private folder beside ``target`` (inside it when in place); leftovers are cleaned first."""
-    tag = f"{os.getpid()}-{secrets.token_hex(4)}"
-    if in_place:
-        home, staging = target, target / f"{_IN_PLACE_PREFIX}{tag}"
-    else:
-        home, staging = target.parent, target.parent / f".{target.name}{_NEW_INFIX}{tag}"
-    try:
-        home.mkdir(parents=True, exist_ok=True)
-        staging.mkdir()
-    except OSError as exc:
-        raise CodegenError(f"cannot create the export folder out_dir {str(target)!r}: {exc}") from exc
-    return staging
-
-
-_NEW_INFIX = ".export-"
-_OLD_INFIX = ".replaced-"
-_IN_PLACE_PREFIX = ".mrpctl-export-"
-
-
-def _clean_leftovers(target: Path) -> None:
-    """Remove staging folders of killed exports; put back a folder a killed export had moved aside."""
-    patterns = [(target.parent, re.compile(rf"\.{re.escape(target.name)}(\.export-|\.replaced-)(\d+)-[0-9a-f]+"))]
-    if target.is_dir():
-        patterns.append((target, re.compile(r"\.mrpctl-export-()(\d+)-[0-9a-f]+")))
-    for home, pattern in patterns:
-        try:
-            entries = list(home.iterdir())
-        except OSError:
-            continue
-        for entry in entries:
-            match = pattern.fullmatch(entry.name)
-            if match is None or not abandoned(entry, int(match.group(2))):
-                continue
-            if match.group(1) == _OLD_INFIX and not os.path.lexists(target):
-                try:
-                    os.rename(entry, target)  # killed between the two renames of the swap: restore
-                except OSError as exc:
-                    logger.warning("could not restore %s from %s: %s", target, entry, exc)
-                else:
-                    logger.warning("restored %s from %s, left by an interrupted export", target, entry)
-            else:
-                shutil.rmtree(entry, ignore_errors=True)
-                logger.info("removed %s, left by an interrupted export", entry)
-
-
-def _carry_over(old: Path, staging: Path) -> None:
-    """Hard-link (or copy) the entries of ``old`` that export did not write into ``staging``."""
-    ours = set(_export_names())
-    for entry in old.iterdir():
-        if entry.name in ours or entry.name.startswith(_IN_PLACE_PREFIX):
-            continue
-        destination = staging / entry.name
-        if entry.is_dir() and not entry.is_symlink():
-            shutil.copytree(entry, destination, symlinks=True, copy_function=_link_or_copy)
-        elif entry.is_symlink():
-            os.symlink(os.readlink(entry), destination)
-        else:
-            _link_or_copy(str(entry), str(destination))
-
-
-def _link_or_copy(source: str, destination: str) -> None:
-    try:
-        os.link(source, destination)
-    except OSError:
-        shutil.copy2(source, destination)
-
-
-def _publish(staging: Path, target: Path) -> None:
-    """Swap ``staging`` in as ``target``: old folder renamed aside, new one renamed in, old one removed."""
-    if not os.path.lexists(target):
-        _swap_rename(staging, target, target)
-        return
-    try:
-        _carry_over(target, staging)
-        os.chmod(staging, stat.S_IMODE(target.stat().st_mode))
-    except OSError as exc:
-        raise CodegenError(f"cannot carry the other files of out_dir {str(target)!r} over: {exc}") from exc
-    aside = target.parent / f".{target.name}{_OLD_INFIX}{os.getpid()}-{secrets.token_hex(4)}"
-    _swap_rename(target, aside, target)
-    try:
-        _swap_rename(staging, target, target)
-    except BaseException:
-        os.rename(aside, target)
-        raise
-    shutil.rmtree(aside, ignore_errors=True)
-
-
-def _swap_rename(source: Path, destination: Path, target: Path) -> None:
-    try:
-        os.rename(source, destination)
-    except OSError as exc:
-        raise CodegenError(f"cannot put the export in place at out_dir {str(target)!r}: {exc}") from exc
-
-
-def _publish_in_place(staging: Path, target: Path, names: list[str]) -> None:
-    """Replace the export's files in ``target`` one by one (each atomically), the manifest last.
-
-    The old manifest goes first, so that a folder interrupted half-way has none."""
-    try:
-        with contextlib.suppress(FileNotFoundError):
-            (target / MANIFEST_NAME).unlink()
-        for name in names:
-            if name != MANIFEST_NAME:
-                os.replace(staging / name, target / name)
-        for name in set(_export_names()) - set(names):
-            with contextlib.suppress(FileNotFoundError):
-                (target / name).unlink()
-        os.replace(staging / MANIFEST_NAME, target / MANIFEST_NAME)
-    except OSError as exc:
-        raise CodegenError(f"cannot write the export into out_dir {str(target)!r}: {exc}") from exc
-
-
-def _write(path: Path, action: Any) -> None:
-    """Run ``action`` (which writes ``path``), turning failures into a CodegenError naming the file."""
-    try:
-        action()
-    except (OSError, RuntimeError) as exc:
-        raise CodegenError(f"cannot write {path}: {exc}") from exc
-
-
 def _write_c_code(folder: Path, functions: Mapping[str, ca.Function]) -> list[str]:
     """One .c/.h pair; each Function is wrapped under the name ``mrpctl_<name>`` (same arithmetic)."""
     generator = ca.CodeGenerator(SOURCE_NAME, _CODEGEN_OPTIONS)
@@ -806,7 +655,7 @@ def _write_c_code(folder: Path, functions: Mapping[str, ca.Function]) -> list[st
         generator.add(
             ca.Function(C_PREFIX + name, symbols, function.call(symbols), function.name_in(), function.name_out())
         )
-    _write(folder / SOURCE_NAME, lambda: generator.generate(str(folder) + os.sep))
+    write_file(folder / SOURCE_NAME, lambda: generator.generate(str(folder) + os.sep))
     return [SOURCE_NAME, HEADER_NAME]
 
 
@@ -906,7 +755,7 @@ def _manifest(
             "compiler": _compiler_description(compiler) if compiler is not None else None,
             "flags": [*DEFAULT_FLAGS, "-lm"],
         },
-        "files": {name: _file_digest(folder / name) for name in sorted(names)},
+        "files": {name: file_digest(folder / name) for name in sorted(names)},
         "content_hash": {
             "algorithm": "sha256",
             "covers": "every file listed in 'files' (all written files except manifest.json)",
@@ -1088,11 +937,3 @@ def _disturbance_manifest(disturbance: Any) -> dict[str, Any] | None:
         "note": "w_k (N m, body frame) is the input `torque` of sample (3) and chunk (3 x max(d, 1), one column "
         "per sample), added to the applied torque and held over the period; it is not bound into the Functions",
     }
-
-
-def _file_digest(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as stream:
-        for block in iter(lambda: stream.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()

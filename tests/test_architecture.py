@@ -56,7 +56,17 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("engines", ("mrpctl.engines",)),
     ("figures", ("mrpctl.plots",)),
     ("simulate and its results", ("mrpctl.simulation",)),
-    ("files and bridges", ("mrpctl.scenario", "mrpctl.data", "mrpctl.interop", "mrpctl._export")),
+    (
+        "files and bridges",
+        (
+            "mrpctl.scenario",
+            "mrpctl._scenario_tables",
+            "mrpctl.data",
+            "mrpctl.interop",
+            "mrpctl._export",
+            "mrpctl._publish",
+        ),
+    ),
     ("campaigns and studies", ("mrpctl.campaign", "mrpctl._predictor_study", "mrpctl.reproduction")),
     ("command line", ("mrpctl.cli", "mrpctl.__main__")),
 )

@@ -150,7 +150,7 @@ def test_a_run_that_would_not_fit_is_refused_up_front() -> None:
     # the way out: every 1000th sample is about 10 MB (+ at most 17 MB of switch instants)
     assert _budget.run_bytes(100_000_001, 1000) < 3e7
     assert _budget.run_bytes(100_000_001, None) <= _budget.SWITCH_LIMIT * 16
-    assert _budget._memory_limit(None) > 0
+    assert _budget.memory_limit_bytes(None) > 0
 
 
 def test_a_long_delay_stores_one_history_column() -> None:

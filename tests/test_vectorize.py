@@ -270,7 +270,7 @@ def scalar_stats(x0, gains, rules, d: int, n: int, crafts=None) -> np.ndarray:
             scalar.run(
                 x0[i],
                 rules[i].initial_memory(delay_samples=d),
-                _simulate._history("constant", x0[i], d)[0],
+                _simulate.measurement_history("constant", x0[i], d)[0],
                 gains[i],
                 np.array(rules[i].parameters()),
                 n,
@@ -289,7 +289,7 @@ def lane_stats(x0, gains, rules, d: int, n: int, *, width: int, threads: int | N
         lanes,
         x0,
         np.array([rule.initial_memory(delay_samples=d) for rule in rules]),
-        np.stack([_simulate._history("constant", x, d)[0].T for x in x0]),
+        np.stack([_simulate.measurement_history("constant", x, d)[0].T for x in x0]),
         gains,
         np.array([rule.parameters() for rule in rules]),
         n,

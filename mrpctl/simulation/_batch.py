@@ -51,17 +51,17 @@ from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._budget import (
     SWITCH_LIMIT,
-    _batch_run_bytes,
-    _check_memory,
-    _keep_every,
-    _memory_limit,
-    _samples,
+    batch_run_bytes,
+    check_keep_every,
+    check_memory,
     jitter_bytes,
     lane_bytes,
+    memory_limit_bytes,
+    sample_horizon,
     workspace_bytes,
 )
 from mrpctl.simulation._guards import check_step_rotation
-from mrpctl.simulation._simulate import _history, _streamed_disturbance, _structure, settling_tolerances
+from mrpctl.simulation._simulate import engine_structure, measurement_history, settling_tolerances, streamed_disturbance
 from mrpctl.simulation._tracking import tracking_options
 from mrpctl.simulation._wheels import (
     check_wheel_run,
@@ -369,32 +369,32 @@ def simulate_batch(
                 "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
             )
     rate = positive_scalar("rate", rate)
-    t_final, n = _samples(t_final, rate)
+    t_final, n = sample_horizon(t_final, rate)
     substeps = check_substeps(substeps)
     check_step_rotation(states, rate, substeps)
     threads = _threads(threads)
-    keep = _keep_every(keep_every) if trajectories else None
-    limit = _memory_limit(memory_limit)
+    keep = check_keep_every(keep_every) if trajectories else None
+    limit = memory_limit_bytes(memory_limit)
     # what the runs need whatever their delays, checked before any per-run object is made (30 million runs took
     # 9 GB and 109 s of those before the refusal)
-    _check_memory(
-        n_runs * _batch_run_bytes(n, keep, trajectories, records=False), limit, t_final=t_final, keep_every=keep,
+    check_memory(
+        n_runs * batch_run_bytes(n, keep, trajectories, records=False), limit, t_final=t_final, keep_every=keep,
         runs=n_runs,
     )  # fmt: skip
     samples_by_run = [delay_samples(value, rate) for value in delays]
     if not isinstance(history, str) and len(set(samples_by_run)) > 1:
         raise SpecificationError("history: an array history needs all runs to have the same tau")
-    histories = [_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
+    histories = [measurement_history(history, states[i], samples_by_run[i]) for i in range(n_runs)]
     workers = min(threads, n_runs)
     width = 1 if predictor is None else 2
     records = trajectories and (
         predictor is not None or reference is not None or any(isinstance(one, Hysteretic) for one in rules)
     )
     estimate = workers * workspace_bytes(n, max(samples_by_run), substeps, width)
-    estimate += n_runs * _batch_run_bytes(n, keep, trajectories, records=records)
+    estimate += n_runs * batch_run_bytes(n, keep, trajectories, records=records)
     if not trajectories and _LANES:
         estimate += lane_bytes(n_runs, max(samples_by_run), workers)
-    _check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
+    check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
 
     saturation = Saturation.SCALE
     checked = None
@@ -418,13 +418,13 @@ def simulate_batch(
         for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
             options_by_run[i], saturation = flight_options(one, actuator, items[i], sensor)
             streamed_by_run[i] = (
-                _streamed_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]", hint)
+                streamed_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]", hint)
                 if (i == 0 or not shared)
                 else streamed_by_run[0]
             )
         varying = [varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
         jitter = jitter_bytes(varying[0], max(samples_by_run))  # one delay model for every run
-        _check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
+        check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
         for i in range(n_runs):
             if i == 0 or not shared:
@@ -449,7 +449,7 @@ def simulate_batch(
 
         # each worker's torque rows of one slice (the lanes: W runs' rows side by side)
         rows = INPUT_SIZE * (1 if trajectories or checked is not None else DEFAULT_WIDTH)
-        _check_memory(
+        check_memory(
             estimate + workers * min(slice_samples(substeps), n) * rows * 8,
             limit,
             t_final=t_final,
@@ -492,7 +492,7 @@ def simulate_batch(
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
     engines: dict[int, Any] = {}
     for i in scalar_runs:
-        structure = _structure(checked, options_by_run[i], sensor, actuator)
+        structure = engine_structure(checked, options_by_run[i], sensor, actuator)
         torque_input = streamed_by_run[i] is not None
         tracking = tracked_by_run[i] is not None
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input, tracking)

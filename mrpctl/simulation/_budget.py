@@ -49,7 +49,7 @@ _BYTES_PER_RESULT = 6000
 MAX_RUN_SAMPLES = 1.0e12
 
 
-def _samples(t_final: Any, rate: float) -> tuple[float, int]:
+def sample_horizon(t_final: Any, rate: float) -> tuple[float, int]:
     t_final = positive_scalar("t_final", t_final)
     total = t_final * rate
     if not total + 1 <= MAX_RUN_SAMPLES:
@@ -62,13 +62,13 @@ def _samples(t_final: Any, rate: float) -> tuple[float, int]:
     return t_final, n
 
 
-def _keep_every(keep_every: Any) -> int | None:
+def check_keep_every(keep_every: Any) -> int | None:
     if keep_every is None:
         return None
     return integer("keep_every", keep_every, minimum=1)
 
 
-def _memory_limit(memory_limit: Any) -> float:
+def memory_limit_bytes(memory_limit: Any) -> float:
     if memory_limit is not None:
         return positive_scalar("memory_limit", memory_limit)
     available = available_memory()
@@ -90,7 +90,7 @@ def workspace_bytes(n: int, d: int, substeps: int, width: int = 1) -> int:
     return (min(d, n) + 1) * width * STATE_SIZE * 8 + min(slice_samples(substeps), n) * 8
 
 
-def _batch_run_bytes(n: int, keep_every: int | None, trajectories: bool, *, records: bool) -> int:
+def batch_run_bytes(n: int, keep_every: int | None, trajectories: bool, *, records: bool) -> int:
     """Bytes of each run of a simulate_batch call: its objects and statistics, and with ``trajectories`` its
     result (the kept samples, with ``records`` the flight records)."""
     size = _BYTES_PER_RUN + STATS_SIZE * 8 * 4
@@ -104,7 +104,7 @@ def jitter_bytes(delay: DelayModel | None, d: int) -> int:
     return (d + 4) * 8 if delay is not None and delay.kind is DelayKind.JITTER else 0
 
 
-def _check_memory(estimate: float, limit: float, *, t_final: float, keep_every: int | None, runs: int = 1) -> None:
+def check_memory(estimate: float, limit: float, *, t_final: float, keep_every: int | None, runs: int = 1) -> None:
     if estimate <= limit:
         return
     what = (

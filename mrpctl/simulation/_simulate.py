@@ -37,12 +37,12 @@ from mrpctl.model import STATE_SIZE, gain_matrix
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._budget import (
     SWITCH_LIMIT,
-    _check_memory,
-    _keep_every,
-    _memory_limit,
-    _samples,
+    check_keep_every,
+    check_memory,
     jitter_bytes,
+    memory_limit_bytes,
     run_bytes,
+    sample_horizon,
     workspace_bytes,
 )
 from mrpctl.simulation._guards import check_step_rotation
@@ -61,7 +61,7 @@ from mrpctl.switching import SwitchingRule
 from mrpctl.wheels import WheelCluster
 
 
-def _history(history: Any, x0: np.ndarray, d: int) -> tuple[np.ndarray, Any]:
+def measurement_history(history: Any, x0: np.ndarray, d: int) -> tuple[np.ndarray, Any]:
     """The measurements before t = 0 as (columns, 6) rows m_{−d}, … (one row for a constant
     history: only that row is stored), and the value to store in the result."""
     if isinstance(history, str):
@@ -81,7 +81,7 @@ def _history(history: Any, x0: np.ndarray, d: int) -> tuple[np.ndarray, Any]:
     return np.ascontiguousarray(array), readonly(array)
 
 
-def _streamed_disturbance(disturbance: Any, n: int, name: str = "disturbance", hint: str = "") -> Disturbance | None:
+def streamed_disturbance(disturbance: Any, n: int, name: str = "disturbance", hint: str = "") -> Disturbance | None:
     """The per-sample disturbance of a run of n samples (its rows checked, errors naming ``name``, ``hint``
     appended), or None (none or constant)."""
     if disturbance is None:
@@ -99,7 +99,7 @@ def _streamed_disturbance(disturbance: Any, n: int, name: str = "disturbance", h
     return disturbance
 
 
-def _structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
+def engine_structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
     """The engine's structure keywords: the predictor's (sensor given, actuator given), or the
     flight sample's specialisation to the run's constants (`flight_structure`)."""
     if checked is not None:
@@ -368,13 +368,13 @@ def simulate(
             )
     d = delay_samples(tau, rate)
     rate = float(rate)
-    t_final, n = _samples(t_final, rate)
+    t_final, n = sample_horizon(t_final, rate)
     substeps = check_substeps(substeps)
     check_step_rotation(x0, rate, substeps)
-    keep = _keep_every(keep_every)
+    keep = check_keep_every(keep_every)
     settle_attitude, settle_rate, settling = settling_tolerances(settling_attitude, settling_rate)
-    history_rows, history_value = _history(history, x0, d)
-    limit = _memory_limit(memory_limit)
+    history_rows, history_value = measurement_history(history, x0, d)
+    limit = memory_limit_bytes(memory_limit)
     checked = check_predictor(predictor, rule, history, delay)
     tracked, feedforward, pointing_tolerance = tracking_options(
         reference, error_time, feedforward, pointing_tolerance, rule=rule, predictor=checked, n=n, rate=rate, d=d
@@ -383,7 +383,7 @@ def simulate(
     if checked is None:
         options, saturation = flight_options(rule, actuator, disturbance, sensor)
         varying = varying_delay(rule, delay, d, rate, n)
-        streamed = _streamed_disturbance(disturbance, n)
+        streamed = streamed_disturbance(disturbance, n)
     else:
         disturbance = predictor_disturbance(disturbance, n)
         options, saturation = flight_constants(actuator, disturbance, sensor)
@@ -391,7 +391,7 @@ def simulate(
         streamed = None if disturbance is None or disturbance.constant else disturbance
     width = 1 if checked is None else 2
     records = checked is not None or isinstance(rule, Hysteretic) or tracked is not None
-    _check_memory(
+    check_memory(
         run_bytes(n, keep, flight=records)
         + workspace_bytes(n, d, substeps, width)
         + jitter_bytes(varying, d)
@@ -436,7 +436,7 @@ def simulate(
         substeps,
         saturation,
         predictor=None if checked is None else checked.model,
-        **_structure(checked, options, sensor, actuator),
+        **engine_structure(checked, options, sensor, actuator),
         **({} if streamed is None else {"torque_input": True}),
         **({} if tracked is None else {"reference_input": True, "feedforward": feedforward}),
         law=law,
