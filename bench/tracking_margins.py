@@ -77,13 +77,13 @@ def slow_table(nadir: NadirPointing) -> list[str]:
 
 
 def orbit_range(nadir: NadirPointing) -> list[str]:
-    rates = (0.0, nadir.rate)
+    rates = (0.0, nadir.orbit_rate)
     lines = []
     for tau in (paper.TAU, 1.5):
         cert = certify_orbit_rates(paper.SPACECRAFT, paper.GAIN, tau, rates, order=2)
         word = "certified" if cert.certified else cert.status.value
         lines.append(
-            f"- every circular orbit with 0 <= n <= {nadir.rate:.6g} rad/s (500 km and above), feedforward and "
+            f"- every circular orbit with 0 <= n <= {nadir.orbit_rate:.6g} rad/s (500 km and above), feedforward and "
             f"gravity gradient, tau = {tau:g} s, N = 2: **{word}** (3 vertices, {cert.solve_time:.2g} s)"
         )
     return lines
@@ -96,7 +96,7 @@ def block() -> str:
     parts = [
         BEGIN,
         f"Paper spacecraft J = diag{paper.INERTIA}, K = [{paper.GAIN_SIGMA:g} I3, {paper.GAIN_OMEGA:g} I3]; "
-        f"500 km circular orbit, n = {orbit.rate:.6g} rad/s (period {orbit.period:.6g} s); h = {PERIOD:g} s.",
+        f"500 km circular orbit, n = {orbit.orbit_rate:.6g} rad/s (period {orbit.period:.6g} s); h = {PERIOD:g} s.",
         "",
         *paper_table(nadir),
         "",

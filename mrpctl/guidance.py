@@ -28,6 +28,7 @@ Attitudes are composed as direction cosine matrices with [`mrpctl.mrp`][mrpctl.m
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -291,7 +292,7 @@ class EigenaxisSlew:
 
 
 # --------------------------------------------------------------------------------------------- orbit
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class CircularOrbit:
     """A circular Keplerian orbit: rate n, inclination i, right ascension of the ascending node Ω and
     argument of latitude u₀ at t = 0.
@@ -302,8 +303,9 @@ class CircularOrbit:
 
     Attributes
     ----------
-    rate : float
-        n > 0 (rad/s), n = √(μ / r³).
+    orbit_rate : float
+        n > 0 (rad/s), n = √(μ / r³). ``rate`` is its deprecated name (``rate`` is a sample rate in Hz
+        elsewhere in mrpctl).
     inclination : float
         i (rad), 0 <= i <= π. Default 0.
     raan : float
@@ -312,16 +314,52 @@ class CircularOrbit:
         u₀ (rad), the argument of latitude at t = 0. Default 0.
     """
 
-    rate: float
+    orbit_rate: float
     inclination: float = 0.0
     raan: float = 0.0
     latitude: float = 0.0
 
-    def __post_init__(self) -> None:
-        rate = finite_scalar("orbit_rate", self.rate)
-        if rate <= 0.0:
-            raise SpecificationError(f"orbit_rate must be > 0 (rad/s), got {rate!r}")
-        object.__setattr__(self, "rate", rate)
+    def __init__(
+        self,
+        orbit_rate: float | None = None,
+        inclination: float = 0.0,
+        raan: float = 0.0,
+        latitude: float = 0.0,
+        *,
+        rate: float | None = None,
+    ) -> None:
+        if rate is not None:
+            warnings.warn(
+                "CircularOrbit(rate=...) is deprecated: use orbit_rate= (rate is a sample rate in Hz elsewhere in "
+                "mrpctl)",
+                DeprecationWarning,
+                stacklevel=2,
+            )
+            if orbit_rate is not None:
+                raise SpecificationError("give orbit_rate (rate is its deprecated name), not both")
+            orbit_rate = rate
+        if orbit_rate is None:
+            raise SpecificationError("orbit_rate (n, rad/s) is required")
+        n = finite_scalar("orbit_rate", orbit_rate)
+        if n <= 0.0:
+            raise SpecificationError(f"orbit_rate must be > 0 (rad/s), got {n!r}")
+        object.__setattr__(self, "orbit_rate", n)
+        object.__setattr__(self, "inclination", inclination)
+        object.__setattr__(self, "raan", raan)
+        object.__setattr__(self, "latitude", latitude)
+        self._check_angles()
+
+    @property
+    def rate(self) -> float:
+        """Deprecated name of ``orbit_rate`` (``rate`` is a sample rate in Hz elsewhere in mrpctl)."""
+        warnings.warn(
+            "CircularOrbit.rate is deprecated: use .orbit_rate (rate is a sample rate in Hz elsewhere in mrpctl)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return self.orbit_rate
+
+    def _check_angles(self) -> None:
         inclination = finite_scalar("inclination", self.inclination)
         if not 0.0 <= inclination <= math.pi:
             raise SpecificationError(f"inclination must lie in [0, pi] rad (0 to 180 deg), got {inclination!r}")
@@ -334,7 +372,7 @@ class CircularOrbit:
         """The orbit of ``radius`` (m, from the body's centre) about a body of parameter ``mu`` (m³/s²)."""
         r = positive_scalar("radius", radius)
         gm = positive_scalar("mu", mu)
-        return cls(rate=math.sqrt(gm / r**3), **angles)
+        return cls(orbit_rate=math.sqrt(gm / r**3), **angles)
 
     @classmethod
     def from_altitude(
@@ -347,7 +385,7 @@ class CircularOrbit:
     @property
     def period(self) -> float:
         """2π / n (s)."""
-        return 2.0 * math.pi / self.rate
+        return 2.0 * math.pi / self.orbit_rate
 
     def _frame(self) -> np.ndarray:
         """[N O]: columns are the node line, the in-plane normal to it and ĥ (N components)."""
@@ -362,7 +400,7 @@ class CircularOrbit:
 
     def r_hat(self, t: Any) -> np.ndarray:
         """r̂_N(t) (len(t), 3): the unit vector from the body's centre to the spacecraft, N components."""
-        u = self.latitude + self.rate * _times(t)
+        u = self.latitude + self.orbit_rate * _times(t)
         frame = self._frame()
         return np.cos(u)[:, None] * frame[:, 0] + np.sin(u)[:, None] * frame[:, 1]
 
@@ -374,7 +412,7 @@ class CircularOrbit:
 
     def __str__(self) -> str:
         return (
-            f"circular orbit: n = {self.rate:.6g} rad/s (period {self.period:.6g} s), i = "
+            f"circular orbit: n = {self.orbit_rate:.6g} rad/s (period {self.period:.6g} s), i = "
             f"{math.degrees(self.inclination):.6g} deg, RAAN = {math.degrees(self.raan):.6g} deg, "
             f"u0 = {math.degrees(self.latitude):.6g} deg"
         )
@@ -405,9 +443,19 @@ class NadirPointing:
             raise SpecificationError(f"orbit must be a CircularOrbit, got {type(self.orbit).__name__}")
 
     @property
-    def rate(self) -> float:
+    def orbit_rate(self) -> float:
         """The reference rate n (rad/s) about the orbit normal."""
-        return self.orbit.rate
+        return self.orbit.orbit_rate
+
+    @property
+    def rate(self) -> float:
+        """Deprecated name of ``orbit_rate`` (``rate`` is a sample rate in Hz elsewhere in mrpctl)."""
+        warnings.warn(
+            "NadirPointing.rate is deprecated: use .orbit_rate (rate is a sample rate in Hz elsewhere in mrpctl)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return self.orbit.orbit_rate
 
     def r_hat(self, t: Any) -> np.ndarray:
         """r̂_N(t) (len(t), 3), the unit position vector (N components) the gravity gradient needs."""
@@ -418,7 +466,7 @@ class NadirPointing:
         dcm = self.orbit.hill_dcm(t)
         out = np.zeros((len(dcm), 9))
         out[:, 0:3] = from_dcm(dcm)
-        out[:, 3:6] = self.orbit.rate * self.orbit.normal
+        out[:, 3:6] = self.orbit.orbit_rate * self.orbit.normal
         return out
 
     def __str__(self) -> str:

@@ -688,7 +688,7 @@ def _reference_toml(reference: GuidanceProfile | None) -> list[str]:
         orbit = reference.orbit
         lines += [
             'type = "nadir"  # the Hill frame: x radial out, y along-track, z orbit normal',
-            f"orbit_rate = {_toml_value(orbit.rate)}  # rad/s",
+            f"orbit_rate = {_toml_value(orbit.orbit_rate)}  # rad/s",
             f"inclination_deg = {_toml_value(math.degrees(orbit.inclination))}",
             f"raan_deg = {_toml_value(math.degrees(orbit.raan))}",
             f"latitude_deg = {_toml_value(math.degrees(orbit.latitude))}  # argument of latitude at t = 0",

@@ -28,7 +28,7 @@ SPEC = {
     "rule": {"type": "delay-aware"},
     "dispersions": {
         "attitude": {"angle_deg": [150.0, 180.0]},
-        "rate": {"magnitude": [0.0, 0.5]},
+        "omega": {"magnitude": [0.0, 0.5]},
         "tau": {"range": [0.04, 0.05], "step": 0.01},
         "gains": {"scale": [0.5, 1.5]},
     },
@@ -348,7 +348,7 @@ FLIGHT_SPEC = {
     "flight": {"u_max": 40.0, "saturation": "clip", "attitude_noise": 2e-3, "jitter": [0.02, 0.05]},
     "dispersions": {
         "attitude": {"angle_deg": [150.0, 180.0]},
-        "rate": {"magnitude": [0.0, 0.5]},
+        "omega": {"magnitude": [0.0, 0.5]},
         "hysteresis": {"delta": [0.0, 0.2]},
         "actuator": {"u_max": [20.0, 60.0]},
         "disturbance": {"magnitude": [0.5, 1.0]},

@@ -37,7 +37,7 @@ SPEC = {
     "gains": {"k_sigma": -70.11, "k_omega": -163.08},
     "rule": {"type": "hysteretic", "delta": 0.1},
     "flight": {"attitude_noise": 1e-4, "rate_noise": 1e-5, "u_max": 50.0},
-    "dispersions": {"attitude": {"angle_deg": [0.0, 180.0]}, "rate": {"magnitude": [0.0, 0.3]}},
+    "dispersions": {"attitude": {"angle_deg": [0.0, 180.0]}, "omega": {"magnitude": [0.0, 0.3]}},
 }
 
 

@@ -53,7 +53,7 @@ def test_normal_gain_scale_follows_the_normal_cdf():
 
 
 def test_truncated_normal_rate_stays_in_its_interval_and_follows_its_cdf():
-    spec = _spec(rate={"magnitude": {"distribution": "truncnorm", "mean": 0.02, "std": 0.02, "low": 0.0, "high": 0.05}})
+    spec = _spec(omega={"magnitude": {"distribution": "truncnorm", "mean": 0.02, "std": 0.02, "low": 0.0, "high": 0.05}})
     omega = run_inputs(spec, 0, 4000).omega0
     magnitude = np.linalg.norm(omega, axis=1)
     assert magnitude.min() >= 0.0 and magnitude.max() <= 0.05 * (1 + 1e-12)
@@ -84,23 +84,23 @@ def test_each_run_depends_only_on_seed_and_index():
     [
         (
             {"distribution": "normal", "mean": 0.02, "std": 0.01},
-            r"rate.magnitude: every draw must lie in \[0, inf\).*truncnorm",
+            r"omega.magnitude: every draw must lie in \[0, inf\).*truncnorm",
         ),
-        ({"distribution": "gauss", "mean": 0.0, "std": 1.0}, r"rate.magnitude.distribution must be one of"),
+        ({"distribution": "gauss", "mean": 0.0, "std": 1.0}, r"omega.magnitude.distribution must be one of"),
         ({"distribution": "normal", "mean": 0.0}, r"missing \['std'\]"),
         ({"distribution": "normal", "mean": 0.0, "std": 1.0, "low": 0.0}, r"unknown \['low'\]"),
         ({"distribution": "truncnorm", "mean": 0.0, "std": -1.0, "low": 0.0, "high": 1.0}, r"std > 0"),
         ({"distribution": "truncnorm", "mean": 0.0, "std": 1.0, "low": 1.0, "high": 1.0}, r"low < high"),
         ({"distribution": "truncnorm", "mean": 0.0, "std": 1.0, "low": -1.0, "high": 1.0}, r"must be >= 0"),
         ({"distribution": "truncnorm", "mean": 0.0, "std": 1e-3, "low": 50.0, "high": 60.0}, r"holds no probability"),
-        ({"distribution": "uniform", "low": float("nan"), "high": 1.0}, r"rate.magnitude.low"),
+        ({"distribution": "uniform", "low": float("nan"), "high": 1.0}, r"omega.magnitude.low"),
         ([0.1, 0.2, 0.3], r"pair \[low, high\]"),
         ("wide", r"pair \[low, high\] or a distribution table"),
     ],
 )
 def test_bad_distributions_name_the_parameter(value, message):
     with pytest.raises(SpecificationError, match=message):
-        _spec(rate={"magnitude": value})
+        _spec(omega={"magnitude": value})
 
 
 def test_bounded_quantities_refuse_a_support_that_crosses_their_bound():

@@ -47,7 +47,7 @@ type = "hysteretic"
 delta = {DELTA}
 [dispersions.attitude]
 angle_deg = [150.0, 180.0]
-[dispersions.rate]
+[dispersions.omega]
 magnitude = [1.0, 3.0]
 """
 

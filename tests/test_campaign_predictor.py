@@ -35,7 +35,7 @@ SPEC = {
     "predictor": {"inertia_error": 0.05},
     "dispersions": {
         "attitude": {"angle_deg": [150.0, 180.0]},
-        "rate": {"magnitude": [0.0, 0.5]},
+        "omega": {"magnitude": [0.0, 0.5]},
         "inertia": {"axis_tolerance": 0.2, "product_tolerance": 2.0},
         "tau": {"range": [0.04, 0.05], "step": 0.01},
         "rule": {"rules": ["on-predicted", "on-predicted:1.2"]},

@@ -105,7 +105,7 @@ def test_run_inputs_depend_on_seed_and_index_only():
     """Run i alone equals run i of a block; other dispersions do not shift its attitude; seeds differ."""
     dispersions = {
         "attitude": {},
-        "rate": {"magnitude": [0.1, 0.2]},
+        "omega": {"magnitude": [0.1, 0.2]},
         "tau": {"range": [0.3, 0.6], "step": 0.1},
         "gains": {"scale": [0.9, 1.1]},
         "inertia": {"axis_tolerance": 0.05, "product_tolerance": 2.0},
@@ -157,7 +157,7 @@ def test_impossible_inertia_tolerance_is_refused():
         ({"dispersions": {"tau": {"range": [0.3, 0.6], "step": 0.00015}}}, "tau.step"),
         ({"dispersions": {"attitude": {"angle_deg": [0, 200]}}}, "angle_deg"),
         ({"dispersions": {"inertia": {"axis_tolerance": 1.5}}}, "axis_tolerance"),
-        ({"dispersions": {"rate": {"magnitude": [0.3, 0.1]}}}, "rate.magnitude"),
+        ({"dispersions": {"omega": {"magnitude": [0.3, 0.1]}}}, "omega.magnitude"),
     ],
 )
 def test_bad_specifications_name_the_key(change, match):

@@ -27,7 +27,7 @@ SPEC = {
     "spacecraft": {"inertia": [140.0, 100.0, 80.0]},
     "gains": {"k_sigma": -70.11, "k_omega": -163.08},
     "rule": {"type": "hysteretic", "delta": 0.1},
-    "dispersions": {"attitude": {"angle_deg": [150.0, 180.0]}, "rate": {"magnitude": [0.0, 0.5]}},
+    "dispersions": {"attitude": {"angle_deg": [150.0, 180.0]}, "omega": {"magnitude": [0.0, 0.5]}},
 }
 
 

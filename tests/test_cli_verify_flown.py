@@ -76,7 +76,7 @@ def test_flight_paper_is_verified_as_flown_end_to_end(capsys: pytest.CaptureFixt
     # The held torque adds one period to the measurement's delay: tau(t) in [0.45, 0.501) s, jumping.
     assert jitter["source"] == "[delay] tau_min" and jitter["certified"] is True
     assert jitter["tau_min"] == 0.45 and jitter["tau_max"] == pytest.approx(0.501, rel=1e-12)
-    assert jitter["rate"] == "rate unknown"
+    assert jitter["delay_rate"] == "rate unknown"
     inertia = flown["inertia"]
     assert inertia["source"] == "[uncertainty]" and inertia["inertia_tolerance"] == 0.05
     assert inertia["certified"] is True
@@ -113,7 +113,7 @@ def test_options_override_the_scenario(tmp_path: Path, capsys: pytest.CaptureFix
     flags = _flown(capsys, *argv)
     assert flags["sampled"]["source"] == "--sampled" and flags["sampled"]["delay_samples"] == 10
     assert flags["jitter"]["source"] == "--jitter" and flags["jitter"]["tau_min"] == 0.15
-    assert flags["jitter"]["tau_max"] == pytest.approx(0.22) and "0.5" in str(flags["jitter"]["rate"])
+    assert flags["jitter"]["tau_max"] == pytest.approx(0.22) and "0.5" in str(flags["jitter"]["delay_rate"])
     assert flags["inertia"]["source"] == "--inertia-tolerance" and flags["inertia"]["inertia_tolerance"] == 0.1
     reference = max(_lifted_radius(j, paper.GAIN_SIGMA, paper.GAIN_OMEGA, 0.02, 10) for j in paper.INERTIA)
     assert flags["sampled"]["spectral_radius"] == pytest.approx(reference, rel=1e-9)

@@ -402,7 +402,7 @@ def test_a_campaign_with_physical_gains_runs_the_paper_form_bit_for_bit() -> Non
         "spacecraft": {"inertia": [140.0, 100.0, 80.0]},
         "rule": {"type": "on-delayed"},
         "initial": {"sigma": [0.5, 0.0, 0.0], "omega": [0.1, 0.0, 0.0]},
-        "dispersions": {"rate": {"magnitude": [0.0, 0.2]}, "gains": {"scale": [0.9, 1.1]}},
+        "dispersions": {"omega": {"magnitude": [0.0, 0.2]}, "gains": {"scale": [0.9, 1.1]}},
     }
     physical = parse_campaign({**base, "gains": {"attitude": 70.11, "rate": 40.77}})
     paper_form = parse_campaign({**base, "gains": {"k_sigma": -70.11, "k_omega": -163.08}})

@@ -63,7 +63,7 @@ def _closed_loop(
     if gravity_gradient:
         assert isinstance(profile, NadirPointing)
         r_hat = profile.r_hat(np.array([t]))[0]
-        n = profile.rate
+        n = profile.orbit_rate
 
         def torque(sigma_bn: object) -> object:
             return gravity_gradient_expr(sigma_bn, r_hat, n, spacecraft.inertia)

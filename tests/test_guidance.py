@@ -170,8 +170,8 @@ def test_slew_needs_a_target_or_an_axis_and_angle() -> None:
 # ---------------------------------------------------------------------------------------------- orbit
 def test_orbit_rate_from_altitude_and_geometry() -> None:
     orbit = CircularOrbit.from_altitude(500e3, inclination=math.radians(51.6), raan=0.4, latitude=0.3)
-    assert orbit.rate == pytest.approx(math.sqrt(EARTH_MU / (EARTH_RADIUS + 500e3) ** 3), rel=1e-15)
-    assert orbit.rate == pytest.approx(1.10678e-3, rel=1e-5)
+    assert orbit.orbit_rate == pytest.approx(math.sqrt(EARTH_MU / (EARTH_RADIUS + 500e3) ** 3), rel=1e-15)
+    assert orbit.orbit_rate == pytest.approx(1.10678e-3, rel=1e-5)
     t = np.linspace(0.0, orbit.period, 97)
     r = orbit.r_hat(t)
     np.testing.assert_allclose(np.linalg.norm(r, axis=1), 1.0, rtol=1e-15)
@@ -179,7 +179,7 @@ def test_orbit_rate_from_altitude_and_geometry() -> None:
     # the normal is the direction of r x v (v by central differences), and the angle advances at n
     h = 1e-3
     v = (orbit.r_hat(t + h) - orbit.r_hat(t - h)) / (2 * h)
-    np.testing.assert_allclose(np.cross(r, v), np.tile(orbit.rate * orbit.normal, (len(t), 1)), atol=1e-12)
+    np.testing.assert_allclose(np.cross(r, v), np.tile(orbit.orbit_rate * orbit.normal, (len(t), 1)), atol=1e-12)
     # scipy: Euler 3-1-3 (Omega, i, u) rotates the x axis onto r
     expected = Rotation.from_euler("ZXZ", [0.4, math.radians(51.6), 0.3]).apply([1.0, 0.0, 0.0])
     np.testing.assert_allclose(r[0], expected, atol=1e-15)
@@ -190,7 +190,7 @@ def test_hill_frame_rate_is_n_about_the_normal_and_closes_after_one_orbit() -> N
     nadir = NadirPointing(orbit)
     t = np.linspace(0.0, orbit.period, 400)
     rows = nadir.samples(t)
-    np.testing.assert_allclose(rows[:, 3:6], np.tile(orbit.rate * orbit.normal, (len(t), 1)), rtol=0, atol=1e-18)
+    np.testing.assert_allclose(rows[:, 3:6], np.tile(orbit.orbit_rate * orbit.normal, (len(t), 1)), rtol=0, atol=1e-18)
     np.testing.assert_array_equal(rows[:, 6:9], 0.0)
     assert _same_attitude(rows[0, 0:3], rows[-1, 0:3]) < 1e-12  # sigma_R closes after one orbit
     # the axes: x = r_hat, y = along-track (h x r), z = h; compared with scipy's DCM of sigma_RN

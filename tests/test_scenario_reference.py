@@ -97,9 +97,9 @@ def test_nadir_reference(tmp_path: Path, orbit: dict[str, float], rate: float) -
     scenario, again = _round_trip(tmp_path, _data(table))
     nadir = scenario.reference
     assert isinstance(nadir, NadirPointing)
-    assert nadir.rate == rate
+    assert nadir.orbit_rate == rate
     assert nadir.orbit.inclination == math.radians(97.4)
-    assert again.reference.rate == rate
+    assert again.reference.orbit_rate == rate
     t = np.linspace(0.0, 6000.0, 7)
     np.testing.assert_allclose(again.reference.samples(t), nadir.samples(t), rtol=0, atol=1e-14)
 

@@ -145,7 +145,7 @@ def test_a_campaign_takes_them() -> None:
 
     data = tomllib.loads(SCENARIO)
     data.update(count=2, seed=1, rule={"type": "on-current"})
-    data["dispersions"] = {"rate": {"magnitude": [0.0, 0.3]}}
+    data["dispersions"] = {"omega": {"magnitude": [0.0, 0.3]}}
     spec = parse_campaign(data)
     assert (spec.base.settling_attitude, spec.base.settling_rate) == (10.0, 0.01)
     chunk = simulate_chunk(spec, 0, 2, threads=1)

@@ -214,7 +214,7 @@ class CampaignReport:
         if len(self.by_rule) > 1:
             lines.append("  by rule (the same cases under each rule):")
             lines.append(
-                f"    {'rule':<24} {'runs':>7} {'converged':>10} {'rate':>8} {'95 % Wilson':>20} {'diverged':>8} "
+                f"    {'rule':<24} {'runs':>7} {'converged':>10} {'fraction':>8} {'95 % Wilson':>20} {'diverged':>8} "
                 f"{'settle_med_s':>12} {'settle_p95_s':>12} {'switch_med':>10} {'switch_max':>10}"
             )
             for r in self.by_rule:

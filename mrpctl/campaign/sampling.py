@@ -250,8 +250,8 @@ def run_inputs(spec: CampaignSpec, start: int, stop: int | None = None) -> RunIn
     else:
         sigma0 = _attitude(spec.attitude, quaternion_normals, axis_normals, angle_quantile)
     omega0 = np.tile(base_omega, (n, 1))
-    if spec.rate is not None:
-        omega0 = omega0 + spec.rate.magnitude.quantile(rate_quantile)[:, None] * _unit(rate_normals)
+    if spec.omega is not None:
+        omega0 = omega0 + spec.omega.magnitude.quantile(rate_quantile)[:, None] * _unit(rate_normals)
     grid = _tau_grid(spec)
     tau = grid[np.minimum((tau_quantile * len(grid)).astype(np.int64), len(grid) - 1)]
     gain_scale = np.ones(n) if spec.gains is None else spec.gains.scale.quantile(gain_quantile)

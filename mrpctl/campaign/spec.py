@@ -9,8 +9,9 @@ the origin) read by [`mrpctl.scenario.parse_scenario`][mrpctl.scenario.parse_sce
     seed = 2026
     [dispersions.attitude]
     angle_deg = [0.0, 180.0]        # principal angle range; [0, 180] = uniform on SO(3)
-    [dispersions.rate]
+    [dispersions.omega]
     magnitude = [0.0, 0.1]          # rad/s, direction uniform on the sphere, added to [initial] omega
+                                    # ([dispersions.rate] is its deprecated name: rate is the sample rate in Hz)
     [dispersions.inertia]
     axis_tolerance = 0.05           # relative, each diagonal entry J_ii (1 + U(-tol, tol))
     product_tolerance = 1.0         # kg m^2, each product of inertia J_ij + U(-tol, tol)
@@ -96,6 +97,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -147,6 +149,7 @@ _CAMPAIGN_KEYS = {"count", "seed", "dispersions", "peak_torque", "flight", "rule
 _PREDICTOR_KEYS = {"inertia", "inertia_error"}
 _DISPERSION_KEYS = {
     "attitude",
+    "omega",
     "rate",
     "inertia",
     "tau",
@@ -159,6 +162,7 @@ _DISPERSION_KEYS = {
 }
 _KEYS = {
     "attitude": {"angle_deg"},
+    "omega": {"magnitude"},
     "rate": {"magnitude"},
     "inertia": {"axis_tolerance", "product_tolerance"},
     "tau": {"range", "step"},
@@ -489,7 +493,7 @@ class CampaignSpec:
         Number of runs (>= 1).
     seed : int
         Root seed (>= 0).
-    attitude, rate, inertia, tau, gains : dispersion or None
+    attitude, omega, inertia, tau, gains : dispersion or None
         The dispersions; None keeps the base value.
     peak_torque : bool
         Compute the peak torque max_k ‖u_k‖ (N m) of each run (needs the trajectories when
@@ -502,7 +506,7 @@ class CampaignSpec:
     count: int
     seed: int
     attitude: AttitudeDispersion | None = None
-    rate: RateDispersion | None = None
+    omega: RateDispersion | None = None
     inertia: InertiaDispersion | None = None
     tau: TauDispersion | None = None
     gains: GainDispersion | None = None
@@ -543,6 +547,16 @@ class CampaignSpec:
         )
 
     @property
+    def rate(self) -> RateDispersion | None:
+        """Deprecated name of ``omega``, the body-rate dispersion (``rate`` is the sample rate in Hz)."""
+        warnings.warn(
+            "CampaignSpec.rate is deprecated: use .omega (the body-rate dispersion; rate is the sample rate in Hz)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return self.omega
+
+    @property
     def uses_flight(self) -> bool:
         """True when the runs go through the flight loop's models (sensor, actuator, disturbance, jitter)."""
         return self.flight is not None or self.flight_dispersion.models
@@ -550,7 +564,7 @@ class CampaignSpec:
     def __str__(self) -> str:
         parts = [f"campaign {self.base.name}: {self.count} runs, seed {self.seed}, rule {self.base.rule}"]
         parts.append(f"  t_final = {self.base.t_final:g} s at {self.base.rate:g} Hz, base tau = {self.base.tau:g} s")
-        for name in ("attitude", "rate", "inertia", "tau", "gains", "rules"):
+        for name in ("attitude", "omega", "inertia", "tau", "gains", "rules"):
             value = getattr(self, name)
             parts.append(f"  {name:<9} {'base value' if value is None else value}")
         if self.predictor is not None:
@@ -628,11 +642,21 @@ def parse_campaign(
         attitude = AttitudeDispersion(
             _interval("attitude.angle_deg", tables["attitude"].get("angle_deg", [0.0, 180.0]), low=0.0, high=180.0)
         )
-    rate = None
     if "rate" in tables:
-        if "magnitude" not in tables["rate"]:
-            raise SpecificationError("[dispersions.rate] needs magnitude = [low, high] (rad/s)")
-        rate = RateDispersion(parse_distribution("rate.magnitude", tables["rate"]["magnitude"], low=0.0))
+        if "omega" in tables:
+            raise SpecificationError("give [dispersions.omega] ([dispersions.rate] is its deprecated name), not both")
+        warnings.warn(
+            "[dispersions.rate] is deprecated: name the body-rate dispersion [dispersions.omega] (rate is the sample "
+            "rate in Hz elsewhere in mrpctl)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        tables["omega"] = tables.pop("rate")
+    omega = None
+    if "omega" in tables:
+        if "magnitude" not in tables["omega"]:
+            raise SpecificationError("[dispersions.omega] needs magnitude = [low, high] (rad/s)")
+        omega = RateDispersion(parse_distribution("omega.magnitude", tables["omega"]["magnitude"], low=0.0))
     inertia = None
     if "inertia" in tables:
         table = tables["inertia"]
@@ -679,7 +703,7 @@ def parse_campaign(
         count=count,
         seed=seed,
         attitude=attitude,
-        rate=rate,
+        omega=omega,
         inertia=inertia,
         tau=tau,
         gains=gains,

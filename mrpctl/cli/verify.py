@@ -148,7 +148,7 @@ def _flown_checks(
                 "source": source,
                 "tau_min": tau_min,
                 "tau_max": tau_max,
-                "rate": str(rate_bound),
+                "delay_rate": str(rate_bound),
                 "criterion": "interval delay, Wirtinger + reciprocal convexity (N=1)",
                 "certified": all(c.certified for c in certificates),
                 "statuses": [c.status.name for c in certificates],

@@ -42,6 +42,17 @@ def delay_rate_argument(delay_rate: Any, rate: Any) -> Any:
     return rate
 
 
+def renamed_attribute(owner: Any, old: str, new: str) -> Any:
+    """``owner.new``, read through its deprecated name ``old`` (a DeprecationWarning naming both)."""
+    warnings.warn(
+        f"{type(owner).__name__}.{old} is deprecated: use .{new} (rate is the measurement rate in Hz elsewhere in "
+        "mrpctl)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return getattr(owner, new)
+
+
 #: cvxpy statuses that carry a usable solution (only "optimal": "optimal_inaccurate" never certifies).
 OPTIMAL = "optimal"
 

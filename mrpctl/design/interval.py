@@ -30,6 +30,7 @@ from mrpctl.design._common import (
     SolveOutcome,
     delay_rate_argument,
     order_value,
+    renamed_attribute,
     solve,
     system_matrices,
 )
@@ -155,7 +156,7 @@ class IntervalCertificate:
     order: int
     tau_min: float
     tau_max: float
-    rate: DelayRate
+    delay_rate: DelayRate
     plants: int
     matrices: dict[str, np.ndarray] = field(repr=False)
     margins: tuple[BlockMargin, ...]
@@ -170,14 +171,20 @@ class IntervalCertificate:
         return self.status is CertificateStatus.CERTIFIED
 
     @property
+    def rate(self) -> DelayRate:
+        """Deprecated name of ``delay_rate`` (``rate`` is a measurement rate in Hz elsewhere in mrpctl)."""
+        return renamed_attribute(self, "rate", "delay_rate")
+
+    @property
     def min_margin(self) -> float:
         """The smallest relative block margin (nan when nothing was recomputed)."""
         return min((m.relative for m in self.margins), default=math.nan)
 
     def __str__(self) -> str:
         return (
-            f"{criterion_name(self.order)} + RCC, tau(t) in [{self.tau_min:.6g}, {self.tau_max:.6g}] s, {self.rate}: "
-            f"{self.status.value} (CLARABEL {self.solver_status}, {1e3 * self.solve_time:.1f} ms)\n  {self.reason}"
+            f"{criterion_name(self.order)} + RCC, tau(t) in [{self.tau_min:.6g}, {self.tau_max:.6g}] s, "
+            f"{self.delay_rate}: {self.status.value} (CLARABEL {self.solver_status}, {1e3 * self.solve_time:.1f} ms)"
+            f"\n  {self.reason}"
         )
 
 
@@ -193,7 +200,8 @@ class IntervalDelayCertification:
     tau_min : float
     upper : float
         The largest certified τ_max (s), to ``rtol``; nan when nothing was certified.
-    rate : DelayRate
+    delay_rate : DelayRate
+        The bound on the delay's rate dτ/dt.
     certificate : IntervalCertificate or None
         The certificate at ``upper``.
     solves : int
@@ -205,7 +213,7 @@ class IntervalDelayCertification:
     order: int
     tau_min: float
     upper: float
-    rate: DelayRate
+    delay_rate: DelayRate
     certificate: IntervalCertificate | None = field(repr=False)
     solves: int
     solve_time: float
@@ -215,11 +223,16 @@ class IntervalDelayCertification:
     def certified(self) -> bool:
         return self.status is not SearchStatus.NOT_CERTIFIED
 
+    @property
+    def rate(self) -> DelayRate:
+        """Deprecated name of ``delay_rate`` (``rate`` is a measurement rate in Hz elsewhere in mrpctl)."""
+        return renamed_attribute(self, "rate", "delay_rate")
+
     def __str__(self) -> str:
         if not self.certified:
-            return f"{criterion_name(self.order)} + RCC ({self.rate}): {self.status.value} ({self.reason})"
+            return f"{criterion_name(self.order)} + RCC ({self.delay_rate}): {self.status.value} ({self.reason})"
         return (
-            f"{criterion_name(self.order)} + RCC ({self.rate}): certified for tau(t) in "
+            f"{criterion_name(self.order)} + RCC ({self.delay_rate}): certified for tau(t) in "
             f"[{self.tau_min:.6g}, {self.upper:.6g}] s ({self.solves} solves, {self.solve_time:.3f} s; {self.reason})"
         )
 
@@ -610,7 +623,7 @@ def solve_interval(
     def blocks(mats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return interval_blocks(scaled, h1, rate, mats, order=order)
 
-    meta = {"order": order, "tau_min": tau_min, "tau_max": tau_max, "rate": rate, "plants": len(plants)}
+    meta = {"order": order, "tau_min": tau_min, "tau_max": tau_max, "delay_rate": rate, "plants": len(plants)}
     return _solve_and_recheck(unknowns, blocks, fixed, meta, margin_tol, preconditioned=None)
 
 
@@ -963,5 +976,5 @@ def solve_interval_preconditioned(
     def blocks(matrices: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return {key: scale[key][:, None] * b * scale[key][None, :] for key, b in raw(matrices).items()}
 
-    meta = {"order": order, "tau_min": tau_min, "tau_max": tau_max, "rate": rate, "plants": len(plants)}
+    meta = {"order": order, "tau_min": tau_min, "tau_max": tau_max, "delay_rate": rate, "plants": len(plants)}
     return _solve_and_recheck(unknowns, blocks, fixed, meta, margin_tol, preconditioned=var_scale)

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from mrpctl._validation import integer, nonnegative_scalar, positive_scalar
-from mrpctl.design._common import NOT_GIVEN, delay_rate_argument, order_value
+from mrpctl.design._common import NOT_GIVEN, delay_rate_argument, order_value, renamed_attribute
 from mrpctl.design.gains import PDGains, pd_gains
 from mrpctl.design.interval import DelayRate, rate_value
 from mrpctl.design.lmi import CertificateStatus
@@ -153,7 +153,7 @@ def synthesize_robust_pd(
     rtol = positive_scalar("rtol", rtol)
     poly = inertia_polytope(sc, tol, product_bound=pb)
     delays = delay_set(tau, period=period, tau_min=tau_min, delay_rate=delay_rate_argument(delay_rate, rate))
-    model, lo, hi, rate_v, d = delays.model, delays.tau_min, delays.tau_max, delays.rate, delays.samples
+    model, lo, hi, rate_v, d = delays.model, delays.tau_min, delays.tau_max, delays.delay_rate, delays.samples
     top = None if omega_max is None else positive_scalar("omega_max", omega_max)
     solves = 0
     failures = 0
@@ -240,7 +240,7 @@ class DelaySet:
     model : DelayModel
     tau_min, tau_max : float
         The delay interval (s); equal for a constant delay.
-    rate : DelayRate
+    delay_rate : DelayRate
         τ̇ bound (sawtooth for the sampled loop; unknown for a constant delay, where it is unused).
     samples : int
         d = τ/h of the sampled loop (0 otherwise).
@@ -251,9 +251,14 @@ class DelaySet:
     model: DelayModel
     tau_min: float
     tau_max: float
-    rate: DelayRate
+    delay_rate: DelayRate
     samples: int = 0
     period: float | None = None
+
+    @property
+    def rate(self) -> DelayRate:
+        """Deprecated name of ``delay_rate`` (``rate`` is a measurement rate in Hz elsewhere in mrpctl)."""
+        return renamed_attribute(self, "rate", "delay_rate")
 
 
 def delay_set(

@@ -565,7 +565,7 @@ def _robust_gain(
             unknowns, blocks, normalise = _constant_blocks(scaled, order, float(eps) / hi, vertex)
         else:
             unknowns, blocks, normalise = _interval_problem(
-                scaled, delays.tau_min / hi, delays.rate, order, float(eps) / hi
+                scaled, delays.tau_min / hi, delays.delay_rate, order, float(eps) / hi
             )
         outcome, values, t_opt = solve_lmi(unknowns, blocks, {}, normalise)
         statuses.append(outcome.status)
@@ -626,7 +626,7 @@ def _synthesize_lmi_robust(
         )
     k = gain_from_pd(spacecraft, np.full(3, k_part[0, 0]), np.full(3, k_part[0, 1])) if split else k_part
     interval = delays.model is not DelayModel.CONSTANT
-    extra: dict[str, Any] = {"tau_min": lo, "delay_rate": delays.rate} if interval else {}
+    extra: dict[str, Any] = {"tau_min": lo, "delay_rate": delays.delay_rate} if interval else {}
     cert = certify_polytope(poly, k, hi, order=order, margin_tol=margin_tol, **extra)
     decay_cert = certify_polytope(poly, k, hi, order=order, margin_tol=margin_tol, decay_rate=alpha, **extra)
     exact_ok, exact_text = exact_check_of_set(poly, k, delays.model, lo, hi, delays.period, delays.samples)

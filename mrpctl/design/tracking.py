@@ -257,7 +257,7 @@ def tracking_linearization(
     if reference is None or isinstance(reference, InertialPointing):
         name, n, gg = "inertial pointing", 0.0, False
     elif isinstance(reference, NadirPointing):
-        name, n, gg = "nadir pointing", reference.rate, gravity_gradient
+        name, n, gg = "nadir pointing", reference.orbit_rate, gravity_gradient
     else:
         raise SpecificationError(
             "reference: the linearisation covers constant reference motions (InertialPointing, NadirPointing); "
