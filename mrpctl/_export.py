@@ -27,7 +27,7 @@ import math
 import os
 import shutil
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -400,44 +400,20 @@ def export(
         error_time=error_time,
         feedforward=feedforward,
     )
-    folder = folder_path(out_dir)
-    target = Path(os.path.realpath(folder))  # a symbolic link stays, its target is replaced
-    clean_leftovers(target)  # first: it may put back a folder that a killed export had moved aside
-    check_folder(folder, overwrite)
-    functions = closed.functions()
-    if physical:
-        functions = {name: physical_function(function) for name, function in functions.items()}
-    in_place = in_place_only(target)
-    staging = staging_folder(target, in_place)
-    try:
-        names: list[str] = []
-        for name, function in functions.items():
-            path = staging / f"{name}.casadi"
-            write_file(path, lambda path=path, function=function: function.save(str(path)))
-            names.append(path.name)
-        names += _write_c_code(staging, functions)
-        compiler, reason = _build_library(staging, compile)
-        if compiler is not None:
-            names.append(LIBRARY_NAME)
-        manifest = _manifest(closed, functions, staging, names, compiler, reason)
-        manifest_path = staging / MANIFEST_NAME
-        write_file(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
-        names.append(MANIFEST_NAME)
-        if in_place:
-            publish_in_place(staging, target, names, frozenset(_export_names()), MANIFEST_NAME)
-        else:
-            publish(staging, target, frozenset(_export_names()))
-    finally:
-        if staging.exists():
-            shutil.rmtree(staging, ignore_errors=True)
-    logger.info("exported %d Functions to %s", len(functions), folder)
-    return ExportResult(
-        folder=folder,
-        files=tuple(folder / name for name in names),
-        library=folder / LIBRARY_NAME if compiler is not None else None,
-        skipped_reason=reason,
-        manifest=manifest,
-    )
+
+    def functions() -> dict[str, ca.Function]:
+        made = closed.functions()
+        if physical:
+            return {name: physical_function(function) for name, function in made.items()}
+        return made
+
+    def manifest(staging: Path, made: dict[str, ca.Function], names: list[str], compiler: str | None,
+                 reason: str | None) -> dict[str, Any]:  # fmt: skip
+        return _manifest(closed, made, staging, names, compiler, reason)
+
+    result = _write_export(out_dir, overwrite, compile, functions, manifest)
+    logger.info("exported %d Functions to %s", sum(path.suffix == ".casadi" for path in result.files), result.folder)
+    return result
 
 
 _WHEEL_DESCRIPTIONS = {
@@ -522,23 +498,10 @@ def export_wheel_controller(
         ),
         "wheel_step": wheel_step_function(spacecraft, wheels, period, substeps),
     }  # fmt: skip
-    folder = folder_path(out_dir)
-    target = Path(os.path.realpath(folder))
-    clean_leftovers(target)
-    check_folder(folder, overwrite)
-    in_place = in_place_only(target)
-    staging = staging_folder(target, in_place)
-    try:
-        names: list[str] = []
-        for name, function in functions.items():
-            path = staging / f"{name}.casadi"
-            write_file(path, lambda path=path, function=function: function.save(str(path)))
-            names.append(path.name)
-        names += _write_c_code(staging, functions)
-        compiler, reason = _build_library(staging, compile)
-        if compiler is not None:
-            names.append(LIBRARY_NAME)
-        manifest = {
+
+    def manifest(staging: Path, made: dict[str, ca.Function], names: list[str], compiler: str | None,
+                 reason: str | None) -> dict[str, Any]:  # fmt: skip
+        return {
             "format": "mrpctl-export",
             "format_version": MANIFEST_FORMAT_VERSION,
             "mrpctl_version": mrpctl_version(),
@@ -596,13 +559,46 @@ def export_wheel_controller(
                 "value": content_hash(staging, names),
             },
         }
+
+    return _write_export(out_dir, overwrite, compile, lambda: functions, manifest)
+
+
+def _write_export(
+    out_dir: Any,
+    overwrite: bool,
+    compile: bool,
+    functions: Callable[[], dict[str, ca.Function]],
+    manifest: Callable[[Path, dict[str, ca.Function], list[str], str | None, str | None], dict[str, Any]],
+) -> ExportResult:
+    """Write ``functions()`` (.casadi files, their C code, the library when ``compile``) and the ``manifest`` into a
+    private staging folder beside ``out_dir`` and publish it whole (`mrpctl._publish`); the folder is checked (and
+    a killed export's leftovers cleaned) before ``functions`` is called."""
+    folder = folder_path(out_dir)
+    target = Path(os.path.realpath(folder))  # a symbolic link stays, its target is replaced
+    clean_leftovers(target)  # first: it may put back a folder that a killed export had moved aside
+    check_folder(folder, overwrite)
+    made = functions()
+    ours = frozenset(_export_names())
+    in_place = in_place_only(target)
+    staging = staging_folder(target, in_place)
+    try:
+        names: list[str] = []
+        for name, function in made.items():
+            path = staging / f"{name}.casadi"
+            write_file(path, lambda path=path, function=function: function.save(str(path)))
+            names.append(path.name)
+        names += _write_c_code(staging, made)
+        compiler, reason = _build_library(staging, compile)
+        if compiler is not None:
+            names.append(LIBRARY_NAME)
+        written = manifest(staging, made, names, compiler, reason)
         manifest_path = staging / MANIFEST_NAME
-        write_file(manifest_path, lambda: manifest_path.write_text(json.dumps(manifest, indent=2) + "\n"))
+        write_file(manifest_path, lambda: manifest_path.write_text(json.dumps(written, indent=2) + "\n"))
         names.append(MANIFEST_NAME)
         if in_place:
-            publish_in_place(staging, target, names, frozenset(_export_names()), MANIFEST_NAME)
+            publish_in_place(staging, target, names, ours, MANIFEST_NAME)
         else:
-            publish(staging, target, frozenset(_export_names()))
+            publish(staging, target, ours)
     finally:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)
@@ -611,7 +607,7 @@ def export_wheel_controller(
         files=tuple(folder / name for name in names),
         library=folder / LIBRARY_NAME if compiler is not None else None,
         skipped_reason=reason,
-        manifest=manifest,
+        manifest=written,
     )
 
 

@@ -465,7 +465,7 @@ def test_flight_runs_sharing_their_models_run_in_one_call_with_the_same_results(
 
     data = copy.deepcopy(FLIGHT_SPEC)
     data["flight"] = {"u_max": 40.0, "disturbance": [0.2, 0.0, -0.1]}
-    data["dispersions"] = {k: data["dispersions"][k] for k in ("attitude", "rate", "hysteresis")}
+    data["dispersions"] = {k: data["dispersions"][k] for k in ("attitude", "omega", "hysteresis")}
     data["count"] = 4
     spec = parse_campaign(data)
     together = simulate_chunk(spec, 0, 4, threads=2)
