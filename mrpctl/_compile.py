@@ -64,6 +64,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from mrpctl._files import file_sha256
 from mrpctl._validation import positive_scalar
 from mrpctl.errors import CacheWarning, CodegenError, CompilerWarning, SpecificationError
 
@@ -529,17 +530,9 @@ def _checksum_path(library: Path) -> Path:
     return library.with_name(library.name + _CHECKSUM_SUFFIX)
 
 
-def _file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as stream:
-        for block in iter(lambda: stream.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def _write_checksum(library: Path, build: Path) -> None:
     """Write ``<library>.sha256`` (size and SHA-256) atomically, after the library is in place."""
-    record = {"library": library.name, "size": library.stat().st_size, "sha256": _file_sha256(library)}
+    record = {"library": library.name, "size": library.stat().st_size, "sha256": file_sha256(library)}
     partial = build / (library.name + _CHECKSUM_SUFFIX)
     partial.write_text(json.dumps(record) + "\n")
     os.replace(partial, _checksum_path(library))
@@ -563,7 +556,7 @@ def _verify(library: Path) -> str | None:
         found = library.stat().st_size
         if found != size:
             return f"{found} bytes where {size} were written: truncated or replaced"
-        if _file_sha256(library) != expected:
+        if file_sha256(library) != expected:
             return "its SHA-256 differs from the one recorded when it was built"
     except OSError as exc:
         return f"cannot be read: {exc}"

@@ -35,10 +35,10 @@ from typing import Any
 import casadi as ca
 
 from mrpctl._compile import DEFAULT_FLAGS, CompilerWarning, build_library, compiler_version, find_compiler
+from mrpctl._files import file_sha256
 from mrpctl._publish import (
     check_folder,
     clean_leftovers,
-    file_digest,
     folder_path,
     in_place_only,
     publish,
@@ -552,7 +552,7 @@ def export_wheel_controller(
                 "compiler": _compiler_description(compiler) if compiler is not None else None,
                 "flags": [*DEFAULT_FLAGS, "-lm"],
             },
-            "files": {name: file_digest(staging / name) for name in sorted(names)},
+            "files": {name: file_sha256(staging / name) for name in sorted(names)},
             "content_hash": {
                 "algorithm": "sha256",
                 "covers": "every file listed in 'files' (all written files except manifest.json)",
@@ -620,7 +620,7 @@ def content_hash(folder: str | os.PathLike[str], names: Any) -> str:
     gives the same value.
     """
     folder = Path(folder)
-    lines = [f"{file_digest(folder / name)}  {name}\n" for name in sorted(names)]
+    lines = [f"{file_sha256(folder / name)}  {name}\n" for name in sorted(names)]
     return hashlib.sha256("".join(lines).encode()).hexdigest()
 
 
@@ -751,7 +751,7 @@ def _manifest(
             "compiler": _compiler_description(compiler) if compiler is not None else None,
             "flags": [*DEFAULT_FLAGS, "-lm"],
         },
-        "files": {name: file_digest(folder / name) for name in sorted(names)},
+        "files": {name: file_sha256(folder / name) for name in sorted(names)},
         "content_hash": {
             "algorithm": "sha256",
             "covers": "every file listed in 'files' (all written files except manifest.json)",

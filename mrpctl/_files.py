@@ -9,6 +9,7 @@ file with a ``.csv`` name) is named, never echoed. Memory is estimated from the 
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import stat
@@ -29,6 +30,16 @@ MAX_TOML_BYTES = 16 * 2**20
 _CSV_BYTES_PER_BYTE = 10
 #: Largest .npy header read (bytes; NumPy's own default limit).
 _NPY_HEADER_LIMIT = 10000
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """The SHA-256 of a file's bytes (hex), read in 1 MiB blocks: the one checksum of the engine cache, export
+    manifests and stored trajectories."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def memory_limit() -> float:

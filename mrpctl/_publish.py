@@ -5,7 +5,6 @@ left by a killed export are cleaned up or put back first."""
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import logging
 import os
 import re
@@ -21,7 +20,6 @@ from mrpctl.errors import CodegenError, SpecificationError
 __all__ = [
     "check_folder",
     "clean_leftovers",
-    "file_digest",
     "folder_path",
     "in_place_only",
     "publish",
@@ -188,11 +186,3 @@ def write_file(path: Path, action: Any) -> None:
         action()
     except (OSError, RuntimeError) as exc:
         raise CodegenError(f"cannot write {path}: {exc}") from exc
-
-
-def file_digest(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as stream:
-        for block in iter(lambda: stream.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()

@@ -13,13 +13,13 @@ every file with its SHA-256, so ``sha256sum -c SHA256SUMS`` in that folder check
 
 from __future__ import annotations
 
-import hashlib
 import os
 import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from mrpctl._files import file_sha256
 from mrpctl._validation import integer
 from mrpctl.campaign.report import CampaignReport, replay
 from mrpctl.campaign.store import open_campaign
@@ -77,14 +77,6 @@ def trajectory_runs(summary: CampaignReport, worst: int, runs: Iterable[int] = (
     return tuple(chosen)
 
 
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def _write_sums(folder: Path, sums: dict[str, str]) -> None:
     text = "".join(f"{digest}  {name}\n" for name, digest in sorted(sums.items()))
     handle, temporary = tempfile.mkstemp(dir=folder, prefix=f".{_SUMS}.", suffix=".tmp")
@@ -135,7 +127,7 @@ def store_trajectories(out: str | Path, runs: Iterable[int]) -> StoredTrajectori
                 f"; no trajectory written (mrpctl campaign replay {out} --run {run} shows the numbers)"
             )
         path = save(result.trajectory, folder / f"run-{run}.nc", seed=seed)
-        sums[path.name] = _sha256(path)
+        sums[path.name] = file_sha256(path)
         _write_sums(folder, sums)
         written.append(run)
         files.append(path)
