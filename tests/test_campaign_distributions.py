@@ -53,7 +53,8 @@ def test_normal_gain_scale_follows_the_normal_cdf():
 
 
 def test_truncated_normal_rate_stays_in_its_interval_and_follows_its_cdf():
-    spec = _spec(omega={"magnitude": {"distribution": "truncnorm", "mean": 0.02, "std": 0.02, "low": 0.0, "high": 0.05}})
+    magnitude_law = {"distribution": "truncnorm", "mean": 0.02, "std": 0.02, "low": 0.0, "high": 0.05}
+    spec = _spec(omega={"magnitude": magnitude_law})
     omega = run_inputs(spec, 0, 4000).omega0
     magnitude = np.linalg.norm(omega, axis=1)
     assert magnitude.min() >= 0.0 and magnitude.max() <= 0.05 * (1 + 1e-12)
