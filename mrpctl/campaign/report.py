@@ -19,13 +19,14 @@ import xarray as xr
 from scipy.stats import binomtest
 
 from mrpctl._validation import integer
-from mrpctl.campaign._task import run_models, simulate_chunk
+from mrpctl.campaign._task import run_models, run_tracking, simulate_chunk, tracking_keywords
 from mrpctl.campaign.integrity import StoreDamagedError
 from mrpctl.campaign.sampling import run_inputs
-from mrpctl.campaign.simulation import METRICS, flight_keywords
-from mrpctl.campaign.store import INPUTS, STORE_NAME, open_campaign, spec_of, stored_noise_revision
+from mrpctl.campaign.simulation import METRICS, POINTING_METRICS, flight_keywords
+from mrpctl.campaign.store import STORE_NAME, open_campaign, spec_of, stored_names, stored_noise_revision
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE
 from mrpctl.simulation import simulate
 from mrpctl.spacecraft import Spacecraft
 
@@ -162,6 +163,10 @@ class CampaignReport:
     peak_torque_max: float
     worst: tuple[WorstCase, ...] = field(repr=False)
     by_rule: tuple[RuleSummary, ...] = field(default=(), repr=False)
+    #: A tracking campaign's pointing (None when the campaign regulates): the quantiles (median, p95, max) of
+    #: ``pointing_max_deg`` and ``pointing_rms_deg`` (Φ_B/R after the settling time, deg, over the settled runs)
+    #: and ``slew_time_s`` (over the runs that came within the tolerance), with ``slewed`` (how many did).
+    pointing: dict[str, Any] | None = field(default=None, repr=False)
     #: The store's check: ``verified`` (False: written without checksum records) and the ``damaged`` chunks
     #: left out of this report (only with ``intact_only``).
     integrity: dict[str, Any] = field(default_factory=dict, repr=False)
@@ -184,6 +189,7 @@ class CampaignReport:
             "worst": [case.__dict__ for case in self.worst],
             "by_rule": [{**entry.__dict__, "wilson": list(entry.wilson)} for entry in self.by_rule],
             "integrity": self.integrity,
+            **({} if self.pointing is None else {"pointing": self.pointing}),
         }
 
     def __str__(self) -> str:
@@ -198,6 +204,19 @@ class CampaignReport:
             f"  switches      median {w['median']:.4g}, p95 {w['p95']:.4g}, max {w['max']:.4g}",
             f"  peak torque   max {self.peak_torque_max:.4g} N m",
         ]
+        if self.pointing is not None:
+            p = self.pointing
+            for key, label in (
+                ("pointing_max_deg", "pointing max after settling (deg)"),
+                ("pointing_rms_deg", "pointing RMS after settling (deg)"),
+                ("slew_time_s", "slew time (s)"),
+            ):
+                q = p[key]
+                lines.append(f"  {label:<34} median {q['median']:.4g}, p95 {q['p95']:.4g}, max {q['max']:.4g}")
+            lines.append(
+                f"  slewed        {p['slewed']}/{self.complete} runs came within {p['tolerance_deg']:g} deg of the "
+                "reference to the end (slew time); pointing over the settled runs"
+            )
         if self.integrity and not self.integrity.get("verified", True):
             lines.append(f"  integrity     NOT VERIFIED: {self.integrity.get('note', 'no checksum records')}")
         damaged = self.integrity.get("damaged", []) if self.integrity else []
@@ -324,6 +343,16 @@ def report(
             )
         )
     peak = np.asarray(dataset["peak_torque"], dtype=float)
+    pointing = None
+    if "pointing_max" in dataset:
+        slew = np.asarray(dataset["slew_time"], dtype=float)
+        pointing = {
+            "pointing_max_deg": _quantiles(_finite(dataset["pointing_max"])),
+            "pointing_rms_deg": _quantiles(_finite(dataset["pointing_rms"])),
+            "slew_time_s": _quantiles(slew[np.isfinite(slew)]),
+            "slewed": int(np.isfinite(slew).sum()),
+            "tolerance_deg": _pointing_tolerance(dataset),
+        }
     return CampaignReport(
         name=str(dataset.attrs.get("name", "campaign")),
         count=int(dataset.attrs.get("count", n)),
@@ -339,7 +368,21 @@ def report(
         worst=tuple(cases),
         by_rule=tuple(by_rule),
         integrity=json.loads(str(dataset.attrs.get("integrity", "{}"))),
+        pointing=pointing,
     )
+
+
+def _finite(values: Any) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    return array[np.isfinite(array)]
+
+
+def _pointing_tolerance(dataset: xr.Dataset) -> float:
+    """The slew time's tolerance (deg) of a tracking campaign: the campaign's ``[reference]
+    pointing_tolerance_deg`` where given, else simulate's default."""
+    table = json.loads(str(dataset.attrs.get("campaign", "{}"))).get("reference", {})
+    value = table.get("pointing_tolerance_deg", DEFAULT_POINTING_TOLERANCE) if isinstance(table, dict) else None
+    return float(value) if isinstance(value, int | float) else DEFAULT_POINTING_TOLERANCE
 
 
 def _rule_labels(dataset: xr.Dataset) -> list[str]:
@@ -484,7 +527,7 @@ class ReplayResult:
                 f"  the store was written with noise revision {self.noise_revisions[0]}, this mrpctl computes revision "
                 f"{self.noise_revisions[1]}: runs with attitude noise differ in their last bits (see CHANGELOG.md)"
             )
-        for name in METRICS:
+        for name in [*METRICS, *(key for key in POINTING_METRICS if key in self.stored)]:
             lines.append(f"  {name:<18} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
         return "\n".join(lines)
 
@@ -524,7 +567,7 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
         raise SpecificationError(f"run: run {run} has not been stored yet (its chunk is not complete)")
     spec = spec_of(dataset)
     values = simulate_chunk(spec, run, run + 1)
-    names = list(INPUTS) + list(METRICS)
+    names = stored_names(spec.tracking)
     stored = {name: np.asarray(dataset[name].sel(run=run).values) for name in names}
     replayed = {name: np.asarray(values[name][0]) for name in names}
     mismatches = tuple(name for name in names if not _same(stored[name], replayed[name]))
@@ -570,8 +613,11 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
         rate=base.rate,
         history=base.history,
         substeps=base.substeps,
+        settling_attitude=base.settling_attitude,
+        settling_rate=base.settling_rate,
         **({} if models is None else flight_keywords(models)),
         **({} if spec.predictor is None else {"predictor": spec.predictor}),
+        **({} if not spec.tracking else {"reference": run_tracking(spec, inputs, 0), **tracking_keywords(spec)}),
     )
 
 
