@@ -629,7 +629,10 @@ def parse_campaign(
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
     if "rule" not in data:
         raise SpecificationError(f"[rule] needs type, one of {sorted([*RULE_NAMES, 'hysteretic'])}")
-    given_rows = (files or {}).get("reference_file")
+    table = scenario_part.get("reference")
+    given_rows = (
+        (files or {}).get("reference_file") if isinstance(table, dict) and table.get("type") == "file" else None
+    )
     if given_rows is not None:  # the rows of [reference] file as read before (a store, a Dask task): not re-read
         scenario_part["reference"] = {k: v for k, v in scenario_part["reference"].items() if k != "file"}
         scenario_part["reference"]["type"] = "inertial"
