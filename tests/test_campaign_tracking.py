@@ -23,6 +23,7 @@ from mrpctl import Spacecraft, simulate
 from mrpctl.campaign import load_campaign, open_campaign, parse_campaign, replay, report, run_campaign, run_inputs
 from mrpctl.campaign import simulation as campaign_simulation
 from mrpctl.campaign._task import simulate_chunk
+from mrpctl.campaign.report import figures
 from mrpctl.campaign.simulation import METRICS, POINTING_METRICS
 from mrpctl.cli import USER_ERROR, main
 from mrpctl.errors import SpecificationError
@@ -310,6 +311,9 @@ def test_store_report_and_replay_of_a_tracking_campaign(tmp_path: Path, capsys: 
     json.dumps(summary.summary()["pointing"])
     assert main(["campaign", "report", str(out)]) == 0
     assert "pointing RMS after settling (deg)" in capsys.readouterr().out
+    written = json.loads((out / "report" / "summary.json").read_text(encoding="utf-8"))
+    assert written["pointing"]["slew_time_s"]["max"] == float(np.nanmax(dataset["slew_time"].values))
+    assert (out / "report" / "pointing.png").stat().st_size > 0
 
 
 def test_a_regulation_campaign_stores_no_tracking_arrays(tmp_path: Path) -> None:
@@ -319,6 +323,7 @@ def test_a_regulation_campaign_stores_no_tracking_arrays(tmp_path: Path) -> None
     run_campaign(spec, tmp_path / "out", chunk=2)
     assert "pointing_max" not in open_campaign(tmp_path / "out")
     assert report(tmp_path / "out").pointing is None
+    assert "pointing" not in figures(tmp_path / "out")
 
 
 BAD = [

@@ -393,7 +393,8 @@ def _rule_labels(dataset: xr.Dataset) -> list[str]:
 
 
 def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
-    """The report's figures: settling-time and switch-count histograms, outcome against the initial state."""
+    """The report's figures: settling-time and switch-count histograms, outcome against the initial state; a
+    tracking campaign's also its slew times and pointing errors (``pointing``)."""
     # deferred: matplotlib, only when a figure is made
     from matplotlib.figure import Figure
 
@@ -446,7 +447,35 @@ def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.set_title("outcome against the initial state", fontsize=9)
     out["outcome_vs_initial"] = fig
+    if "pointing_max" in dataset:
+        out["pointing"] = _pointing_figure(dataset)
     return out
+
+
+def _pointing_figure(dataset: xr.Dataset) -> Figure:
+    """A tracking campaign's slew times and pointing errors after settling, one histogram each."""
+    # deferred: matplotlib, only when a figure is made
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9.0, 3.6), layout="constrained")
+    left, right = fig.subplots(1, 2)
+    slew = _finite(dataset["slew_time"])
+    peak, rms = _finite(dataset["pointing_max"]), _finite(dataset["pointing_rms"])
+    n = dataset.sizes["run"]
+    if slew.size:
+        left.hist(slew, bins=min(50, max(5, int(np.sqrt(slew.size)))), color="tab:blue")
+    left.set_xlabel(f"slew time (s): pointing error < {_pointing_tolerance(dataset):g} deg to the end")
+    left.set_ylabel("runs")
+    left.set_title(f"slew time of {slew.size}/{n} runs ({n - slew.size} never within the tolerance)", fontsize=9)
+    if peak.size:
+        bins = min(50, max(5, int(np.sqrt(peak.size))))
+        right.hist(peak, bins=bins, color="tab:red", alpha=0.6, label="max")
+        right.hist(rms, bins=bins, color="tab:green", alpha=0.6, label="RMS")
+        right.legend(fontsize=8)
+    right.set_xlabel("pointing error after settling (deg)")
+    right.set_ylabel("runs")
+    right.set_title(f"pointing of {peak.size}/{n} settled runs", fontsize=9)
+    return fig
 
 
 def _save(fig: Figure, path: Path) -> Path:

@@ -51,7 +51,7 @@ POINTING_METRICS: dict[str, tuple[Any, Any]] = {
 }
 
 #: The most bytes of kept samples a tracking campaign holds at once (all its concurrent simulate_batch calls).
-TRACKING_BATCH_BYTES = 256e6
+TRACKING_BATCH_BYTES = 64e6
 
 
 def flight_keywords(models: dict[str, Any]) -> dict[str, Any]:
