@@ -413,3 +413,32 @@ def test_a_predictor_campaign_tracks_each_runs_orbit_as_simulate_does() -> None:
         )
         _same(chunk, j, result)
     assert len(set(chunk["orbit_rate"].tolist())) == 3
+
+
+@pytest.mark.slow
+def test_dask_workers_fly_the_stored_reference_rows_and_the_drawn_slews(tmp_path: Path) -> None:
+    """A LocalCluster stores what the local runner stores: the file reference's rows are shipped with the task (the
+    file deleted before the run) and the drawn slews come from (seed, case) on the worker."""
+    pytest.importorskip("distributed")
+    n = math.floor(T_FINAL * RATE + 1e-9) + 1
+    profile = EigenaxisSlew(
+        start=[0.0, 0.0, 0.0], rate_limit=0.2, acceleration_limit=0.05, axis=[0.6, 0.0, 0.8], angle=math.radians(60.0)
+    )
+    np.savetxt(tmp_path / "rows.csv", reference_samples(profile, n, RATE), delimiter=",", fmt="%.17g")
+    (tmp_path / "file.toml").write_text(
+        HEADER + '\n[reference]\ntype = "file"\nfile = "rows.csv"\n[dispersions.omega]\nmagnitude = [0.0, 0.01]\n',
+        encoding="utf-8",
+    )
+    (tmp_path / "slew.toml").write_text(
+        HEADER + SLEW + '[dispersions.reference]\nslew_angle_deg = [30.0, 150.0]\nslew_axis = "sphere"\n',
+        encoding="utf-8",
+    )
+    specs = [load_campaign(tmp_path / "file.toml"), load_campaign(tmp_path / "slew.toml")]
+    (tmp_path / "rows.csv").unlink()
+    for k, spec in enumerate(specs):
+        run_campaign(spec, tmp_path / f"local{k}", chunk=3, threads=1)
+        assert run_campaign(spec, tmp_path / f"dask{k}", chunk=3, scheduler="local", workers=1).complete
+        local, dask = open_campaign(tmp_path / f"local{k}"), open_campaign(tmp_path / f"dask{k}")
+        assert set(local.data_vars) == set(dask.data_vars) >= {"pointing_max", "slew_time", "slew_angle"}
+        for name in local.data_vars:
+            assert local[name].values.tobytes() == dask[name].values.tobytes(), name
