@@ -29,7 +29,7 @@ from mrpctl.cli import USER_ERROR, main
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, Hysteretic
 from mrpctl.guidance import CircularOrbit, EigenaxisSlew, InertialPointing, NadirPointing, reference_samples
-from mrpctl.simulation._budget import batch_run_bytes
+from mrpctl.simulation import kept_run_bytes
 
 RATE, T_FINAL, TAU = 100.0, 25.0, 0.05
 HEADER = f"""
@@ -208,7 +208,8 @@ def test_an_undispersed_reference_is_shared_and_stored_with_its_base_values() ->
 def test_groups_bounded_by_memory_give_the_same_runs(monkeypatch: pytest.MonkeyPatch) -> None:
     spec = _spec(HEADER + SLEW + "[dispersions.reference]\nslew_angle_deg = [30.0, 120.0]\n")
     n = math.floor(T_FINAL * RATE + 1e-9) + 1
-    per_run = batch_run_bytes(n, 1, True, records=True)
+    per_run = kept_run_bytes(T_FINAL, RATE, 1, records=True)
+    assert per_run >= n * (104 + 256)  # the kept sample (m_k, u_k, t, omega) and its flight records, per sample
     assert campaign_simulation._group_size(T_FINAL, RATE, 1) == int(campaign_simulation.TRACKING_BATCH_BYTES // per_run)
     whole = simulate_chunk(spec, 0, spec.count, threads=2)
     monkeypatch.setattr(campaign_simulation, "TRACKING_BATCH_BYTES", 2.5 * per_run)  # 2 runs per call
@@ -442,3 +443,13 @@ def test_dask_workers_fly_the_stored_reference_rows_and_the_drawn_slews(tmp_path
         assert set(local.data_vars) == set(dask.data_vars) >= {"pointing_max", "slew_time", "slew_angle"}
         for name in local.data_vars:
             assert local[name].values.tobytes() == dask[name].values.tobytes(), name
+
+
+def test_the_how_to_section_runs_as_written(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/how-to/campaigns.md's section on tracking campaigns: its Python block runs, its assertions hold."""
+    page = (Path(__file__).resolve().parents[1] / "docs" / "how-to" / "campaigns.md").read_text(encoding="utf-8")
+    section = page.split("## Campaigns of the tracking loop", 1)[1]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code, "docs/how-to/campaigns.md", "exec"), {})
+    assert (tmp_path / "slews" / "campaign.zarr").is_dir()

@@ -7,7 +7,7 @@ A tracking campaign (a reference per run) also returns the pointing metrics of `
 are computed from every sample of the true error σ_B/R, which only a run with its records kept gives
 (``simulate_batch(..., trajectories=True, keep_every=1)``, the scalar engine): such runs go in groups
 whose kept samples fit in `TRACKING_BATCH_BYTES` (estimated before each call with simulate_batch's own
-per-run rule), each group's trajectories dropped once its metrics are read.
+per-run rule, `mrpctl.simulation.kept_run_bytes`), each group's trajectories dropped once its metrics are read.
 """
 
 from __future__ import annotations
@@ -22,8 +22,7 @@ import numpy as np
 
 from mrpctl.flight import Disturbance
 from mrpctl.predictor import Predictor
-from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, simulate_batch
-from mrpctl.simulation._budget import batch_run_bytes, sample_horizon
+from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, kept_run_bytes, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 
@@ -98,8 +97,7 @@ def _batch(
 def _group_size(t_final: float, rate: float, concurrent: int) -> int:
     """Runs per tracking call: their kept samples and records within `TRACKING_BATCH_BYTES` over the
     ``concurrent`` calls in flight (at least one run: simulate_batch then refuses one that does not fit)."""
-    _, n = sample_horizon(t_final, rate)
-    per_run = batch_run_bytes(n, 1, True, records=True)
+    per_run = kept_run_bytes(t_final, rate, 1, records=True)
     return max(1, int(TRACKING_BATCH_BYTES // (per_run * max(1, concurrent))))
 
 
