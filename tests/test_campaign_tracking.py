@@ -315,6 +315,13 @@ def test_store_report_and_replay_of_a_tracking_campaign(tmp_path: Path, capsys: 
     written = json.loads((out / "report" / "summary.json").read_text(encoding="utf-8"))
     assert written["pointing"]["slew_time_s"]["max"] == float(np.nanmax(dataset["slew_time"].values))
     assert (out / "report" / "pointing.png").stat().st_size > 0
+    # a resume whose file now holds other rows is refused, naming the key and the file
+    other = reference_samples(
+        EigenaxisSlew(start=[0.0] * 3, rate_limit=0.2, acceleration_limit=0.05, axis=[1.0, 0, 0], angle=1.0), n, RATE
+    )
+    np.savetxt(rows_path, other, delimiter=",", fmt="%.17g")
+    with pytest.raises(SpecificationError, match=r"\[reference\] file: .*rows.csv is not the file"):
+        run_campaign(load_campaign(path), out, chunk=4)
 
 
 def test_a_regulation_campaign_stores_no_tracking_arrays(tmp_path: Path) -> None:
@@ -453,3 +460,22 @@ def test_the_how_to_section_runs_as_written(tmp_path: Path, monkeypatch: pytest.
     monkeypatch.chdir(tmp_path)
     exec(compile(code, "docs/how-to/campaigns.md", "exec"), {})
     assert (tmp_path / "slews" / "campaign.zarr").is_dir()
+
+
+def test_the_scenarios_tracking_options_reach_every_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where the scenario reader gives a tracking scenario's options (Scenario.tracking_options), the runs take them."""
+    from mrpctl.scenario import Scenario
+
+    spec = _spec(HEADER + SLEW + '[dispersions.reference]\nslew_axis = "sphere"\n')
+    plain = simulate_chunk(spec, 0, 2, threads=1)
+    options = {"feedforward": True, "pointing_tolerance": 0.05}
+    monkeypatch.setattr(Scenario, "tracking_options", property(lambda self: dict(options)), raising=False)
+    chunk = simulate_chunk(spec, 0, 2, threads=1)
+    inputs = run_inputs(spec, 0, 2)
+    for j in range(2):
+        slew = EigenaxisSlew(
+            start=[0.0, 0.0, 0.0], rate_limit=0.2, acceleration_limit=0.05, axis=inputs.slew_axis[j],
+            angle=math.radians(90.0), t_start=1.0,
+        )  # fmt: skip
+        _same(chunk, j, _simulate_run(spec, inputs, j, slew, **options))
+    assert chunk["pointing_max"].tobytes() != plain["pointing_max"].tobytes()  # the feedforward flies

@@ -89,6 +89,11 @@ may differ: ``"on-predicted:1.2"``, ``"on-predicted:inf"`` never switches)::
 The model is the same for every run; the plant is each run's dispersed spacecraft. ``flight.jitter``
 and a ``history`` other than ``"constant"`` are refused with it.
 
+A scenario ``[reference]`` table (``type = "inertial" | "slew" | "nadir" | "file"``) makes the runs fly the
+tracking loop on it (every rule ``hysteretic`` or ``on-predicted``), dispersed per run by
+``[dispersions.reference]`` (``slew_angle_deg``, ``slew_axis = "sphere"``, ``orbit_rate``;
+[`mrpctl.campaign.reference`][mrpctl.campaign.reference]); each run then also stores its pointing.
+
 Unknown keys anywhere are errors naming the key.
 """
 
@@ -504,6 +509,11 @@ class CampaignSpec:
         the simulator does not report it; about 1.5× the run time). Default True.
     source : dict
         The parsed TOML the specification was built from (written to the results).
+    reference : ReferenceDispersion or None
+        ``[dispersions.reference]`` of a tracking campaign (the base reference is ``base.reference``, the
+        scenario's ``[reference]``; see [`mrpctl.campaign.reference`][mrpctl.campaign.reference]).
+    reference_file : SampleFile or None
+        The rows of ``[reference] type = "file"`` as read (kept with the campaign, as the ``[flight]`` files).
     """
 
     base: Scenario
