@@ -312,7 +312,11 @@ def test_store_report_and_replay_of_a_tracking_campaign(tmp_path: Path, capsys: 
     json.dumps(summary.summary()["pointing"])
     assert main(["campaign", "report", str(out)]) == 0
     assert "pointing RMS after settling (deg)" in capsys.readouterr().out
+    assert "point_max_deg" in text and "slew_time_s" in text  # the worst cases' pointing columns
+    first = summary.worst[0]
+    assert first.slew_time == float(dataset["slew_time"].sel(run=first.run))
     written = json.loads((out / "report" / "summary.json").read_text(encoding="utf-8"))
+    assert "pointing_max" in written["worst"][0]
     assert written["pointing"]["slew_time_s"]["max"] == float(np.nanmax(dataset["slew_time"].values))
     assert (out / "report" / "pointing.png").stat().st_size > 0
     # a resume whose file now holds other rows is refused, naming the key and the file
@@ -332,6 +336,7 @@ def test_a_regulation_campaign_stores_no_tracking_arrays(tmp_path: Path) -> None
     assert "pointing_max" not in open_campaign(tmp_path / "out")
     assert report(tmp_path / "out").pointing is None
     assert "pointing" not in figures(tmp_path / "out")
+    assert "pointing_max" not in report(tmp_path / "out").summary()["worst"][0]
 
 
 BAD = [

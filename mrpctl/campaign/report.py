@@ -115,6 +115,9 @@ class WorstCase:
     initial_rate: float
     command: str
     rule: str = ""
+    #: A tracking campaign's pointing max after settling (deg) and slew time (s) of the run (NaN: none, or regulation).
+    pointing_max: float = math.nan
+    slew_time: float = math.nan
 
 
 #: How the worst runs are ordered (most severe first), as the report states it.
@@ -186,11 +189,18 @@ class CampaignReport:
             "switch_count": self.switch_quantiles,
             "peak_torque_max_Nm": None if math.isnan(self.peak_torque_max) else self.peak_torque_max,
             "worst_criterion": WORST_CRITERION,
-            "worst": [case.__dict__ for case in self.worst],
+            "worst": [self._worst_entry(case) for case in self.worst],
             "by_rule": [{**entry.__dict__, "wilson": list(entry.wilson)} for entry in self.by_rule],
             "integrity": self.integrity,
             **({} if self.pointing is None else {"pointing": self.pointing}),
         }
+
+    def _worst_entry(self, case: WorstCase) -> dict[str, Any]:
+        entry = dict(case.__dict__)
+        if self.pointing is None:  # a regulation campaign's summary is as before
+            entry.pop("pointing_max")
+            entry.pop("slew_time")
+        return entry
 
     def __str__(self) -> str:
         s, w = self.settling_quantiles, self.switch_quantiles
@@ -243,15 +253,20 @@ class CampaignReport:
                     f"{r.settling_quantiles['median']:>12.4g} {r.settling_quantiles['p95']:>12.4g} "
                     f"{r.switch_quantiles['median']:>10.4g} {r.switch_quantiles['max']:>10.4g}"
                 )
+        tracking = self.pointing is not None
         lines += [
             f"  worst cases ({WORST_CRITERION}):",
             f"    {'run':>8} {'rule':<20} {'reason':<12} {'settling_s':>10} {'switches':>8} {'max|sigma|':>10} "
-            f"{'angle_deg':>9} {'rate_rad/s':>10}  replay",
+            f"{'angle_deg':>9} {'rate_rad/s':>10}"
+            + (f" {'point_max_deg':>13} {'slew_time_s':>11}" if tracking else "")
+            + "  replay",
         ]
         for c in self.worst:
             lines.append(
                 f"    {c.run:>8} {c.rule:<20} {c.reason:<12} {c.settling_time:>10.4g} {c.switch_count:>8} "
-                f"{c.max_sigma:>10.4g} {math.degrees(c.initial_angle):>9.2f} {c.initial_rate:>10.4g}  {c.command}"
+                f"{c.max_sigma:>10.4g} {math.degrees(c.initial_angle):>9.2f} {c.initial_rate:>10.4g}"
+                + (f" {c.pointing_max:>13.4g} {c.slew_time:>11.4g}" if tracking else "")
+                + f"  {c.command}"
             )
         return "\n".join(lines)
 
@@ -324,6 +339,11 @@ def report(
                 initial_rate=float(dataset["initial_rate"][i]),
                 command=f"mrpctl campaign replay {shlex.quote(folder)} --run {int(runs[i])}",
                 rule=labels[int(rule_index[i])] if 0 <= int(rule_index[i]) < len(labels) else "?",
+                **(
+                    {"pointing_max": float(dataset["pointing_max"][i]), "slew_time": float(dataset["slew_time"][i])}
+                    if "pointing_max" in dataset
+                    else {}
+                ),
             )
         )
     by_rule = []
