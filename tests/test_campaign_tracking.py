@@ -484,3 +484,21 @@ def test_the_scenarios_tracking_options_reach_every_run(monkeypatch: pytest.Monk
         )  # fmt: skip
         _same(chunk, j, _simulate_run(spec, inputs, j, slew, **options))
     assert chunk["pointing_max"].tobytes() != plain["pointing_max"].tobytes()  # the feedforward flies
+
+
+def test_a_slew_given_by_target_keeps_its_angle_and_takes_the_drawn_axis() -> None:
+    from mrpctl.campaign._task import run_tracking
+
+    text = HEADER + '\n[reference]\ntype = "slew"\ntarget = [0.0, 0.0, 0.41421356237309503]\nrate_limit = 0.2\n'
+    text += 'acceleration_limit = 0.05\n[dispersions.reference]\nslew_axis = "sphere"\n'
+    spec = _spec(text)
+    inputs = run_inputs(spec, 0, 3)
+    base = spec.base.reference
+    assert base.angle == pytest.approx(math.pi / 2, rel=1e-12)  # tan(Φ/4) = √2 − 1: a quarter turn
+    np.testing.assert_array_equal(inputs.slew_angle, np.full(3, math.degrees(base.angle)))
+    for j in range(3):
+        slew = run_tracking(spec, inputs, j)
+        assert isinstance(slew, EigenaxisSlew) and slew.angle == base.angle and slew.target is None
+        # the stored unit axis, normalised once more by the profile (to the last bit of |axis| = 1)
+        np.testing.assert_array_equal(slew.axis, inputs.slew_axis[j] / np.linalg.norm(inputs.slew_axis[j]))
+        np.testing.assert_allclose(slew.axis, inputs.slew_axis[j], rtol=0, atol=4e-16)

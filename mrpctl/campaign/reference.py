@@ -153,7 +153,8 @@ def reference_values(
     reference: GuidanceProfile | None, dispersion: ReferenceDispersion | None, draws: np.ndarray
 ) -> dict[str, np.ndarray]:
     """The runs' ``slew_angle`` (deg), ``slew_axis`` and ``orbit_rate`` (rad/s): the drawn value, else the base
-    reference's (NaN where the reference has none: no slew, no orbit)."""
+    reference's (NaN where the reference has none: no slew, no orbit). A drawn axis is the normalised normals
+    (unit to the last bit; the slew normalises it once more, which may move an ulp)."""
     n = len(draws)
     angle, axis, rate = np.full(n, np.nan), np.full((n, 3), np.nan), np.full(n, np.nan)
     dispersion = dispersion if dispersion is not None else ReferenceDispersion()
