@@ -355,10 +355,6 @@ def test_bad_combinations_say_what_to_use() -> None:
 
     with pytest.raises(SpecificationError, match="tracking a reference on a wheel cluster is not modelled"):
         simulate_batch(CUBESAT, K, [x0, x0], rule=Hysteretic(0.1), wheels=wheels, reference=reference, **run)
-    from mrpctl.flight.steering import SteeringLaw
-
-    with pytest.raises(SpecificationError, match="law: the steering law on a wheel cluster is not modelled"):
-        simulate(CUBESAT, K, x0, rule=Hysteretic(0.1), wheels=wheels, law=SteeringLaw(0.1, 0.01, 0.4), **run)
 
 
 def test_predictor_with_wheels_is_refused() -> None:

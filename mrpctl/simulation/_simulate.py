@@ -361,11 +361,6 @@ def simulate(
                 "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
                 "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
             )
-        if law is not None:
-            raise SpecificationError(
-                "law: the steering law on a wheel cluster is not modelled yet; fly it with an ideal body torque "
-                "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
-            )
     d = delay_samples(tau, rate)
     rate = float(rate)
     t_final, n = sample_horizon(t_final, rate)
@@ -420,6 +415,7 @@ def simulate(
             varying=varying,
             stop=progress_stop(progress, n),
             switch_limit=n if keep == 1 else SWITCH_LIMIT,
+            law=law,
         )
         flown = assemble_run(
             output,
