@@ -31,11 +31,12 @@ def _gain(spacecraft: Spacecraft) -> np.ndarray:
 
 _AWAY = np.array([0.9, 0.3, -0.2]) / np.linalg.norm([0.9, 0.3, -0.2])
 CASES = {
-    # the cubesat's cluster (5 mN m, 20 mN m s), a slew of ~150 degrees: the rate limit acts, then the linear law
+    # the cubesat's cluster (5 mN m, 20 mN m s), a slew of ~150 degrees: the law's momentum limit (the wheels'
+    # 0.02 N m s, 0.08 to 0.13 rad/s) acts below its rate limit, then the linear law
     "orthogonal": dict(
         inertia=np.diag([0.2, 0.25, 0.15]),
         wheels=WheelCluster.orthogonal(SPIN_INERTIA, 5e-3, SPEED_LIMIT),
-        law=SteeringLaw(0.08, 0.012, 0.45),
+        law=SteeringLaw(0.2, 0.012, 0.45, momentum_limit=0.02, spacecraft=CUBESAT),
         x0=([0.5, -0.6, 0.4], [0.01, 0.005, -0.01]),
         tau=0.2,
         rate=10.0,
@@ -80,7 +81,8 @@ def test_steering_law_on_wheels_matches_the_numpy_reference_at_every_sample(name
         spacecraft, K, x0, tau=case["tau"], rule=Hysteretic(case["delta"]), wheels=wheels, law=law, **common
     )
     reference_args = dict(d=round(case["tau"] * case["rate"]), delta=case["delta"], **common)
-    steering = (law.rate_limit, law.acceleration, law.lag)
+    inertia = None if law.spacecraft is None else np.array(case["inertia"])
+    steering = (law.rate_limit, law.acceleration, law.lag, law.momentum_limit, inertia)
     reference = wheel_loop(case["inertia"], K, x0, _reference_wheels(wheels), steering=steering, **reference_args)
     assert result.wheels is not None and result.sigma.shape == reference.sigma.shape
     assert _relative(result.sigma, reference.sigma) <= 1e-12
@@ -99,7 +101,9 @@ def test_steering_law_on_wheels_matches_the_numpy_reference_at_every_sample(name
     assert np.linalg.norm(result.omega, axis=1).max() <= 1.2 * max(law.rate_limit, np.linalg.norm(x0[3:]) * 4.0)
     if name == "pyramid":
         assert np.any(reference.speed_limited) and np.any(reference.torque_limited) and result.switch_count > 0
-    else:
+    else:  # the momentum limit keeps the body's momentum at the wheels' 0.02 N m s: no wheel at its speed limit
+        assert np.linalg.norm(result.omega @ case["inertia"], axis=1).max() <= 1.01 * law.momentum_limit
+        assert not np.any(reference.speed_limited)
         assert np.any(reference.torque_limited) and result.settling_time is not None
 
 
@@ -161,3 +165,75 @@ def test_law_on_wheels_needs_an_invertible_rate_block() -> None:
     with pytest.raises(SpecificationError, match="rate block"):
         simulate(CUBESAT, K, state([0.1, 0, 0], [0, 0, 0]), tau=0.2, rule=Hysteretic(0.0), t_final=1.0, rate=10.0,
                  wheels=wheels, law=SteeringLaw(0.1, 0.01, 0.4))  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------------- the design
+def test_guaranteed_torque_and_momentum_of_a_cluster_by_hand() -> None:
+    from mrpctl.design.actuator import guaranteed_momentum, guaranteed_torque
+
+    orthogonal = WheelCluster.orthogonal(SPIN_INERTIA, 5e-3, SPEED_LIMIT, speeds=[100.0, -200.0, 0.0])
+    low, high = guaranteed_torque(orthogonal)
+    assert low == pytest.approx(5e-3, rel=1e-15) and high == pytest.approx(math.sqrt(3.0) * 5e-3, rel=1e-15)
+    # the wheel at -200 rad/s has the least to spare
+    assert guaranteed_momentum(orthogonal) == pytest.approx(SPIN_INERTIA * (SPEED_LIMIT - 200.0), rel=1e-14)
+    # pyramid at atan(1/√2): Gs Gsᵀ = (4/3) I, so pinv(Gs) = (3/4) Gsᵀ, rows of norm 3/4; the largest body torque
+    # is 4 sin(β) u = (4/√3) u (all motors alike, or two pairs opposed)
+    pyramid = WheelCluster.pyramid(SPIN_INERTIA, 5e-3, SPEED_LIMIT)
+    low, high = guaranteed_torque(pyramid)
+    assert low == pytest.approx(5e-3 / 0.75, rel=1e-14) and high == pytest.approx(
+        4.0 / math.sqrt(3.0) * 5e-3, rel=1e-14
+    )
+    assert guaranteed_momentum(pyramid) == pytest.approx(0.02 / 0.75, rel=1e-14)
+
+
+def test_design_for_a_wheel_cluster_bounds_the_commanded_momentum() -> None:
+    from mrpctl.design.actuator import ActuatorDesignStatus, design_for_actuator
+    from mrpctl.flight import ActuatorModel
+
+    wheels = WheelCluster.orthogonal(SPIN_INERTIA, 5e-3, SPEED_LIMIT)
+    ideal = design_for_actuator(CUBESAT, 0.2, ActuatorModel(5e-3), max_rate=0.05)
+    design = design_for_actuator(CUBESAT, 0.2, wheels, max_rate=0.05)
+    assert design.torque == ideal.torque and design.lower_bound == ideal.lower_bound
+    np.testing.assert_array_equal(design.K, ideal.K)
+    law = design.law
+    assert (law.rate_limit, law.acceleration, law.lag) == (ideal.law.rate_limit, ideal.law.acceleration, ideal.law.lag)
+    assert law.momentum_limit == pytest.approx(0.02, rel=1e-14) and law.spacecraft == CUBESAT
+    assert design.momentum == law.momentum_limit and ideal.momentum is None
+    # the prediction's worst cruise: the 0.02 N m s less the envelope's 0.25 * 0.05, over J_max; only the slew
+    # of π changes against the ideal design's (stop, lag and tail are the same)
+    cruise = (0.02 - 0.25 * 0.05) / 0.25
+    a, w = law.acceleration, ideal.law.rate_limit
+    slew = (math.pi / cruise + cruise / a) - (math.pi / w + w / a)
+    assert design.predicted_time - ideal.predicted_time == pytest.approx(slew, rel=1e-9)
+    assert design.status is ActuatorDesignStatus.NOT_MET and "0.0075 N m s" in design.reason
+    assert "momentum limit 0.02 N m s" in str(design)
+    # an envelope whose initial momentum alone fills the wheels: no cruise left
+    full = design_for_actuator(CUBESAT, 0.2, wheels, max_rate=0.1, settling_time=300.0)
+    assert full.predicted_time == math.inf and full.status is ActuatorDesignStatus.NOT_MET
+
+
+@pytest.mark.parametrize(
+    ("actuator", "words"),
+    [
+        (WheelCluster.pyramid(2e-4, 5e-3, 300.0, control_axes=[[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), "control_axes"),
+        (WheelCluster.orthogonal(2e-4, 5e-3, 300.0, speeds=[300.0, 0.0, 0.0]), "speed limit"),
+        (np.eye(3), "WheelCluster"),
+    ],
+)
+def test_design_refuses_a_cluster_it_cannot_use(actuator: object, words: str) -> None:
+    from mrpctl.design.actuator import design_for_actuator
+
+    with pytest.raises(SpecificationError, match=words):
+        design_for_actuator(CUBESAT, 0.2, actuator, max_rate=0.05)  # type: ignore[arg-type]
+
+
+def test_momentum_limit_needs_its_spacecraft() -> None:
+    with pytest.raises(SpecificationError, match="momentum_limit"):
+        SteeringLaw(0.1, 0.01, 0.4, momentum_limit=0.02)
+    with pytest.raises(SpecificationError, match="momentum_limit"):
+        SteeringLaw(0.1, 0.01, 0.4, momentum_limit=-1.0, spacecraft=CUBESAT)
+    with pytest.raises(SpecificationError, match="spacecraft"):
+        SteeringLaw(0.1, 0.01, 0.4, momentum_limit=0.02, spacecraft=np.eye(3))  # type: ignore[arg-type]
+    law = SteeringLaw(0.1, 0.01, 0.4, momentum_limit=0.02, spacecraft=CUBESAT)
+    assert law.label() != SteeringLaw(0.1, 0.01, 0.4).label()
+    assert SteeringLaw(0.1, 0.01, 0.4).label() == SteeringLaw(0.1, 0.01, 0.4, None, None).label()

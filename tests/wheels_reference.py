@@ -14,9 +14,10 @@ sample, with explicit per-wheel loops where the engine uses matrices:
 * controller: quaternion sign continuity, the hysteresis h ← −h when h q̂₀ < −δ, σ_c = h q̂_v/(1 + h q̂₀),
   u_c = K [σ_c; ω_used/4] (+ ω × (J ω + Σ g_i Js,i (g_i·ω + Ω_i)) with the gyroscopic term); the wheel
   speeds read are those of the sample instant;
-* steering law (optional, (ω_max, a, T)): with K = [K_σ, K_ω], the remaining angle φ = 2 atan2(|q_v|, h q₀) of the
-  set used, the rate command ω_lin = −4 K_ω⁻¹ K_σ σ_c (numpy.linalg.solve), L = min(ω_max, √((aT)² + 2aφ) − aT),
-  u_c = K_ω ω_used/4 + min(1, L/|ω_lin|) K_σ σ_c;
+* steering law (optional, (ω_max, a, T, h, J), h and J None without a momentum limit): with K = [K_σ, K_ω], the
+  remaining angle φ = 2 atan2(|q_v|, h q₀) of the set used, the rate command ω_lin = −4 K_ω⁻¹ K_σ σ_c
+  (numpy.linalg.solve), L = min(ω_max, √((aT)² + 2aφ) − aT), s = min(1, L/|ω_lin|, h/|J ω_lin|),
+  u_c = K_ω ω_used/4 + s K_σ σ_c;
 * allocation: u = −pinv(C Gs) C u_c (numpy.linalg.pinv) − k_n (I − pinv(Gs) Gs) Js (Ω − Ω_bias); each u_i
   clipped to ±u_max,i, then 0 when |Ω_i| >= Ω_max,i and Ω_i u_i >= 0.
 """
@@ -127,12 +128,17 @@ def _quaternion(sigma: np.ndarray) -> np.ndarray:
 
 def _steering(K: np.ndarray, law, sigma_c: np.ndarray, q: np.ndarray, w_used: np.ndarray) -> np.ndarray:
     """The steering law's body torque request from the set used (σ_c and its quaternion q, q₀ >= −δ)."""
-    rate_limit, a, lag = law
+    rate_limit, a, lag, momentum_limit, inertia = law
     k_sigma, k_omega = K[:, 0:3], K[:, 3:6]
     angle = 2.0 * math.atan2(math.sqrt(q[1] ** 2 + q[2] ** 2 + q[3] ** 2), q[0])
-    linear = 4.0 * np.linalg.norm(np.linalg.solve(k_omega, k_sigma @ sigma_c))
+    omega_linear = -4.0 * np.linalg.solve(k_omega, k_sigma @ sigma_c)
+    linear = np.linalg.norm(omega_linear)
     limit = min(rate_limit, math.sqrt((a * lag) ** 2 + 2.0 * a * angle) - a * lag)
     scale = limit / linear if linear > limit else 1.0
+    if momentum_limit is not None:
+        momentum = np.linalg.norm(inertia @ omega_linear)
+        if scale * momentum > momentum_limit:
+            scale = momentum_limit / momentum
     return k_omega @ (w_used / 4.0) + scale * (k_sigma @ sigma_c)
 
 
