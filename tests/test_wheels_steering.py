@@ -237,3 +237,14 @@ def test_momentum_limit_needs_its_spacecraft() -> None:
     law = SteeringLaw(0.1, 0.01, 0.4, momentum_limit=0.02, spacecraft=CUBESAT)
     assert law.label() != SteeringLaw(0.1, 0.01, 0.4).label()
     assert SteeringLaw(0.1, 0.01, 0.4).label() == SteeringLaw(0.1, 0.01, 0.4, None, None).label()
+
+
+def test_linear_radius_counts_the_momentum_limit() -> None:
+    """s_K with a momentum limit h that binds first: h / ‖J 4 K_ω⁻¹ K_σ‖ (to the bisection's 1e-6)."""
+    from mrpctl.design.attraction import linear_radius
+
+    K = _gain(CUBESAT)
+    free = linear_radius(SteeringLaw(0.2, 0.012, 0.4), K)
+    bound = linear_radius(SteeringLaw(0.2, 0.012, 0.4, momentum_limit=1e-4, spacecraft=CUBESAT), K)
+    expected = 1e-4 / np.linalg.norm(CUBESAT.inertia @ (4.0 * np.linalg.solve(K[:, 3:6], K[:, 0:3])), 2)
+    assert expected < free and bound == pytest.approx(expected, rel=2e-6) and bound <= expected
