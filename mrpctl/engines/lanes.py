@@ -680,7 +680,7 @@ def wheel_lane_engine(
     """
     disturbed = bool(disturbed or torque_input)
     structure = {"sensor": bool(sensor), "limited": False, "disturbed": disturbed}
-    key = (
+    key: tuple[Any, ...] = (
         "wheels",
         wheels.key(),
         spacecraft.inertia.tobytes(),

@@ -800,7 +800,17 @@ def wheel_engine(
     ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; J and the cluster are constants of the
     library, so one library per spacecraft inertia and cluster). ``law``: the steering law's body torque request
     (its numbers compiled in, one library per law); None: the PD law. Needs a C compiler (CodegenError without)."""
-    key = ("wheels", wheels.key(), spacecraft.inertia.tobytes(), d, period, substeps, sensor, disturbed, torque_input)
+    key: tuple[Any, ...] = (
+        "wheels",
+        wheels.key(),
+        spacecraft.inertia.tobytes(),
+        d,
+        period,
+        substeps,
+        sensor,
+        disturbed,
+        torque_input,
+    )
     key += () if law is None else (law,)  # without a law the key of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)

@@ -281,8 +281,9 @@ def simulate_batch(
         (shared or per run), each run streaming its own rows.
     wheels : mrpctl.wheels.WheelCluster, keyword-only
         Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
-        no ``actuator``, no ``predictor``): the runs take the scalar engine on the thread pool, and the result's
-        ``wheels`` holds each run's wheel metrics (and, with ``trajectories``, its wheel speeds and torques).
+        no ``actuator``, no ``predictor``; ``law`` taken): metrics-only runs take the wheel lane engine, with
+        ``trajectories`` the scalar engine on the thread pool, and the result's ``wheels`` holds each run's wheel
+        metrics (and, with ``trajectories``, its wheel speeds and torques).
     reference : keyword-only
         Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
         [`Hysteretic`][mrpctl.flight.Hysteretic]): one reference shared by the runs (an (n, 9) array, read
@@ -307,7 +308,8 @@ def simulate_batch(
         pool, not the lanes (the same metrics bit for bit). With ``trajectories`` they are kept anyway.
     law : mrpctl.flight.steering.SteeringLaw, keyword-only
         The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
-        such runs take the scalar engine (on the thread pool), also when ``trajectories`` is False.
+        on an ideal torque such runs take the scalar engine (on the thread pool), also when ``trajectories`` is
+        False; on ``wheels`` metrics-only runs take the wheel lane engine (the law compiled in).
     sigma0, omega0 : array_like, keyword-only
         The initial states in physical form instead of ``x0``: (3,) or (N, 3) MRPs σ₀ and (3,) or
         (N, 3) body rates ω₀ (rad/s; default zero), broadcast against each other; each run is bit
