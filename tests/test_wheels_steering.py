@@ -248,3 +248,19 @@ def test_linear_radius_counts_the_momentum_limit() -> None:
     bound = linear_radius(SteeringLaw(0.2, 0.012, 0.4, momentum_limit=1e-4, spacecraft=CUBESAT), K)
     expected = 1e-4 / np.linalg.norm(CUBESAT.inertia @ (4.0 * np.linalg.solve(K[:, 3:6], K[:, 0:3])), 2)
     assert expected < free and bound == pytest.approx(expected, rel=2e-6) and bound <= expected
+
+
+def test_momentum_limit_on_an_ideal_torque_bounds_the_body_momentum() -> None:
+    """The flight sample takes the same law: on a 5 mN m ideal torque the body's momentum follows the command's
+    bound (0.01 N m s here, well below what the rate limit alone allows) to the rate loop's overshoot."""
+    from mrpctl.flight import ActuatorModel
+
+    K = _gain(CUBESAT)
+    x0 = state([0.5, -0.6, 0.4], [0.0, 0.0, 0.0])
+    run = dict(tau=0.2, rule=Hysteretic(0.0), t_final=120.0, rate=20.0, actuator=ActuatorModel(5e-3))
+    free = simulate(CUBESAT, K, x0, law=SteeringLaw(0.2, 0.012, 0.45), **run)
+    bound = simulate(CUBESAT, K, x0, law=SteeringLaw(0.2, 0.012, 0.45, momentum_limit=0.01, spacecraft=CUBESAT), **run)
+    assert np.linalg.norm(free.omega @ CUBESAT.inertia, axis=1).max() > 0.02
+    assert np.linalg.norm(bound.omega @ CUBESAT.inertia, axis=1).max() <= 1.05 * 0.01
+    assert bound.settling_time is not None and free.settling_time is not None
+    assert bound.settling_time > free.settling_time
