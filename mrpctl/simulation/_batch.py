@@ -281,8 +281,9 @@ def simulate_batch(
         (shared or per run), each run streaming its own rows.
     wheels : mrpctl.wheels.WheelCluster, keyword-only
         Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
-        no ``actuator``, no ``predictor``): the runs take the scalar engine on the thread pool, and the result's
-        ``wheels`` holds each run's wheel metrics (and, with ``trajectories``, its wheel speeds and torques).
+        no ``actuator``, no ``predictor``; ``law`` taken): metrics-only runs take the wheel lane engine, with
+        ``trajectories`` the scalar engine on the thread pool, and the result's ``wheels`` holds each run's wheel
+        metrics (and, with ``trajectories``, its wheel speeds and torques).
     reference : keyword-only
         Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
         [`Hysteretic`][mrpctl.flight.Hysteretic]): one reference shared by the runs (an (n, 9) array, read
@@ -307,7 +308,8 @@ def simulate_batch(
         pool, not the lanes (the same metrics bit for bit). With ``trajectories`` they are kept anyway.
     law : mrpctl.flight.steering.SteeringLaw, keyword-only
         The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
-        such runs take the scalar engine (on the thread pool), also when ``trajectories`` is False.
+        on an ideal torque such runs take the scalar engine (on the thread pool), also when ``trajectories`` is
+        False; on ``wheels`` metrics-only runs take the wheel lane engine (the law compiled in).
     sigma0, omega0 : array_like, keyword-only
         The initial states in physical form instead of ``x0``: (3,) or (N, 3) MRPs σ₀ and (3,) or
         (N, 3) body rates ω₀ (rad/s; default zero), broadcast against each other; each run is bit
@@ -362,11 +364,6 @@ def simulate_batch(
             raise SpecificationError(
                 "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
                 "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
-            )
-        if law is not None:
-            raise SpecificationError(
-                "law: the steering law on a wheel cluster is not modelled yet; fly it with an ideal body torque "
-                "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
             )
     rate = positive_scalar("rate", rate)
     t_final, n = sample_horizon(t_final, rate)
@@ -466,7 +463,9 @@ def simulate_batch(
     wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
     if reference is not None and find_compiler() is None:
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
-    if not trajectories and not switches and _LANES and checked is None and law is None and find_compiler() is not None:
+    lanes_take_law = law is None or wheels is not None  # the flight sample's law is not on the lanes (not done)
+    on_lanes = not trajectories and not switches and _LANES and checked is None and lanes_take_law
+    if on_lanes and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -487,6 +486,7 @@ def simulate_batch(
             wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
             tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
             settling=settling,
+            law=law,
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -507,6 +507,7 @@ def simulate_batch(
                 sensor=structure["sensor"],
                 disturbed=structure["disturbed"],
                 torque_input=torque_input,
+                law=law,
             )
         if key not in by_structure:
             by_structure[key] = engine(
@@ -674,6 +675,7 @@ def _run_lanes(
     wheels: tuple[WheelCluster, np.ndarray] | None = None,
     tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
     settling: tuple[float, float] | None = None,
+    law: SteeringLaw | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -686,7 +688,7 @@ def _run_lanes(
     (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it.
     ``tracking``: each run's reference, the feedforward and
     whether the references are per run (then, or beside per-run torques, each lane is streamed its own rows;
-    a shared one is streamed beside the noise)."""
+    a shared one is streamed beside the noise). ``law``: the wheel runs' steering law (the wheel lanes take it)."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
     tracked_by_run, feedforward, per_run_reference = (
@@ -737,6 +739,7 @@ def _run_lanes(
                     disturbed=structure["disturbed"],
                     torque_input=torque is not None,
                     torque_per_lane=own_torque,
+                    law=law,
                 )
             else:
                 lanes = lane_engines.lane_engine(
