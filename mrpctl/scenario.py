@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._files import read_toml
+from mrpctl._scenario_estimator import ESTIMATOR_TABLE, estimator_table, estimator_toml
 from mrpctl._scenario_tables import (
     FLIGHT_TABLES,
     REFERENCE_TABLE,
@@ -37,6 +38,7 @@ from mrpctl._validation import (
 )
 from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.estimation import EstimatedLoop
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, SensorModel
 from mrpctl.guidance import (
     EigenaxisSlew,
@@ -50,6 +52,7 @@ from mrpctl.model import gain_matrix
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationResult, settling_tolerances, simulate
+from mrpctl.simulation.estimated import EstimatedResult
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
 
@@ -182,6 +185,9 @@ class Scenario:
         [`FileReference`][mrpctl.guidance.FileReference]. None: regulation to the inertial origin.
         [`simulate`][mrpctl.Scenario.simulate] flies the tracking loop on it
         (``simulate(..., reference=...)``: the controller-side rule or the predictor).
+    estimated_loop : EstimatedLoop or None
+        The loop on an estimator of a late star tracker and a gyro (``[estimator]``; ``design/estimation.md``),
+        flown by [`simulate_estimated`][mrpctl.Scenario.simulate_estimated]. None: the loop above.
     """
 
     name: str
@@ -204,6 +210,7 @@ class Scenario:
     settling_attitude: float = SETTLING_ATTITUDE_DEG
     settling_rate: float = SETTLING_OMEGA
     reference: GuidanceProfile | None = None
+    estimated_loop: EstimatedLoop | None = None
 
     @property
     def gains(self) -> PDGains:
@@ -244,6 +251,8 @@ class Scenario:
 
     def simulate(self) -> SimulationResult:
         """Run the scenario with [`mrpctl.simulate`][mrpctl.simulation.simulate]."""
+        if self.estimated_loop is not None:
+            raise SpecificationError("scenario: its [estimator] loop runs with Scenario.simulate_estimated()")
         return simulate(
             self.spacecraft,
             self.K,
@@ -260,6 +269,17 @@ class Scenario:
             **self.run_options,
         )
 
+    def simulate_estimated(self) -> EstimatedResult:
+        """Run the scenario's [estimator] loop: ``simulate(..., sensors=..., estimator=...)``."""
+        if self.estimated_loop is None:
+            raise SpecificationError("scenario: no [estimator] table; run it with Scenario.simulate()")
+        loop = self.estimated_loop
+        return simulate(
+            self.spacecraft, self.K, self.x0, tau=self.tau, rule=self.rule, t_final=self.t_final, rate=self.rate,
+            history=self.history, substeps=self.substeps, reference=self.reference, sensors=loop.sensors,
+            estimator=loop.estimator, **self.run_options,
+        )  # fmt: skip
+
     def __str__(self) -> str:
         sigma0, omega0 = self.sigma0, self.omega0
         return "\n".join(
@@ -272,6 +292,7 @@ class Scenario:
                 *(f"  {value}" for value in self.run_options.values()),
                 *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
                 *([f"  reference: {self.reference}"] if self.reference is not None else []),
+                *([f"  {self.estimated_loop}"] if self.estimated_loop is not None else []),
             )
         )
 
@@ -432,8 +453,12 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
       ``latitude_deg`` (argument of latitude at t = 0), each default 0;
     * ``"file"``: ``file``, a .csv or .npy file of n = floor(t_final · rate) + 1 rows of 9 numbers
       (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
+
+    The optional ``[estimator]`` table (with ``[estimator.star_tracker]``, ``[estimator.gyro]`` and optionally
+    ``[estimator.tuning]``) sets [`Scenario.estimated_loop`][mrpctl.Scenario]: the loop on an estimator of a late
+    star tracker and a gyro (the keys: ``mrpctl._scenario_estimator``; ``docs/how-to/estimation.md``).
     """
-    check_keys("", data, _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE})
+    check_keys("", data, _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, ESTIMATOR_TABLE})
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")
@@ -487,6 +512,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         settling_attitude=settle_attitude,
         settling_rate=settle_rate,
         reference=reference_table(data, rate, Horizon(None if base is None else Path(base), samples)),
+        estimated_loop=estimator_table(data, spacecraft=spacecraft, rule=rule, tau=tau, rate=rate, history=history),
         **flight,
     )
 
@@ -653,6 +679,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
     lines += _flight_toml(scenario)
     lines += _reference_toml(scenario.reference)
+    lines += estimator_toml(scenario.estimated_loop)
     if scenario.uncertainty is not None:
         lines += [
             "",
