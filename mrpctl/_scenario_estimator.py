@@ -159,12 +159,16 @@ def _section(where: str, build: Any, *args: Any) -> Any:
         raise type(exc)(f"[{where}] {exc}") from exc
 
 
-def _estimator(table: dict[str, Any], tracker: StarTracker, gyro: Gyro, tuning_table: dict[str, Any] | None) -> Estimator:
+def _estimator(
+    table: dict[str, Any], tracker: StarTracker, gyro: Gyro, tuning_table: dict[str, Any] | None
+) -> Estimator:
     covariance_now = table.get("covariance_now", True)
     if not isinstance(covariance_now, bool):
         raise SpecificationError(f"covariance_now must be true or false, got {covariance_now!r}")
     options = {key: table[key] for key in ("kind", "attitude_error", "bias_error", "initial_sigma") if key in table}
-    estimator = Estimator(initial_bias=table.get("initial_bias", (0.0, 0.0, 0.0)), covariance_now=covariance_now, **options)
+    estimator = Estimator(
+        initial_bias=table.get("initial_bias", (0.0, 0.0, 0.0)), covariance_now=covariance_now, **options
+    )
     if tuning_table is None:
         return estimator
     default = EstimatorTuning.from_sensors(

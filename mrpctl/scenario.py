@@ -90,7 +90,7 @@ _TOP_KEYS = {
     "settling_attitude_deg",
     "settling_rate",
 }
-_TABLES = {"spacecraft", "gains", "initial", "rule"}
+_TABLES = {"spacecraft", "gains", "initial", "rule", ESTIMATOR_TABLE}
 #: The predictor controller's table (``[rule] type = "on-predicted"`` only, and then required).
 _PREDICTOR_TABLE = "predictor"
 #: The inertia uncertainty that ``mrpctl verify`` certifies (any rule; the simulation flies the nominal J).
@@ -458,7 +458,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     ``[estimator.tuning]``) sets [`Scenario.estimated_loop`][mrpctl.Scenario]: the loop on an estimator of a late
     star tracker and a gyro (the keys: ``mrpctl._scenario_estimator``; ``docs/how-to/estimation.md``).
     """
-    check_keys("", data, _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, ESTIMATOR_TABLE})
+    check_keys("", data, _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE})
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")

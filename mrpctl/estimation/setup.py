@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from mrpctl.errors import SpecificationError
-from mrpctl.estimation.filters import Estimator
+from mrpctl.estimation.filters import Estimator, EstimatorKind
 from mrpctl.estimation.sensors import ARCSEC, Sensors
 
 __all__ = ["EstimatedLoop"]
@@ -28,7 +28,7 @@ class EstimatedLoop:
     """
 
     sensors: Sensors
-    estimator: Estimator = Estimator()
+    estimator: Estimator = field(default_factory=Estimator)
 
     def __post_init__(self) -> None:
         if not isinstance(self.sensors, Sensors):
@@ -40,8 +40,9 @@ class EstimatedLoop:
         tracker, gyro = self.sensors.star_tracker, self.sensors.gyro
         noise = np.round(np.asarray(tracker.noise) / ARCSEC, 3).tolist()
         dropout = f", {tracker.dropout:.0%} dropouts" if tracker.dropout else ""
+        kind = EstimatorKind(self.estimator.kind).value
         return (
-            f"estimator: {self.estimator.kind.value} on a {tracker.rate:g} Hz star tracker of {noise} arcsec "
+            f"estimator: {kind} on a {tracker.rate:g} Hz star tracker of {noise} arcsec "
             f"(1 sigma) {tracker.latency:g} s late{dropout} and a gyro of {gyro.rate_noise:g} rad/sqrt(s), "
             f"bias walk {gyro.bias_walk:g} rad/s^1.5; noise seed {self.sensors.seed}"
         )
