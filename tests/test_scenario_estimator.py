@@ -294,3 +294,15 @@ def test_a_campaign_of_the_estimated_loop_is_refused() -> None:
     data = {**copy.deepcopy(BASE), "count": 4, "seed": 1}
     with pytest.raises(SpecificationError, match=r"\[estimator\]: campaigns of the estimated loop.*simulate_estimated"):
         parse_campaign(data)
+
+
+def test_the_how_to_file_is_the_how_to_python_loop() -> None:
+    page = (Path(__file__).resolve().parents[1] / "docs" / "how-to" / "estimation.md").read_text(encoding="utf-8")
+    scenario = parse_scenario(tomllib.loads(page.split("```toml\n", 1)[1].split("```", 1)[0]))
+    # the Python block's values: StarTracker.from_arcsec(10.0, rate=2.0, latency=0.5, dropout=0.05), ...
+    tracker = StarTracker(10.0 * ARCSEC, 2.0, 0.5, dropout=0.05)
+    gyro = Gyro(rate_noise=1e-5, bias_walk=1e-7, initial_bias=(5e-4, -3e-4, 2e-4))
+    expected = EstimatedLoop(Sensors(tracker, gyro, seed=1), Estimator(attitude_error=1e-3, bias_error=2e-3))
+    assert _same(scenario.estimated_loop, expected)
+    assert scenario.rate == 10.0 and scenario.substeps == 4 and scenario.t_final == 120.0
+    np.testing.assert_array_equal(scenario.K, paper.GAIN)
