@@ -364,9 +364,7 @@ def _mrp_propagate(sigma: Any, bias: Any, p: Any, gyro: Any, h: float, q: np.nda
     # T Q Tᵀ for T = diag(¼B, I) and Q's blocks q_ij I
     q11, q12, q22 = q[0, 0], q[0, 3], q[3, 3]
     cross = q12 * quarter_b
-    noise = ca.vertcat(
-        ca.horzcat(q11 * _upper(quarter_b, quarter_b), cross), ca.horzcat(cross.T, q22 * ca.DM.eye(3))
-    )
+    noise = ca.vertcat(ca.horzcat(q11 * _upper(quarter_b, quarter_b), cross), ca.horzcat(cross.T, q22 * ca.DM.eye(3)))
     p_next = _block_propagation(phi11, phi12, p, noise)
     sigma_next, p_next, _ = _switch(sigma_next, p_next)
     return sigma_next, p_next
