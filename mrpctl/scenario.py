@@ -456,7 +456,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
 
     The optional ``[estimator]`` table (with ``[estimator.star_tracker]``, ``[estimator.gyro]`` and optionally
     ``[estimator.tuning]``) sets [`Scenario.estimated_loop`][mrpctl.Scenario]: the loop on an estimator of a late
-    star tracker and a gyro (the keys: ``mrpctl._scenario_estimator``; ``docs/how-to/estimation.md``).
+    star tracker and a gyro (its keys: ``design/estimation.md``; an example: ``docs/how-to/estimation.md``).
     """
     check_keys("", data, _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE})
     spacecraft_table = _table(data, "spacecraft")

@@ -245,9 +245,10 @@ def test_cli_simulates_an_estimator_scenario(tmp_path: Path, capsys: pytest.Capt
     np.testing.assert_array_equal(rows[:, 1:4], run.sigma)
     np.testing.assert_array_equal(rows[:, 16:19], run.bias_hat)
     # the options: the other estimator and another noise seed
-    assert main(["simulate", str(path), "--estimator", "mrp_ekf", "--noise-seed", "7"]) == 0
+    assert main(["simulate", str(path), "--estimator", "mrp_ekf", "--noise-seed", "7", "--hysteresis", "0.1"]) == 0
     text = capsys.readouterr().out
     assert "estimated loop (mrp_ekf)" in text and "noise seed 7" in text
+    assert "rule Hysteretic (h flips when h q0 < -0.1;" in text  # the rule the loop flew
 
 
 def test_cli_mrp_ekf_sigma_is_the_mekf_sigma_in_rotation_units(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -267,6 +268,7 @@ def test_cli_mrp_ekf_sigma_is_the_mekf_sigma_in_rotation_units(tmp_path: Path, c
         (["--torque-limit", "1"], "--torque-limit does not apply to a scenario with an [estimator] table"),
         (["--predictor"], "--predictor does not apply"),
         (["--noise-seed", "-1"], "--noise-seed must be >= 0"),
+        (["--hysteresis", "1.5"], "--hysteresis"),
         (["--tau", "0.3"], "tau"),
     ],
 )

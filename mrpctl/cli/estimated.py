@@ -17,6 +17,7 @@ from mrpctl._validation import integer
 from mrpctl.cli.common import EXIT_DIVERGED, atomic_output, check_plot_path, options_given, print_json, save_plot
 from mrpctl.cli.limits import check_run_fits
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import Hysteretic
 from mrpctl.estimation import ARCSEC, EstimatedLoop, EstimatorKind, Sensors
 from mrpctl.mrp import b_matrix_inverse
 from mrpctl.scenario import Scenario
@@ -86,6 +87,11 @@ def _apply(scenario: Scenario, args: argparse.Namespace) -> tuple[Scenario, Esti
             f"{others[0]} does not apply to a scenario with an [estimator] table: the estimated loop flies the PD law "
             "on the estimate without actuator limits, disturbance, delay jitter or predictor"
         )
+    if getattr(args, "hysteresis", None) is not None:
+        try:
+            scenario = replace(scenario, rule=Hysteretic(args.hysteresis))
+        except SpecificationError as exc:
+            raise SpecificationError(f"--hysteresis: {exc}") from exc
     sensors, estimator = loop.sensors, loop.estimator
     if args.noise_seed is not None:
         sensors = Sensors(sensors.star_tracker, sensors.gyro, seed=integer("--noise-seed", args.noise_seed, minimum=0))
