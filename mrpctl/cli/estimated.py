@@ -17,8 +17,8 @@ from mrpctl._validation import integer
 from mrpctl.cli.common import EXIT_DIVERGED, atomic_output, check_plot_path, options_given, print_json, save_plot
 from mrpctl.cli.limits import check_run_fits
 from mrpctl.errors import SpecificationError
-from mrpctl.flight import Hysteretic
 from mrpctl.estimation import ARCSEC, EstimatedLoop, EstimatorKind, Sensors
+from mrpctl.flight import Hysteretic
 from mrpctl.mrp import b_matrix_inverse
 from mrpctl.scenario import Scenario
 from mrpctl.simulation.estimated import EstimatedResult
