@@ -308,3 +308,14 @@ def test_the_how_to_file_is_the_how_to_python_loop() -> None:
     assert _same(scenario.estimated_loop, expected)
     assert scenario.rate == 10.0 and scenario.substeps == 4 and scenario.t_final == 120.0
     np.testing.assert_array_equal(scenario.K, paper.GAIN)
+
+
+def test_simulate_batch_refuses_the_estimated_loop_naming_what_to_use() -> None:
+    from mrpctl import simulate_batch
+
+    loop = _python_loop()
+    with pytest.raises(SpecificationError, match=r"sensors, estimator: simulate_batch does not fly.*once per run"):
+        simulate_batch(
+            paper.SPACECRAFT, paper.GAIN, np.array([paper.INITIAL_STATE] * 2), tau=0.5, rule=Hysteretic(0.0),
+            t_final=1.0, rate=10.0, sensors=loop.sensors, estimator=loop.estimator,
+        )  # fmt: skip
