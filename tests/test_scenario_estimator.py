@@ -239,6 +239,7 @@ def test_cli_simulates_an_estimator_scenario(tmp_path: Path, capsys: pytest.Capt
     run = load_scenario(path).simulate_estimated()
     result = payload["result"]
     assert result["estimator"] == "mekf" and result["switches"] == run.switches
+    assert result["settling_time"] is None  # 12 s: still turning (JSON null for NaN)
     assert result["final_sigma"] == run.sigma[-1].tolist()
     assert result["final_pointing_arcsec"] == pytest.approx(run.pointing_error[-1] / ARCSEC, rel=1e-12)
     rows = np.loadtxt(tmp_path / "run.csv", delimiter=",", skiprows=1)
@@ -249,6 +250,7 @@ def test_cli_simulates_an_estimator_scenario(tmp_path: Path, capsys: pytest.Capt
     text = capsys.readouterr().out
     assert "estimated loop (mrp_ekf)" in text and "noise seed 7" in text
     assert "rule Hysteretic (h flips when h q0 < -0.1;" in text  # the rule the loop flew
+    assert "pointing: not settled within 0.01 rad; final" in text
 
 
 def test_cli_mrp_ekf_sigma_is_the_mekf_sigma_in_rotation_units(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

@@ -136,12 +136,16 @@ def _summary(result: EstimatedResult, loop: EstimatedLoop) -> dict[str, Any]:
 
 def _text(summary: dict[str, Any]) -> str:
     settling = summary["settling_time"]
-    settled = "not settled" if math.isnan(settling) else f"{settling:.2f} s"
+    settled = (
+        f"not settled within {SETTLED:g} rad"
+        if math.isnan(settling)
+        else f"settled within {SETTLED:g} rad at {settling:.2f} s"
+    )
     return "\n".join(
         (
             f"estimated loop ({summary['estimator']}) at {summary['rate']:g} Hz over {summary['t_final']:g} s, "
             f"{summary['switches']} switch(es)",
-            f"  pointing: settled (within {SETTLED:g} rad) at {settled}; final {summary['final_pointing_arcsec']:.2f} "
+            f"  pointing: {settled}; final {summary['final_pointing_arcsec']:.2f} "
             f"arcsec, RMS over the last half {summary['pointing_rms_arcsec']:.2f} arcsec",
             f"  estimation error RMS over the last half {summary['estimation_error_rms_arcsec']:.2f} arcsec "
             f"(the filter's 1 sigma: {summary['filter_sigma_rms_arcsec']:.2f} arcsec)",
