@@ -1,16 +1,19 @@
 """``mrpctl verify`` of a tracking scenario: the tracking-error loop linearised about its reference motion.
 
-What is checked, per linearisation (`mrpctl.design.tracking`): the exact delay margin of ẋ = A x + A_d x(t − τ),
-the Bessel-Legendre LMI certificate at τ for each of ``--orders``, and, at the scenario's rate, the exact
-stability of the sampled loop (zero-order hold, d = τ · rate samples). Nadir pointing is linearised with and
-without the gravity-gradient stiffness (the engines fly it without; an orbit has it), and both must hold.
+What is checked, per linearisation ([`mrpctl.design.tracking`][mrpctl.design.tracking]): the exact delay margin
+of ẋ = A x + A_d x(t − τ) and whether τ lies inside it, the Bessel-Legendre LMI certificate at τ for each of
+``--orders`` (at least one must certify), and, at the scenario's rate, the exact stability of the sampled loop
+(zero-order hold, d = τ · rate samples, the lifted companion matrix block by block). Nadir pointing is
+linearised with and without the gravity-gradient stiffness (the engines fly it without; an orbit has it), and
+both must hold. An eigenaxis slew is linearised about rest (the error dynamics about a constant reference,
+which hold before and after the slew).
 
-What is not: an eigenaxis slew is certified about rest (the error dynamics about a constant reference, which
-hold before and after the slew), not along its time-varying profile; a file reference is time-varying and is
-not certified at all; neither is nadir pointing with the error formed against the reference of *now*
-(``error_time = "current"``), the predictor's tracking loop, nor the loop-as-flown models (noise, limits, jitter,
-disturbance) of the scenario. Each of these is named in the output and makes the verdict NOT VERIFIED, never a
-silent pass.
+What is not: the slew's time-varying profile, a file reference (time-varying: no linearisation), the error
+formed against the reference of *now* (``error_time = "current"``) on a turning reference, the predictor's
+tracking loop, the loop-as-flown models of the scenario (actuator limits, sensor noise, disturbance, delay
+jitter, the [uncertainty] inertia box) and an inertia whose products leave part of the reference's torque
+unsupplied (x = 0 is then not the loop's equilibrium). Each of these is named in the output and makes the
+verdict NOT VERIFIED, never a silent pass.
 """
 
 from __future__ import annotations
@@ -20,55 +23,115 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from mrpctl.cli.common import NOT_VERIFIED, print_json
+import numpy as np
+
+from mrpctl.cli.common import NOT_VERIFIED, options_given, print_json
 from mrpctl.clock import delay_samples
 from mrpctl.design.lmi import criterion_name
 from mrpctl.design.tracking import TrackingLinearization, tracking_linearization
+from mrpctl.errors import SpecificationError
 from mrpctl.flight.tracking import ErrorTime
 from mrpctl.guidance import EigenaxisSlew, InertialPointing, NadirPointing
 from mrpctl.scenario import Scenario
 
-__all__ = ["verify_tracking"]
+__all__ = ["check_tracking_options", "verify_tracking"]
 
 
 @dataclass(frozen=True)
 class _Check:
-    """One linearisation's checks: exact margin, LMI certificates, sampled-data stability."""
+    """One linearisation's checks: exact margin, LMI certificates, sampled-data stability (None: not run)."""
 
     name: str
     loop: TrackingLinearization
     margin: float
     stable_at_tau: bool
     certificates: tuple[tuple[int, str, bool], ...]
+    delay_samples: int
+    spectral_radius: float | None
     sampled: str
-    sampled_stable: bool
+
+    @property
+    def certified(self) -> bool:
+        """At least one LMI order certifies τ (τ = 0 needs none)."""
+        return not self.certificates or any(certified for _, _, certified in self.certificates)
+
+    @property
+    def sampled_stable(self) -> bool:
+        return self.spectral_radius is not None and self.spectral_radius < 1.0
 
     @property
     def verified(self) -> bool:
-        lmi = not self.certificates or any(certified for _, _, certified in self.certificates)
-        return self.stable_at_tau and lmi and self.sampled_stable
+        return self.stable_at_tau and self.certified and self.sampled_stable
+
+    @property
+    def status(self) -> str:
+        """VERIFIED; UNSTABLE (τ outside the exact margin, or the sampled loop unstable); NOT CERTIFIED (stable,
+        but no LMI order proves it); NOT CHECKED (the sampled loop too large to lift)."""
+        if self.verified:
+            return "VERIFIED"
+        if not self.stable_at_tau or (self.spectral_radius is not None and not self.sampled_stable):
+            return "UNSTABLE"
+        return "NOT CHECKED" if self.spectral_radius is None else "NOT CERTIFIED"
 
 
-def _uncovered(scenario: Scenario) -> list[str]:
+def check_tracking_options(args: argparse.Namespace) -> None:
+    """Refuse the loop-as-flown options of ``verify``: they build regulation certificates (the per-axis
+    jitter interval, the inertia polytope) that a tracking loop does not have."""
+    given = options_given(
+        ("--jitter", args.jitter),
+        ("--jitter-rate", args.jitter_rate),
+        ("--sampled", args.sampled),
+        ("--inertia-tolerance", args.inertia_tolerance),
+        ("--product-bound", args.product_bound),
+        ("--no-flown", args.no_flown or None),
+    )
+    if given:
+        raise SpecificationError(
+            f"{given[0]} does not apply to a tracking scenario ([reference]): its verdict is the linearised tracking "
+            "loop's at the scenario's rate; leave out the option"
+        )
+
+
+def _turning(reference: Any) -> bool:
+    """Whether the reference turns (ω_R ≠ 0 at some time): anything but inertial pointing."""
+    return not isinstance(reference, InertialPointing)
+
+
+def _uncovered(scenario: Scenario, loops: list[TrackingLinearization]) -> list[str]:
     """What the tracking verdict does not cover for this scenario (each one makes it NOT VERIFIED)."""
     reference = scenario.reference
     missing = []
-    if not isinstance(reference, InertialPointing | EigenaxisSlew | NadirPointing):
+    if isinstance(reference, EigenaxisSlew):
+        missing.append(
+            "the slew's time-varying profile: the loop is linearised about rest (before and after the slew), "
+            "not along the slew (simulate it)"
+        )
+    elif not isinstance(reference, InertialPointing | NadirPointing):
         missing.append(
             f"a {type(reference).__name__} is time-varying: no linearisation about a constant reference motion "
-            "covers it (simulate a campaign of it instead)"
+            "covers it (simulate it)"
         )
-    if isinstance(reference, NadirPointing) and scenario.error_time is ErrorTime.CURRENT:
+    error_time = scenario.error_time
+    if error_time is None and scenario.predictor is not None:
+        error_time = ErrorTime.CURRENT  # simulate's default with a predictor
+    if error_time is ErrorTime.CURRENT and _turning(reference):
         missing.append(
-            "the error formed against the reference of now (error_time = current) about a turning reference: its "
+            "the error formed against the reference of now (error_time = current) on a turning reference: its "
             "linear part differs by the rotation of R over tau and is not modelled"
         )
     if scenario.predictor is not None:
-        missing.append("the predictor's tracking loop is not linearised here")
-    if scenario.flight_options:
+        missing.append("the predictor's tracking loop: not linearised here")
+    flown = sorted(scenario.flight_options) + (["uncertainty"] if scenario.uncertainty is not None else [])
+    if flown:
         missing.append(
-            "the loop-as-flown models (" + ", ".join(sorted(scenario.flight_options)) + ") of the tracking loop are "
-            "not certified: the verdict is the idealised tracking loop's"
+            "the loop-as-flown models (" + ", ".join(flown) + ") of the tracking loop: not certified, the checks "
+            "are the idealised tracking loop's"
+        )
+    unbalanced = max((float(np.linalg.norm(loop.unbalanced_torque)) for loop in loops), default=0.0)
+    if unbalanced > 0.0:
+        missing.append(
+            f"the law leaves {unbalanced:.3g} N m of the reference's torque unsupplied (products of inertia in "
+            "the reference axes): x = 0 is not the loop's equilibrium, the checks are about x = 0"
         )
     return missing
 
@@ -76,31 +139,49 @@ def _uncovered(scenario: Scenario) -> list[str]:
 def _check(name: str, loop: TrackingLinearization, tau: float, rate: float, orders: list[int]) -> _Check:
     margin = loop.delay_margin()
     stable = margin.is_stable(tau) if tau > 0 else bool(margin.stable_without_delay)
-    certificates = tuple(
-        (order, loop.certify(tau, order=order).status.name, loop.certify(tau, order=order).certified)
-        for order in (orders if tau > 0 else [])
-    )
-    sampled = loop.sampled_stability(1.0 / rate, delay_samples=delay_samples(tau, rate))
-    return _Check(name, loop, margin.margin, stable, certificates, str(sampled), sampled.stable)
+    certificates = []
+    for order in orders if tau > 0 else []:
+        certificate = loop.certify(tau, order=order)
+        certificates.append((order, certificate.status.name, certificate.certified))
+    d = delay_samples(tau, rate)
+    try:
+        sampled = loop.sampled_stability(1.0 / rate, delay_samples=d)
+    except SpecificationError as exc:  # the lifted companion is refused above MAX_LIFTED_SIZE rows
+        text = f"sampled loop not checked: {exc}"
+        return _Check(name, loop, margin.margin, stable, tuple(certificates), d, None, text)
+    return _Check(name, loop, margin.margin, stable, tuple(certificates), d, sampled.spectral_radius, str(sampled))
+
+
+def _checks(scenario: Scenario, tau: float, orders: list[int]) -> list[_Check]:
+    """The linearisations the reference has (none for a file reference), each checked."""
+    reference = scenario.reference
+    feedforward = scenario.feedforward
+    if isinstance(reference, NadirPointing):
+        return [
+            _check(
+                label,
+                tracking_linearization(
+                    scenario.spacecraft, scenario.K, reference, gravity_gradient=gravity, feedforward=feedforward
+                ),
+                tau,
+                scenario.rate,
+                orders,
+            )
+            for gravity, label in ((True, "nadir pointing with the gravity gradient"), (False, "nadir pointing"))
+        ]
+    if isinstance(reference, InertialPointing | EigenaxisSlew):
+        label = "about rest (the slew's end points)" if isinstance(reference, EigenaxisSlew) else "inertial pointing"
+        loop = tracking_linearization(scenario.spacecraft, scenario.K, None, feedforward=feedforward)
+        return [_check(label, loop, tau, scenario.rate, orders)]
+    return []
 
 
 def verify_tracking(args: argparse.Namespace, scenario: Scenario, tau: float) -> int:
-    """Print (or write as JSON) the tracking scenario's verdict; the exit code is 0 when VERIFIED, else
-    NOT_VERIFIED."""
+    """Print (or write as JSON) the tracking scenario's verdict; the exit code is 0 when VERIFIED (every check
+    holds and nothing is left uncovered), else NOT_VERIFIED."""
     reference = scenario.reference
-    missing = _uncovered(scenario)
-    checks: list[_Check] = []
-    if isinstance(reference, InertialPointing | EigenaxisSlew | NadirPointing):
-        about = reference if isinstance(reference, NadirPointing) else InertialPointing([0.0, 0.0, 0.0])
-        options = {"feedforward": scenario.feedforward}
-        if isinstance(reference, NadirPointing):
-            for gravity, label in ((True, "nadir pointing with the gravity gradient"), (False, "nadir pointing")):
-                loop = tracking_linearization(scenario.spacecraft, scenario.K, about, gravity_gradient=gravity, **options)
-                checks.append(_check(label, loop, tau, scenario.rate, args.orders))
-        else:
-            label = "about rest (the slew's end points)" if isinstance(reference, EigenaxisSlew) else "inertial pointing"
-            loop = tracking_linearization(scenario.spacecraft, scenario.K, about, **options)
-            checks.append(_check(label, loop, tau, scenario.rate, args.orders))
+    checks = _checks(scenario, tau, args.orders)
+    missing = _uncovered(scenario, [check.loop for check in checks])
     verified = bool(checks) and not missing and all(check.verified for check in checks)
     code = 0 if verified else NOT_VERIFIED
     if args.json:
@@ -109,6 +190,7 @@ def verify_tracking(args: argparse.Namespace, scenario: Scenario, tau: float) ->
                 "tau": tau,
                 "rate": scenario.rate,
                 "reference": str(reference),
+                "error_time": None if scenario.error_time is None else scenario.error_time.value,
                 "feedforward": scenario.feedforward,
                 "checks": [
                     {
@@ -120,8 +202,12 @@ def verify_tracking(args: argparse.Namespace, scenario: Scenario, tau: float) ->
                             {"criterion": criterion_name(order), "order": order, "status": status, "certified": ok}
                             for order, status, ok in check.certificates
                         ],
+                        "certified": check.certified,
+                        "delay_samples": check.delay_samples,
+                        "spectral_radius": check.spectral_radius,
                         "sampled": check.sampled,
                         "sampled_stable": check.sampled_stable,
+                        "status": check.status,
                         "verified": check.verified,
                     }
                     for check in checks
@@ -132,23 +218,24 @@ def verify_tracking(args: argparse.Namespace, scenario: Scenario, tau: float) ->
             }
         )
         return code
-    print(f"tracking scenario {scenario.name}: {reference}; tau = {tau:g} s at {scenario.rate:g} Hz")
+    print(f"tracking scenario {scenario.name}: {reference}")
+    print(f"tau = {tau:g} s at {scenario.rate:g} Hz, feedforward {'on' if scenario.feedforward else 'off'}")
     for check in checks:
         print(f"{check.name}: {check.loop}")
-        margin = f"{check.margin:.6g} s" if math.isfinite(check.margin) else "none (unstable without delay)"
-        print(f"  exact delay margin {margin}; stable at tau = {tau:g} s: {check.stable_at_tau}")
+        if math.isinf(check.margin):
+            margin = "infinite (stable for every delay)"
+        else:
+            margin = f"{check.margin:.9g} s" if check.margin > 0 else "none (unstable without delay)"
+        print(f"  exact delay margin {margin}; stable at tau = {tau:g} s: {'yes' if check.stable_at_tau else 'NO'}")
         for order, status, _ in check.certificates:
             print(f"  {criterion_name(order):<24} at tau: {status}")
         print(f"  {check.sampled}")
-        print(f"  {'VERIFIED' if check.verified else 'NOT VERIFIED'}")
+        print(f"  {check.status}")
     for item in missing:
         print(f"not covered: {item}")
-    if isinstance(reference, EigenaxisSlew):
-        print("not covered: the slew itself (the loop along the time-varying profile); simulate it")
     word = "VERIFIED" if verified else "NOT VERIFIED"
-    print(f"tracking verdict: {word} (exit {code}): exactly the checks above, each about its constant reference motion")
+    if any(check.status == "UNSTABLE" for check in checks):
+        word += " (UNSTABLE)"
+    scope = "the checks above, each about its constant reference motion" if checks else "nothing could be checked"
+    print(f"tracking verdict: {word} (exit {code}): {scope}")
     return code
-
-
-def _unused(*_: Any) -> None:  # pragma: no cover - keeps the signature types imported for readers
-    return None
