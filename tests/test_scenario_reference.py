@@ -187,19 +187,11 @@ def test_a_profile_without_a_file_is_not_written() -> None:
         scenario_toml(replace(scenario, reference=FileReference(rows=rows, rate=10.0)))
 
 
-def test_export_and_campaigns_refuse_a_tracking_scenario_rather_than_treat_it_as_regulation(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """(verify gives a tracking scenario the tracking verdict: tests/test_cli_verify_tracking.py.)"""
+def test_campaigns_refuse_a_tracking_scenario_rather_than_treat_it_as_regulation() -> None:
+    """(verify gives a tracking scenario the tracking verdict, tests/test_cli_verify_tracking.py; export the
+    tracking loop, tests/test_scenario_tracking.py.)"""
     from mrpctl.campaign.spec import parse_campaign
-    from mrpctl.cli import main
 
     data = _data({"type": "inertial", "sigma": [0.1, 0.0, 0.0]}, rule={"type": "hysteretic"})
-    path = tmp_path / "tracking.toml"
-    path.write_text(scenario_toml(parse_scenario(data)), encoding="utf-8")
-    for argv, needle in ((["export", str(path), "--out", str(tmp_path / "out"), "--no-compile"], "tracking=True"),):
-        assert main(argv) == 2
-        err = capsys.readouterr().err
-        assert err.startswith("mrpctl: error: [reference]") and err.count("\n") == 1 and needle in err, err
     with pytest.raises(SpecificationError, match=r"\[reference\]: campaigns of the tracking loop"):
         parse_campaign({**data, "count": 2, "seed": 1})

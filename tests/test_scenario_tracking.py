@@ -207,3 +207,53 @@ def test_the_shipped_nadir_scenario() -> None:
     assert run.settling_time is not None and not run.diverged and run.switch_count == 0
     assert run.pointing_error[0] == pytest.approx(20.0, rel=1e-9)
     assert run.pointing_error[-1] < 1e-6
+
+
+def test_export_of_a_tracking_scenario_is_the_tracking_controller(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`mrpctl export nadir` writes the tracking loop of the scenario's error time and feedforward; its
+    tracking_controller gives u = K [σ_B/R; ω_B/R/4] + ω × Jω + J([BN]ω̇_R − ω × [BN]ω_R), here recomputed with
+    scipy's rotations (σ_B/R of [BR] = [BN][RN]ᵀ), for a measurement off a reference row of the nadir profile."""
+    import casadi as ca
+
+    out = tmp_path / "export"
+    assert main(["export", str(NADIR), "--out", str(out), "--no-compile"]) == 0
+    printed = capsys.readouterr().out
+    assert "reference input: one row (sigma_RN, omega_RN_N, domega_RN_N) per sample, of the measurement time" in printed
+    manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
+    assert manifest["tracking"]["error_time"] == "measurement" and manifest["tracking"]["feedforward"] is True
+    assert "tracking_controller" in manifest["functions"] and "flight_controller" not in manifest["functions"]
+    scenario = load_scenario(NADIR)
+    rows = np.array(reference_samples(scenario.reference, 2001, scenario.rate))
+    row = rows[2000]  # t = 100 s: the Hill frame has turned by n t
+    rot_r = Rotation.from_mrp(row[:3])
+    rot_b = Rotation.from_rotvec([0.01, -0.02, 0.015]) * rot_r  # 1.5 deg off the reference
+    sigma_b, omega_b = rot_b.as_mrp(), np.array([1e-3, -2e-3, 3e-3])
+    controller = ca.Function.load(str(out / "tracking_controller.casadi"))
+    sigma_br = (rot_r.inv() * rot_b).as_mrp()
+    memory = np.concatenate(([1.0, 1.0], sigma_br))  # h = c = +1, the previous error this one
+    u = np.asarray(controller(np.concatenate((sigma_b, omega_b / 4)), memory, row, 0.0)[0]).ravel()
+    bn = rot_b.as_matrix().T  # [BN], passive
+    omega_br = omega_b - bn @ row[3:6]
+    j = scenario.spacecraft.inertia
+    feedforward = np.cross(omega_b, j @ omega_b) + j @ (bn @ row[6:9] - np.cross(omega_b, bn @ row[3:6]))
+    expected = scenario.K @ np.concatenate((sigma_br, omega_br / 4)) + feedforward
+    np.testing.assert_allclose(u, expected, rtol=1e-12, atol=1e-14)
+    assert np.linalg.norm(bn @ row[3:6]) == pytest.approx(scenario.reference.orbit_rate, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("rule", "extra"),
+    [('type = "on-predicted"\nalpha = 1.0', "\n[predictor]\n"), ('type = "on-delayed"', "")],
+)
+def test_export_refuses_what_the_tracking_export_does_not_have_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], rule: str, extra: str
+) -> None:
+    """The tracking export is the flight loop's: the predictor's tracking loop and plant-side rules are refused."""
+    text = NADIR.read_text(encoding="utf-8").replace('type = "hysteretic"\ndelta = 0.0', rule) + extra
+    path = tmp_path / "scenario.toml"
+    path.write_text(text, encoding="utf-8")
+    assert main(["export", str(path), "--out", str(tmp_path / "out"), "--no-compile"]) == 2
+    one_line_error(capsys, "tracking: the tracking loop is the flight loop's", "Hysteretic(delta)")
+    assert not (tmp_path / "out").exists()
