@@ -159,6 +159,7 @@ def test_simulate_json_and_text_carry_the_tracking_figures(tmp_path: Path, capsy
     assert main(["simulate", str(NADIR), "--json", "--pointing-plot", str(plot)]) == 0
     summary = json.loads(capsys.readouterr().out)
     result = summary["result"]
+    assert summary["scenario"]["reference"] == str(scenario.reference) and "nadir pointing" in str(scenario.reference)
     assert result["error_time"] == "measurement" and result["feedforward"] is True
     assert result["pointing_tolerance_deg"] == 0.05
     assert result["pointing_max_deg"] == pytest.approx(phi[settled].max(), rel=1e-9)
@@ -174,7 +175,9 @@ def test_simulate_json_and_text_carry_the_tracking_figures(tmp_path: Path, capsy
     # a regulation run's JSON has none of these keys
     regulation = _write(tmp_path, _data(None), "regulation.toml")
     assert main(["simulate", str(regulation), "--json"]) == 0
-    keys = set(json.loads(capsys.readouterr().out)["result"])
+    regulation_summary = json.loads(capsys.readouterr().out)
+    assert regulation_summary["scenario"]["reference"] is None
+    keys = set(regulation_summary["result"])
     assert not keys & {"error_time", "feedforward", "pointing_max_deg", "pointing_rms_deg", "slew_time"}
 
 

@@ -108,6 +108,7 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "substeps": scenario.substeps,
         "flight_models": {name: str(model) for name, model in scenario.flight_options.items()},
         "predictor_inertia": None if scenario.predictor is None else scenario.predictor.model.inertia,
+        "reference": None if scenario.reference is None else str(scenario.reference),
     }
 
 

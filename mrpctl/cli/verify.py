@@ -389,7 +389,9 @@ def add_parser(commands: Any) -> None:
     flown = parser.add_argument_group(
         "the loop as flown (each adds a certificate; see design/lmi.md section 7). A scenario file adds them "
         "itself: its rate (sampled loop), [delay] (jitter, rate unknown) and [uncertainty] (inertia box); "
-        "these options override the file's values"
+        "these options override the file's values. A tracking scenario ([reference]) is verified as its tracking "
+        "loop linearised about the reference (exact margin, LMI at tau, the sampled loop at its rate); these "
+        "options do not apply to it, and what its checks do not cover is listed and makes it NOT VERIFIED"
     )
     flown.add_argument(
         "--jitter",
