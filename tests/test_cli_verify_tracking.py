@@ -92,7 +92,9 @@ def _verify_json(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, d
     return code, json.loads(capsys.readouterr().out)
 
 
-@pytest.mark.parametrize(("tau", "d", "code", "status"), [(0.5, 10, 0, "VERIFIED"), (1.6, 32, 1, "UNSTABLE")])
+@pytest.mark.parametrize(
+    ("tau", "d", "code", "status"), [(0.0, 0, 0, "VERIFIED"), (0.5, 10, 0, "VERIFIED"), (1.6, 32, 1, "UNSTABLE")]
+)
 def test_nadir_verdict_equals_the_lifted_loop_built_by_hand(
     capsys: pytest.CaptureFixture[str], tau: float, d: int, code: int, status: str
 ) -> None:
@@ -108,7 +110,7 @@ def test_nadir_verdict_equals_the_lifted_loop_built_by_hand(
     for check, gravity in zip(report["checks"], (True, False), strict=True):
         a, b, gain = _hill_loop(inertia, n, gravity=gravity, feedforward=True)
         radius = _lifted_radius(a, b, gain, 1.0 / scenario.rate, d)
-        assert check["delay_samples"] == d
+        assert check["delay_samples"] == d and (check["criteria"] == []) is (tau == 0.0)
         assert check["spectral_radius"] == pytest.approx(radius, rel=1e-9, abs=0.0)
         assert check["sampled_stable"] is (radius < 1.0)
         margin = _exact_margin(a, b @ gain, inertia)
@@ -266,3 +268,21 @@ def test_bad_options_are_one_line(
 ) -> None:
     assert main(["verify", str(NADIR), *argv]) == 2
     one_line_error(capsys, *needles)
+
+
+def test_a_sampled_loop_too_large_to_lift_is_not_checked_and_not_verified(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """1 kHz and tau = 1.2 s: the roll-yaw block's companion is 4 (1200 + 1) = 4804 rows, above the limit."""
+    path = tmp_path / "fast.toml"
+    text = (
+        NADIR.read_text(encoding="utf-8").replace("rate = 20.0 ", "rate = 1000.0 ").replace("tau = 0.5 ", "tau = 1.2 ")
+    )
+    path.write_text(text, encoding="utf-8")
+    code, report = _verify_json(capsys, str(path), "--orders", "1")
+    assert code == 1 and [check["status"] for check in report["checks"]] == ["NOT CHECKED", "NOT CHECKED"]
+    assert all(check["stable_at_tau"] and check["certified"] for check in report["checks"])
+    assert all(
+        check["spectral_radius"] is None and "d = 1200: not checked" in check["sampled"] for check in report["checks"]
+    )
+    assert len(report["not_covered"]) == 2 and "would exceed 4000 rows" in report["not_covered"][0]

@@ -28,6 +28,7 @@ import numpy as np
 from mrpctl.cli.common import NOT_VERIFIED, options_given, print_json
 from mrpctl.clock import delay_samples
 from mrpctl.design.lmi import criterion_name
+from mrpctl.design.sampled import MAX_LIFTED_SIZE
 from mrpctl.design.tracking import TrackingLinearization, tracking_linearization
 from mrpctl.errors import SpecificationError
 from mrpctl.flight.tracking import ErrorTime
@@ -146,8 +147,11 @@ def _check(name: str, loop: TrackingLinearization, tau: float, rate: float, orde
     d = delay_samples(tau, rate)
     try:
         sampled = loop.sampled_stability(1.0 / rate, delay_samples=d)
-    except SpecificationError as exc:  # the lifted companion is refused above MAX_LIFTED_SIZE rows
-        text = f"sampled loop not checked: {exc}"
+    except SpecificationError:  # the lifted companion is refused above MAX_LIFTED_SIZE rows
+        text = (
+            f"sampled loop h = {1.0 / rate:.6g} s, d = {d}: not checked (its lifted companion would exceed "
+            f"{MAX_LIFTED_SIZE} rows; a lower rate or a shorter delay fits)"
+        )
         return _Check(name, loop, margin.margin, stable, tuple(certificates), d, None, text)
     return _Check(name, loop, margin.margin, stable, tuple(certificates), d, sampled.spectral_radius, str(sampled))
 
@@ -182,6 +186,7 @@ def verify_tracking(args: argparse.Namespace, scenario: Scenario, tau: float) ->
     reference = scenario.reference
     checks = _checks(scenario, tau, args.orders)
     missing = _uncovered(scenario, [check.loop for check in checks])
+    missing += [f"{check.name}: the {check.sampled}" for check in checks if check.spectral_radius is None]
     verified = bool(checks) and not missing and all(check.verified for check in checks)
     code = 0 if verified else NOT_VERIFIED
     if args.json:
