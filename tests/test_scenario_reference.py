@@ -185,13 +185,3 @@ def test_a_profile_without_a_file_is_not_written() -> None:
     rows = np.zeros((21, 9))
     with pytest.raises(SpecificationError, match=r"reference: a FileReference is not written"):
         scenario_toml(replace(scenario, reference=FileReference(rows=rows, rate=10.0)))
-
-
-def test_campaigns_refuse_a_tracking_scenario_rather_than_treat_it_as_regulation() -> None:
-    """(verify gives a tracking scenario the tracking verdict, tests/test_cli_verify_tracking.py; export the
-    tracking loop, tests/test_scenario_tracking.py.)"""
-    from mrpctl.campaign.spec import parse_campaign
-
-    data = _data({"type": "inertial", "sigma": [0.1, 0.0, 0.0]}, rule={"type": "hysteretic"})
-    with pytest.raises(SpecificationError, match=r"\[reference\]: campaigns of the tracking loop"):
-        parse_campaign({**data, "count": 2, "seed": 1})
