@@ -26,6 +26,7 @@ from mrpctl._scenario_tables import (
     sample_count,
     samples_file,
     torque_rows,
+    tracking_keys,
 )
 from mrpctl._validation import (
     finite_array,
@@ -38,6 +39,7 @@ from mrpctl._validation import (
 from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, SensorModel
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime
 from mrpctl.guidance import (
     EigenaxisSlew,
     FileReference,
@@ -182,6 +184,10 @@ class Scenario:
         [`FileReference`][mrpctl.guidance.FileReference]. None: regulation to the inertial origin.
         [`simulate`][mrpctl.Scenario.simulate] flies the tracking loop on it
         (``simulate(..., reference=...)``: the controller-side rule or the predictor).
+    error_time, feedforward, pointing_tolerance : ErrorTime or None, bool, float
+        How a tracking scenario's controller forms its error (``[reference] error_time``: "measurement" or
+        "current"; None: simulate's default), whether it adds the feedforward terms (``feedforward``), and
+        the slew time's tolerance on the pointing error in degrees (``pointing_tolerance_deg``, default 0.1).
     """
 
     name: str
@@ -204,6 +210,9 @@ class Scenario:
     settling_attitude: float = SETTLING_ATTITUDE_DEG
     settling_rate: float = SETTLING_OMEGA
     reference: GuidanceProfile | None = None
+    error_time: ErrorTime | None = None
+    feedforward: bool = False
+    pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE
 
     @property
     def gains(self) -> PDGains:
@@ -257,8 +266,21 @@ class Scenario:
             settling_attitude=self.settling_attitude,
             settling_rate=self.settling_rate,
             reference=self.reference,
+            **self.tracking_options,
             **self.run_options,
         )
+
+    @property
+    def tracking_options(self) -> dict[str, Any]:
+        """A tracking scenario's ``error_time``, ``feedforward`` and ``pointing_tolerance`` as keywords of
+        [`mrpctl.simulate`][mrpctl.simulation.simulate]; {} when the scenario regulates."""
+        if self.reference is None:
+            return {}
+        return {
+            "error_time": self.error_time,
+            "feedforward": self.feedforward,
+            "pointing_tolerance": self.pointing_tolerance,
+        }
 
     def __str__(self) -> str:
         sigma0, omega0 = self.sigma0, self.omega0
@@ -487,6 +509,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         settling_attitude=settle_attitude,
         settling_rate=settle_rate,
         reference=reference_table(data, rate, Horizon(None if base is None else Path(base), samples)),
+        **tracking_keys(data),
         **flight,
     )
 
@@ -653,6 +676,14 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
     lines += _flight_toml(scenario)
     lines += _reference_toml(scenario.reference)
+    if scenario.reference is not None:
+        if scenario.error_time is not None:
+            lines.append(f'error_time = "{scenario.error_time.value}"  # the reference at the measurement time or now')
+        if scenario.feedforward:
+            lines.append("feedforward = true  # omega x J omega and J (domega_R - omega x omega_R)")
+        if scenario.pointing_tolerance != DEFAULT_POINTING_TOLERANCE:
+            tolerance = _toml_value(scenario.pointing_tolerance)
+            lines.append(f"pointing_tolerance_deg = {tolerance}  # the slew time's tolerance")
     if scenario.uncertainty is not None:
         lines += [
             "",

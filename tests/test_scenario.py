@@ -60,7 +60,8 @@ def test_examples_are_the_package_data_files() -> None:
     assert EXAMPLES.resolve() == PACKAGE.resolve()
     shipped = shipped_scenarios()
     # predictor-paper: checked against mrpctl._predictor_study in tests/test_scenario_predictor.py
-    expected = set(paper_scenarios()) | set(flight_scenarios()) | {"predictor-paper"}
+    # nadir: checked in tests/test_scenario_tracking.py
+    expected = set(paper_scenarios()) | set(flight_scenarios()) | {"predictor-paper", "nadir"}
     assert set(shipped) == expected == {p.stem for p in PACKAGE.glob("*.toml")}
     assert all(path.resolve().parent == PACKAGE.resolve() for path in shipped.values())
 
