@@ -130,6 +130,7 @@ def test_verify_json_keys(capsys: pytest.CaptureFixture[str]) -> None:
         "feedforward",
         "checks",
         "not_covered",
+        "local",
         "verified",
         "exit_code",
     }
@@ -286,3 +287,19 @@ def test_a_sampled_loop_too_large_to_lift_is_not_checked_and_not_verified(
         check["spectral_radius"] is None and "d = 1200: not checked" in check["sampled"] for check in report["checks"]
     )
     assert len(report["not_covered"]) == 2 and "would exceed 4000 rows" in report["not_covered"][0]
+
+
+def test_the_verdict_says_it_is_local_with_the_initial_error(capsys: pytest.CaptureFixture[str]) -> None:
+    """The linearised checks say nothing of the loop far from the reference: the output says so, with the
+    scenario's initial pointing error (here from scipy: the reference starts at the origin, the body at sigma0)."""
+    from scipy.spatial.transform import Rotation
+
+    from mrpctl.scenario import load_scenario
+
+    code, report = _verify_json(capsys, str(NADIR), "--orders", "0")
+    sigma0 = load_scenario(NADIR).sigma0
+    angle = np.degrees(Rotation.from_mrp(np.array(sigma0)).magnitude())
+    assert code == 0 and "no region of attraction is certified" in report["local"]
+    assert f"starts {angle:.3g} deg from its reference" in report["local"]
+    main(["verify", str(NADIR), "--orders", "0"])
+    assert "not checked (the verdict is local)" in capsys.readouterr().out

@@ -32,7 +32,8 @@ from mrpctl.design.sampled import MAX_LIFTED_SIZE
 from mrpctl.design.tracking import TrackingLinearization, tracking_linearization
 from mrpctl.errors import SpecificationError
 from mrpctl.flight.tracking import ErrorTime
-from mrpctl.guidance import EigenaxisSlew, InertialPointing, NadirPointing
+from mrpctl.guidance import EigenaxisSlew, InertialPointing, NadirPointing, reference_samples
+from mrpctl.mrp import to_dcm
 from mrpctl.scenario import Scenario
 
 __all__ = ["check_tracking_options", "verify_tracking"]
@@ -180,6 +181,21 @@ def _checks(scenario: Scenario, tau: float, orders: list[int]) -> list[_Check]:
     return []
 
 
+def _local_note(scenario: Scenario) -> str:
+    """What a linearisation does not say: the loop far from its reference, with this scenario's initial error."""
+    reference = scenario.reference
+    start = ""
+    if reference is not None:
+        row = reference_samples(reference, 1, scenario.rate)[0]
+        relative = to_dcm(scenario.sigma0) @ to_dcm(row[:3]).T  # [BR] = [BN][NR]
+        cosine = min(1.0, max(-1.0, (float(np.trace(relative)) - 1.0) / 2.0))
+        start = f"; this scenario starts {math.degrees(math.acos(cosine)):.3g} deg from its reference"
+    return (
+        "the nonlinear loop away from the reference motion (the checks are of its linearisation; no region of "
+        f"attraction is certified here{start}): simulate the scenario, or run a campaign of it"
+    )
+
+
 def verify_tracking(args: argparse.Namespace, scenario: Scenario, tau: float) -> int:
     """Print (or write as JSON) the tracking scenario's verdict; the exit code is 0 when VERIFIED (every check
     holds and nothing is left uncovered), else NOT_VERIFIED."""
@@ -218,6 +234,7 @@ def verify_tracking(args: argparse.Namespace, scenario: Scenario, tau: float) ->
                     for check in checks
                 ],
                 "not_covered": missing,
+                "local": _local_note(scenario),
                 "verified": verified,
                 "exit_code": code,
             }
@@ -238,6 +255,7 @@ def verify_tracking(args: argparse.Namespace, scenario: Scenario, tau: float) ->
         print(f"  {check.status}")
     for item in missing:
         print(f"not covered: {item}")
+    print(f"not checked (the verdict is local): {_local_note(scenario)}")
     word = "VERIFIED" if verified else "NOT VERIFIED"
     if any(check.status == "UNSTABLE" for check in checks):
         word += " (UNSTABLE)"
