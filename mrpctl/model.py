@@ -33,12 +33,14 @@ from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "INPUT_SIZE",
+    "ORBIT_SIZE",
     "STATE_SIZE",
     "PlantModel",
     "dynamics_expr",
     "gain_from_pd",
     "gain_matrix",
     "gravity_gradient_expr",
+    "orbit_position_expr",
     "pd_from_gain",
     "plant_model",
     "state",
@@ -50,6 +52,9 @@ __all__ = [
 
 STATE_SIZE = 6
 INPUT_SIZE = 3
+#: A circular orbit as the run-time constants of a compiled sample: (n, u₀, ê₁ (3), ê₂ (3)), see
+#: [`orbit_position_expr`][mrpctl.model.orbit_position_expr].
+ORBIT_SIZE = 8
 
 
 def dynamics_expr(
@@ -161,6 +166,17 @@ def gravity_gradient_expr(sigma_BN: Any, r_hat_N: Any, n: Any, inertia: Any) -> 
     sigma_BN, r_hat_N, inertia = (_casadi(v) for v in (sigma_BN, r_hat_N, inertia))
     r_b = dcm_expr(sigma_BN) @ r_hat_N
     return 3 * n**2 * ca.cross(r_b, inertia @ r_b)
+
+
+def orbit_position_expr(orbit: Any, t: Any) -> Any:
+    """r̂_N(t) = cos(u₀ + n t) ê₁ + sin(u₀ + n t) ê₂ (N components) of a circular orbit, as a CasADi expression.
+
+    ``orbit`` holds (n, u₀, ê₁ (3), ê₂ (3)) (`ORBIT_SIZE`): the orbit rate (rad/s), the argument of latitude
+    at t = 0 (rad) and the two in-plane unit axes, ê₁ to the ascending node and ê₂ = ĥ × ê₁
+    ([`CircularOrbit.in_plane_axes`][mrpctl.guidance.CircularOrbit.in_plane_axes]); ``t`` in seconds.
+    """
+    angle = orbit[1] + orbit[0] * t
+    return ca.cos(angle) * orbit[2:5] + ca.sin(angle) * orbit[5:8]
 
 
 def _casadi(value: Any) -> Any:
