@@ -37,7 +37,9 @@ from mrpctl.model import (
     STATE_SIZE,
     dynamics_expr,
     gravity_gradient_expr,
+    orbit_phase_expr,
     orbit_position_expr,
+    orbit_turn_expr,
     plant_model,
 )
 from mrpctl.spacecraft import Spacecraft
@@ -107,11 +109,14 @@ def step_function(
 
     With ``inertia`` the spacecraft's J and J⁻¹ are inputs instead of constants:
     ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see [`InertiaInput`][mrpctl.loop.InertiaInput]).
-    With ``gravity_gradient`` two more inputs ``orbit`` (`ORBIT_SIZE`: n, u₀, ê₁, ê₂ of a circular orbit) and
-    ``time`` (t_k, s, the start of the period) add the gravity-gradient torque of the plant's own J,
-    [`gravity_gradient_expr`][mrpctl.model.gravity_gradient_expr] of the stage's attitude and of
+    With ``gravity_gradient`` two more inputs ``orbit`` (`ORBIT_SIZE`: n, u₀, ê₁, ê₂, cos δ, sin δ of a circular
+    orbit, δ = n dt/2) and ``time`` (t_k, s, the start of the period) add the gravity-gradient torque of the
+    plant's own J, [`gravity_gradient_expr`][mrpctl.model.gravity_gradient_expr] of the stage's attitude and of
     r̂_N = [`orbit_position_expr`][mrpctl.model.orbit_position_expr] at the stage's time (t_k + j dt, + dt/2,
-    + dt/2, + dt for substep j, dt = h/substeps), to the held torque u inside every RK4 stage.
+    + dt/2, + dt for substep j, dt = h/substeps), to the held torque u inside every RK4 stage. The phase
+    (cos u, sin u) is computed once a sample at t_k ([`orbit_phase_expr`][mrpctl.model.orbit_phase_expr]) and
+    turned by δ to the later stage times ([`orbit_turn_expr`][mrpctl.model.orbit_turn_expr]: one cosine and one
+    sine a sample, whatever the substeps).
     """
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", INPUT_SIZE)
@@ -129,21 +134,18 @@ def step_function(
     time = ca.SX.sym("time")
     dt = period / substeps
 
-    def torque(z: Any, r_hat: Any) -> Any:
-        """The torque of one stage: u, plus the gravity gradient at the stage's attitude and r̂_N."""
+    def torque(z: Any, phase: Any) -> Any:
+        """The torque of one stage: u, plus the gravity gradient at the stage's attitude and orbit phase."""
         if not gravity_gradient:
             return u
-        return u + gravity_gradient_expr(z[0:3], r_hat, orbit[0], j_matrix)
+        return u + gravity_gradient_expr(z[0:3], orbit_position_expr(orbit, phase), orbit[0], j_matrix)
 
-    def position(offset: float) -> Any:
-        if not gravity_gradient:
-            return None
-        return orbit_position_expr(orbit, time if offset == 0.0 else time + offset)
-
+    # the orbit's phase (cos u, sin u) at t_k from libm, then turned by δ = n dt/2 to each later stage time
+    start = orbit_phase_expr(orbit, time) if gravity_gradient else None
     z = x
-    start = position(0.0)
-    for j in range(substeps):
-        middle, end = position((j + 0.5) * dt), position((j + 1) * dt)  # the two new stage times of substep j
+    for _ in range(substeps):
+        middle = orbit_turn_expr(orbit, start) if gravity_gradient else None
+        end = orbit_turn_expr(orbit, middle) if gravity_gradient else None
         k1 = dynamics(z, torque(z, start), *extra)
         z2 = z + (dt / 2) * k1
         k2 = dynamics(z2, torque(z2, middle), *extra)
@@ -281,7 +283,7 @@ def flight_core_function(
 
     With ``gravity_gradient`` the plant flies the gravity-gradient torque 3 n² r̂_B × (J r̂_B) of a circular orbit
     inside its RK4 stages ([`step_function`][mrpctl.loop.step_function]): ``flight`` grows by the orbit's
-    constants (n, u₀, ê₁, ê₂) (`ORBIT_SIZE`, after the ten flight constants) and a last input
+    constants (n, u₀, ê₁, ê₂, cos δ, sin δ) (`ORBIT_SIZE`, after the ten flight constants) and a last input
     ``sample_index`` (k, the sample's index; the engines feed it from their sample counter) gives the
     sample's time t_k = k h. The controller does not know the torque (no feedforward of it).
     """

@@ -233,10 +233,11 @@ def flight_structure(options: np.ndarray | None, sensor: SensorModel | None) -> 
     }
 
 
-def orbit_constants(value: Any, name: str = "gravity_gradient") -> np.ndarray:
-    """The (`ORBIT_SIZE`,) constants (n, u₀, ê₁, ê₂) of a [`CircularOrbit`][mrpctl.guidance.CircularOrbit], or of
-    the orbit of a [`NadirPointing`][mrpctl.guidance.NadirPointing]: what a gravity-gradient sample's ``flight``
-    input holds after the ten flight constants (``mrpctl.model.orbit_position_expr``)."""
+def orbit_constants(value: Any, period: float, substeps: int, name: str = "gravity_gradient") -> np.ndarray:
+    """The (`ORBIT_SIZE`,) constants (n, u₀, ê₁, ê₂, cos δ, sin δ) of a [`CircularOrbit`][mrpctl.guidance.CircularOrbit],
+    or of the orbit of a [`NadirPointing`][mrpctl.guidance.NadirPointing], for RK4 substeps of dt = period/substeps
+    (δ = n dt/2): what a gravity-gradient sample's ``flight`` input holds after the ten flight constants
+    (``mrpctl.model.orbit_position_expr``, ``orbit_turn_expr``)."""
     orbit = value.orbit if isinstance(value, NadirPointing) else value
     if not isinstance(orbit, CircularOrbit):
         raise SpecificationError(
@@ -244,20 +245,28 @@ def orbit_constants(value: Any, name: str = "gravity_gradient") -> np.ndarray:
             f"got {type(value).__name__}"
         )
     axes = orbit.in_plane_axes
-    constants = np.concatenate(([orbit.orbit_rate, orbit.latitude], axes[:, 0], axes[:, 1]))
+    half = orbit.orbit_rate * (period / substeps / 2)  # the SX's dt/2, as the step function writes it
+    constants = np.concatenate(([orbit.orbit_rate, orbit.latitude], axes[:, 0], axes[:, 1], [np.cos(half), np.sin(half)]))
     assert constants.size == ORBIT_SIZE
     return constants
 
 
 def gravity_gradient_options(
-    value: Any, rule: Any, options: np.ndarray | None, *, predictor: Any = None, wheels: Any = None
+    value: Any,
+    rule: Any,
+    options: np.ndarray | None,
+    *,
+    period: float,
+    substeps: int,
+    predictor: Any = None,
+    wheels: Any = None,
 ) -> np.ndarray | None:
     """The flight constants of a run with the gravity-gradient torque of ``value`` (`orbit_constants`) after
     ``options`` (None: `NO_FLIGHT_OPTIONS`); ``options`` unchanged when ``value`` is None. The torque is flown by the
     flight sample (``rule=Hysteretic(...)``) only: refused with the plant-side rules, the predictor and wheels."""
     if value is None:
         return options
-    constants = orbit_constants(value)
+    constants = orbit_constants(value, period, substeps)
     if predictor is not None:
         raise SpecificationError(
             "gravity_gradient: the predictor's plant does not fly the gravity-gradient torque yet (nor its model "

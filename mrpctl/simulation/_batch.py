@@ -429,7 +429,9 @@ def simulate_batch(
                 constants = options_by_run[i]
                 row_key = None if constants is None else constants.tobytes()
                 if row_key not in orbit_rows:
-                    orbit_rows[row_key] = gravity_gradient_options(gravity_gradient, one, constants, wheels=wheels)
+                    orbit_rows[row_key] = gravity_gradient_options(
+                        gravity_gradient, one, constants, period=1.0 / rate, substeps=substeps, wheels=wheels
+                    )
                 options_by_run[i] = orbit_rows[row_key]
             streamed_by_run[i] = (
                 streamed_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]", hint)
@@ -440,7 +442,9 @@ def simulate_batch(
         jitter = jitter_bytes(varying[0], max(samples_by_run))  # one delay model for every run
         check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
-        gravity_gradient_options(gravity_gradient, rules[0], None, predictor=checked)  # refused with a predictor
+        gravity_gradient_options(  # refused with a predictor
+            gravity_gradient, rules[0], None, period=1.0 / rate, substeps=substeps, predictor=checked
+        )
         for i in range(n_runs):
             if i == 0 or not shared:
                 item = predictor_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]")

@@ -396,11 +396,15 @@ def simulate(
     law = check_law(law, (rule,), gain, predictor=checked)
     if checked is None:
         options, saturation = flight_options(rule, actuator, disturbance, sensor)
-        options = gravity_gradient_options(gravity_gradient, rule, options, wheels=wheels)
+        options = gravity_gradient_options(
+            gravity_gradient, rule, options, period=1.0 / rate, substeps=substeps, wheels=wheels
+        )
         varying = varying_delay(rule, delay, d, rate, n)
         streamed = streamed_disturbance(disturbance, n)
     else:
-        gravity_gradient_options(gravity_gradient, rule, None, predictor=checked)  # refused with a predictor
+        gravity_gradient_options(  # refused with a predictor
+            gravity_gradient, rule, None, period=1.0 / rate, substeps=substeps, predictor=checked
+        )
         disturbance = predictor_disturbance(disturbance, n)
         options, saturation = flight_constants(actuator, disturbance, sensor)
         options, varying = predictor_constants(options, float(tau), checked.model), None
