@@ -61,7 +61,7 @@ def physics() -> None:
     jx, jy, jz = STABLE_J
     omega_p = FAST.orbit_rate * math.sqrt(3.0 * (jy - jx) / jz)
     print(f"pitch libration, n = {FAST.orbit_rate} rad/s, J = diag{STABLE_J}: omega_p = {omega_p:.9g} rad/s")
-    print("| theta0 (rad) | measured period (s) | exact (4/omega_p) K(sin^2 theta0) | rel. | linear 2 pi/omega_p | rel. |")
+    print("| theta0 (rad) | period (s) | exact (4/omega_p) K(sin^2 theta0) | rel. | linear 2 pi/omega_p | rel. |")
     print("|---|---|---|---|---|---|")
     for pitch in (1e-3, 0.1, 0.3):
         run = simulate(
@@ -110,7 +110,8 @@ def physics() -> None:
             linear = tracking_linearization(craft, paper.GAIN, reference, feedforward=True)
             predicted = np.linalg.solve(linear.A + linear.A_d, linear.B @ linear.unbalanced_torque)[0:3]
             line += f"; linear (A + A_d)^-1 B L = {np.array2string(predicted, precision=6)}"
-            line += f", |difference|/|linear| = {np.linalg.norm(sigma_br[-1] - predicted) / np.linalg.norm(predicted):.1e}"
+            relative = np.linalg.norm(sigma_br[-1] - predicted) / np.linalg.norm(predicted)
+            line += f", |difference|/|linear| = {relative:.1e}"
             line += f"; L_unbalanced = {np.array2string(np.asarray(linear.unbalanced_torque), precision=4)} N m"
         print(line)
 
@@ -150,7 +151,8 @@ def cost(rounds: int) -> None:
             simulate_batch(paper.SPACECRAFT, paper.GAIN, x0, **batch, **options)
             best = min(best, time.process_time() - start)
         label = "with" if options else "without"
-        print(f"  lanes, 64 runs of 20 001 samples {label} the gravity gradient: {best / 64 / 20_001 * 1e9:.0f} ns/sample")
+        per_sample = best / 64 / 20_001 * 1e9
+        print(f"  lanes, 64 runs of 20 001 samples {label} the gravity gradient: {per_sample:.0f} ns/sample")
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ from mrpctl.design.tracking import tracking_linearization
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.errors import SpecificationError
 from mrpctl.estimation import Gyro, Sensors, StarTracker
-from mrpctl.flight import Hysteretic, SensorModel
+from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, SensorModel
 from mrpctl.guidance import CircularOrbit, NadirPointing
 from mrpctl.predictor import OnPredicted
 from mrpctl.simulation import _batch
@@ -134,16 +134,12 @@ def test_the_plant_equals_a_numpy_rk4_with_the_gravity_gradient(inertia, closed,
     orbit = (FAST.orbit_rate, FAST.inclination, FAST.raan, FAST.latitude)
     count = len(run.t)
     d = round(tau * rate)
-    sigma, omega, u = _reference_run(
-        inertia, gain, x0, d=d, rate=rate, n_samples=count, substeps=substeps, orbit=orbit
-    )
+    sigma, omega, u = _reference_run(inertia, gain, x0, d=d, rate=rate, n_samples=count, substeps=substeps, orbit=orbit)
     assert _relative(run.sigma, sigma) < 1e-12
     assert _relative(run.omega, omega) < 1e-12
     if closed:
         assert _relative(run.u, u) < 1e-12
-    free_sigma, free_omega, _ = _reference_run(
-        inertia, gain, x0, d=d, rate=rate, n_samples=count, substeps=substeps, orbit=None
-    )
+    _, free_omega, _ = _reference_run(inertia, gain, x0, d=d, rate=rate, n_samples=count, substeps=substeps, orbit=None)
     assert _relative(run.omega, free_omega) > 1e-3  # the torque matters in these runs
     plain = simulate(spacecraft, gain, x0, tau=tau, rule=Hysteretic(0.0), t_final=t_final, rate=rate, substeps=substeps)
     assert _relative(plain.omega, free_omega) < 1e-12  # and None is the plant without it
@@ -263,17 +259,25 @@ def _bits(a, b) -> bool:
 _FIELDS = ("switch_count", "first_switch_time", "sign_flips", "settling_time", "diverged", "max_sigma", "peak_torque")
 
 
-@pytest.mark.parametrize("tracking", [False, True])
-def test_the_lanes_fly_the_gravity_gradient_as_the_scalar_engine_bit_for_bit(tracking):
+@pytest.mark.parametrize("case", ["regulation", "tracking", "limits"])
+def test_the_lanes_fly_the_gravity_gradient_as_the_scalar_engine_bit_for_bit(case):
     """Dispersed runs (per-run δ, 11 runs: two batches of W = 8, one padded) with a noisy biased sensor, on the
-    fast orbit, regulating or tracking its Hill frame: lanes = scalar engine = simulate, every metric's bits."""
+    fast orbit, regulating, tracking its Hill frame with feedforward, or with saturating torque limits, a constant
+    disturbance and a jittered delay: lanes = scalar engine = simulate, every metric's bits."""
+    tracking = case == "tracking"
+    more = {}
+    if case == "limits":
+        more = dict(
+            actuator=ActuatorModel([0.5, 0.4, 0.6], norm_max=0.7), disturbance=[0.01, 0.02, -0.01],
+            delay=DelayModel.jitter(0.04, 0.1, seed=4),
+        )  # fmt: skip
     rng = np.random.default_rng(5)
     x0 = np.hstack((rng.normal(size=(11, 3)) * 0.4, rng.normal(size=(11, 3)) * 0.02))
     rules = [Hysteretic(delta) for delta in np.linspace(0.0, 0.2, len(x0))]
     sensor = SensorModel(attitude_noise=1e-3, rate_noise=1e-4, gyro_bias=[1e-4, 0.0, -2e-4], seed=9)
     options = dict(
         tau=0.1, rate=50.0, rule=rules, t_final=30.0, sensor=sensor, gravity_gradient=NadirPointing(FAST), threads=2,
-        **({"reference": NadirPointing(FAST), "feedforward": True} if tracking else {}),
+        **({"reference": NadirPointing(FAST), "feedforward": True} if tracking else {}), **more,
     )  # fmt: skip
     spacecraft = Spacecraft(FULL_J)
     lanes = simulate_batch(spacecraft, paper.GAIN, x0, **options)
@@ -283,8 +287,10 @@ def test_the_lanes_fly_the_gravity_gradient_as_the_scalar_engine_bit_for_bit(tra
         scalar = simulate_batch(spacecraft, paper.GAIN, x0, **options)
     finally:
         _batch._LANES = True
-    for name in _FIELDS:
+    for name in _FIELDS + (("saturated_fraction", "peak_command") if more else ()):
         assert _bits(getattr(lanes, name), getattr(scalar, name)), name
+    if more:
+        assert np.all(np.asarray(lanes.saturated_fraction) > 0.0)
     single = {key: value for key, value in options.items() if key not in ("rule", "threads")}
     one = simulate(spacecraft, paper.GAIN, x0[4], rule=rules[4], keep_every=None, **single)
     assert _bits(one.max_sigma, lanes.max_sigma[4]) and _bits(one.peak_torque, lanes.peak_torque[4])
@@ -295,9 +301,9 @@ def test_the_lanes_fly_the_gravity_gradient_as_the_scalar_engine_bit_for_bit(tra
 def test_bad_gravity_gradient_options_are_refused_naming_the_parameter():
     x0 = np.array([0.1, 0.0, 0.0, 0.0, 0.0, 0.0])
     common = dict(tau=0.0, t_final=1.0, rate=10.0)
-    with pytest.raises(SpecificationError, match="gravity_gradient must be a mrpctl.guidance.CircularOrbit"):
+    with pytest.raises(SpecificationError, match=r"gravity_gradient must be a mrpctl\.guidance\.CircularOrbit"):
         simulate(paper.SPACECRAFT, paper.GAIN, x0, rule=Hysteretic(0.0), gravity_gradient=0.05, **common)
-    with pytest.raises(SpecificationError, match="gravity_gradient: .*flight loop only.*Hysteretic"):
+    with pytest.raises(SpecificationError, match=r"gravity_gradient: .*flight loop only.*Hysteretic"):
         simulate(paper.SPACECRAFT, paper.GAIN, x0, rule=OnCurrent(), gravity_gradient=FAST, **common)
     with pytest.raises(SpecificationError, match="gravity_gradient: the predictor"):
         simulate(
@@ -309,7 +315,7 @@ def test_bad_gravity_gradient_options_are_refused_naming_the_parameter():
             paper.SPACECRAFT, paper.GAIN, x0, rule=Hysteretic(0.0), gravity_gradient=FAST, **common,
             sensors=Sensors(StarTracker(noise=1e-4, rate=10.0, latency=0.0), Gyro(rate_noise=1e-5, bias_walk=1e-7)),
         )  # fmt: skip
-    with pytest.raises(SpecificationError, match="gravity_gradient: .*flight loop only"):
+    with pytest.raises(SpecificationError, match=r"gravity_gradient: .*flight loop only"):
         simulate_batch(paper.SPACECRAFT, paper.GAIN, x0, rule=OnCurrent(), gravity_gradient=FAST, **common)
 
 
@@ -326,13 +332,23 @@ def test_the_virtual_machine_fallback_flies_the_gravity_gradient_as_the_compiled
     assert compiled.compiled_code
     machine = VirtualMachineEngine(compiled.virtual_machine_sample(), 5, compiled.inertia, flight=True)
     options = gravity_gradient_options(FAST, rule, None, period=0.02, substeps=2)
-    outputs = [
-        found.run(
-            x0, 0.0, x0[None], np.asarray(paper.GAIN), np.array(rule.parameters()), 600, spacecraft=spacecraft,
-            keep_every=1, workspace=found.workspace(600, switches=True), switch_limit=600, flight_options=options,
-        )  # fmt: skip
-        for found in (compiled, machine)
-    ]
+    outputs = []
+    for found in (compiled, machine):
+        outputs.append(
+            found.run(
+                x0,
+                0.0,
+                x0[None],
+                np.asarray(paper.GAIN),
+                np.array(rule.parameters()),
+                600,
+                spacecraft=spacecraft,
+                keep_every=1,
+                workspace=found.workspace(600, switches=True),
+                switch_limit=600,
+                flight_options=options,
+            )
+        )
     sigma, omega, _ = _reference_run(
         FULL_J, np.asarray(paper.GAIN), x0, d=5, rate=50.0, n_samples=600, substeps=2,
         orbit=(FAST.orbit_rate, FAST.inclination, FAST.raan, FAST.latitude),

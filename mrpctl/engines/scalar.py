@@ -330,8 +330,8 @@ class Engine:
         self.gravity_gradient = gravity_gradient
         if gravity_gradient and (wheels is not None or predictor is not None or not self.flight):
             raise SpecificationError(
-                "gravity_gradient: the gravity-gradient torque is flown by the flight sample only (rule=Hysteretic(...), "
-                "no predictor, no wheel cluster)"
+                "gravity_gradient: the gravity-gradient torque is flown by the flight sample only "
+                "(rule=Hysteretic(...), no predictor, no wheel cluster)"
             )
         if wheels is not None:
             if not isinstance(rule, Hysteretic) or predictor is not None:

@@ -141,11 +141,11 @@ def step_function(
         return u + gravity_gradient_expr(z[0:3], orbit_position_expr(orbit, phase), orbit[0], j_matrix)
 
     # the orbit's phase (cos u, sin u) at t_k from libm, then turned by δ = n dt/2 to each later stage time
-    start = orbit_phase_expr(orbit, time) if gravity_gradient else None
+    start: Any = orbit_phase_expr(orbit, time) if gravity_gradient else None
     z = x
     for _ in range(substeps):
-        middle = orbit_turn_expr(orbit, start) if gravity_gradient else None
-        end = orbit_turn_expr(orbit, middle) if gravity_gradient else None
+        middle: Any = orbit_turn_expr(orbit, start) if gravity_gradient else None
+        end: Any = orbit_turn_expr(orbit, middle) if gravity_gradient else None
         k1 = dynamics(z, torque(z, start), *extra)
         z2 = z + (dt / 2) * k1
         k2 = dynamics(z2, torque(z2, middle), *extra)

@@ -234,9 +234,10 @@ def flight_structure(options: np.ndarray | None, sensor: SensorModel | None) -> 
 
 
 def orbit_constants(value: Any, period: float, substeps: int, name: str = "gravity_gradient") -> np.ndarray:
-    """The (`ORBIT_SIZE`,) constants (n, u₀, ê₁, ê₂, cos δ, sin δ) of a [`CircularOrbit`][mrpctl.guidance.CircularOrbit],
-    or of the orbit of a [`NadirPointing`][mrpctl.guidance.NadirPointing], for RK4 substeps of dt = period/substeps
-    (δ = n dt/2): what a gravity-gradient sample's ``flight`` input holds after the ten flight constants
+    """The (`ORBIT_SIZE`,) constants (n, u₀, ê₁, ê₂, cos δ, sin δ) of a
+    [`CircularOrbit`][mrpctl.guidance.CircularOrbit], or of the orbit of a
+    [`NadirPointing`][mrpctl.guidance.NadirPointing], for RK4 substeps of dt = period/substeps (δ = n dt/2):
+    what a gravity-gradient sample's ``flight`` input holds after the ten flight constants
     (``mrpctl.model.orbit_position_expr``, ``orbit_turn_expr``)."""
     orbit = value.orbit if isinstance(value, NadirPointing) else value
     if not isinstance(orbit, CircularOrbit):
@@ -246,7 +247,9 @@ def orbit_constants(value: Any, period: float, substeps: int, name: str = "gravi
         )
     axes = orbit.in_plane_axes
     half = orbit.orbit_rate * (period / substeps / 2)  # the SX's dt/2, as the step function writes it
-    constants = np.concatenate(([orbit.orbit_rate, orbit.latitude], axes[:, 0], axes[:, 1], [np.cos(half), np.sin(half)]))
+    constants = np.concatenate(
+        ([orbit.orbit_rate, orbit.latitude], axes[:, 0], axes[:, 1], [np.cos(half), np.sin(half)])
+    )
     assert constants.size == ORBIT_SIZE
     return constants
 

@@ -331,11 +331,11 @@ def simulate(
         (rad/s; default zero); the run is bit for bit the one of x0 = [σ₀; ω₀/4].
     gravity_gradient : mrpctl.guidance.CircularOrbit or NadirPointing, keyword-only
         Fly the gravity-gradient torque 3 n² r̂_B × (J r̂_B) of this circular orbit (a ``NadirPointing``: its
-        orbit) in the plant (``design/tracking.md``, "Gravity gradient"; ``rule=Hysteretic(...)``, no predictor,
-        no wheels): a torque of the attitude, evaluated inside every RK4 stage with r̂_N(t) = cos(u₀ + n t) ê₁
-        + sin(u₀ + n t) ê₂ at the stage's time (t_k = k/rate in the sample k), J the plant's inertia. The
-        controller does not know it (no feedforward of it). None (default): no environment torque, the plant
-        of before bit for bit.
+        orbit) in the plant (``design/tracking.md``, "The gravity gradient in the flown plant";
+        ``rule=Hysteretic(...)``, no predictor, no wheels): a torque of the attitude, evaluated inside every RK4
+        stage with r̂_N(t) = cos(u₀ + n t) ê₁ + sin(u₀ + n t) ê₂ at the stage's time (t_k = k h, h = 1/rate, in
+        the sample k), J the plant's inertia. The controller does not know it (no feedforward of it). None
+        (default): no environment torque, the plant of before bit for bit.
 
     Returns
     -------
