@@ -71,6 +71,7 @@ from mrpctl.engines.scalar import engine_sample, noise_rows, rule_key
 from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.flight.tracking import ReferenceStream
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_structure
@@ -671,11 +672,13 @@ def wheel_lane_engine(
     disturbed: bool = True,
     torque_input: bool = False,
     torque_per_lane: bool = False,
+    law: SteeringLaw | None = None,
 ) -> LaneEngine:
     """The (cached) lane engine of the flight sample on a wheel cluster
     ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; J and the cluster are constants of the
     library), the ports as the flight sample's in `lane_engine` (structure ``limited=False``: the limits are the
-    wheels'). Its runs' memories start with `mrpctl.loop.wheels.wheel_memory`.
+    wheels'). Its runs' memories start with `mrpctl.loop.wheels.wheel_memory`. ``law``: the steering law's body
+    torque request, as `mrpctl.engines.scalar.wheel_engine`'s (one library per law); None: the PD law.
 
     Raises
     ------
@@ -684,7 +687,7 @@ def wheel_lane_engine(
     """
     disturbed = bool(disturbed or torque_input)
     structure = {"sensor": bool(sensor), "limited": False, "disturbed": disturbed}
-    key = (
+    key: tuple[Any, ...] = (
         "wheels",
         wheels.key(),
         spacecraft.inertia.tobytes(),
@@ -696,17 +699,19 @@ def wheel_lane_engine(
         torque_input,
         torque_per_lane and torque_input,
     )
+    key += () if law is None else (law,)  # without a law the key of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
             core = wheel_core_function(
                 spacecraft, wheels, d, period, substeps, sensor=structure["sensor"], disturbed=disturbed,
-                torque_input=torque_input,
+                torque_input=torque_input, law=law,
             )  # fmt: skip
             digest = hashlib.sha256(repr(key[1:3]).encode()).hexdigest()[:12]
             label = f"hysteretic_wheels{wheels.count}_{digest}_d{d}_s{substeps}"
             label += ("" if structure["sensor"] else "_ideal") + ("" if disturbed else "_free")
             label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
+            label += "" if law is None else "_" + law.label()
             noise = ("noise",) if structure["sensor"] else ()
             found = LaneEngine(
                 engine_sample(core, d, f"mrpctl_lanes_{label}"),

@@ -336,8 +336,6 @@ class Engine:
         if wheels is not None:
             if not isinstance(rule, Hysteretic) or predictor is not None:
                 raise SpecificationError("wheels: the wheel cluster flies with rule=Hysteretic(...) only")
-            if law is not None:
-                raise SpecificationError("law: the steering law on a wheel cluster is not modelled yet")
             self._squared_peak = False
             core = wheel_core_function(
                 spacecraft,
@@ -351,6 +349,7 @@ class Engine:
                 torque_input=torque_input,
                 noise_form=NoiseForm.MRP if sensor and _ROTATION_IN_DRIVER else NoiseForm.ROTATION_VECTOR,
                 short_measurements=not sensor,
+                law=law,
             )
         elif predictor is not None:
             core = predictor_core_function(
@@ -402,6 +401,7 @@ class Engine:
             digest = hashlib.sha256(repr((wheels.key(), spacecraft.inertia.tobytes())).encode()).hexdigest()[:12]
             label += f"_wheels{wheels.count}_{digest}" + ("" if sensor else "_ideal") + ("" if disturbed else "_free")
             label += "_torque" if torque_input else ""
+            label += "" if law is None else "_" + law.label()
         elif predictor is not None:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
             label += "_torque" if self.torque_input else ""
@@ -818,11 +818,24 @@ def wheel_engine(
     sensor: bool = False,
     disturbed: bool = True,
     torque_input: bool = False,
+    law: SteeringLaw | None = None,
 ) -> Engine:
     """The compiled engine of the flight sample on a wheel cluster, cached
     ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; J and the cluster are constants of the
-    library, so one library per spacecraft inertia and cluster). Needs a C compiler (CodegenError without)."""
-    key = ("wheels", wheels.key(), spacecraft.inertia.tobytes(), d, period, substeps, sensor, disturbed, torque_input)
+    library, so one library per spacecraft inertia and cluster). ``law``: the steering law's body torque request
+    (its numbers compiled in, one library per law); None: the PD law. Needs a C compiler (CodegenError without)."""
+    key: tuple[Any, ...] = (
+        "wheels",
+        wheels.key(),
+        spacecraft.inertia.tobytes(),
+        d,
+        period,
+        substeps,
+        sensor,
+        disturbed,
+        torque_input,
+    )
+    key += () if law is None else (law,)  # without a law the key of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -837,6 +850,7 @@ def wheel_engine(
                 disturbed=disturbed,
                 torque_input=torque_input,
                 wheels=wheels,
+                law=law,
             )
             if not found.compiled_code:
                 raise CodegenError(

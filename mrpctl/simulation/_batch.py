@@ -283,8 +283,9 @@ def simulate_batch(
         (shared or per run), each run streaming its own rows.
     wheels : mrpctl.wheels.WheelCluster, keyword-only
         Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
-        no ``actuator``, no ``predictor``): the runs take the scalar engine on the thread pool, and the result's
-        ``wheels`` holds each run's wheel metrics (and, with ``trajectories``, its wheel speeds and torques).
+        no ``actuator``, no ``predictor``; ``law`` taken): metrics-only runs take the wheel lane engine, with
+        ``trajectories`` the scalar engine on the thread pool, and the result's ``wheels`` holds each run's wheel
+        metrics (and, with ``trajectories``, its wheel speeds and torques).
     reference : keyword-only
         Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
         [`Hysteretic`][mrpctl.flight.Hysteretic]): one reference shared by the runs (an (n, 9) array, read
@@ -309,7 +310,8 @@ def simulate_batch(
         pool, not the lanes (the same metrics bit for bit). With ``trajectories`` they are kept anyway.
     law : mrpctl.flight.steering.SteeringLaw, keyword-only
         The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
-        such runs take the scalar engine (on the thread pool), also when ``trajectories`` is False.
+        on an ideal torque such runs take the scalar engine (on the thread pool), also when ``trajectories`` is
+        False; on ``wheels`` metrics-only runs take the wheel lane engine (the law compiled in).
     gravity_gradient : mrpctl.guidance.CircularOrbit or NadirPointing, keyword-only
         The gravity-gradient torque of this orbit in every run's plant (as in [`simulate`][mrpctl.simulation.simulate];
         every rule a [`Hysteretic`][mrpctl.flight.Hysteretic]), the orbit shared by the runs. Metrics-only runs take
@@ -369,11 +371,6 @@ def simulate_batch(
             raise SpecificationError(
                 "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
                 "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
-            )
-        if law is not None:
-            raise SpecificationError(
-                "law: the steering law on a wheel cluster is not modelled yet; fly it with an ideal body torque "
-                "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
             )
     rate = positive_scalar("rate", rate)
     t_final, n = sample_horizon(t_final, rate)
@@ -485,7 +482,9 @@ def simulate_batch(
     wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
     if reference is not None and find_compiler() is None:
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
-    if not trajectories and not switches and _LANES and checked is None and law is None and find_compiler() is not None:
+    lanes_take_law = law is None or wheels is not None  # the flight sample's law is not on the lanes (not done)
+    on_lanes = not trajectories and not switches and _LANES and checked is None and lanes_take_law
+    if on_lanes and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -506,6 +505,7 @@ def simulate_batch(
             wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
             tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
             settling=settling,
+            law=law,
             gravity_gradient=gravity_gradient is not None,
         )
 
@@ -529,6 +529,7 @@ def simulate_batch(
                 sensor=structure["sensor"],
                 disturbed=structure["disturbed"],
                 torque_input=torque_input,
+                law=law,
             )  # (wheels with the gravity gradient are refused above)
         if key not in by_structure:
             by_structure[key] = engine(
@@ -696,6 +697,7 @@ def _run_lanes(
     wheels: tuple[WheelCluster, np.ndarray] | None = None,
     tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
     settling: tuple[float, float] | None = None,
+    law: SteeringLaw | None = None,
     gravity_gradient: bool = False,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
@@ -709,8 +711,9 @@ def _run_lanes(
     (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it.
     ``tracking``: each run's reference, the feedforward and
     whether the references are per run (then, or beside per-run torques, each lane is streamed its own rows;
-    a shared one is streamed beside the noise). ``gravity_gradient``: the runs' plant flies the gravity-gradient
-    torque (the orbit's constants at the end of each run's flight constants)."""
+    a shared one is streamed beside the noise). ``law``: the wheel runs' steering law (the wheel lanes take it).
+    ``gravity_gradient``: the runs' plant flies the gravity-gradient torque (the orbit's constants at the end of
+    each run's flight constants)."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
     tracked_by_run, feedforward, per_run_reference = (
@@ -761,6 +764,7 @@ def _run_lanes(
                     disturbed=structure["disturbed"],
                     torque_input=torque is not None,
                     torque_per_lane=own_torque,
+                    law=law,
                 )
             else:
                 lanes = lane_engines.lane_engine(
@@ -872,7 +876,7 @@ def _run_lanes(
 
 def _lane_options(options_by_run: list[np.ndarray | None], members: list[int]) -> np.ndarray | None:
     """The flight constants of a lane group: one shared row, or (members, 10) when they differ by run
-    ((members, 18) with the gravity gradient's orbit: no run's row is then None)."""
+    ((members, 20) with the gravity gradient's orbit: no run's row is then None)."""
     rows = [options_by_run[i] for i in members]
     if all(row is rows[0] for row in rows):
         return rows[0]

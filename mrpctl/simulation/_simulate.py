@@ -287,7 +287,7 @@ def simulate(
         is allocated to the wheels' motor torques, each clipped to its torque limit and cut at its speed
         limit, and the wheel speeds are states of the plant (J is the whole spacecraft's inertia, wheels
         included). With ``rule=Hysteretic(...)`` only, without ``actuator`` and ``predictor``; takes
-        ``disturbance``, ``sensor`` and ``delay``; needs a C compiler. The result's ``wheels``
+        ``disturbance``, ``sensor``, ``delay`` and ``law``; needs a C compiler. The result's ``wheels``
         ([`WheelRecord`][mrpctl.simulation.results.WheelRecord]) has the wheel speeds and metrics.
     reference : array_like (n, 9) or object with ``samples(t)``, keyword-only
         Track a reference (``design/tracking.md``; ``rule=Hysteretic(...)`` or the predictor, compiled engine): one row
@@ -317,7 +317,8 @@ def simulate(
         The flight loop's saturation-aware law (``rule=Hysteretic(...)`` only): K's attitude term
         scaled down so that the commanded rate stays below the rate from which the body can stop in
         the remaining angle ([`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]; ``design/wheels.md``); the
-        law is the PD law K wherever that limit is not reached. None (default): the PD law.
+        law is the PD law K wherever that limit is not reached. With ``wheels`` the law's command is the body
+        torque request the allocation takes. None (default): the PD law.
     sensors : mrpctl.estimation.Sensors, keyword-only
         A late star tracker and a rate-integrating gyro: the loop then flies the control law on the
         estimator's attitude and rate (``design/estimation.md``), with ``rule=Hysteretic(...)`` on the
@@ -374,11 +375,6 @@ def simulate(
             raise SpecificationError(
                 "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
                 "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
-            )
-        if law is not None:
-            raise SpecificationError(
-                "law: the steering law on a wheel cluster is not modelled yet; fly it with an ideal body torque "
-                "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
             )
     d = delay_samples(tau, rate)
     rate = float(rate)
@@ -440,6 +436,7 @@ def simulate(
             varying=varying,
             stop=progress_stop(progress, n),
             switch_limit=n if keep == 1 else SWITCH_LIMIT,
+            law=law,
         )
         flown = assemble_run(
             output,
