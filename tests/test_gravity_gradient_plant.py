@@ -27,6 +27,7 @@ from mrpctl.guidance import CircularOrbit, NadirPointing
 from mrpctl.predictor import OnPredicted
 from mrpctl.simulation import _batch
 from mrpctl.spacecraft import Spacecraft
+from mrpctl.wheels import WheelCluster
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="the compiled engine needs a C compiler")
 
@@ -317,6 +318,10 @@ def test_bad_gravity_gradient_options_are_refused_naming_the_parameter():
         )  # fmt: skip
     with pytest.raises(SpecificationError, match=r"gravity_gradient: .*flight loop only"):
         simulate_batch(paper.SPACECRAFT, paper.GAIN, x0, rule=OnCurrent(), gravity_gradient=FAST, **common)
+    wheels = WheelCluster(np.eye(3), 1e-2, 1.0, 1e3)
+    for run in (simulate, simulate_batch):
+        with pytest.raises(SpecificationError, match="gravity_gradient: the wheel cluster"):
+            run(paper.SPACECRAFT, paper.GAIN, x0, rule=Hysteretic(0.0), wheels=wheels, gravity_gradient=FAST, **common)
 
 
 def test_the_virtual_machine_fallback_flies_the_gravity_gradient_as_the_compiled_engine():
