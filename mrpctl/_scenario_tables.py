@@ -315,12 +315,14 @@ def check_keys(table: str, data: dict[str, Any], allowed: set[str]) -> None:
 
 #: The keys of [reference] every type takes: how the controller forms and follows the error, and the slew time's
 #: tolerance (keywords of simulate: error_time, feedforward, pointing_tolerance).
-TRACKING_KEYS = {"error_time", "feedforward", "pointing_tolerance_deg"}
+TRACKING_KEYS = {"error_time", "feedforward", "pointing_tolerance_deg", "gravity_gradient"}
 
 
 def tracking_keys(data: dict[str, Any]) -> dict[str, Any]:
     """The tracking keywords of the [reference] table (``error_time``: "measurement" or "current";
-    ``feedforward``: true or false; ``pointing_tolerance_deg`` > 0) as keywords of simulate; {} without them."""
+    ``feedforward``: true or false; ``pointing_tolerance_deg`` > 0; ``gravity_gradient``: true or false, nadir
+    pointing only: the plant flies the gravity-gradient torque of the reference's orbit) as keywords of the
+    scenario; {} without them."""
     table = data.get(REFERENCE_TABLE)
     if not isinstance(table, dict):
         return {}
@@ -341,6 +343,17 @@ def tracking_keys(data: dict[str, Any]) -> dict[str, Any]:
         if tolerance > 180.0:
             raise SpecificationError(f"[reference] pointing_tolerance_deg must be at most 180, got {tolerance:g}")
         options["pointing_tolerance"] = tolerance
+    if "gravity_gradient" in table:
+        if not isinstance(table["gravity_gradient"], bool):
+            raise SpecificationError(
+                f"[reference] gravity_gradient must be true or false, got {table['gravity_gradient']!r}"
+            )
+        if table["gravity_gradient"] and table.get("type") != "nadir":
+            raise SpecificationError(
+                "[reference] gravity_gradient = true needs an orbit: it applies to type = 'nadir' only, got type = "
+                f"{table.get('type')!r}"
+            )
+        options["gravity_gradient"] = table["gravity_gradient"]
     return options
 
 

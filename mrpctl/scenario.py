@@ -188,6 +188,9 @@ class Scenario:
         How a tracking scenario's controller forms its error (``[reference] error_time``: "measurement" or
         "current"; None: simulate's default), whether it adds the feedforward terms (``feedforward``), and
         the slew time's tolerance on the pointing error in degrees (``pointing_tolerance_deg``, default 0.1).
+    gravity_gradient : bool
+        Nadir pointing only (``[reference] gravity_gradient = true``): the plant flies the gravity-gradient torque
+        3n² r̂ × (J r̂) of the reference's orbit (``simulate(..., gravity_gradient=reference)``). Default False.
     """
 
     name: str
@@ -213,6 +216,7 @@ class Scenario:
     error_time: ErrorTime | None = None
     feedforward: bool = False
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE
+    gravity_gradient: bool = False
 
     @property
     def gains(self) -> PDGains:
@@ -272,14 +276,16 @@ class Scenario:
 
     @property
     def tracking_options(self) -> dict[str, Any]:
-        """A tracking scenario's ``error_time``, ``feedforward`` and ``pointing_tolerance`` as keywords of
-        [`mrpctl.simulate`][mrpctl.simulation.simulate]; {} when the scenario regulates."""
+        """A tracking scenario's ``error_time``, ``feedforward``, ``pointing_tolerance`` (and, with
+        ``gravity_gradient``, the orbit) as keywords of [`mrpctl.simulate`][mrpctl.simulation.simulate]; {} when
+        the scenario regulates."""
         if self.reference is None:
             return {}
         return {
             "error_time": self.error_time,
             "feedforward": self.feedforward,
             "pointing_tolerance": self.pointing_tolerance,
+            **({"gravity_gradient": self.reference} if self.gravity_gradient else {}),
         }
 
     def __str__(self) -> str:
@@ -684,6 +690,8 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         if scenario.pointing_tolerance != DEFAULT_POINTING_TOLERANCE:
             tolerance = _toml_value(scenario.pointing_tolerance)
             lines.append(f"pointing_tolerance_deg = {tolerance}  # the slew time's tolerance")
+        if scenario.gravity_gradient:
+            lines.append("gravity_gradient = true  # the plant flies 3 n^2 r x (J r) of the orbit")
     if scenario.uncertainty is not None:
         lines += [
             "",

@@ -732,6 +732,11 @@ def parse_campaign(
     reference = None
     if "reference" in tables:
         reference = parse_reference_dispersion(tables["reference"], nominal.reference)
+    if getattr(nominal, "gravity_gradient", False) and reference is not None and reference.orbit_rate is not None:
+        raise SpecificationError(
+            "dispersions.reference.orbit_rate with [reference] gravity_gradient = true: the runs of a batch share "
+            "one orbit's gravity gradient; remove one of the two"
+        )
     spec = CampaignSpec(
         base=nominal,
         count=count,

@@ -24,6 +24,11 @@ def _export(args: argparse.Namespace) -> int:
     check_history_fits(scenario)
     if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
         raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")
+    if scenario.gravity_gradient:
+        raise SpecificationError(
+            "[reference] gravity_gradient = true: the exported plant functions (dynamics, step, sample) do not model "
+            "the gravity-gradient torque; remove the key to export (the controller does not depend on it)"
+        )
     result = export(
         scenario.spacecraft,
         scenario.K,
