@@ -27,6 +27,7 @@ from mrpctl._scenario_tables import (
     samples_file,
     torque_rows,
 )
+from mrpctl._scenario_wheels import WHEELS_TABLE, check_wheel_scenario, wheels_table, wheels_text, wheels_toml
 from mrpctl._validation import (
     finite_array,
     finite_scalar,
@@ -52,6 +53,7 @@ from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationResult, settling_tolerances, simulate
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "RULE_NAMES",
@@ -182,6 +184,9 @@ class Scenario:
         [`FileReference`][mrpctl.guidance.FileReference]. None: regulation to the inertial origin.
         [`simulate`][mrpctl.Scenario.simulate] flies the tracking loop on it
         (``simulate(..., reference=...)``: the controller-side rule or the predictor).
+    wheels : WheelCluster or None
+        The reaction wheels the body torque is flown on (``[wheels]``, `mrpctl._scenario_wheels`;
+        ``simulate(..., wheels=...)``, ``design/wheels.md``). None: the torque as commanded (or ``actuator``).
     """
 
     name: str
@@ -204,6 +209,7 @@ class Scenario:
     settling_attitude: float = SETTLING_ATTITUDE_DEG
     settling_rate: float = SETTLING_OMEGA
     reference: GuidanceProfile | None = None
+    wheels: WheelCluster | None = None
 
     @property
     def gains(self) -> PDGains:
@@ -258,6 +264,7 @@ class Scenario:
             settling_rate=self.settling_rate,
             reference=self.reference,
             **self.run_options,
+            **({} if self.wheels is None else {"wheels": self.wheels}),
         )
 
     def __str__(self) -> str:
@@ -272,6 +279,7 @@ class Scenario:
                 *(f"  {value}" for value in self.run_options.values()),
                 *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
                 *([f"  reference: {self.reference}"] if self.reference is not None else []),
+                *([f"  {wheels_text(self.wheels)}"] if self.wheels is not None else []),
             )
         )
 
@@ -433,7 +441,11 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     * ``"file"``: ``file``, a .csv or .npy file of n = floor(t_final · rate) + 1 rows of 9 numbers
       (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
     """
-    check_keys("", data, _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE})
+    check_keys(
+        "",
+        data,
+        _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, WHEELS_TABLE},
+    )
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")
@@ -470,6 +482,9 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         )
     except SpecificationError as exc:
         raise SpecificationError(f"{exc} (scenario keys settling_attitude_deg, settling_rate)") from exc
+    reference = reference_table(data, rate, Horizon(None if base is None else Path(base), samples))
+    wheels = wheels_table(data, spacecraft)
+    check_wheel_scenario(wheels, rule, actuator=flight.get("actuator"), predictor=predictor, reference=reference)
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
@@ -486,8 +501,9 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         uncertainty=_uncertainty_table(data, spacecraft),
         settling_attitude=settle_attitude,
         settling_rate=settle_rate,
-        reference=reference_table(data, rate, Horizon(None if base is None else Path(base), samples)),
+        reference=reference,
         **flight,
+        wheels=wheels,
     )
 
 
@@ -653,6 +669,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
     lines += _flight_toml(scenario)
     lines += _reference_toml(scenario.reference)
+    lines += wheels_toml(scenario.wheels)
     if scenario.uncertainty is not None:
         lines += [
             "",

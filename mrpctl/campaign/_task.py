@@ -100,6 +100,7 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
         predictor=spec.predictor,
         settling_attitude=base.settling_attitude,
         settling_rate=base.settling_rate,
+        wheels=base.wheels,
     )
     sigma_norm = np.linalg.norm(inputs.sigma0, axis=1)
     return {

@@ -24,6 +24,7 @@ from mrpctl.campaign.integrity import StoreDamagedError
 from mrpctl.campaign.sampling import run_inputs
 from mrpctl.campaign.simulation import METRICS, flight_keywords
 from mrpctl.campaign.store import INPUTS, STORE_NAME, open_campaign, spec_of, stored_noise_revision
+from mrpctl.campaign.wheels import WHEEL_METRICS, wheel_summary, wheel_summary_lines
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
 from mrpctl.simulation import simulate
@@ -165,6 +166,8 @@ class CampaignReport:
     #: The store's check: ``verified`` (False: written without checksum records) and the ``damaged`` chunks
     #: left out of this report (only with ``intact_only``).
     integrity: dict[str, Any] = field(default_factory=dict, repr=False)
+    #: A campaign on wheels: the wheel metrics per wheel ([wheel_summary][mrpctl.campaign.wheels.wheel_summary]).
+    wheels: dict[str, Any] | None = field(default=None, repr=False)
 
     def summary(self) -> dict[str, Any]:
         """The report as JSON-ready values."""
@@ -184,6 +187,7 @@ class CampaignReport:
             "worst": [case.__dict__ for case in self.worst],
             "by_rule": [{**entry.__dict__, "wilson": list(entry.wilson)} for entry in self.by_rule],
             "integrity": self.integrity,
+            **({} if self.wheels is None else {"wheels": self.wheels}),
         }
 
     def __str__(self) -> str:
@@ -197,6 +201,7 @@ class CampaignReport:
             f"  settling (s)  median {s['median']:.4g}, p95 {s['p95']:.4g}, max {s['max']:.4g} (converged runs)",
             f"  switches      median {w['median']:.4g}, p95 {w['p95']:.4g}, max {w['max']:.4g}",
             f"  peak torque   max {self.peak_torque_max:.4g} N m",
+            *wheel_summary_lines(self.wheels),
         ]
         if self.integrity and not self.integrity.get("verified", True):
             lines.append(f"  integrity     NOT VERIFIED: {self.integrity.get('note', 'no checksum records')}")
@@ -339,7 +344,17 @@ def report(
         worst=tuple(cases),
         by_rule=tuple(by_rule),
         integrity=json.loads(str(dataset.attrs.get("integrity", "{}"))),
+        wheels=_wheels(dataset),
     )
+
+
+def _wheels(dataset: xr.Dataset) -> dict[str, Any] | None:
+    """The wheel summary of a campaign on wheels (its cluster's limits from the stored campaign), or None."""
+    if "wheel_peak_speed" not in dataset:
+        return None
+    cluster = spec_of(dataset).base.wheels
+    limits = None if cluster is None else (np.asarray(cluster.speed_limit), np.asarray(cluster.momentum_capacity))
+    return wheel_summary(dataset, *(limits or (None, None)))
 
 
 def _rule_labels(dataset: xr.Dataset) -> list[str]:
@@ -484,8 +499,10 @@ class ReplayResult:
                 f"  the store was written with noise revision {self.noise_revisions[0]}, this mrpctl computes revision "
                 f"{self.noise_revisions[1]}: runs with attitude noise differ in their last bits (see CHANGELOG.md)"
             )
-        for name in METRICS:
-            lines.append(f"  {name:<18} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
+        names = [*METRICS, *(name for name in WHEEL_METRICS if name in self.stored)]
+        width = max(18, *(len(name) for name in names))
+        for name in names:
+            lines.append(f"  {name:<{width}} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
         return "\n".join(lines)
 
 
@@ -524,7 +541,7 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
         raise SpecificationError(f"run: run {run} has not been stored yet (its chunk is not complete)")
     spec = spec_of(dataset)
     values = simulate_chunk(spec, run, run + 1)
-    names = list(INPUTS) + list(METRICS)
+    names = list(INPUTS) + list(METRICS) + [name for name in WHEEL_METRICS if name in dataset]
     stored = {name: np.asarray(dataset[name].sel(run=run).values) for name in names}
     replayed = {name: np.asarray(values[name][0]) for name in names}
     mismatches = tuple(name for name in names if not _same(stored[name], replayed[name]))
@@ -572,6 +589,7 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
         substeps=base.substeps,
         **({} if models is None else flight_keywords(models)),
         **({} if spec.predictor is None else {"predictor": spec.predictor}),
+        **({} if base.wheels is None else {"wheels": base.wheels}),
     )
 
 

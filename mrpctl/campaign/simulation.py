@@ -14,11 +14,13 @@ from typing import Any
 
 import numpy as np
 
+from mrpctl.campaign.wheels import WHEEL_METRICS, wheel_metrics
 from mrpctl.flight import Disturbance
 from mrpctl.predictor import Predictor
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 __all__ = ["METRICS", "flight_keywords", "simulate_runs"]
 
@@ -62,9 +64,14 @@ def _batch(
     rule: Sequence[SwitchingRule],
     options: dict[str, Any],
 ) -> dict[str, np.ndarray]:
-    """The runs' metrics from one metrics-only batch (the peak torque is accumulated by the engine)."""
+    """The runs' metrics from one metrics-only batch (the peak torque is accumulated by the engine), and on a
+    wheel cluster the `WHEEL_METRICS`."""
     batch = simulate_batch(spacecraft, K, x0, tau=tau, rule=rule, **options)
-    return {name: np.asarray(getattr(batch, name)) for name in METRICS}
+    found = {name: np.asarray(getattr(batch, name)) for name in METRICS}
+    wheels = options.get("wheels")
+    if wheels is not None:
+        found.update(wheel_metrics(batch.wheels, len(x0), wheels.count))
+    return found
 
 
 def _cpus() -> int:
@@ -127,6 +134,7 @@ def simulate_runs(
     predictor: Predictor | None = None,
     settling_attitude: float = SETTLING_ATTITUDE_DEG,
     settling_rate: float = SETTLING_OMEGA,
+    wheels: WheelCluster | None = None,
 ) -> dict[str, np.ndarray]:
     """Simulate N runs, each with its own inertia, gain, initial state, delay, rule and flight models.
 
@@ -160,11 +168,14 @@ def simulate_runs(
         The settling tolerances (principal angle in deg, rate in rad/s) of
         [`mrpctl.simulate_batch`][mrpctl.simulate_batch] (the campaign file's ``settling_attitude_deg`` and
         ``settling_rate``).
+    wheels : WheelCluster or None, optional
+        The reaction-wheel cluster every run flies on (every rule a [`Hysteretic`][mrpctl.flight.Hysteretic]);
+        the wheel metrics of `mrpctl.campaign.wheels.WHEEL_METRICS` are returned too.
 
     Returns
     -------
     dict of numpy.ndarray
-        One (N,) array per name in `METRICS`, in input order.
+        One (N,) array per name in `METRICS` (and, with ``wheels``, of `WHEEL_METRICS`), in input order.
     """
     n = len(x0)
     options: dict[str, Any] = dict(t_final=t_final, rate=rate, history=history, substeps=substeps, threads=threads)
@@ -172,8 +183,15 @@ def simulate_runs(
         options.update(settling_attitude=settling_attitude, settling_rate=settling_rate)
     if predictor is not None:
         options["predictor"] = predictor
+    names = list(METRICS)
+    if wheels is not None:
+        options["wheels"] = wheels
+        names += list(WHEEL_METRICS)
     if n == 0:
-        return {name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()}
+        return {
+            **{name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()},
+            **({} if wheels is None else wheel_metrics(None, 0, wheels.count)),
+        }
     rules = [rule] * n if isinstance(rule, SwitchingRule) else list(rule)
     models = [None] * n if flight is None else list(flight)
     crafts = _spacecraft(inertia)
@@ -181,6 +199,8 @@ def simulate_runs(
     for i in range(n):
         groups.setdefault(_flight_key(models[i]), []).append(i)
     out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()}
+    if wheels is not None:
+        out.update(wheel_metrics(None, n, wheels.count))
 
     def call(members: list[int], **extra: Any) -> None:
         given = models[members[0]]
@@ -203,7 +223,7 @@ def simulate_runs(
             [rules[i] for i in members],
             {**options, **extra, **found},
         )
-        for name in METRICS:
+        for name in names:
             out[name][members] = batch[name]
 
     plain = groups.pop(None, None)

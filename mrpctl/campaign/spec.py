@@ -99,7 +99,7 @@ import hashlib
 import math
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +108,7 @@ import numpy as np
 from mrpctl._files import read_toml
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.campaign.distributions import Distribution, parse_distribution
+from mrpctl.campaign.wheels import campaign_wheels, check_campaign_wheels
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
 from mrpctl.loop import delay_samples
@@ -624,8 +625,11 @@ def parse_campaign(
             "(see design/campaigns.md), not as scenario tables"
         )
     scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
+    wheels = scenario_part.pop("wheels", None)  # read below, with the campaign's rules (check_campaign_wheels)
     nominal = parse_scenario(scenario_part, name=name)
-    nominal = nominal.with_rule(parse_rule("[rule]", data["rule"]))
+    nominal = replace(
+        nominal.with_rule(parse_rule("[rule]", data["rule"])), wheels=campaign_wheels(wheels, nominal.spacecraft)
+    )
     for key in ("count", "seed"):
         if key not in data:
             raise SpecificationError(f"campaign needs {key} (an integer)")
@@ -716,6 +720,7 @@ def parse_campaign(
     )
     _check_flight(spec)
     _check_predictor(spec)
+    check_campaign_wheels(spec)
     return spec
 
 

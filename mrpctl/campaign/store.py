@@ -46,6 +46,7 @@ import zarr
 from mrpctl.campaign import integrity
 from mrpctl.campaign.simulation import METRICS
 from mrpctl.campaign.spec import CampaignSpec, SampleFile, parse_campaign
+from mrpctl.campaign.wheels import WHEEL_METRICS
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
 from mrpctl.provenance import versions
@@ -139,6 +140,10 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
         data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=(chunk, *shape[1:])))
     for name, (dtype, missing) in METRICS.items():
         data[name] = (("run",), da.full((n,), missing, dtype=dtype, chunks=(chunk,)))
+    wheels = spec.base.wheels
+    for name, (dims, dtype, missing, unit) in WHEEL_METRICS.items() if wheels is not None else ():
+        shape = (n, *([wheels.count] if dims else []))
+        data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=(chunk, *shape[1:])), {"units": unit})
     for key, each in spec.files.items():
         name, dims = FILE_ARRAYS[key]
         data[name] = (dims, np.array(each.values), {"units": "N m" if key == "disturbance_file" else "s"})
@@ -148,16 +153,20 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
     return dataset
 
 
-def run_arrays() -> dict[str, int]:
-    """The per-run arrays (chunked by the campaign chunk) and their number of dimensions."""
-    return {**{name: 1 + len(dims) for name, (dims, _) in INPUTS.items()}, **{name: 1 for name in METRICS}}
+def run_arrays(wheels: bool = False) -> dict[str, int]:
+    """The per-run arrays (chunked by the campaign chunk) and their number of dimensions; ``wheels``: with the
+    wheel metrics of a campaign on wheels."""
+    arrays = {**{name: 1 + len(dims) for name, (dims, _) in INPUTS.items()}, **{name: 1 for name in METRICS}}
+    return arrays | ({name: 1 + len(dims) for name, (dims, *_) in WHEEL_METRICS.items()} if wheels else {})
 
 
-def bytes_per_run() -> int:
-    """Uncompressed bytes one run takes in the store (inputs, metrics and its coordinate)."""
+def bytes_per_run(wheels: int = 0) -> int:
+    """Uncompressed bytes one run takes in the store (inputs, metrics and its coordinate; with ``wheels``
+    wheels, their metrics)."""
     inputs = sum(8 * int(np.prod([_SIZES[d] for d in dims])) for dims, _ in INPUTS.values())
     metrics = sum(np.dtype(dtype).itemsize for dtype, _ in METRICS.values())
-    return inputs + metrics + 8
+    wheel = sum(8 * (wheels if dims else 1) for dims, *_ in WHEEL_METRICS.values()) if wheels else 0
+    return inputs + metrics + wheel + 8
 
 
 class CampaignStore:
@@ -186,6 +195,10 @@ class CampaignStore:
         with integrity.writer_lock(self.out):
             self._open(chunk)
         self.chunks = -(-spec.count // self.chunk)
+
+    @property
+    def _arrays(self) -> dict[str, int]:
+        return run_arrays(self.spec.base.wheels is not None)
 
     def _open(self, chunk: int | None) -> None:
         spec = self.spec
@@ -222,7 +235,10 @@ class CampaignStore:
         temporary = self.out / (STORE_NAME + ".tmp")
         if temporary.exists():
             shutil.rmtree(temporary)
-        estimate = self.spec.count * bytes_per_run() + sum(each.values.nbytes for each in self.spec.files.values())
+        wheels = self.spec.base.wheels
+        estimate = self.spec.count * bytes_per_run(0 if wheels is None else wheels.count) + sum(
+            each.values.nbytes for each in self.spec.files.values()
+        )
         free = shutil.disk_usage(self.out).free
         if estimate > free // 2:
             raise SpecificationError(
@@ -246,13 +262,13 @@ class CampaignStore:
         with dask.config.set(scheduler="synchronous"):
             dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
         # the per-sample files' arrays are checked by their own SHA-256 (attrs["flight_files"], stored_files)
-        skip = {*run_arrays(), "chunk_complete", *(name for name, _ in FILE_ARRAYS.values())}
+        skip = {*self._arrays, "chunk_complete", *(name for name, _ in FILE_ARRAYS.values())}
         integrity.record_static(temporary, skip=skip)
         os.replace(temporary, self.path)
 
     def check(self) -> integrity.StoreCheck:
         """Every complete chunk checked against its SHA-256 record."""
-        return integrity.check_store(self.path, run_arrays(), self.chunk, self.spec.count)
+        return integrity.check_store(self.path, self._arrays, self.chunk, self.spec.count)
 
     def complete(self) -> np.ndarray:
         """(chunks,) True for every chunk whose runs are all written and intact (damaged chunks are not).
@@ -283,15 +299,17 @@ class CampaignStore:
         flags = zarr.open_array(str(self.path / "chunk_complete"), mode="r+")
         if verified:
             flags[index] = False
-            integrity.forget_chunk(self.path, run_arrays(), index)
+            integrity.forget_chunk(self.path, self._arrays, index)
         data = {}
         for name, (dims, _) in INPUTS.items():
             data[name] = (("run", *dims), values[name])
         for name in METRICS:
             data[name] = (("run",), values[name])
+        for name, (dims, *_) in WHEEL_METRICS.items() if self.spec.base.wheels is not None else ():
+            data[name] = (("run", *dims), values[name])
         xr.Dataset(data).to_zarr(str(self.path), region={"run": slice(start, stop)}, mode="r+", consolidated=False)
         if verified:
-            integrity.record_chunk(self.path, run_arrays(), index)
+            integrity.record_chunk(self.path, self._arrays, index)
         flags[index] = True
 
 
@@ -328,7 +346,8 @@ def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: b
     if not path.exists():
         raise SpecificationError(f"out: no campaign store at {path}")
     with xr.open_zarr(str(path), consolidated=False) as stored:
-        estimate = stored.sizes["run"] * bytes_per_run()
+        wheels = "wheel_peak_speed" in stored  # a campaign on wheels
+        estimate = stored.sizes["run"] * bytes_per_run(stored.sizes.get("wheel", 0) if wheels else 0)
         available = _available_memory()
         if available is not None and estimate > available // 2:
             raise SpecificationError(
@@ -337,7 +356,7 @@ def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: b
             )
         runs_per_chunk = int(str(stored["chunk_complete"].attrs["runs_per_chunk"]))
         count = stored.sizes["run"]
-        check = integrity.check_store(path, run_arrays(), runs_per_chunk, count)
+        check = integrity.check_store(path, run_arrays(wheels), runs_per_chunk, count)
         repair = f"mrpctl campaign run CAMPAIGN.toml --out {out} (CAMPAIGN.toml: the file this store was run from)"
         if check.static or (check.damaged and not (intact_only and complete_only)):
             raise check.error(repair=repair)

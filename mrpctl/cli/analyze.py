@@ -31,6 +31,7 @@ from mrpctl.design.pointing import (
 )
 from mrpctl.design.spectra import characteristic_roots, plot_spectrum
 from mrpctl.errors import SpecificationError
+from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.scenario import load_scenario
 
 __all__ = ["add_parser"]
@@ -51,6 +52,8 @@ def _analyze(args: argparse.Namespace) -> int:
                 "leave out the file or the option"
             )
         scenario = load_scenario(args.scenario)
+        if scenario.wheels is not None:
+            raise SpecificationError(WHEELS_NOT_CERTIFIED.format(command="analyze"))
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         spacecraft = spacecraft_from(list(paper.INERTIA) if args.inertia is None else args.inertia)

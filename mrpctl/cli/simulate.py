@@ -13,6 +13,7 @@ import numpy as np
 from tqdm import tqdm  # type: ignore[import-untyped]
 
 from mrpctl import paper
+from mrpctl._scenario_wheels import check_wheel_scenario
 from mrpctl._validation import integer
 from mrpctl.cli.common import (
     EXIT_CODES,
@@ -29,6 +30,14 @@ from mrpctl.cli.common import (
 )
 from mrpctl.cli.limits import check_run_fits, check_sweep_fits
 from mrpctl.cli.overrides import apply_flight_options, apply_overrides, scenario_from_args
+from mrpctl.cli.wheels import (
+    add_wheel_options,
+    check_wheel_options,
+    wheel_files,
+    wheel_lines,
+    wheel_summary,
+    wheels_json,
+)
 from mrpctl.conventions import state_parts
 from mrpctl.design import linearized_loop
 from mrpctl.errors import SpecificationError
@@ -96,15 +105,17 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "substeps": scenario.substeps,
         "flight_models": {name: str(model) for name, model in scenario.flight_options.items()},
         "predictor_inertia": None if scenario.predictor is None else scenario.predictor.model.inertia,
+        "wheels": wheels_json(scenario),
     }
 
 
 def _simulate(args: argparse.Namespace) -> int:
     scenario = apply_flight_options(apply_overrides(scenario_from_args(args, file=args.scenario), args), args)
     check_plot_path(args.plot)
+    check_wheel_options(scenario, args)
     check_run_fits(scenario)
     result = scenario.simulate()
-    files: dict[str, Path] = {}
+    files: dict[str, Path] = wheel_files(result, args)
     if args.plot is not None:
         # deferred: matplotlib (through mrpctl.plots), only for --plot
         from mrpctl import plots
@@ -118,10 +129,14 @@ def _simulate(args: argparse.Namespace) -> int:
             np.savetxt(stream, rows, delimiter=",", fmt="%.17g")
         files["csv"] = path
     if args.json:
-        print_json({"scenario": _scenario_summary(scenario), "result": _result_summary(result), "files": files})
+        summary = {**_result_summary(result), "wheels": wheel_summary(result)}
+        print_json({"scenario": _scenario_summary(scenario), "result": summary, "files": files})
     else:
         print(scenario)
         print(result)
+        print(*wheel_lines(result), sep="\n")
+        if "wheels_plot" in files:
+            print(f"wheel plot written to {files['wheels_plot']}")
         if "plot" in files:
             print(f"plot written to {files['plot']}")
         if "csv" in files:
@@ -154,6 +169,7 @@ def add_simulate(commands: Any) -> None:
         parser, plot="write sigma, omega, u against t to this image", csv="write the trajectory to this CSV"
     )
     add_flight_options(parser)
+    add_wheel_options(parser)
     parser.set_defaults(handler=_simulate)
 
 
@@ -241,6 +257,7 @@ def _sweep(args: argparse.Namespace) -> int:
     check_plot_path(args.plot)
     chunk = integer("--chunk", args.chunk, minimum=1)
     values, label, runs = _sweep_runs(args, base)
+    check_wheel_scenario(base.wheels, runs[0].get("rule", base.rule), actuator=base.actuator, reference=base.reference)
     check_sweep_fits(base, len(runs), [r.get("tau", base.tau) for r in runs], chunk)
     rows: list[tuple[Any, ...]] = []
     batches: list[Any] = []
@@ -261,6 +278,7 @@ def _sweep(args: argparse.Namespace) -> int:
                 settling_attitude=base.settling_attitude,
                 settling_rate=base.settling_rate,
                 **base.flight_options,  # a flight scenario's models, shared by the runs
+                **({} if base.wheels is None else {"wheels": base.wheels}),  # a shared wheel cluster
             )
             batches.append(batch)
             for i in range(len(part)):

@@ -37,6 +37,7 @@ from mrpctl.design import (
 )
 from mrpctl.design.interval import rate_value
 from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.scenario import Scenario, load_scenario
 from mrpctl.spacecraft import Spacecraft
 
@@ -240,6 +241,8 @@ def _verify(args: argparse.Namespace) -> int:
                 "its margins are mrpctl.design.tracking's (design/tracking.md): remove [reference] to verify "
                 "the regulation loop"
             )
+        if scenario.wheels is not None:
+            raise SpecificationError(WHEELS_NOT_CERTIFIED.format(command="verify"))
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         scenario = None
