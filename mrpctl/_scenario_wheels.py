@@ -160,7 +160,9 @@ def _cluster(table: dict[str, Any]) -> WheelCluster:
         return WheelCluster(axes, *limits, **values)
     if table["layout"] == "orthogonal":
         return WheelCluster.orthogonal(*limits, **values)
-    return WheelCluster.pyramid(*limits, **({} if elevation is None else {"elevation": elevation}), **values)
+    if elevation is not None:
+        values["elevation"] = elevation
+    return WheelCluster.pyramid(*limits, **values)
 
 
 def wheels_table(data: dict[str, Any], spacecraft: Spacecraft) -> WheelCluster | None:

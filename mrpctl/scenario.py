@@ -264,7 +264,7 @@ class Scenario:
             settling_rate=self.settling_rate,
             reference=self.reference,
             **self.run_options,
-            **({} if self.wheels is None else {"wheels": self.wheels}),
+            wheels=self.wheels,
         )
 
     def __str__(self) -> str:
@@ -440,6 +440,9 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
       ``latitude_deg`` (argument of latitude at t = 0), each default 0;
     * ``"file"``: ``file``, a .csv or .npy file of n = floor(t_final · rate) + 1 rows of 9 numbers
       (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
+
+    The optional ``[wheels]`` table sets [`Scenario.wheels`][mrpctl.Scenario], the reaction wheels the torque is
+    flown on (keys and refusals: `mrpctl._scenario_wheels`).
     """
     check_keys(
         "",

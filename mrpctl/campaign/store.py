@@ -141,9 +141,11 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
     for name, (dtype, missing) in METRICS.items():
         data[name] = (("run",), da.full((n,), missing, dtype=dtype, chunks=(chunk,)))
     wheels = spec.base.wheels
-    for name, (dims, dtype, missing, unit) in WHEEL_METRICS.items() if wheels is not None else ():
-        shape = (n, *([wheels.count] if dims else []))
-        data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=(chunk, *shape[1:])), {"units": unit})
+    if wheels is not None:
+        for name, (dims, dtype, missing, unit) in WHEEL_METRICS.items():
+            shape = (n, *([wheels.count] if dims else []))
+            chunks = (chunk, *shape[1:])
+            data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=chunks), {"units": unit})
     for key, each in spec.files.items():
         name, dims = FILE_ARRAYS[key]
         data[name] = (dims, np.array(each.values), {"units": "N m" if key == "disturbance_file" else "s"})

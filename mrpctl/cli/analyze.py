@@ -19,6 +19,7 @@ from mrpctl.cli.common import (
     print_json,
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
+from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.design.performance import (
     hinf_bound,
     hinf_norm,
@@ -31,7 +32,6 @@ from mrpctl.design.pointing import (
 )
 from mrpctl.design.spectra import characteristic_roots, plot_spectrum
 from mrpctl.errors import SpecificationError
-from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.scenario import load_scenario
 
 __all__ = ["add_parser"]

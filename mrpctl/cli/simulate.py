@@ -278,7 +278,7 @@ def _sweep(args: argparse.Namespace) -> int:
                 settling_attitude=base.settling_attitude,
                 settling_rate=base.settling_rate,
                 **base.flight_options,  # a flight scenario's models, shared by the runs
-                **({} if base.wheels is None else {"wheels": base.wheels}),  # a shared wheel cluster
+                wheels=base.wheels,  # a shared wheel cluster, or None
             )
             batches.append(batch)
             for i in range(len(part)):

@@ -22,6 +22,7 @@ from mrpctl.cli.common import (
     print_json,
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
+from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.design import (
     FlownVerdict,
     analyze_gains,
@@ -37,7 +38,6 @@ from mrpctl.design import (
 )
 from mrpctl.design.interval import rate_value
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.scenario import Scenario, load_scenario
 from mrpctl.spacecraft import Spacecraft
 
