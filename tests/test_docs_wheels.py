@@ -1,0 +1,58 @@
+"""docs/how-to/wheels.md runs as written: its scenario, its commands' output and its sizing table."""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from mrpctl.campaign import load_campaign, run_campaign
+from mrpctl.campaign.report import report
+from mrpctl.cli import main
+from mrpctl.scenario import shipped_scenarios
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE = (ROOT / "docs" / "how-to" / "wheels.md").read_text(encoding="utf-8")
+
+
+def _blocks(kind: str) -> list[str]:
+    return re.findall(rf"```{kind}\n(.*?)```", PAGE, flags=re.DOTALL)
+
+
+def test_the_page_is_in_the_site_and_shows_the_shipped_table() -> None:
+    assert "how-to/wheels.md" in (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    shown = tomllib.loads(_blocks("toml")[0])
+    shipped = tomllib.loads(shipped_scenarios()["cubesat_wheels"].read_text(encoding="utf-8"))
+    campaign = tomllib.loads((ROOT / "examples" / "campaigns" / "cubesat_wheels.toml").read_text(encoding="utf-8"))
+    assert shown["wheels"] == shipped["wheels"] == campaign["wheels"]
+    for key in ("spacecraft", "gains", "rule", "tau", "rate", "t_final"):
+        assert shipped[key] == campaign[key], key
+
+
+def test_the_commands_print_what_the_page_shows(capsys: pytest.CaptureFixture[str]) -> None:
+    texts = _blocks("text")
+    assert main(["design", "--inertia", "0.2", "0.25", "0.15", "--tau", "0.2"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    for line in texts[0].splitlines():
+        assert line == "..." or line in printed, line
+    assert main(["simulate", "cubesat_wheels"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    for line in texts[1].splitlines():
+        assert line in printed, line
+
+
+def test_the_sizing_table_is_what_the_code_prints(capsys: pytest.CaptureFixture[str], monkeypatch) -> None:
+    monkeypatch.chdir(ROOT)
+    code = _blocks("python")[0]
+    exec(compile(code, "docs/how-to/wheels.md", "exec"), {})
+    assert capsys.readouterr().out == _blocks("text")[2]
+
+
+def test_the_campaign_reports_what_the_page_shows(tmp_path: Path) -> None:
+    spec = load_campaign(ROOT / "examples" / "campaigns" / "cubesat_wheels.toml")
+    run_campaign(spec, tmp_path, threads=1)
+    text = str(report(tmp_path)).splitlines()
+    for line in _blocks("text")[3].splitlines():
+        assert line in text, line
