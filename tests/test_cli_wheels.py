@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 from cli_assertions import one_line_error
 
-from mrpctl import simulate
-from mrpctl._export import export_wheel_controller
+from mrpctl import export_wheel_controller, simulate
 from mrpctl.cli import USER_ERROR, main
 from mrpctl.flight import Hysteretic
 from mrpctl.scenario import load_scenario, scenario_toml, tumbling_states

@@ -33,7 +33,6 @@ from mrpctl.cli.overrides import apply_flight_options, apply_overrides, scenario
 from mrpctl.cli.wheels import (
     add_wheel_options,
     check_wheel_options,
-    wheel_files,
     wheel_lines,
     wheel_summary,
     wheels_json,
@@ -115,12 +114,15 @@ def _simulate(args: argparse.Namespace) -> int:
     check_wheel_options(scenario, args)
     check_run_fits(scenario)
     result = scenario.simulate()
-    files: dict[str, Path] = wheel_files(result, args)
-    if args.plot is not None:
-        # deferred: matplotlib (through mrpctl.plots), only for --plot
+    files: dict[str, Path] = {}
+    if args.plot is not None or args.wheels_plot is not None:
+        # deferred: matplotlib (through mrpctl.plots), only for --plot and --wheels-plot
         from mrpctl import plots
 
-        files["plot"] = save_plot(plots.plot_response(result), Path(args.plot))
+        if args.plot is not None:
+            files["plot"] = save_plot(plots.plot_response(result), Path(args.plot))
+        if args.wheels_plot is not None:  # a wheel scenario (check_wheel_options)
+            files["wheels_plot"] = save_plot(plots.plot_wheels(result), Path(args.wheels_plot))
     if args.csv is not None:
         path = Path(args.csv)
         rows = np.column_stack((result.t, result.sigma, result.omega, result.u))

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._scenario_wheels import RPM, check_wheel_scenario, rpm
-from mrpctl.cli.common import check_plot_path, save_plot
+from mrpctl.cli.common import check_plot_path
 from mrpctl.errors import SpecificationError
 from mrpctl.scenario import Scenario
 from mrpctl.simulation import SimulationResult
@@ -19,7 +19,6 @@ __all__ = [
     "WHEELS_NOT_CERTIFIED",
     "add_wheel_options",
     "check_wheel_options",
-    "wheel_files",
     "wheel_lines",
     "wheel_summary",
     "wheels_json",
@@ -61,17 +60,6 @@ def check_wheel_options(scenario: Scenario, args: argparse.Namespace) -> None:
         predictor=scenario.predictor,
         reference=scenario.reference,
     )
-
-
-def wheel_files(result: SimulationResult, args: argparse.Namespace) -> dict[str, Path]:
-    """The ``--wheels-plot`` image of a run, when asked for."""
-    plot = getattr(args, "wheels_plot", None)
-    if plot is None or result.wheels is None:
-        return {}
-    # deferred: matplotlib (through mrpctl.plots), only for --wheels-plot
-    from mrpctl import plots
-
-    return {"wheels_plot": save_plot(plots.plot_wheels(result), Path(plot))}
 
 
 def wheel_summary(result: SimulationResult) -> dict[str, Any] | None:
