@@ -862,6 +862,8 @@ delta = 0.1
 # [sensor]       attitude_noise = 0.01 (rad, 1 sigma per axis), rate_noise = 1e-4 (rad/s), gyro_bias, seed = 1
 # [disturbance]  torque = [1e-3, 0.0, 0.0] (N m, body frame)
 # [delay]        tau_min = 0.15 (s; the delay jitters over the whole periods in [tau_min, tau]), seed = 2
+# [wheels]       reaction wheels instead of [actuator]: layout = "orthogonal", spin_inertia = 0.05 (kg m^2),
+#                torque_limit = 0.2 (N m), speed_limit_rpm = 6000.0 (see `mrpctl simulate cubesat_wheels`)
 #
 # What `mrpctl verify` certifies besides the idealised constant delay (any rule): the sampled loop at
 # `rate` (exact lifted check + certificate), the [delay] jitter (interval certificate), and
