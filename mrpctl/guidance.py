@@ -54,7 +54,9 @@ __all__ = [
     "reference_samples",
 ]
 
-#: The Earth's gravitational parameter μ (m³/s², Basilisk's ``MU_EARTH`` = 398600.4415 km³/s²).
+#: The Earth's gravitational parameter μ (m³/s²): 398600.4415 km³/s², the JGM-3 value. Basilisk 2.12 uses
+#: 398600.436 km³/s² (``orbitalMotion.MU_EARTH`` and ``gravBodyFactory().createEarth().mu``): pass ``mu=`` to fly
+#: a Basilisk run's orbit (at one altitude the two rates differ by 6.9e-9 relative).
 EARTH_MU = 3.986004415e14
 #: The Earth's equatorial radius (m, Basilisk's ``REQ_EARTH`` = 6378.1366 km).
 EARTH_RADIUS = 6378136.6

@@ -10,13 +10,15 @@ from typing import Any
 
 import numpy as np
 
+from mrpctl.campaign.reference import REFERENCE_INPUTS, run_reference
 from mrpctl.campaign.sampling import RunInputs, run_inputs
 from mrpctl.campaign.simulation import simulate_runs
 from mrpctl.campaign.spec import CampaignSpec, FlightOptions, SampleFile, parse_campaign
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel
+from mrpctl.guidance import GuidanceProfile
 from mrpctl.switching import SwitchingRule
 
-__all__ = ["FLIGHT_INPUTS", "chunk_on_worker", "run_models", "simulate_chunk"]
+__all__ = ["FLIGHT_INPUTS", "chunk_on_worker", "run_models", "run_tracking", "simulate_chunk", "tracking_keywords"]
 
 
 #: The per-run inputs of the flight loop stored with each run (besides the rule index and case).
@@ -71,6 +73,30 @@ def run_models(spec: CampaignSpec, inputs: RunInputs, j: int) -> tuple[Switching
     return rule, models
 
 
+def run_tracking(spec: CampaignSpec, inputs: RunInputs, j: int) -> GuidanceProfile | None:
+    """Row j's reference (None when the campaign regulates), rebuilt from its stored inputs: the base
+    ``[reference]`` itself where it is not dispersed (one object shared by the runs)."""
+    if not spec.tracking:
+        return None
+    return run_reference(
+        spec.base.reference,
+        spec.reference,
+        float(inputs.slew_angle[j]),
+        np.array(inputs.slew_axis[j]),
+        float(inputs.orbit_rate[j]),
+    )
+
+
+def tracking_keywords(spec: CampaignSpec) -> dict[str, Any]:
+    """The tracking options shared by a tracking campaign's runs (``error_time``, ``feedforward``,
+    ``pointing_tolerance`` of [`mrpctl.simulate`][mrpctl.simulation.simulate]) where the scenario reader
+    gives them (`Scenario.tracking_options`); {} otherwise (simulate's defaults)."""
+    if not spec.tracking:
+        return {}
+    options = getattr(spec.base, "tracking_options", {})
+    return dict(options) if isinstance(options, dict) else {}
+
+
 def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | None = None) -> dict[str, np.ndarray]:
     """Inputs and metrics of runs [start, stop) of ``spec`` (what one chunk stores).
 
@@ -78,12 +104,14 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
     -------
     dict of numpy.ndarray
         The arrays of `mrpctl.campaign.store.INPUTS` and
-        `mrpctl.campaign.simulation.METRICS`, one row per run.
+        `mrpctl.campaign.simulation.METRICS`, one row per run; a tracking campaign's also those of
+        `mrpctl.campaign.reference.REFERENCE_INPUTS` and `mrpctl.campaign.simulation.POINTING_METRICS`.
     """
     inputs = run_inputs(spec, start, stop)
     base = spec.base
     K = inputs.gain_scale[:, None, None] * base.K[None]
     per_run = [run_models(spec, inputs, j) for j in range(len(inputs))]
+    tracked = [run_tracking(spec, inputs, j) for j in range(len(inputs))] if spec.tracking else None
     metrics = simulate_runs(
         inputs.inertia,
         K,
@@ -100,6 +128,8 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
         predictor=spec.predictor,
         settling_attitude=base.settling_attitude,
         settling_rate=base.settling_rate,
+        reference=tracked,
+        tracking=tracking_keywords(spec),
         wheels=base.wheels,
     )
     sigma_norm = np.linalg.norm(inputs.sigma0, axis=1)
@@ -114,6 +144,7 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
         "rule": np.array(inputs.rule),
         "case": np.array(inputs.case),
         **{name: np.array(getattr(inputs, name)) for name in FLIGHT_INPUTS},
+        **({name: np.array(getattr(inputs, name)) for name in REFERENCE_INPUTS} if spec.tracking else {}),
         **metrics,
     }
 

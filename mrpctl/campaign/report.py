@@ -19,14 +19,15 @@ import xarray as xr
 from scipy.stats import binomtest
 
 from mrpctl._validation import integer
-from mrpctl.campaign._task import run_models, simulate_chunk
+from mrpctl.campaign._task import run_models, run_tracking, simulate_chunk, tracking_keywords
 from mrpctl.campaign.integrity import StoreDamagedError
 from mrpctl.campaign.sampling import run_inputs
-from mrpctl.campaign.simulation import METRICS, flight_keywords
-from mrpctl.campaign.store import INPUTS, STORE_NAME, open_campaign, spec_of, stored_noise_revision
+from mrpctl.campaign.simulation import METRICS, POINTING_METRICS, flight_keywords
+from mrpctl.campaign.store import STORE_NAME, open_campaign, spec_of, stored_names, stored_noise_revision
 from mrpctl.campaign.wheels import WHEEL_METRICS, wheel_summary, wheel_summary_lines
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE
 from mrpctl.simulation import simulate
 from mrpctl.spacecraft import Spacecraft
 
@@ -115,6 +116,9 @@ class WorstCase:
     initial_rate: float
     command: str
     rule: str = ""
+    #: A tracking campaign's pointing max after settling (deg) and slew time (s) of the run (NaN: none, or regulation).
+    pointing_max: float = math.nan
+    slew_time: float = math.nan
 
 
 #: How the worst runs are ordered (most severe first), as the report states it.
@@ -163,6 +167,10 @@ class CampaignReport:
     peak_torque_max: float
     worst: tuple[WorstCase, ...] = field(repr=False)
     by_rule: tuple[RuleSummary, ...] = field(default=(), repr=False)
+    #: A tracking campaign's pointing (None when the campaign regulates): the quantiles (median, p95, max) of
+    #: ``pointing_max_deg`` and ``pointing_rms_deg`` (Φ_B/R after the settling time, deg, over the settled runs)
+    #: and ``slew_time_s`` (over the runs that came within the tolerance), with ``slewed`` (how many did).
+    pointing: dict[str, Any] | None = field(default=None, repr=False)
     #: The store's check: ``verified`` (False: written without checksum records) and the ``damaged`` chunks
     #: left out of this report (only with ``intact_only``).
     integrity: dict[str, Any] = field(default_factory=dict, repr=False)
@@ -184,11 +192,19 @@ class CampaignReport:
             "switch_count": self.switch_quantiles,
             "peak_torque_max_Nm": None if math.isnan(self.peak_torque_max) else self.peak_torque_max,
             "worst_criterion": WORST_CRITERION,
-            "worst": [case.__dict__ for case in self.worst],
+            "worst": [self._worst_entry(case) for case in self.worst],
             "by_rule": [{**entry.__dict__, "wilson": list(entry.wilson)} for entry in self.by_rule],
             "integrity": self.integrity,
+            **({} if self.pointing is None else {"pointing": self.pointing}),
             **({} if self.wheels is None else {"wheels": self.wheels}),
         }
+
+    def _worst_entry(self, case: WorstCase) -> dict[str, Any]:
+        entry = dict(case.__dict__)
+        if self.pointing is None:  # a regulation campaign's summary is as before
+            entry.pop("pointing_max")
+            entry.pop("slew_time")
+        return entry
 
     def __str__(self) -> str:
         s, w = self.settling_quantiles, self.switch_quantiles
@@ -203,6 +219,19 @@ class CampaignReport:
             f"  peak torque   max {self.peak_torque_max:.4g} N m",
             *wheel_summary_lines(self.wheels),
         ]
+        if self.pointing is not None:
+            p = self.pointing
+            for key, label in (
+                ("pointing_max_deg", "pointing max after settling (deg)"),
+                ("pointing_rms_deg", "pointing RMS after settling (deg)"),
+                ("slew_time_s", "slew time (s)"),
+            ):
+                q = p[key]
+                lines.append(f"  {label:<34} median {q['median']:.4g}, p95 {q['p95']:.4g}, max {q['max']:.4g}")
+            lines.append(
+                f"  slewed        {p['slewed']}/{self.complete} runs came within {p['tolerance_deg']:g} deg of the "
+                "reference to the end (slew time); pointing over the settled runs"
+            )
         if self.integrity and not self.integrity.get("verified", True):
             lines.append(f"  integrity     NOT VERIFIED: {self.integrity.get('note', 'no checksum records')}")
         damaged = self.integrity.get("damaged", []) if self.integrity else []
@@ -229,15 +258,20 @@ class CampaignReport:
                     f"{r.settling_quantiles['median']:>12.4g} {r.settling_quantiles['p95']:>12.4g} "
                     f"{r.switch_quantiles['median']:>10.4g} {r.switch_quantiles['max']:>10.4g}"
                 )
+        tracking = self.pointing is not None
         lines += [
             f"  worst cases ({WORST_CRITERION}):",
             f"    {'run':>8} {'rule':<20} {'reason':<12} {'settling_s':>10} {'switches':>8} {'max|sigma|':>10} "
-            f"{'angle_deg':>9} {'rate_rad/s':>10}  replay",
+            f"{'angle_deg':>9} {'rate_rad/s':>10}"
+            + (f" {'point_max_deg':>13} {'slew_time_s':>11}" if tracking else "")
+            + "  replay",
         ]
         for c in self.worst:
             lines.append(
                 f"    {c.run:>8} {c.rule:<20} {c.reason:<12} {c.settling_time:>10.4g} {c.switch_count:>8} "
-                f"{c.max_sigma:>10.4g} {math.degrees(c.initial_angle):>9.2f} {c.initial_rate:>10.4g}  {c.command}"
+                f"{c.max_sigma:>10.4g} {math.degrees(c.initial_angle):>9.2f} {c.initial_rate:>10.4g}"
+                + (f" {c.pointing_max:>13.4g} {c.slew_time:>11.4g}" if tracking else "")
+                + f"  {c.command}"
             )
         return "\n".join(lines)
 
@@ -310,6 +344,11 @@ def report(
                 initial_rate=float(dataset["initial_rate"][i]),
                 command=f"mrpctl campaign replay {shlex.quote(folder)} --run {int(runs[i])}",
                 rule=labels[int(rule_index[i])] if 0 <= int(rule_index[i]) < len(labels) else "?",
+                **(
+                    {"pointing_max": float(dataset["pointing_max"][i]), "slew_time": float(dataset["slew_time"][i])}
+                    if "pointing_max" in dataset
+                    else {}
+                ),
             )
         )
     by_rule = []
@@ -329,6 +368,16 @@ def report(
             )
         )
     peak = np.asarray(dataset["peak_torque"], dtype=float)
+    pointing = None
+    if "pointing_max" in dataset:
+        slew = np.asarray(dataset["slew_time"], dtype=float)
+        pointing = {
+            "pointing_max_deg": _quantiles(_finite(dataset["pointing_max"])),
+            "pointing_rms_deg": _quantiles(_finite(dataset["pointing_rms"])),
+            "slew_time_s": _quantiles(slew[np.isfinite(slew)]),
+            "slewed": int(np.isfinite(slew).sum()),
+            "tolerance_deg": _pointing_tolerance(dataset),
+        }
     return CampaignReport(
         name=str(dataset.attrs.get("name", "campaign")),
         count=int(dataset.attrs.get("count", n)),
@@ -344,8 +393,22 @@ def report(
         worst=tuple(cases),
         by_rule=tuple(by_rule),
         integrity=json.loads(str(dataset.attrs.get("integrity", "{}"))),
+        pointing=pointing,
         wheels=_wheels(dataset),
     )
+
+
+def _finite(values: Any) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    return array[np.isfinite(array)]
+
+
+def _pointing_tolerance(dataset: xr.Dataset) -> float:
+    """The slew time's tolerance (deg) of a tracking campaign: the campaign's ``[reference]
+    pointing_tolerance_deg`` where given, else simulate's default."""
+    table = json.loads(str(dataset.attrs.get("campaign", "{}"))).get("reference", {})
+    value = table.get("pointing_tolerance_deg", DEFAULT_POINTING_TOLERANCE) if isinstance(table, dict) else None
+    return float(value) if isinstance(value, int | float) else DEFAULT_POINTING_TOLERANCE
 
 
 def _wheels(dataset: xr.Dataset) -> dict[str, Any] | None:
@@ -365,7 +428,8 @@ def _rule_labels(dataset: xr.Dataset) -> list[str]:
 
 
 def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
-    """The report's figures: settling-time and switch-count histograms, outcome against the initial state."""
+    """The report's figures: settling-time and switch-count histograms, outcome against the initial state; a
+    tracking campaign's also its slew times and pointing errors (``pointing``)."""
     # deferred: matplotlib, only when a figure is made
     from matplotlib.figure import Figure
 
@@ -418,7 +482,35 @@ def figures(source: str | Path | xr.Dataset) -> dict[str, Figure]:
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.set_title("outcome against the initial state", fontsize=9)
     out["outcome_vs_initial"] = fig
+    if "pointing_max" in dataset:
+        out["pointing"] = _pointing_figure(dataset)
     return out
+
+
+def _pointing_figure(dataset: xr.Dataset) -> Figure:
+    """A tracking campaign's slew times and pointing errors after settling, one histogram each."""
+    # deferred: matplotlib, only when a figure is made
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9.0, 3.6), layout="constrained")
+    left, right = fig.subplots(1, 2)
+    slew = _finite(dataset["slew_time"])
+    peak, rms = _finite(dataset["pointing_max"]), _finite(dataset["pointing_rms"])
+    n = dataset.sizes["run"]
+    if slew.size:
+        left.hist(slew, bins=min(50, max(5, int(np.sqrt(slew.size)))), color="tab:blue")
+    left.set_xlabel(f"slew time (s): pointing error < {_pointing_tolerance(dataset):g} deg to the end")
+    left.set_ylabel("runs")
+    left.set_title(f"slew time of {slew.size}/{n} runs ({n - slew.size} never within the tolerance)", fontsize=9)
+    if peak.size:
+        bins = min(50, max(5, int(np.sqrt(peak.size))))
+        right.hist(peak, bins=bins, color="tab:red", alpha=0.6, label="max")
+        right.hist(rms, bins=bins, color="tab:green", alpha=0.6, label="RMS")
+        right.legend(fontsize=8)
+    right.set_xlabel("pointing error after settling (deg)")
+    right.set_ylabel("runs")
+    right.set_title(f"pointing of {peak.size}/{n} settled runs", fontsize=9)
+    return fig
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -499,7 +591,11 @@ class ReplayResult:
                 f"  the store was written with noise revision {self.noise_revisions[0]}, this mrpctl computes revision "
                 f"{self.noise_revisions[1]}: runs with attitude noise differ in their last bits (see CHANGELOG.md)"
             )
-        names = [*METRICS, *(name for name in WHEEL_METRICS if name in self.stored)]
+        names = [
+            *METRICS,
+            *(key for key in POINTING_METRICS if key in self.stored),
+            *(key for key in WHEEL_METRICS if key in self.stored),
+        ]
         width = max(18, *(len(name) for name in names))
         for name in names:
             lines.append(f"  {name:<{width}} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
@@ -541,7 +637,7 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
         raise SpecificationError(f"run: run {run} has not been stored yet (its chunk is not complete)")
     spec = spec_of(dataset)
     values = simulate_chunk(spec, run, run + 1)
-    names = list(INPUTS) + list(METRICS) + [name for name in WHEEL_METRICS if name in dataset]
+    names = stored_names(spec.tracking) + [name for name in WHEEL_METRICS if name in dataset]
     stored = {name: np.asarray(dataset[name].sel(run=run).values) for name in names}
     replayed = {name: np.asarray(values[name][0]) for name in names}
     mismatches = tuple(name for name in names if not _same(stored[name], replayed[name]))
@@ -587,8 +683,11 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
         rate=base.rate,
         history=base.history,
         substeps=base.substeps,
+        settling_attitude=base.settling_attitude,
+        settling_rate=base.settling_rate,
         **({} if models is None else flight_keywords(models)),
         **({} if spec.predictor is None else {"predictor": spec.predictor}),
+        **({} if not spec.tracking else {"reference": run_tracking(spec, inputs, 0), **tracking_keywords(spec)}),
         **({} if base.wheels is None else {"wheels": base.wheels}),
     )
 

@@ -21,6 +21,9 @@ the campaign uses the flight loop, always in this order: 1 uniform (δ), 1 unifo
 3 normals and 1 uniform (disturbance direction and magnitude), 1 uniform (attitude noise),
 1 uniform (rate noise), 3 normals and 1 uniform (gyro bias direction and magnitude), then two
 integers in [0, 2⁶³): the seeds of the run's sensor-noise and delay-jitter streams.
+A tracking campaign (a ``[reference]``) draws the reference from a third generator of the case,
+spawn key (c, 2): 1 uniform (slew angle), 3 normals (slew axis), 1 uniform (orbit rate)
+([`mrpctl.campaign.reference`][mrpctl.campaign.reference]).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import numpy as np
 
 from mrpctl._validation import integer, sealed
 from mrpctl.campaign.distributions import Distribution
+from mrpctl.campaign.reference import reference_draws, reference_values
 from mrpctl.campaign.spec import AttitudeDispersion, CampaignSpec, FlightOptions
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import Hysteretic
@@ -84,6 +88,9 @@ class RunInputs:
         (N, 3) gyro biases (rad/s).
     noise_seed, jitter_seed : numpy.ndarray
         (N,) seeds of the run's sensor-noise and delay-jitter streams (0 without the flight loop).
+    slew_angle, slew_axis, orbit_rate : numpy.ndarray
+        A tracking campaign's reference per run: (N,) slew angle (deg), (N, 3) unit eigenaxis, (N,) orbit
+        rate (rad/s); NaN where the reference has none. Empty (0 rows) without a ``[reference]``.
     """
 
     index: np.ndarray
@@ -103,6 +110,9 @@ class RunInputs:
     gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
     noise_seed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
     jitter_seed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
+    slew_angle: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    slew_axis: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    orbit_rate: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     @property
     def x0(self) -> np.ndarray:
@@ -256,6 +266,10 @@ def run_inputs(spec: CampaignSpec, start: int, stop: int | None = None) -> RunIn
     tau = grid[np.minimum((tau_quantile * len(grid)).astype(np.int64), len(grid) - 1)]
     gain_scale = np.ones(n) if spec.gains is None else spec.gains.scale.quantile(gain_quantile)
     rule_all = index_all % rules
+    tracked = {}
+    if spec.tracking:
+        drawn = reference_values(spec.base.reference, spec.reference, reference_draws(spec.seed, case_all))
+        tracked = {name: sealed(values) for name, values in drawn.items()}
     return RunInputs(
         index=sealed(index_all),
         sigma0=sealed(sigma0),
@@ -267,6 +281,7 @@ def run_inputs(spec: CampaignSpec, start: int, stop: int | None = None) -> RunIn
         rule=sealed(rule_all),
         case=sealed(case_all),
         **_flight_values(spec, rule_all, flight),
+        **tracked,
     )
 
 

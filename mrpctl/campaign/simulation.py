@@ -2,6 +2,12 @@
 
 ``simulate_batch`` takes one spacecraft per run (J and J⁻¹ are run-time inputs of the compiled
 engine), so a campaign with dispersed inertia compiles one engine per delay, not one per run.
+
+A tracking campaign (a reference per run) also returns the pointing metrics of `POINTING_METRICS`. They
+are computed from every sample of the true error σ_B/R, which only a run with its records kept gives
+(``simulate_batch(..., trajectories=True, keep_every=1)``, the scalar engine): such runs go in groups
+whose kept samples fit in `TRACKING_BATCH_BYTES` (estimated before each call with simulate_batch's own
+per-run rule, `mrpctl.simulation.kept_run_bytes`), each group's trajectories dropped once its metrics are read.
 """
 
 from __future__ import annotations
@@ -14,15 +20,15 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl.campaign.wheels import WHEEL_METRICS, wheel_metrics
+from mrpctl.campaign.wheels import wheel_metrics
 from mrpctl.flight import Disturbance
 from mrpctl.predictor import Predictor
-from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, simulate_batch
+from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, kept_run_bytes, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 from mrpctl.wheels import WheelCluster
 
-__all__ = ["METRICS", "flight_keywords", "simulate_runs"]
+__all__ = ["METRICS", "POINTING_METRICS", "TRACKING_BATCH_BYTES", "flight_keywords", "simulate_runs"]
 
 #: Per-run metrics, in the order they are stored, with their dtype and "missing" value.
 METRICS: dict[str, tuple[Any, Any]] = {
@@ -35,6 +41,18 @@ METRICS: dict[str, tuple[Any, Any]] = {
     "max_sigma": (np.float64, np.nan),
     "peak_torque": (np.float64, np.nan),
 }
+
+#: A tracking campaign's per-run pointing metrics (besides `METRICS`): Φ_B/R's max and RMS after the settling
+#: time (deg), the slew time (s; the first t from which Φ_B/R stays below the pointing tolerance); NaN when
+#: the run never settled (never came within the tolerance).
+POINTING_METRICS: dict[str, tuple[Any, Any]] = {
+    "pointing_max": (np.float64, np.nan),
+    "pointing_rms": (np.float64, np.nan),
+    "slew_time": (np.float64, np.nan),
+}
+
+#: The most bytes of kept samples a tracking campaign holds at once (all its concurrent simulate_batch calls).
+TRACKING_BATCH_BYTES = 64e6
 
 
 def flight_keywords(models: dict[str, Any]) -> dict[str, Any]:
@@ -64,14 +82,30 @@ def _batch(
     rule: Sequence[SwitchingRule],
     options: dict[str, Any],
 ) -> dict[str, np.ndarray]:
-    """The runs' metrics from one metrics-only batch (the peak torque is accumulated by the engine), and on a
-    wheel cluster the `WHEEL_METRICS`."""
-    batch = simulate_batch(spacecraft, K, x0, tau=tau, rule=rule, **options)
-    found = {name: np.asarray(getattr(batch, name)) for name in METRICS}
-    wheels = options.get("wheels")
-    if wheels is not None:
-        found.update(wheel_metrics(batch.wheels, len(x0), wheels.count))
-    return found
+    """The runs' metrics from one metrics-only batch (the peak torque is accumulated by the engine), with a
+    reference (``options["reference"]``, one per run) their pointing metrics from the kept samples, and on a
+    wheel cluster (``options["wheels"]``) the `WHEEL_METRICS`."""
+    if options.get("reference") is None:
+        batch = simulate_batch(spacecraft, K, x0, tau=tau, rule=rule, **options)
+        found = {name: np.asarray(getattr(batch, name)) for name in METRICS}
+        wheels = options.get("wheels")
+        if wheels is not None:
+            found.update(wheel_metrics(batch.wheels, len(x0), wheels.count))
+        return found
+    batch = simulate_batch(spacecraft, K, x0, tau=tau, rule=rule, trajectories=True, keep_every=1, **options)
+    out = {name: np.asarray(getattr(batch, name)) for name in METRICS}
+    runs: Sequence[Any] = batch.runs or ()
+    for name, (dtype, missing) in POINTING_METRICS.items():
+        values = [getattr(run, name) for run in runs]
+        out[name] = np.array([missing if value is None else value for value in values], dtype=dtype)
+    return out
+
+
+def _group_size(t_final: float, rate: float, concurrent: int) -> int:
+    """Runs per tracking call: their kept samples and records within `TRACKING_BATCH_BYTES` over the
+    ``concurrent`` calls in flight (at least one run: simulate_batch then refuses one that does not fit)."""
+    per_run = kept_run_bytes(t_final, rate, 1, records=True)
+    return max(1, int(TRACKING_BATCH_BYTES // (per_run * max(1, concurrent))))
 
 
 def _cpus() -> int:
@@ -134,6 +168,8 @@ def simulate_runs(
     predictor: Predictor | None = None,
     settling_attitude: float = SETTLING_ATTITUDE_DEG,
     settling_rate: float = SETTLING_OMEGA,
+    reference: Sequence[Any] | None = None,
+    tracking: dict[str, Any] | None = None,
     wheels: WheelCluster | None = None,
 ) -> dict[str, np.ndarray]:
     """Simulate N runs, each with its own inertia, gain, initial state, delay, rule and flight models.
@@ -168,6 +204,12 @@ def simulate_runs(
         The settling tolerances (principal angle in deg, rate in rad/s) of
         [`mrpctl.simulate_batch`][mrpctl.simulate_batch] (the campaign file's ``settling_attitude_deg`` and
         ``settling_rate``).
+    reference : sequence or None, optional
+        One reference per run (a guidance profile, ``samples(t)``, evaluated slice by slice; runs may share
+        one object): the runs fly the tracking loop and the result also holds `POINTING_METRICS`.
+    tracking : dict, optional
+        ``error_time``, ``feedforward``, ``pointing_tolerance`` of [`mrpctl.simulate_batch`][mrpctl.simulate_batch]
+        for every run (with ``reference``).
     wheels : WheelCluster or None, optional
         The reaction-wheel cluster every run flies on (every rule a [`Hysteretic`][mrpctl.flight.Hysteretic]);
         the wheel metrics of `mrpctl.campaign.wheels.WHEEL_METRICS` are returned too.
@@ -175,7 +217,8 @@ def simulate_runs(
     Returns
     -------
     dict of numpy.ndarray
-        One (N,) array per name in `METRICS` (and, with ``wheels``, of `WHEEL_METRICS`), in input order.
+        One (N,) array per name in `METRICS` (and `POINTING_METRICS` with ``reference``, the (N,) or (N, wheels)
+        arrays of `WHEEL_METRICS` with ``wheels``), in input order.
     """
     n = len(x0)
     options: dict[str, Any] = dict(t_final=t_final, rate=rate, history=history, substeps=substeps, threads=threads)
@@ -183,13 +226,14 @@ def simulate_runs(
         options.update(settling_attitude=settling_attitude, settling_rate=settling_rate)
     if predictor is not None:
         options["predictor"] = predictor
-    names = list(METRICS)
+    names = {**METRICS, **(POINTING_METRICS if reference is not None else {})}
+    if reference is not None:
+        options.update(tracking or {})
     if wheels is not None:
         options["wheels"] = wheels
-        names += list(WHEEL_METRICS)
     if n == 0:
         return {
-            **{name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()},
+            **{name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in names.items()},
             **({} if wheels is None else wheel_metrics(None, 0, wheels.count)),
         }
     rules = [rule] * n if isinstance(rule, SwitchingRule) else list(rule)
@@ -198,11 +242,25 @@ def simulate_runs(
     groups: dict[Any, list[int]] = {}
     for i in range(n):
         groups.setdefault(_flight_key(models[i]), []).append(i)
-    out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in METRICS.items()}
+    out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in names.items()}
     if wheels is not None:
         out.update(wheel_metrics(None, n, wheels.count))
+    flown_calls = sum(key is not None for key in groups)  # the calls after the first run on a pool
+    concurrent = max(1, min(flown_calls - 1, threads or _cpus()))
 
     def call(members: list[int], **extra: Any) -> None:
+        if reference is not None:  # the kept samples of a group at a time (their memory bounded)
+            size = _group_size(t_final, rate, concurrent)
+            for first in range(0, len(members), size):
+                one_call(
+                    members[first : first + size],
+                    reference=[reference[i] for i in members[first : first + size]],
+                    **extra,
+                )
+            return
+        one_call(members, **extra)
+
+    def one_call(members: list[int], **extra: Any) -> None:
         given = models[members[0]]
         found = {} if given is None else flight_keywords(given)
         if given is not None:
@@ -223,7 +281,7 @@ def simulate_runs(
             [rules[i] for i in members],
             {**options, **extra, **found},
         )
-        for name in names:
+        for name in batch:  # the metrics, and the pointing or the wheel metrics of the campaign
             out[name][members] = batch[name]
 
     plain = groups.pop(None, None)

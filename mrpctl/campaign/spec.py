@@ -89,6 +89,11 @@ may differ: ``"on-predicted:1.2"``, ``"on-predicted:inf"`` never switches)::
 The model is the same for every run; the plant is each run's dispersed spacecraft. ``flight.jitter``
 and a ``history`` other than ``"constant"`` are refused with it.
 
+A scenario ``[reference]`` table (``type = "inertial" | "slew" | "nadir" | "file"``) makes the runs fly the
+tracking loop on it (every rule ``hysteretic`` or ``on-predicted``), dispersed per run by
+``[dispersions.reference]`` (``slew_angle_deg``, ``slew_axis = "sphere"``, ``orbit_rate``;
+[`mrpctl.campaign.reference`][mrpctl.campaign.reference]); each run then also stores its pointing.
+
 Unknown keys anywhere are errors naming the key.
 """
 
@@ -108,9 +113,11 @@ import numpy as np
 from mrpctl._files import read_toml
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.campaign.distributions import Distribution, parse_distribution
+from mrpctl.campaign.reference import REFERENCE_KEYS, ReferenceDispersion, parse_reference_dispersion
 from mrpctl.campaign.wheels import campaign_wheels, check_campaign_wheels
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
+from mrpctl.guidance import FileReference
 from mrpctl.loop import delay_samples
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.scenario import (
@@ -160,6 +167,7 @@ _DISPERSION_KEYS = {
     "actuator",
     "disturbance",
     "sensor",
+    "reference",
 }
 _KEYS = {
     "attitude": {"angle_deg"},
@@ -173,6 +181,7 @@ _KEYS = {
     "actuator": {"u_max"},
     "disturbance": {"magnitude"},
     "sensor": {"attitude_noise", "rate_noise", "gyro_bias"},
+    "reference": REFERENCE_KEYS,
 }
 _FLIGHT_KEYS = {
     "u_max",
@@ -501,6 +510,11 @@ class CampaignSpec:
         the simulator does not report it; about 1.5× the run time). Default True.
     source : dict
         The parsed TOML the specification was built from (written to the results).
+    reference : ReferenceDispersion or None
+        ``[dispersions.reference]`` of a tracking campaign (the base reference is ``base.reference``, the
+        scenario's ``[reference]``; see [`mrpctl.campaign.reference`][mrpctl.campaign.reference]).
+    reference_file : SampleFile or None
+        The rows of ``[reference] type = "file"`` as read (kept with the campaign, as the ``[flight]`` files).
     """
 
     base: Scenario
@@ -517,6 +531,13 @@ class CampaignSpec:
     flight: FlightOptions | None = None
     flight_dispersion: FlightDispersion = field(default_factory=FlightDispersion)
     predictor: Predictor | None = None
+    reference: ReferenceDispersion | None = None
+    reference_file: SampleFile | None = None
+
+    @property
+    def tracking(self) -> bool:
+        """True when the runs fly the tracking loop (the scenario has a ``[reference]``)."""
+        return self.base.reference is not None
 
     @property
     def rule_list(self) -> tuple[SwitchingRule, ...]:
@@ -525,8 +546,12 @@ class CampaignSpec:
 
     @property
     def files(self) -> dict[str, SampleFile]:
-        """The per-sample files of ``[flight]`` by key, with their numbers (empty without them)."""
-        return {} if self.flight is None else self.flight.files
+        """The per-sample files of ``[flight]`` and the rows of ``[reference] file`` (key ``reference_file``) by key,
+        with their numbers (empty without them)."""
+        found = {} if self.flight is None else self.flight.files
+        if self.reference_file is not None:
+            found["reference_file"] = self.reference_file
+        return found
 
     @property
     def rule_labels(self) -> tuple[str, ...]:
@@ -570,6 +595,8 @@ class CampaignSpec:
             parts.append(f"  {name:<9} {'base value' if value is None else value}")
         if self.predictor is not None:
             parts.append(f"  predictor {self.predictor} (the plant is the dispersed spacecraft)")
+        if self.base.reference is not None:
+            parts.append(f"  reference {self.base.reference}; dispersed: {self.reference or 'none'}")
         if self.uses_flight:
             parts.append(f"  flight    {self.flight if self.flight is not None else 'base models'}")
             parts.append(f"  flight dispersions {self.flight_dispersion}")
@@ -613,11 +640,14 @@ def parse_campaign(
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
     if "rule" not in data:
         raise SpecificationError(f"[rule] needs type, one of {sorted([*RULE_NAMES, 'hysteretic'])}")
-    if "reference" in scenario_part:
-        raise SpecificationError(
-            "[reference]: campaigns of the tracking loop are not run yet; remove [reference] (the runs regulate "
-            "to the origin), or run simulate_batch(..., reference=...) on the dispersed inputs"
-        )
+    table = scenario_part.get("reference")
+    given_rows = (
+        (files or {}).get("reference_file") if isinstance(table, dict) and table.get("type") == "file" else None
+    )
+    if given_rows is not None:  # the rows of [reference] file as read before (a store, a Dask task): not re-read
+        scenario_part["reference"] = {k: v for k, v in scenario_part["reference"].items() if k != "file"}
+        scenario_part["reference"]["type"] = "inertial"
+        scenario_part["reference"]["sigma"] = [0.0, 0.0, 0.0]
     flight_tables = sorted(set(scenario_part) & {"actuator", "sensor", "disturbance", "delay"})
     if flight_tables:  # scenario-style flight tables would be dropped by the runner: refuse, never drop them
         raise SpecificationError(
@@ -626,10 +656,11 @@ def parse_campaign(
         )
     scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
     wheels = scenario_part.pop("wheels", None)  # read below, with the campaign's rules (check_campaign_wheels)
-    nominal = parse_scenario(scenario_part, name=name)
+    nominal = parse_scenario(scenario_part, name=name, base=folder)
     nominal = replace(
         nominal.with_rule(parse_rule("[rule]", data["rule"])), wheels=campaign_wheels(wheels, nominal.spacecraft)
     )
+    nominal, reference_file = _reference_rows(nominal, given_rows)
     for key in ("count", "seed"):
         if key not in data:
             raise SpecificationError(f"campaign needs {key} (an integer)")
@@ -702,6 +733,9 @@ def parse_campaign(
             raise SpecificationError(f"dispersions.rule.rules: {repeated[0]!r} is listed twice")
     flight = _flight_options(data["flight"], nominal, folder, files or {}) if "flight" in data else None
     flight_dispersion = _flight_dispersion(tables)
+    reference = None
+    if "reference" in tables:
+        reference = parse_reference_dispersion(tables["reference"], nominal.reference)
     spec = CampaignSpec(
         base=nominal,
         count=count,
@@ -717,11 +751,47 @@ def parse_campaign(
         flight=flight,
         flight_dispersion=flight_dispersion,
         predictor=_predictor(data, nominal, rules.rules if rules is not None else (nominal.rule,)),
+        reference=reference,
+        reference_file=reference_file,
     )
+    _check_tracking(spec)
     _check_flight(spec)
     _check_predictor(spec)
     check_campaign_wheels(spec)
     return spec
+
+
+def _reference_rows(nominal: Scenario, given: SampleFile | None) -> tuple[Scenario, SampleFile | None]:
+    """The scenario with the rows of ``[reference] file`` as given (``given``: read before), and those rows as a
+    [`SampleFile`][mrpctl.campaign.spec.SampleFile] (kept with the campaign, as the ``[flight]`` files are)."""
+    if given is not None:
+        n = sample_count(nominal.t_final, nominal.rate)
+        if given.values.shape != (n, 9):
+            raise DimensionError(
+                f"[reference] file ({given.path}): expected n rows of 9 numbers, shape ({n}, 9) with n = "
+                f"floor(t_final * rate) + 1, but the stored rows have shape {given.values.shape}"
+            )
+        rows = FileReference(rows=np.array(given.values), rate=nominal.rate, source=given.path)
+        return replace(nominal, reference=rows), given
+    if isinstance(nominal.reference, FileReference):
+        return nominal, SampleFile("reference_file", nominal.reference.source, nominal.reference.rows)
+    return nominal, None
+
+
+def _check_tracking(spec: CampaignSpec) -> None:
+    """A reference is tracked by the controller-side rule or the predictor only (design/tracking.md)."""
+    if spec.base.reference is None:
+        return
+    other = [
+        label
+        for label, rule in zip(spec.rule_labels, spec.rule_list, strict=True)
+        if not isinstance(rule, Hysteretic | OnPredicted)
+    ]
+    if other:
+        raise SpecificationError(
+            f"[reference]: the tracking loop chooses the set of sigma_BR itself: every rule must be 'hysteretic' "
+            f"(hysteretic:0 is on-current's rule on sigma_BR) or 'on-predicted' (the predictor), got {other[0]!r}"
+        )
 
 
 def _predictor(data: dict[str, Any], base: Scenario, rules: tuple[SwitchingRule, ...]) -> Predictor | None:

@@ -13,6 +13,11 @@ Layout of ``<out>/campaign.zarr`` (a Zarr group written by xarray):
 * with per-sample files in ``[flight]``, their numbers, shared by the runs: ``flight_disturbance_rows``
   (sample, axis) of ``disturbance_file`` (N m) and ``flight_delays`` (sample,) of ``delay_file`` (s),
   with ``attrs["flight_files"]`` (JSON: per key the file name as read and the SHA-256 of its numbers);
+  the rows of ``[reference] file`` likewise, ``reference_rows`` (sample, column: σ_R/N, ω_R/N in rad/s,
+  ω̇_R/N in rad/s²; key ``reference_file``);
+* a tracking campaign's (a ``[reference]``) only: the reference inputs ``slew_angle`` (deg), ``slew_axis``
+  (run, axis), ``orbit_rate`` (rad/s) and the pointing metrics ``pointing_max``, ``pointing_rms`` (deg,
+  after the settling time) and ``slew_time`` (s); a regulation campaign's store is as before;
 * ``chunk_complete`` (chunk,), one Zarr chunk per campaign chunk, set to True only after
   all of that chunk's arrays are written. A chunk whose flag is False (never started, or
   half-written when the campaign was interrupted) is simulated again on resume.
@@ -44,14 +49,15 @@ import xarray as xr
 import zarr
 
 from mrpctl.campaign import integrity
-from mrpctl.campaign.simulation import METRICS
+from mrpctl.campaign.reference import REFERENCE_INPUTS
+from mrpctl.campaign.simulation import METRICS, POINTING_METRICS
 from mrpctl.campaign.spec import CampaignSpec, SampleFile, parse_campaign
 from mrpctl.campaign.wheels import WHEEL_METRICS
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
 from mrpctl.provenance import versions
 
-__all__ = ["INPUTS", "STORE_NAME", "CampaignStore", "open_campaign"]
+__all__ = ["INPUTS", "STORE_NAME", "CampaignStore", "open_campaign", "stored_names", "tracking_store"]
 
 STORE_NAME = "campaign.zarr"
 
@@ -95,13 +101,46 @@ _UNITS = {
     "max_sigma": "1",
     "peak_torque": "N m",
 }
+_TRACKING_UNITS = {
+    **{name: unit for name, (_, unit) in REFERENCE_INPUTS.items()},
+    "pointing_max": "deg",
+    "pointing_rms": "deg",
+    "slew_time": "s",
+}
 
 
 #: The store's array of each per-sample file of ``[flight]``: (name, dims).
 FILE_ARRAYS = {
     "disturbance_file": ("flight_disturbance_rows", ("sample", "axis")),
     "delay_file": ("flight_delays", ("sample",)),
+    "reference_file": ("reference_rows", ("sample", "column")),
 }
+_FILE_UNITS = {"disturbance_file": "N m", "delay_file": "s", "reference_file": "1, rad/s, rad/s^2"}
+#: The campaign file's key of each per-sample file (what messages name).
+FILE_KEYS = {
+    "disturbance_file": "flight.disturbance_file",
+    "delay_file": "flight.delay_file",
+    "reference_file": "[reference] file",
+}
+
+
+def tracking_store(attrs: Any) -> bool:
+    """True when a store (its attrs) is a tracking campaign's: its campaign has a ``[reference]``."""
+    return "reference" in json.loads(str(attrs.get("campaign", "{}")))
+
+
+def _inputs(tracking: bool) -> dict[str, tuple[tuple[str, ...], Any]]:
+    extra = {name: (dims, np.float64) for name, (dims, _) in REFERENCE_INPUTS.items()} if tracking else {}
+    return {**INPUTS, **extra}
+
+
+def _metrics(tracking: bool) -> dict[str, tuple[Any, Any]]:
+    return {**METRICS, **(POINTING_METRICS if tracking else {})}
+
+
+def stored_names(tracking: bool) -> list[str]:
+    """The per-run inputs and metrics a store holds (a tracking campaign's with its reference and pointing)."""
+    return [*_inputs(tracking), *_metrics(tracking)]
 
 
 def _file_attrs(spec: CampaignSpec) -> dict[str, Any]:
@@ -134,11 +173,11 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
 
     n = spec.count
     data: dict[str, Any] = {}
-    for name, (dims, dtype) in INPUTS.items():
+    for name, (dims, dtype) in _inputs(spec.tracking).items():
         shape = (n, *(_SIZES[d] for d in dims))
         missing = np.nan if np.dtype(dtype).kind == "f" else -1
         data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=(chunk, *shape[1:])))
-    for name, (dtype, missing) in METRICS.items():
+    for name, (dtype, missing) in _metrics(spec.tracking).items():
         data[name] = (("run",), da.full((n,), missing, dtype=dtype, chunks=(chunk,)))
     wheels = spec.base.wheels
     if wheels is not None:
@@ -148,25 +187,29 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
             data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=chunks), {"units": unit})
     for key, each in spec.files.items():
         name, dims = FILE_ARRAYS[key]
-        data[name] = (dims, np.array(each.values), {"units": "N m" if key == "disturbance_file" else "s"})
+        data[name] = (dims, np.array(each.values), {"units": _FILE_UNITS[key]})
     dataset = xr.Dataset(data, coords={"run": np.arange(n, dtype=np.int64)}, attrs=_attrs(spec))
-    for name, unit in _UNITS.items():
+    for name, unit in {**_UNITS, **(_TRACKING_UNITS if spec.tracking else {})}.items():
         dataset[name].attrs["units"] = unit
     return dataset
 
 
-def run_arrays(wheels: bool = False) -> dict[str, int]:
-    """The per-run arrays (chunked by the campaign chunk) and their number of dimensions; ``wheels``: with the
-    wheel metrics of a campaign on wheels."""
-    arrays = {**{name: 1 + len(dims) for name, (dims, _) in INPUTS.items()}, **{name: 1 for name in METRICS}}
-    return arrays | ({name: 1 + len(dims) for name, (dims, *_) in WHEEL_METRICS.items()} if wheels else {})
+def run_arrays(tracking: bool = False, wheels: bool = False) -> dict[str, int]:
+    """The per-run arrays (chunked by the campaign chunk) and their number of dimensions (``tracking``: a
+    tracking campaign's, with its reference inputs and pointing metrics; ``wheels``: a campaign on wheels, with
+    the wheel metrics)."""
+    return {
+        **{name: 1 + len(dims) for name, (dims, _) in _inputs(tracking).items()},
+        **{name: 1 for name in _metrics(tracking)},
+        **({name: 1 + len(dims) for name, (dims, *_) in WHEEL_METRICS.items()} if wheels else {}),
+    }
 
 
-def bytes_per_run(wheels: int = 0) -> int:
+def bytes_per_run(tracking: bool = False, wheels: int = 0) -> int:
     """Uncompressed bytes one run takes in the store (inputs, metrics and its coordinate; with ``wheels``
     wheels, their metrics)."""
-    inputs = sum(8 * int(np.prod([_SIZES[d] for d in dims])) for dims, _ in INPUTS.values())
-    metrics = sum(np.dtype(dtype).itemsize for dtype, _ in METRICS.values())
+    inputs = sum(8 * int(np.prod([_SIZES[d] for d in dims])) for dims, _ in _inputs(tracking).values())
+    metrics = sum(np.dtype(dtype).itemsize for dtype, _ in _metrics(tracking).values())
     wheel = sum(8 * (wheels if dims else 1) for dims, *_ in WHEEL_METRICS.values()) if wheels else 0
     return inputs + metrics + wheel + 8
 
@@ -200,7 +243,7 @@ class CampaignStore:
 
     @property
     def _arrays(self) -> dict[str, int]:
-        return run_arrays(self.spec.base.wheels is not None)
+        return run_arrays(self.spec.tracking, self.spec.base.wheels is not None)
 
     def _open(self, chunk: int | None) -> None:
         spec = self.spec
@@ -238,7 +281,7 @@ class CampaignStore:
         if temporary.exists():
             shutil.rmtree(temporary)
         wheels = self.spec.base.wheels
-        estimate = self.spec.count * bytes_per_run(0 if wheels is None else wheels.count) + sum(
+        estimate = self.spec.count * bytes_per_run(self.spec.tracking, 0 if wheels is None else wheels.count) + sum(
             each.values.nbytes for each in self.spec.files.values()
         )
         free = shutil.disk_usage(self.out).free
@@ -298,14 +341,15 @@ class CampaignStore:
         """
         start, stop = self.bounds(index)
         verified = (self.path / integrity.RECORDS).is_dir()
+        tracking = self.spec.tracking
         flags = zarr.open_array(str(self.path / "chunk_complete"), mode="r+")
         if verified:
             flags[index] = False
             integrity.forget_chunk(self.path, self._arrays, index)
         data = {}
-        for name, (dims, _) in INPUTS.items():
+        for name, (dims, _) in _inputs(tracking).items():
             data[name] = (("run", *dims), values[name])
-        for name in METRICS:
+        for name in _metrics(tracking):
             data[name] = (("run",), values[name])
         for name, (dims, *_) in WHEEL_METRICS.items() if self.spec.base.wheels is not None else ():
             data[name] = (("run", *dims), values[name])
@@ -348,8 +392,9 @@ def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: b
     if not path.exists():
         raise SpecificationError(f"out: no campaign store at {path}")
     with xr.open_zarr(str(path), consolidated=False) as stored:
+        tracking = tracking_store(stored.attrs)
         wheels = "wheel_peak_speed" in stored  # a campaign on wheels
-        estimate = stored.sizes["run"] * bytes_per_run(stored.sizes.get("wheel", 0) if wheels else 0)
+        estimate = stored.sizes["run"] * bytes_per_run(tracking, stored.sizes.get("wheel", 0) if wheels else 0)
         available = _available_memory()
         if available is not None and estimate > available // 2:
             raise SpecificationError(
@@ -358,7 +403,7 @@ def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: b
             )
         runs_per_chunk = int(str(stored["chunk_complete"].attrs["runs_per_chunk"]))
         count = stored.sizes["run"]
-        check = integrity.check_store(path, run_arrays(wheels), runs_per_chunk, count)
+        check = integrity.check_store(path, run_arrays(tracking, wheels), runs_per_chunk, count)
         repair = f"mrpctl campaign run CAMPAIGN.toml --out {out} (CAMPAIGN.toml: the file this store was run from)"
         if check.static or (check.damaged and not (intact_only and complete_only)):
             raise check.error(repair=repair)
@@ -417,7 +462,7 @@ def _check_files(path: Path, stored: Any, spec: CampaignSpec) -> None:
         old = recorded.get(key, {}).get("sha256")
         if old != each.sha256:
             raise SpecificationError(
-                f"flight.{key}: {each.path} is not the file this campaign was started with: its numbers have "
+                f"{FILE_KEYS[key]}: {each.path} is not the file this campaign was started with: its numbers have "
                 f"SHA-256 {each.sha256}, the store at {path} holds {old}; restore the file or choose a new --out folder"
             )
 
@@ -432,8 +477,8 @@ def stored_files(dataset: xr.Dataset) -> dict[str, SampleFile]:
             expected = recorded.get(key, {}).get("sha256")
             if each.sha256 != expected:
                 raise SpecificationError(
-                    f"flight.{key}: the store's {name} has SHA-256 {each.sha256}, but attrs['flight_files'] records "
-                    f"{expected}: the store was modified"
+                    f"{FILE_KEYS[key]}: the store's {name} has SHA-256 {each.sha256}, but attrs['flight_files'] "
+                    f"records {expected}: the store was modified"
                 )
             found[key] = each
     return found

@@ -13,7 +13,7 @@ from __future__ import annotations
 from mrpctl.engines.stats import DIVERGENCE_BOUND, HISTORY_KINDS, SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SETTLING_SIGMA
 from mrpctl.loop import MAX_SUBSTEPS, ClosedLoopFunctions, closed_loop_functions, delay_samples
 from mrpctl.simulation._batch import simulate_batch
-from mrpctl.simulation._budget import SWITCH_LIMIT
+from mrpctl.simulation._budget import SWITCH_LIMIT, kept_run_bytes
 from mrpctl.simulation._simulate import settling_tolerances, simulate
 from mrpctl.simulation.results import BatchResult, SimulationResult
 
@@ -30,6 +30,7 @@ __all__ = [
     "SimulationResult",
     "closed_loop_functions",
     "delay_samples",
+    "kept_run_bytes",
     "settling_tolerances",
     "simulate",
     "simulate_batch",

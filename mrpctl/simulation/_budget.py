@@ -99,6 +99,15 @@ def batch_run_bytes(n: int, keep_every: int | None, trajectories: bool, *, recor
     return size
 
 
+def kept_run_bytes(t_final: float, rate: float, keep_every: int | None = 1, *, records: bool = False) -> int:
+    """Bytes [`simulate_batch`][mrpctl.simulate_batch] counts, before it allocates anything, for each run of a batch
+    with ``trajectories=True`` of ``t_final`` s at ``rate`` Hz keeping every ``keep_every``-th sample (``records``:
+    a flight, predictor or tracking run, whose result also keeps its records): what a caller that runs many such
+    runs in groups sizes its groups by."""
+    _, n = sample_horizon(t_final, rate)
+    return batch_run_bytes(n, check_keep_every(keep_every), True, records=records)
+
+
 def jitter_bytes(delay: DelayModel | None, d: int) -> int:
     """Bytes of the driver's arrival ring of a seeded jitter (d_max + 1 slots and 3 numbers, whatever n is)."""
     return (d + 4) * 8 if delay is not None and delay.kind is DelayKind.JITTER else 0
