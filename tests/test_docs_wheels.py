@@ -27,6 +27,8 @@ def test_the_page_is_in_the_site_and_shows_the_shipped_table() -> None:
     shipped = tomllib.loads(shipped_scenarios()["cubesat_wheels"].read_text(encoding="utf-8"))
     campaign = tomllib.loads(_blocks("toml")[1])  # the page's campaign file: the scenario's cubesat and wheels
     assert shown["wheels"] == shipped["wheels"] == campaign["wheels"]
+    example = ROOT / "examples" / "campaigns" / "wheels" / "cubesat.toml"
+    assert tomllib.loads(example.read_text(encoding="utf-8")) == campaign  # the page's file, shipped
     for key in ("spacecraft", "gains", "rule", "tau", "rate", "t_final"):
         assert shipped[key] == campaign[key], key
 
