@@ -14,6 +14,8 @@ from mrpctl.campaign import parse_campaign, run_campaign
 from mrpctl.campaign.integrity import StoreDamagedError
 from mrpctl.campaign.report import replay, report
 from mrpctl.campaign.store import STORE_NAME, open_campaign
+from mrpctl.campaign.trajectories import store_trajectories
+from mrpctl.data import load
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import DelayModel, Hysteretic, SensorModel
 from mrpctl.spacecraft import Spacecraft
@@ -117,6 +119,18 @@ def test_the_report_summarises_the_wheels(stored) -> None:
     assert summary.summary()["wheels"]["momentum_capacity_Nms"] == pytest.approx([3.1831e-5 * 200 * math.pi] * 3)
     text = str(summary)
     assert "wheels        3; peak stored momentum" in text and "runs_at_speed_lim" in text
+
+
+def test_a_stored_trajectory_holds_the_wheels(stored, tmp_path) -> None:
+    out = tmp_path / "copy"
+    shutil.copytree(stored, out)
+    written = store_trajectories(out, [5])
+    run = load(written.files[0])
+    direct = _direct(open_campaign(out), 5, WheelCluster.orthogonal(3.1831e-5, 5e-3, 6000.0 * RPM))
+    assert run.wheels is not None and direct.wheels is not None
+    assert np.array_equal(run.wheels.speeds, direct.wheels.speeds)
+    assert np.array_equal(run.wheels.motor_torque, direct.wheels.motor_torque)
+    assert run.wheels.cluster.key() == direct.wheels.cluster.key()
 
 
 def test_a_damaged_wheel_chunk_is_found(stored, tmp_path) -> None:
