@@ -85,7 +85,9 @@ def save(result: SimulationResult, path: str | Path, *, seed: int | None = None)
     """Save one run with its inputs, the package versions and (optionally) the seed it came from.
 
     The file is NetCDF-3 (64-bit offset) written by xarray's scipy engine into a temporary
-    file beside ``path`` and renamed over it, so an interrupted save leaves any old file intact.
+    file beside ``path`` and renamed over it, so an interrupted save leaves any old file intact. A run on
+    wheels also holds its wheel speeds and motor torques over (``time``, ``wheel``), its wheel metrics and its
+    cluster (`mrpctl.simulation.results.WHEEL_VARIABLES`); [`load`][mrpctl.data.load] rebuilds them.
 
     Parameters
     ----------
