@@ -26,6 +26,7 @@ from mrpctl._scenario_tables import (
     sample_count,
     samples_file,
     torque_rows,
+    tracking_keys,
 )
 from mrpctl._scenario_wheels import WHEELS_TABLE, check_wheel_scenario, wheels_table, wheels_text, wheels_toml
 from mrpctl._validation import (
@@ -39,6 +40,7 @@ from mrpctl._validation import (
 from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, SensorModel
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime
 from mrpctl.guidance import (
     EigenaxisSlew,
     FileReference,
@@ -184,6 +186,10 @@ class Scenario:
         [`FileReference`][mrpctl.guidance.FileReference]. None: regulation to the inertial origin.
         [`simulate`][mrpctl.Scenario.simulate] flies the tracking loop on it
         (``simulate(..., reference=...)``: the controller-side rule or the predictor).
+    error_time, feedforward, pointing_tolerance : ErrorTime or None, bool, float
+        How a tracking scenario's controller forms its error (``[reference] error_time``: "measurement" or
+        "current"; None: simulate's default), whether it adds the feedforward terms (``feedforward``), and
+        the slew time's tolerance on the pointing error in degrees (``pointing_tolerance_deg``, default 0.1).
     wheels : WheelCluster or None
         The reaction wheels the body torque is flown on (``[wheels]``, `mrpctl._scenario_wheels`;
         ``simulate(..., wheels=...)``, ``design/wheels.md``). None: the torque as commanded (or ``actuator``).
@@ -209,6 +215,9 @@ class Scenario:
     settling_attitude: float = SETTLING_ATTITUDE_DEG
     settling_rate: float = SETTLING_OMEGA
     reference: GuidanceProfile | None = None
+    error_time: ErrorTime | None = None
+    feedforward: bool = False
+    pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE
     wheels: WheelCluster | None = None
 
     @property
@@ -263,9 +272,22 @@ class Scenario:
             settling_attitude=self.settling_attitude,
             settling_rate=self.settling_rate,
             reference=self.reference,
+            **self.tracking_options,
             **self.run_options,
             wheels=self.wheels,
         )
+
+    @property
+    def tracking_options(self) -> dict[str, Any]:
+        """A tracking scenario's ``error_time``, ``feedforward`` and ``pointing_tolerance`` as keywords of
+        [`mrpctl.simulate`][mrpctl.simulation.simulate]; {} when the scenario regulates."""
+        if self.reference is None:
+            return {}
+        return {
+            "error_time": self.error_time,
+            "feedforward": self.feedforward,
+            "pointing_tolerance": self.pointing_tolerance,
+        }
 
     def __str__(self) -> str:
         sigma0, omega0 = self.sigma0, self.omega0
@@ -505,6 +527,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         settling_attitude=settle_attitude,
         settling_rate=settle_rate,
         reference=reference,
+        **tracking_keys(data),
         **flight,
         wheels=wheels,
     )
@@ -672,6 +695,14 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
     lines += _flight_toml(scenario)
     lines += _reference_toml(scenario.reference)
+    if scenario.reference is not None:
+        if scenario.error_time is not None:
+            lines.append(f'error_time = "{scenario.error_time.value}"  # the reference at the measurement time or now')
+        if scenario.feedforward:
+            lines.append("feedforward = true  # omega x J omega and J (domega_R - omega x omega_R)")
+        if scenario.pointing_tolerance != DEFAULT_POINTING_TOLERANCE:
+            tolerance = _toml_value(scenario.pointing_tolerance)
+            lines.append(f"pointing_tolerance_deg = {tolerance}  # the slew time's tolerance")
     lines += wheels_toml(scenario.wheels)
     if scenario.uncertainty is not None:
         lines += [

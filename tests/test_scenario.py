@@ -60,8 +60,9 @@ def test_examples_are_the_package_data_files() -> None:
     assert EXAMPLES.resolve() == PACKAGE.resolve()
     shipped = shipped_scenarios()
     # predictor-paper: checked against mrpctl._predictor_study in tests/test_scenario_predictor.py;
+    # nadir: checked in tests/test_scenario_tracking.py;
     # cubesat_wheels: in tests/test_scenario_wheels.py and by the how-to that sizes its wheels (test_docs_wheels.py)
-    expected = set(paper_scenarios()) | set(flight_scenarios()) | {"predictor-paper", "cubesat_wheels"}
+    expected = set(paper_scenarios()) | set(flight_scenarios()) | {"predictor-paper", "nadir", "cubesat_wheels"}
     assert set(shipped) == expected == {p.stem for p in PACKAGE.glob("*.toml")}
     assert all(path.resolve().parent == PACKAGE.resolve() for path in shipped.values())
 

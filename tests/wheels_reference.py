@@ -14,6 +14,10 @@ sample, with explicit per-wheel loops where the engine uses matrices:
 * controller: quaternion sign continuity, the hysteresis h ← −h when h q̂₀ < −δ, σ_c = h q̂_v/(1 + h q̂₀),
   u_c = K [σ_c; ω_used/4] (+ ω × (J ω + Σ g_i Js,i (g_i·ω + Ω_i)) with the gyroscopic term); the wheel
   speeds read are those of the sample instant;
+* steering law (optional, (ω_max, a, T, h, J), h and J None without a momentum limit): with K = [K_σ, K_ω], the
+  remaining angle φ = 2 atan2(|q_v|, h q₀) of the set used, the rate command ω_lin = −4 K_ω⁻¹ K_σ σ_c
+  (numpy.linalg.solve), L = min(ω_max, √((aT)² + 2aφ) − aT), s = min(1, L/|ω_lin|, h/|J ω_lin|),
+  u_c = K_ω ω_used/4 + s K_σ σ_c;
 * allocation: u = −pinv(C Gs) C u_c (numpy.linalg.pinv) − k_n (I − pinv(Gs) Gs) Js (Ω − Ω_bias); each u_i
   clipped to ±u_max,i, then 0 when |Ω_i| >= Ω_max,i and Ω_i u_i >= 0.
 """
@@ -122,6 +126,22 @@ def _quaternion(sigma: np.ndarray) -> np.ndarray:
     return -q if q[0] < 0 else q
 
 
+def _steering(K: np.ndarray, law, sigma_c: np.ndarray, q: np.ndarray, w_used: np.ndarray) -> np.ndarray:
+    """The steering law's body torque request from the set used (σ_c and its quaternion q, q₀ >= −δ)."""
+    rate_limit, a, lag, momentum_limit, inertia = law
+    k_sigma, k_omega = K[:, 0:3], K[:, 3:6]
+    angle = 2.0 * math.atan2(math.sqrt(q[1] ** 2 + q[2] ** 2 + q[3] ** 2), q[0])
+    omega_linear = -4.0 * np.linalg.solve(k_omega, k_sigma @ sigma_c)
+    linear = np.linalg.norm(omega_linear)
+    limit = min(rate_limit, math.sqrt((a * lag) ** 2 + 2.0 * a * angle) - a * lag)
+    scale = limit / linear if linear > limit else 1.0
+    if momentum_limit is not None:
+        momentum = np.linalg.norm(inertia @ omega_linear)
+        if scale * momentum > momentum_limit:
+            scale = momentum_limit / momentum
+    return k_omega @ (w_used / 4.0) + scale * (k_sigma @ sigma_c)
+
+
 @dataclass
 class WheelRun:
     sigma: np.ndarray  # (n, 3) after bookkeeping
@@ -149,9 +169,10 @@ def wheel_loop(
     disturbance=None,
     noise=None,
     bias=None,
+    steering=None,
 ) -> WheelRun:
     """One run (module docstring); x0 = [σ; ω/4]; ``noise`` = (θ (n, 3), η (n, 3)) and ``bias`` (3,) of a sensor;
-    ``disturbance`` (3,) or one row per sample (n, 3)."""
+    ``disturbance`` (3,) or one row per sample (n, 3); ``steering`` = (ω_max, a, T) of the steering law."""
     inertia = np.asarray(inertia, dtype=float)
     x0 = np.asarray(x0, dtype=float)
     n = math.floor(t_final * rate + 1e-9) + 1
@@ -186,7 +207,10 @@ def wheel_loop(
         if h * q_hat[0] < -delta:
             h = -h
         sigma_c = h * q_hat[1:4] / (1.0 + h * q_hat[0])
-        command = np.asarray(K) @ np.concatenate((sigma_c, w_used / 4.0))
+        if steering is None:
+            command = np.asarray(K) @ np.concatenate((sigma_c, w_used / 4.0))
+        else:
+            command = _steering(np.asarray(K), steering, sigma_c, h * q_hat, w_used)
         motor, tl, sl = allocate(wheels, command, w_used, speeds, inertia)
         for key, value in (
             ("sigma", sigma),

@@ -1,4 +1,6 @@
-"""``mrpctl export``: the closed loop of a scenario as CasADi functions and C code."""
+"""``mrpctl export``: the closed loop of a scenario as CasADi functions and C code; a scenario with [reference]
+exports the tracking loop (``export(..., tracking=True)``: ``tracking_controller`` takes the reference row of its
+error time)."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ from mrpctl.cli.limits import check_history_fits
 from mrpctl.cli.overrides import apply_flight_options, apply_overrides
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import Hysteretic
+from mrpctl.flight.tracking import ErrorTime
 from mrpctl.scenario import Scenario, load_scenario
 
 __all__ = ["add_parser"]
@@ -20,11 +23,6 @@ __all__ = ["add_parser"]
 
 def _export(args: argparse.Namespace) -> int:
     scenario = apply_flight_options(apply_overrides(load_scenario(args.scenario), args), args)
-    if scenario.reference is not None:
-        raise SpecificationError(
-            "[reference]: the command exports the regulation controller; export the tracking controller with "
-            "mrpctl.export(..., tracking=True) in Python (its reference ports are the profile's rows)"
-        )
     check_history_fits(scenario)
     if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
         raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")
@@ -41,6 +39,7 @@ def _export(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         compile=not args.no_compile,
         physical=args.physical,
+        **_tracking(scenario),
         **scenario.run_options,
     )
     return _print(result, args)
@@ -84,7 +83,30 @@ def _print(result: ExportResult, args: argparse.Namespace) -> int:
         )
     else:
         print(result)
+        if scenario.reference is not None:
+            print(
+                _REFERENCE_NOTE.format(reference=scenario.reference, error_time=_tracking(scenario)["error_time"].value)
+            )
     return 0
+
+
+#: What the export of a tracking scenario leaves to the caller: the reference rows.
+_REFERENCE_NOTE = (
+    "  tracking   reference input: one row (sigma_RN, omega_RN_N, domega_RN_N) per sample, of the {error_time} "
+    "time;\n             the profile itself is not exported: feed its rows (mrpctl.guidance.reference_samples)"
+)
+
+
+def _tracking(scenario: Scenario) -> dict[str, Any]:
+    """A tracking scenario's keywords of export (``tracking=True``, its error time and feedforward); {} without
+    [reference]."""
+    if scenario.reference is None:
+        return {}
+    return {
+        "tracking": True,
+        "error_time": ErrorTime.MEASUREMENT if scenario.error_time is None else scenario.error_time,
+        "feedforward": scenario.feedforward,
+    }
 
 
 def add_parser(commands: Any) -> None:

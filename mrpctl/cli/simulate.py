@@ -83,6 +83,18 @@ def _result_summary(result: SimulationResult) -> dict[str, Any]:
         "final_omega": result.omega[-1],
         "saturated_fraction": result.saturated_fraction,
         "peak_command": result.peak_command,
+        **(
+            {}
+            if result.error_time is None
+            else {
+                "error_time": result.error_time.value,
+                "feedforward": result.feedforward,
+                "pointing_max_deg": result.pointing_max,
+                "pointing_rms_deg": result.pointing_rms,
+                "slew_time": result.slew_time,
+                "pointing_tolerance_deg": result.pointing_tolerance,
+            }
+        ),
     }
 
 
@@ -105,22 +117,30 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "flight_models": {name: str(model) for name, model in scenario.flight_options.items()},
         "predictor_inertia": None if scenario.predictor is None else scenario.predictor.model.inertia,
         "wheels": wheels_json(scenario),
+        "reference": None if scenario.reference is None else str(scenario.reference),
     }
 
 
 def _simulate(args: argparse.Namespace) -> int:
     scenario = apply_flight_options(apply_overrides(scenario_from_args(args, file=args.scenario), args), args)
     check_plot_path(args.plot)
+    check_plot_path(args.pointing_plot)
+    if args.pointing_plot is not None and scenario.reference is None:
+        raise SpecificationError(
+            "--pointing-plot draws a tracking run's pointing error: give a scenario with a [reference] table"
+        )
     check_wheel_options(scenario, args)
     check_run_fits(scenario)
     result = scenario.simulate()
     files: dict[str, Path] = {}
-    if args.plot is not None or args.wheels_plot is not None:
-        # deferred: matplotlib (through mrpctl.plots), only for --plot and --wheels-plot
+    if args.plot is not None or args.pointing_plot is not None or args.wheels_plot is not None:
+        # deferred: matplotlib (through mrpctl.plots), only for --plot / --pointing-plot / --wheels-plot
         from mrpctl import plots
 
         if args.plot is not None:
             files["plot"] = save_plot(plots.plot_response(result), Path(args.plot))
+        if args.pointing_plot is not None:
+            files["pointing_plot"] = save_plot(plots.plot_pointing(result), Path(args.pointing_plot))
         if args.wheels_plot is not None:  # a wheel scenario (check_wheel_options)
             files["wheels_plot"] = save_plot(plots.plot_wheels(result), Path(args.wheels_plot))
     if args.csv is not None:
@@ -141,6 +161,8 @@ def _simulate(args: argparse.Namespace) -> int:
             print(f"wheel plot written to {files['wheels_plot']}")
         if "plot" in files:
             print(f"plot written to {files['plot']}")
+        if "pointing_plot" in files:
+            print(f"pointing error plot written to {files['pointing_plot']}")
         if "csv" in files:
             print(f"trajectory written to {files['csv']}")
     if result.diverged and args.fail_on_divergence:
@@ -169,6 +191,13 @@ def add_simulate(commands: Any) -> None:
     parser.add_argument("--omega", type=float, nargs=3, metavar="W", help="initial body rates omega0 (rad/s)")
     add_run_options(
         parser, plot="write sigma, omega, u against t to this image", csv="write the trajectory to this CSV"
+    )
+    parser.add_argument(
+        "--pointing-plot",
+        type=Path,
+        metavar="FILE",
+        help="a tracking scenario ([reference]): write the pointing error (deg, log scale, tolerance band) to this "
+        "image",
     )
     add_flight_options(parser)
     add_wheel_options(parser)

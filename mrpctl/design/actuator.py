@@ -9,11 +9,18 @@ envelope's worst case is *predicted* by a kinematic estimate (stop the initial r
 slew of π, the reaction lag, the linear tail); the design does not simulate (the measured numbers
 are those of ``bench/actuator_design.py``). When the time asked is below a lower bound that holds
 for any law, the result says so (``INFEASIBLE``) with the numbers.
+
+On a reaction-wheel cluster ([`WheelCluster`][mrpctl.wheels.WheelCluster]) U is the body torque the
+allocation gives in every direction before a wheel reaches its torque limit, and the wheels' speed limits
+bound the momentum the body may take: the law's commanded rate carries at most the momentum the wheels
+hold in every direction (its momentum limit), and the prediction's cruise is slowed to what is left once
+the envelope's initial momentum is stored.
 """
 
 from __future__ import annotations
 
 import enum
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -26,6 +33,7 @@ from mrpctl.errors import SpecificationError
 from mrpctl.flight.models import ActuatorModel
 from mrpctl.flight.steering import SteeringLaw
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
+from mrpctl.wheels import WheelCluster, allocation_matrix
 
 __all__ = [
     "SETTLING_OMEGA",
@@ -33,9 +41,13 @@ __all__ = [
     "ActuatorDesign",
     "ActuatorDesignStatus",
     "design_for_actuator",
+    "guaranteed_momentum",
     "guaranteed_torque",
     "slew_lower_bound",
 ]
+
+# Up to this many wheels the largest body torque is found over the vertices of the torque box (2^N).
+_VERTEX_WHEELS = 12
 
 #: The settling tolerances the prediction aims at (mrpctl's settling: |σ| < 1e-2, |ω| < 1e-3 rad/s).
 SETTLING_SIGMA, SETTLING_OMEGA = 1e-2, 1e-3
@@ -81,6 +93,9 @@ class ActuatorDesign:
     linear : Any
         The [`PDSynthesis`][mrpctl.design.PDSynthesis] of K.
     reason : str
+    momentum : float or None
+        A wheel cluster's: the body momentum (N m s) its wheels hold in every direction from their initial
+        speeds ([`guaranteed_momentum`][mrpctl.design.actuator.guaranteed_momentum]); None for an ideal torque.
     """
 
     status: ActuatorDesignStatus
@@ -94,6 +109,7 @@ class ActuatorDesign:
     torque: float
     linear: Any = field(repr=False)
     reason: str
+    momentum: float | None = None
 
     @property
     def designed(self) -> bool:
@@ -101,8 +117,9 @@ class ActuatorDesign:
         return self.status is ActuatorDesignStatus.DESIGNED
 
     def __str__(self) -> str:
+        held = "" if self.momentum is None else f", wheels holding {self.momentum:.4g} N m s"
         return (
-            f"Design for the actuator (tau = {self.tau:g} s, torque {self.torque:.4g} N m in every direction, "
+            f"Design for the actuator (tau = {self.tau:g} s, torque {self.torque:.4g} N m in every direction{held}, "
             f"envelope |omega0| <= {self.max_rate:g} rad/s, any attitude): {self.status.value}\n"
             f"  {self.law}\n"
             f"  linear gains: omega_n = {self.linear.omega_n:.4g} rad/s, zeta = {self.linear.zeta:.4g} "
@@ -113,14 +130,55 @@ class ActuatorDesign:
         )
 
 
-def guaranteed_torque(actuator: ActuatorModel) -> tuple[float, float]:
+def _allocation_rows(wheels: WheelCluster) -> np.ndarray:
+    """|a_i| (N,): the norms of the allocation's rows, for a cluster that controls all three axes."""
+    if wheels.control_axes.shape[0] != 3:
+        raise SpecificationError(
+            "actuator: the design needs a wheel cluster that controls all three body axes (control_axes of 3 "
+            f"rows), got {wheels.control_axes.shape[0]}"
+        )
+    return np.linalg.norm(allocation_matrix(wheels), axis=1)
+
+
+def guaranteed_torque(actuator: ActuatorModel | WheelCluster) -> tuple[float, float]:
     """(U_min, U_max) (N m): the torque magnitude the actuator gives in every direction (the box's
-    inscribed ball, or the norm limit) and the largest it gives in some direction."""
+    inscribed ball, or the norm limit) and the largest it gives in some direction.
+
+    For a [`WheelCluster`][mrpctl.wheels.WheelCluster] (controlling all three axes): the allocation
+    u_s = A u_c reaches wheel i's limit at |a_iᵀ u_c| = u_max,i, so every body torque of magnitude
+    U_min = min_i u_max,i / |a_i| is given unclipped (the null-space term, the gyroscopic term and friction
+    not counted); U_max = max |Gs u_s| over the box |u_s,i| <= u_max,i (its vertices, up to 12 wheels; the
+    bound Σ u_max,i beyond)."""
+    if isinstance(actuator, WheelCluster):
+        rows = _allocation_rows(actuator)
+        limits = np.asarray(actuator.torque_limit, dtype=float)
+        if actuator.count <= _VERTEX_WHEELS:
+            signs = np.array(list(itertools.product((-1.0, 1.0), repeat=actuator.count)))
+            largest = float(np.linalg.norm((signs * limits) @ actuator.spin_axes.T, axis=1).max())
+        else:
+            largest = float(limits.sum())
+        return float(np.min(limits / rows)), largest
     if not isinstance(actuator, ActuatorModel):
-        raise SpecificationError(f"actuator must be a mrpctl.flight.ActuatorModel, got {actuator!r}")
+        raise SpecificationError(
+            f"actuator must be a mrpctl.flight.ActuatorModel or a mrpctl.wheels.WheelCluster, got {actuator!r}"
+        )
     limits = np.asarray(actuator.u_max, dtype=float)
     norm = actuator.norm_limit
     return min(float(np.min(limits)), norm), min(float(np.linalg.norm(limits)), norm)
+
+
+def guaranteed_momentum(wheels: WheelCluster) -> float:
+    """The body momentum |J ω| (N m s) the wheels take in every direction from their initial speeds.
+
+    A body momentum p taken from the wheels (the total fixed) moves their spin momenta by the
+    allocation's distribution, Js,i ΔΩ_i = a_iᵀ p; wheel i stays within its speed limit while
+    |Js,i Ω_i(0) + a_iᵀ p| <= Js,i Ω_max,i, so for every direction of p
+    |p| <= min_i (Js,i Ω_max,i − Js,i |Ω_i(0)|) / |a_i| (may be <= 0: a wheel starts at its limit)."""
+    if not isinstance(wheels, WheelCluster):
+        raise SpecificationError(f"wheels must be a mrpctl.wheels.WheelCluster, got {wheels!r}")
+    rows = _allocation_rows(wheels)
+    spare = wheels.spin_inertia * (wheels.speed_limit - np.abs(wheels.speeds))
+    return float(np.min(spare / rows))
 
 
 def slew_lower_bound(angle: float, inertia: float, torque: float) -> float:
@@ -132,7 +190,7 @@ def slew_lower_bound(angle: float, inertia: float, torque: float) -> float:
 def design_for_actuator(
     spacecraft: Spacecraft,
     tau: float,
-    actuator: ActuatorModel,
+    actuator: ActuatorModel | WheelCluster,
     *,
     max_rate: float,
     settling_time: float = 60.0,
@@ -146,8 +204,14 @@ def design_for_actuator(
     spacecraft : Spacecraft
     tau : float
         Measurement delay τ > 0 (s).
-    actuator : mrpctl.flight.ActuatorModel
-        The body torque limits (per axis, and the norm limit).
+    actuator : mrpctl.flight.ActuatorModel or mrpctl.wheels.WheelCluster
+        The body torque limits (per axis, and the norm limit), or a reaction-wheel cluster controlling all
+        three axes: U and U_max from its torque limits and allocation
+        ([`guaranteed_torque`][mrpctl.design.actuator.guaranteed_torque]), and the rate limit at most
+        the momentum limit h of the commanded rate, |J ω| <= h, h the momentum its wheels hold in every
+        direction ([`guaranteed_momentum`][mrpctl.design.actuator.guaranteed_momentum]). The prediction's cruise is
+        then at most (h − J_max ``max_rate``) / J_max (the envelope's initial momentum stored first), and
+        infinite when that is <= 0.
     max_rate : float, keyword-only
         The envelope's largest initial rate (rad/s), >= 0.
     settling_time : float, keyword-only
@@ -167,8 +231,9 @@ def design_for_actuator(
     Raises
     ------
     SpecificationError
-        On a non-positive τ, a negative or non-finite ``max_rate``, ``braking`` outside (0, 1), or a
-        non-positive ``settling_time``.
+        On a non-positive τ, a negative or non-finite ``max_rate``, ``braking`` outside (0, 1), a
+        non-positive ``settling_time``, or a wheel cluster that does not control all three axes or whose
+        wheels start with no momentum to spare (a wheel at its speed limit).
     """
     spacecraft = check_spacecraft(spacecraft)
     tau = positive_scalar("tau", tau)
@@ -194,16 +259,44 @@ def design_for_actuator(
     a = braking * a_full
     gyro_rate = math.inf if spread == 0.0 else math.sqrt((1.0 - braking) * u_min / spread)
     rate_limit = min(math.sqrt(math.pi * a), gyro_rate)
+    cause = "gyroscopic torque" if gyro_rate < math.sqrt(math.pi * a) else "time-optimal for 180 deg"
     lag = tau + 1.0 / rate_gain
-    law = SteeringLaw(rate_limit, a, lag)
+    momentum = None
+    cruise = math.inf  # the prediction's cruise rate beside the law's limit
+    if isinstance(actuator, WheelCluster):
+        momentum = guaranteed_momentum(actuator)
+        if momentum <= 0.0:
+            raise SpecificationError(
+                f"actuator: a wheel starts at its speed limit (the wheels hold {momentum:.4g} N m s in the worst "
+                "direction); start the cluster below its speed limits (WheelCluster speeds)"
+            )
+        cruise = (momentum - j_max * max_rate) / j_max
+        law = SteeringLaw(rate_limit, a, lag, momentum_limit=momentum, spacecraft=spacecraft)
+    else:
+        law = SteeringLaw(rate_limit, a, lag)
 
     lower = slew_lower_bound(math.pi, j_min, u_max)
-    predicted = _predicted_time(law, a_full, u_min, j_max, spread, max_rate, command_gain, linear.exact_decay_rate)
+    predicted = (
+        math.inf
+        if cruise <= 0.0
+        else _predicted_time(
+            law, a_full, u_min, j_max, spread, max_rate, command_gain, linear.exact_decay_rate, cruise=cruise
+        )
+    )
     numbers = (
         f"U = {u_min:.4g} N m, J in [{j_min:.4g}, {j_max:.4g}] kg m^2: deceleration {a:.4g} rad/s^2 "
-        f"({braking:g} of U/J_max), rate limit {rate_limit:.4g} rad/s "
-        f"({'gyroscopic torque' if gyro_rate < math.sqrt(math.pi * a) else 'time-optimal for 180 deg'})"
+        f"({braking:g} of U/J_max), rate limit {rate_limit:.4g} rad/s ({cause})"
     )
+    if momentum is not None:
+        numbers += (
+            f"; the wheels hold {momentum:.4g} N m s in every direction (the law's momentum limit: "
+            f"{momentum / j_max:.4g} to {momentum / j_min:.4g} rad/s), "
+        ) + (
+            f"{momentum - j_max * max_rate:.4g} N m s once the envelope's initial momentum is stored "
+            f"(a cruise of {cruise:.4g} rad/s in the worst case)"
+            if cruise > 0.0
+            else f"less than the envelope's initial momentum {j_max * max_rate:.4g} N m s"
+        )
     if settling_time < lower:
         status = ActuatorDesignStatus.INFEASIBLE
         reason = (
@@ -231,6 +324,7 @@ def design_for_actuator(
         torque=u_min,
         linear=linear,
         reason=reason,
+        momentum=momentum,
     )
 
 
@@ -243,15 +337,18 @@ def _predicted_time(
     max_rate: float,
     command_gain: float,
     decay: float,
+    *,
+    cruise: float = math.inf,
 ) -> float:
     """The kinematic estimate of the envelope's worst-case settling time (s): stop |ω₀| = ``max_rate``
-    against the gyroscopic torque, slew π on the law's trapezoid, the reaction lag, and the linear tail
-    from the angle where the rate limit meets the linear command down to the settling tolerances."""
+    against the gyroscopic torque, slew π on the law's trapezoid (its cruise at most ``cruise``), the
+    reaction lag, and the linear tail from the angle where the rate limit meets the linear command down
+    to the settling tolerances."""
     left = u_min - max_rate**2 * spread
     if left <= 0.0:
         return math.inf
     stop = max_rate * j_max / left
-    a, w = law.acceleration, law.rate_limit
+    a, w = law.acceleration, min(law.rate_limit, cruise)
     slew = math.pi / w + w / a if math.pi >= w * w / a else 2.0 * math.sqrt(math.pi / a)
     k = command_gain
     switch = 2.0 * a * max(1.0 - law.lag * k, 0.05) / k**2  # L(φ) = k φ

@@ -357,14 +357,18 @@ def certify_attraction(
 
 
 def linear_radius(law: SteeringLaw, K: Any) -> float:
-    """s_K: the largest |σ| up to which the steering law ``law`` is K (its rate limit not reached), by the
-    sufficient test of ``steering_covered`` (bisection to 1e-6 relative); inf when it never is reached."""
+    """s_K: the largest |σ| up to which the steering law ``law`` is K (its rate limit, and its momentum limit
+    when it has one, not reached), by the sufficient test of ``steering_covered`` (bisection to 1e-6
+    relative); inf when it never is reached."""
     gain = gain_matrix(K)
-    rate_map = float(np.linalg.norm(4.0 * np.linalg.solve(gain[:, 3:6], gain[:, 0:3]), 2))
+    matrix = 4.0 * np.linalg.solve(gain[:, 3:6], gain[:, 0:3])
+    rate_map = float(np.linalg.norm(matrix, 2))
+    momentum_map = _momentum_map(law, matrix)
 
     def linear(s: float) -> bool:
         phi = 4.0 * math.atan(s)
-        return rate_map <= law.rate_command_limit(phi) / phi * 4.0 / (1.0 + s * s)
+        below = law.momentum_limit is None or momentum_map * s <= law.momentum_limit
+        return below and rate_map <= law.rate_command_limit(phi) / phi * 4.0 / (1.0 + s * s)
 
     low, high = 0.0, 1.0
     if linear(high):
@@ -389,7 +393,17 @@ def _steering_covered(law: SteeringLaw, gain: np.ndarray, p_x: np.ndarray, level
     if phi_max == 0.0:
         return True
     chord = law.rate_command_limit(phi_max) / phi_max  # L(φ) >= chord φ on [0, φ_max]
+    # with a momentum limit h also |J ω_lin| <= ‖J rate_map‖ |σ| <= h
+    if law.momentum_limit is not None and _momentum_map(law, rate_map) * s > law.momentum_limit:
+        return False
     return float(np.linalg.norm(rate_map, 2)) <= chord * 4.0 / (1.0 + s * s)
+
+
+def _momentum_map(law: SteeringLaw, rate_map: np.ndarray) -> float:
+    """‖J rate_map‖₂: |J ω_lin| per unit |σ| (0 without the law's momentum limit)."""
+    if law.spacecraft is None:
+        return 0.0
+    return float(np.linalg.norm(law.spacecraft.inertia @ rate_map, 2))
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:

@@ -71,6 +71,7 @@ from mrpctl.engines.scalar import engine_sample, noise_rows, rule_key
 from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.flight.tracking import ReferenceStream
 from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_structure
@@ -558,6 +559,7 @@ def lane_engine(
     reference_input: bool = False,
     feedforward: bool = False,
     reference_per_lane: bool = False,
+    gravity_gradient: bool = False,
     **options: Any,
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
@@ -577,7 +579,9 @@ def lane_engine(
     stream of each lane's own torque; ``disturbed`` is then implied). With ``reference_input`` the flight
     sample tracks a reference shared by the lanes (its rows ``reference``, ``reference_error`` streamed
     beside the noise and the torque; ``feedforward``: with the feedforward terms; with ``reference_per_lane``
-    each lane's own reference, a per-lane stream). The keywords are ignored for the other rules. The
+    each lane's own reference, a per-lane stream). With ``gravity_gradient`` the flight sample's plant flies the
+    gravity-gradient torque of the orbit whose constants follow the flight constants (shared or per lane, like
+    them; the sample's time from the lane's sample counter). The keywords are ignored for the other rules. The
     engine's `LaneEngine.structure` is the flight sample's structure.
 
     Raises
@@ -610,6 +614,8 @@ def lane_engine(
     )
     tracking = flight and reference_input
     key += (("tracking", feedforward) + (("lanes",) if reference_per_lane else ()),) if tracking else ()
+    gravity = flight and gravity_gradient
+    key += ("gravity",) if gravity else ()  # without it the key of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -628,12 +634,14 @@ def lane_engine(
                     disturbed=structure["disturbed"],
                     reference_input=tracking,
                     feedforward=tracking and feedforward,
+                    gravity_gradient=gravity,
                 )
                 label += f"_{saturation.value}" + ("" if structure["sensor"] else "_ideal")
                 label += ("" if structure["limited"] else "_unlimited") + ("" if structure["disturbed"] else "_free")
                 label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
                 label += ("_tracking" + ("_ff" if feedforward else "")) if tracking else ""
                 label += "_lanes" if tracking and reference_per_lane else ""
+                label += "_gravity" if gravity else ""
                 noise = ("noise",) if structure["sensor"] else ()
                 rows = ("reference", "reference_error") if tracking else ()
                 shared_rows, lane_rows = ((), rows) if reference_per_lane else (rows, ())
@@ -664,11 +672,13 @@ def wheel_lane_engine(
     disturbed: bool = True,
     torque_input: bool = False,
     torque_per_lane: bool = False,
+    law: SteeringLaw | None = None,
 ) -> LaneEngine:
     """The (cached) lane engine of the flight sample on a wheel cluster
     ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; J and the cluster are constants of the
     library), the ports as the flight sample's in `lane_engine` (structure ``limited=False``: the limits are the
-    wheels'). Its runs' memories start with `mrpctl.loop.wheels.wheel_memory`.
+    wheels'). Its runs' memories start with `mrpctl.loop.wheels.wheel_memory`. ``law``: the steering law's body
+    torque request, as `mrpctl.engines.scalar.wheel_engine`'s (one library per law); None: the PD law.
 
     Raises
     ------
@@ -677,7 +687,7 @@ def wheel_lane_engine(
     """
     disturbed = bool(disturbed or torque_input)
     structure = {"sensor": bool(sensor), "limited": False, "disturbed": disturbed}
-    key = (
+    key: tuple[Any, ...] = (
         "wheels",
         wheels.key(),
         spacecraft.inertia.tobytes(),
@@ -689,17 +699,19 @@ def wheel_lane_engine(
         torque_input,
         torque_per_lane and torque_input,
     )
+    key += () if law is None else (law,)  # without a law the key of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
             core = wheel_core_function(
                 spacecraft, wheels, d, period, substeps, sensor=structure["sensor"], disturbed=disturbed,
-                torque_input=torque_input,
+                torque_input=torque_input, law=law,
             )  # fmt: skip
             digest = hashlib.sha256(repr(key[1:3]).encode()).hexdigest()[:12]
             label = f"hysteretic_wheels{wheels.count}_{digest}_d{d}_s{substeps}"
             label += ("" if structure["sensor"] else "_ideal") + ("" if disturbed else "_free")
             label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
+            label += "" if law is None else "_" + law.label()
             noise = ("noise",) if structure["sensor"] else ()
             found = LaneEngine(
                 engine_sample(core, d, f"mrpctl_lanes_{label}"),

@@ -17,6 +17,13 @@ where a (rad/s²) is the deceleration the body can count on and T (s) the reacti
 measurement delay and the rate loop's time constant): L is the largest rate from which the body,
 coasting for T and then braking at a, stops within φ. With s = 1 (near the target, where
 |ω_lin| <= L) the law *is* the PD law K. The actuator's limits act on u_c as for the PD law.
+
+With a momentum limit h and the spacecraft's J (a reaction-wheel cluster's: the body momentum its wheels
+hold in every direction) the scale also keeps the momentum of the commanded rate within h,
+
+    s = min(1, L(φ) / |ω_lin|, h / |J ω_lin|),
+
+a direction-dependent rate limit h / |J ω̂| (faster about the axes of small inertia).
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ import numpy as np
 from mrpctl._validation import nonnegative_scalar, positive_scalar
 from mrpctl.errors import SpecificationError
 from mrpctl.flight.models import Hysteretic
+from mrpctl.spacecraft import Spacecraft
 
 __all__ = ["SteeringLaw", "check_law", "steering_command_expr"]
 
@@ -54,16 +62,34 @@ class SteeringLaw:
     lag : float
         T >= 0, the reaction time included in the stopping distance (s): the measurement delay
         plus the rate loop's time constant. Default 0.
+    momentum_limit : float or None
+        h > 0 (N m s): the largest body momentum |J ω| of the commanded rate (a wheel cluster's
+        momentum capacity); given with ``spacecraft``. Default None: no momentum limit.
+    spacecraft : Spacecraft or None
+        The spacecraft whose inertia J measures the commanded rate's momentum (with ``momentum_limit``).
     """
 
     rate_limit: float
     acceleration: float
     lag: float = 0.0
+    momentum_limit: float | None = None
+    spacecraft: Spacecraft | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rate_limit", positive_scalar("rate_limit", self.rate_limit))
         object.__setattr__(self, "acceleration", positive_scalar("acceleration", self.acceleration))
         object.__setattr__(self, "lag", nonnegative_scalar("lag", self.lag))
+        if (self.momentum_limit is None) != (self.spacecraft is None):
+            raise SpecificationError(
+                "momentum_limit: give it with the spacecraft whose inertia measures the momentum (both or neither), "
+                f"got momentum_limit={self.momentum_limit!r}, spacecraft={self.spacecraft!r}"
+            )
+        if self.momentum_limit is not None:
+            object.__setattr__(self, "momentum_limit", positive_scalar("momentum_limit", self.momentum_limit))
+            if not isinstance(self.spacecraft, Spacecraft):
+                raise SpecificationError(
+                    f"spacecraft must be a mrpctl.Spacecraft, got {type(self.spacecraft).__name__}"
+                )
 
     def rate_command_limit(self, angle: float) -> float:
         """L(φ) (rad/s): the largest commanded rate at the remaining angle φ (rad)."""
@@ -73,12 +99,15 @@ class SteeringLaw:
     def label(self) -> str:
         """A short name of the law's numbers (part of its compiled engine's name)."""
         text = f"{self.rate_limit!r}_{self.acceleration!r}_{self.lag!r}"
+        if self.momentum_limit is not None and self.spacecraft is not None:  # else the label of before
+            text += f"_{self.momentum_limit!r}_{self.spacecraft.inertia.tobytes().hex()}"
         return "steer_" + hashlib.sha256(text.encode()).hexdigest()[:10]
 
     def __str__(self) -> str:
+        momentum = "" if self.momentum_limit is None else f", body momentum limit {self.momentum_limit:.4g} N m s"
         return (
             f"SteeringLaw (rate limit {self.rate_limit:.4g} rad/s, deceleration {self.acceleration:.4g} rad/s^2, "
-            f"lag {self.lag:.4g} s)"
+            f"lag {self.lag:.4g} s{momentum})"
         )
 
 
@@ -89,13 +118,18 @@ def steering_command_expr(law: SteeringLaw, gain: Any, sigma: Any, rate: Any) ->
     """
     k_sigma, k_omega = gain[:, 0:3], gain[:, 3:6]
     attitude = k_sigma @ sigma
-    linear_rate = 4.0 * ca.norm_2(ca.solve(k_omega, attitude))  # |ω_lin| = 4 |K_ω⁻¹ K_σ σ_c|
+    direction = ca.solve(k_omega, attitude)  # −ω_lin/4
+    linear_rate = 4.0 * ca.norm_2(direction)  # |ω_lin| = 4 |K_ω⁻¹ K_σ σ_c|
     angle = 4.0 * ca.atan(ca.norm_2(sigma))
     a, lag = law.acceleration, law.lag
     limit = ca.fmin(law.rate_limit, ca.sqrt((a * lag) ** 2 + 2.0 * a * angle) - a * lag)
     over = linear_rate > limit
     # both if_else branches are evaluated: keep the unused quotient finite at σ_c = 0
     scale = ca.if_else(over, limit / ca.if_else(over, linear_rate, 1.0), 1.0)
+    if law.momentum_limit is not None and law.spacecraft is not None:
+        momentum = 4.0 * ca.norm_2(ca.DM(law.spacecraft.inertia) @ direction)  # |J ω_lin|
+        heavy = scale * momentum > law.momentum_limit
+        scale = ca.if_else(heavy, law.momentum_limit / ca.if_else(heavy, momentum, 1.0), scale)
     return k_omega @ rate + scale * attitude, scale
 
 

@@ -26,6 +26,7 @@ from mrpctl.flight import (
     selection_function,
     short_expr,
 )
+from mrpctl.flight.steering import SteeringLaw, steering_command_expr
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, wheel_dynamics_expr
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent
@@ -160,6 +161,7 @@ def wheel_core_function(
     torque_input: bool = False,
     noise_form: NoiseForm = NoiseForm.ROTATION_VECTOR,
     short_measurements: bool = False,
+    law: SteeringLaw | None = None,
 ) -> ca.Function:
     """One sample of the flight loop on the wheel cluster (pure SX).
 
@@ -173,8 +175,10 @@ def wheel_core_function(
     be inf (the limits are the wheels'). ``u`` is the body torque of the motors −Gs u_s (N m);
     ``record`` (with ``records``) = (h_{k+1}, σ_c,k, u_c,k, Ω_k (N), u_s,k (N)). The wheel speeds the
     controller reads are those of the sample instant (tachometers, no delay); the attitude and the
-    rate are the delayed measurement, as in the flight sample. The other keywords as in
-    [`flight_core_function`][mrpctl.loop.flight_core_function].
+    rate are the delayed measurement, as in the flight sample. ``law``: the body torque request u_c is the
+    steering law's ([`steering_command_expr`][mrpctl.flight.steering.steering_command_expr], as in the flight
+    sample), then allocated to the wheels; None (default): the PD law u_c = K [σ_c; ω̃/4]. The other keywords
+    as in [`flight_core_function`][mrpctl.loop.flight_core_function].
     """
     if short_measurements and sensor:
         raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
@@ -200,7 +204,10 @@ def wheel_core_function(
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
-    command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    if law is None:
+        command = gain @ ca.vertcat(sigma_c, seen[3:6])
+    else:
+        command = steering_command_expr(law, gain, sigma_c, seen[3:6])[0]
     start = FLIGHT_MEMORY_SIZE
     speeds = memory[start : start + count]
     motor, body, torque_limited, speed_limited = allocation(command, 4 * seen[3:6], speeds)

@@ -42,6 +42,7 @@ from mrpctl.loop.options import (
     flight_memory,
     flight_options,
     flight_structure,
+    gravity_gradient_options,
     predictor_constants,
     predictor_disturbance,
     varying_delay,
@@ -211,6 +212,7 @@ def simulate_batch(
     law: SteeringLaw | None = None,
     sigma0: Any = None,
     omega0: Any = None,
+    gravity_gradient: Any = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -281,8 +283,9 @@ def simulate_batch(
         (shared or per run), each run streaming its own rows.
     wheels : mrpctl.wheels.WheelCluster, keyword-only
         Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
-        no ``actuator``, no ``predictor``): the runs take the scalar engine on the thread pool, and the result's
-        ``wheels`` holds each run's wheel metrics (and, with ``trajectories``, its wheel speeds and torques).
+        no ``actuator``, no ``predictor``; ``law`` taken): metrics-only runs take the wheel lane engine, with
+        ``trajectories`` the scalar engine on the thread pool, and the result's ``wheels`` holds each run's wheel
+        metrics (and, with ``trajectories``, its wheel speeds and torques).
     reference : keyword-only
         Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
         [`Hysteretic`][mrpctl.flight.Hysteretic]): one reference shared by the runs (an (n, 9) array, read
@@ -307,7 +310,13 @@ def simulate_batch(
         pool, not the lanes (the same metrics bit for bit). With ``trajectories`` they are kept anyway.
     law : mrpctl.flight.steering.SteeringLaw, keyword-only
         The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
-        such runs take the scalar engine (on the thread pool), also when ``trajectories`` is False.
+        on an ideal torque such runs take the scalar engine (on the thread pool), also when ``trajectories`` is
+        False; on ``wheels`` metrics-only runs take the wheel lane engine (the law compiled in).
+    gravity_gradient : mrpctl.guidance.CircularOrbit or NadirPointing, keyword-only
+        The gravity-gradient torque of this orbit in every run's plant (as in [`simulate`][mrpctl.simulation.simulate];
+        every rule a [`Hysteretic`][mrpctl.flight.Hysteretic]), the orbit shared by the runs. Metrics-only runs take
+        the lane engine (the orbit's constants a per-lane constant), each run bit for bit
+        [`simulate`][mrpctl.simulation.simulate]'s.
     sigma0, omega0 : array_like, keyword-only
         The initial states in physical form instead of ``x0``: (3,) or (N, 3) MRPs σ₀ and (3,) or
         (N, 3) body rates ω₀ (rad/s; default zero), broadcast against each other; each run is bit
@@ -363,11 +372,6 @@ def simulate_batch(
                 "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
                 "torque (actuator=ActuatorModel(...)) or regulate on the wheels (reference=None)"
             )
-        if law is not None:
-            raise SpecificationError(
-                "law: the steering law on a wheel cluster is not modelled yet; fly it with an ideal body torque "
-                "(actuator=ActuatorModel(...)), or fly the wheels with the PD law (law=None)"
-            )
     rate = positive_scalar("rate", rate)
     t_final, n = sample_horizon(t_final, rate)
     substeps = check_substeps(substeps)
@@ -415,8 +419,17 @@ def simulate_batch(
     streamed_by_run: list[Disturbance | None] = [None] * n_runs
     predictor_by_run: list[np.ndarray | None] = [None] * n_runs  # the predictor sample's constants per run
     if checked is None:
+        orbit_rows: dict[bytes | None, np.ndarray | None] = {}  # by the run's flight constants
         for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
             options_by_run[i], saturation = flight_options(one, actuator, items[i], sensor)
+            if gravity_gradient is not None:  # the orbit's constants after the flight constants, shared by the runs
+                constants = options_by_run[i]
+                row_key = None if constants is None else constants.tobytes()
+                if row_key not in orbit_rows:
+                    orbit_rows[row_key] = gravity_gradient_options(
+                        gravity_gradient, one, constants, period=1.0 / rate, substeps=substeps, wheels=wheels
+                    )
+                options_by_run[i] = orbit_rows[row_key]
             streamed_by_run[i] = (
                 streamed_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]", hint)
                 if (i == 0 or not shared)
@@ -426,6 +439,9 @@ def simulate_batch(
         jitter = jitter_bytes(varying[0], max(samples_by_run))  # one delay model for every run
         check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
+        gravity_gradient_options(  # refused with a predictor
+            gravity_gradient, rules[0], None, period=1.0 / rate, substeps=substeps, predictor=checked
+        )
         for i in range(n_runs):
             if i == 0 or not shared:
                 item = predictor_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]")
@@ -466,7 +482,9 @@ def simulate_batch(
     wheel_rows = None if wheels is None else np.full((n_runs, FLIGHT_MEMORY_SIZE + 4 * wheels.count + 1), np.nan)
     if reference is not None and find_compiler() is None:
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
-    if not trajectories and not switches and _LANES and checked is None and law is None and find_compiler() is not None:
+    lanes_take_law = law is None or wheels is not None  # the flight sample's law is not on the lanes (not done)
+    on_lanes = not trajectories and not switches and _LANES and checked is None and lanes_take_law
+    if on_lanes and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
             flight_rows,
@@ -487,12 +505,16 @@ def simulate_batch(
             wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
             tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
             settling=settling,
+            law=law,
+            gravity_gradient=gravity_gradient is not None,
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
     engines: dict[int, Any] = {}
     for i in scalar_runs:
-        structure = engine_structure(checked, options_by_run[i], sensor, actuator)
+        structure = engine_structure(
+            checked, options_by_run[i], sensor, actuator, gravity_gradient=gravity_gradient is not None
+        )
         torque_input = streamed_by_run[i] is not None
         tracking = tracked_by_run[i] is not None
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input, tracking)
@@ -507,7 +529,8 @@ def simulate_batch(
                 sensor=structure["sensor"],
                 disturbed=structure["disturbed"],
                 torque_input=torque_input,
-            )
+                law=law,
+            )  # (wheels with the gravity gradient are refused above)
         if key not in by_structure:
             by_structure[key] = engine(
                 crafts[i],
@@ -674,6 +697,8 @@ def _run_lanes(
     wheels: tuple[WheelCluster, np.ndarray] | None = None,
     tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
     settling: tuple[float, float] | None = None,
+    law: SteeringLaw | None = None,
+    gravity_gradient: bool = False,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -686,7 +711,9 @@ def _run_lanes(
     (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it.
     ``tracking``: each run's reference, the feedforward and
     whether the references are per run (then, or beside per-run torques, each lane is streamed its own rows;
-    a shared one is streamed beside the noise)."""
+    a shared one is streamed beside the noise). ``law``: the wheel runs' steering law (the wheel lanes take it).
+    ``gravity_gradient``: the runs' plant flies the gravity-gradient torque (the orbit's constants at the end of
+    each run's flight constants)."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
     tracked_by_run, feedforward, per_run_reference = (
@@ -737,6 +764,7 @@ def _run_lanes(
                     disturbed=structure["disturbed"],
                     torque_input=torque is not None,
                     torque_per_lane=own_torque,
+                    law=law,
                 )
             else:
                 lanes = lane_engines.lane_engine(
@@ -758,6 +786,7 @@ def _run_lanes(
                             "reference_per_lane": own_reference,
                         }
                     ),
+                    **({"gravity_gradient": True} if gravity_gradient and is_flight else {}),
                 )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
@@ -846,7 +875,8 @@ def _run_lanes(
 
 
 def _lane_options(options_by_run: list[np.ndarray | None], members: list[int]) -> np.ndarray | None:
-    """The flight constants of a lane group: one shared row, or (members, 10) when they differ by run."""
+    """The flight constants of a lane group: one shared row, or (members, 10) when they differ by run
+    ((members, 20) with the gravity gradient's orbit: no run's row is then None)."""
     rows = [options_by_run[i] for i in members]
     if all(row is rows[0] for row in rows):
         return rows[0]

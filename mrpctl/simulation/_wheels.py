@@ -12,6 +12,7 @@ from mrpctl._validation import finite_array, readonly, sealed
 from mrpctl.engines.scalar import wheel_engine
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import FLIGHT_MEMORY_SIZE, Hysteretic
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.loop.options import flight_options, flight_structure
 from mrpctl.model import wheel_hub_inertia
 from mrpctl.simulation.results import SimulationResult, WheelRecord
@@ -84,6 +85,7 @@ def run_wheels(
     varying: Any,
     stop: Any,
     switch_limit: int,
+    law: SteeringLaw | None = None,
 ) -> Any:
     """Run the wheel engine: (output of the engine, its structure), the caller assembles the result."""
     options, _ = flight_options(rule, None, disturbance, sensor)
@@ -98,6 +100,7 @@ def run_wheels(
         disturbed=structure["disturbed"],
         torque_input=streamed is not None,
         wheels=wheels,
+        law=law,
     )
     return found.run(
         x0,

@@ -300,6 +300,7 @@ class SimulationResult(_Conversions):
         last = "" if self.last_switch_time is None else f", last at {self.last_switch_time:.3f} s"
         first = "" if self.first_switch_time is None else f", first at {self.first_switch_time:.3f} s"
         kept = {1: "every sample", None: "metrics only"}.get(self.keep_every, f"every {self.keep_every}th sample")
+        tracking = self.error_time is not None
         return "\n".join(
             (
                 f"Simulation {self.t_final:g} s, tau = {self.tau:g} s ({self.delay_samples} samples at "
@@ -310,7 +311,7 @@ class SimulationResult(_Conversions):
             + (
                 f"  switches     {self.switch_count}{first}{last}",
                 f"  sign flips   u1 {self.sign_flips[0]}, u2 {self.sign_flips[1]}, u3 {self.sign_flips[2]}",
-                f"  max |sigma|  {self.max_sigma:.6f}",
+                f"  max |sigma|  {self.max_sigma:.6f}" + (" (the tracking error sigma_B/R)" if tracking else ""),
                 f"  peak torque  {self.peak_torque:.6g} N m",
             )
             + (
@@ -322,7 +323,26 @@ class SimulationResult(_Conversions):
                 )
             )
             + (f"  status       {status}",)
+            + (self._tracking_lines() if tracking else ())
         )
+
+    def _tracking_lines(self) -> tuple[str, ...]:
+        """The tracking run's convention and pointing figures, in words."""
+        time = {"measurement": "measurement's time", "current": "current time"}.get(
+            str(getattr(self.error_time, "value", self.error_time)), str(self.error_time)
+        )
+        lines = [
+            f"  tracking     error against the reference at the {time}, feedforward "
+            f"{'on' if self.feedforward else 'off'}"
+        ]
+        if self.pointing_max is not None and self.pointing_rms is not None:
+            lines.append(
+                f"  pointing     after settling max {self.pointing_max:.4g} deg, RMS {self.pointing_rms:.4g} deg"
+            )
+        if self.pointing_tolerance is not None:
+            slew = "never" if self.slew_time is None else f"{self.slew_time:.3f} s"
+            lines.append(f"  slew time    {slew} (pointing error within {self.pointing_tolerance:g} deg from then on)")
+        return tuple(lines)
 
 
 def assemble_run(
