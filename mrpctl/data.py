@@ -446,6 +446,7 @@ def _result(dataset: xr.Dataset, checked: dict[str, Any]) -> SimulationResult:
 
 def _wheel_record(dataset: xr.Dataset) -> WheelRecord:
     """The `WheelRecord` of a saved run on wheels, its cluster rebuilt (and checked) from the saved values."""
+
     def value(name: str) -> Any:
         return dataset[name].values
 

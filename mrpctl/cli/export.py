@@ -27,7 +27,7 @@ def _export(args: argparse.Namespace) -> int:
     if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
         raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")
     if scenario.wheels is not None:
-        return _print(_export_wheels(scenario, args), args)
+        return _print(_export_wheels(scenario, args), args, scenario)
     result = export(
         scenario.spacecraft,
         scenario.K,
@@ -42,7 +42,7 @@ def _export(args: argparse.Namespace) -> int:
         **_tracking(scenario),
         **scenario.run_options,
     )
-    return _print(result, args)
+    return _print(result, args, scenario)
 
 
 def _export_wheels(scenario: Scenario, args: argparse.Namespace) -> ExportResult:
@@ -70,7 +70,7 @@ def _export_wheels(scenario: Scenario, args: argparse.Namespace) -> ExportResult
     )
 
 
-def _print(result: ExportResult, args: argparse.Namespace) -> int:
+def _print(result: ExportResult, args: argparse.Namespace, scenario: Scenario) -> int:
     if args.json:
         print_json(
             {

@@ -23,8 +23,8 @@ from mrpctl.cli.common import (
     print_json,
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
-from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.cli.verify_tracking import check_tracking_options, verify_tracking
+from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.design import (
     FlownVerdict,
     analyze_gains,
