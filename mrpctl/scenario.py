@@ -28,6 +28,7 @@ from mrpctl._scenario_tables import (
     torque_rows,
     tracking_keys,
 )
+from mrpctl._scenario_wheels import WHEELS_TABLE, check_wheel_scenario, wheels_table, wheels_text, wheels_toml
 from mrpctl._validation import (
     finite_array,
     finite_scalar,
@@ -54,6 +55,7 @@ from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationResult, settling_tolerances, simulate
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "RULE_NAMES",
@@ -191,6 +193,9 @@ class Scenario:
     gravity_gradient : bool
         Nadir pointing only (``[reference] gravity_gradient = true``): the plant flies the gravity-gradient torque
         3n² r̂ × (J r̂) of the reference's orbit (``simulate(..., gravity_gradient=reference)``). Default False.
+    wheels : WheelCluster or None
+        The reaction wheels the body torque is flown on (``[wheels]``, `mrpctl._scenario_wheels`;
+        ``simulate(..., wheels=...)``, ``design/wheels.md``). None: the torque as commanded (or ``actuator``).
     """
 
     name: str
@@ -217,6 +222,7 @@ class Scenario:
     feedforward: bool = False
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE
     gravity_gradient: bool = False
+    wheels: WheelCluster | None = None
 
     @property
     def gains(self) -> PDGains:
@@ -272,6 +278,7 @@ class Scenario:
             reference=self.reference,
             **self.tracking_options,
             **self.run_options,
+            wheels=self.wheels,
         )
 
     @property
@@ -300,6 +307,7 @@ class Scenario:
                 *(f"  {value}" for value in self.run_options.values()),
                 *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
                 *([f"  reference: {self.reference}"] if self.reference is not None else []),
+                *([f"  {wheels_text(self.wheels)}"] if self.wheels is not None else []),
             )
         )
 
@@ -460,8 +468,15 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
       ``latitude_deg`` (argument of latitude at t = 0), each default 0;
     * ``"file"``: ``file``, a .csv or .npy file of n = floor(t_final · rate) + 1 rows of 9 numbers
       (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
+
+    The optional ``[wheels]`` table sets [`Scenario.wheels`][mrpctl.Scenario], the reaction wheels the torque is
+    flown on (keys and refusals: `mrpctl._scenario_wheels`).
     """
-    check_keys("", data, _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE})
+    check_keys(
+        "",
+        data,
+        _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, WHEELS_TABLE},
+    )
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")
@@ -498,6 +513,9 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         )
     except SpecificationError as exc:
         raise SpecificationError(f"{exc} (scenario keys settling_attitude_deg, settling_rate)") from exc
+    reference = reference_table(data, rate, Horizon(None if base is None else Path(base), samples))
+    wheels = wheels_table(data, spacecraft)
+    check_wheel_scenario(wheels, rule, actuator=flight.get("actuator"), predictor=predictor, reference=reference)
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
@@ -514,9 +532,10 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         uncertainty=_uncertainty_table(data, spacecraft),
         settling_attitude=settle_attitude,
         settling_rate=settle_rate,
-        reference=reference_table(data, rate, Horizon(None if base is None else Path(base), samples)),
+        reference=reference,
         **tracking_keys(data),
         **flight,
+        wheels=wheels,
     )
 
 
@@ -692,6 +711,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
             lines.append(f"pointing_tolerance_deg = {tolerance}  # the slew time's tolerance")
         if scenario.gravity_gradient:
             lines.append("gravity_gradient = true  # the plant flies 3 n^2 r x (J r) of the orbit")
+    lines += wheels_toml(scenario.wheels)
     if scenario.uncertainty is not None:
         lines += [
             "",
@@ -881,6 +901,8 @@ delta = 0.1
 # [sensor]       attitude_noise = 0.01 (rad, 1 sigma per axis), rate_noise = 1e-4 (rad/s), gyro_bias, seed = 1
 # [disturbance]  torque = [1e-3, 0.0, 0.0] (N m, body frame)
 # [delay]        tau_min = 0.15 (s; the delay jitters over the whole periods in [tau_min, tau]), seed = 2
+# [wheels]       reaction wheels instead of [actuator]: layout = "orthogonal", spin_inertia = 0.05 (kg m^2),
+#                torque_limit = 0.2 (N m), speed_limit_rpm = 6000.0 (see `mrpctl simulate cubesat_wheels`)
 #
 # What `mrpctl verify` certifies besides the idealised constant delay (any rule): the sampled loop at
 # `rate` (exact lifted check + certificate), the [delay] jitter (interval certificate), and

@@ -61,6 +61,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         (
             "mrpctl.scenario",
             "mrpctl._scenario_tables",
+            "mrpctl._scenario_wheels",
             "mrpctl.data",
             "mrpctl.interop",
             "mrpctl._export",

@@ -8,11 +8,13 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from mrpctl._export import export
+from mrpctl._export import ExportResult, export, export_wheel_controller
+from mrpctl._scenario_wheels import check_wheel_scenario
 from mrpctl.cli.common import EXIT_CODES, Formatter, add_flight_options, add_json, add_rule_options, print_json
 from mrpctl.cli.limits import check_history_fits
 from mrpctl.cli.overrides import apply_flight_options, apply_overrides
 from mrpctl.errors import SpecificationError
+from mrpctl.flight import Hysteretic
 from mrpctl.flight.tracking import ErrorTime
 from mrpctl.scenario import Scenario, load_scenario
 
@@ -29,6 +31,8 @@ def _export(args: argparse.Namespace) -> int:
             "[reference] gravity_gradient = true: the exported plant functions (dynamics, step, sample) do not model "
             "the gravity-gradient torque; remove the key to export (the controller does not depend on it)"
         )
+    if scenario.wheels is not None:
+        return _print(_export_wheels(scenario, args), args, scenario)
     result = export(
         scenario.spacecraft,
         scenario.K,
@@ -43,6 +47,35 @@ def _export(args: argparse.Namespace) -> int:
         **_tracking(scenario),
         **scenario.run_options,
     )
+    return _print(result, args, scenario)
+
+
+def _export_wheels(scenario: Scenario, args: argparse.Namespace) -> ExportResult:
+    """A wheel scenario's controller with its allocation (wheel torques out): ``export_wheel_controller``."""
+    check_wheel_scenario(scenario.wheels, scenario.rule, actuator=scenario.actuator, predictor=scenario.predictor)
+    if scenario.flight_options:
+        raise SpecificationError(
+            f"[wheels]: the wheel controller is exported without the {', '.join(scenario.flight_options)} model(s) "
+            "(they act on the plant, not in the controller); remove them to export the wheel controller"
+        )
+    if args.physical:
+        raise SpecificationError("--physical: the wheel controller's ports are x = [sigma; omega/4]; leave it out")
+    assert scenario.wheels is not None and isinstance(scenario.rule, Hysteretic)
+    return export_wheel_controller(
+        scenario.spacecraft,
+        scenario.K,
+        scenario.wheels,
+        args.out,
+        tau=scenario.tau,
+        rule=scenario.rule,
+        rate=scenario.rate,
+        substeps=scenario.substeps,
+        overwrite=args.overwrite,
+        compile=not args.no_compile,
+    )
+
+
+def _print(result: ExportResult, args: argparse.Namespace, scenario: Scenario) -> int:
     if args.json:
         print_json(
             {

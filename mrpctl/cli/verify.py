@@ -24,6 +24,7 @@ from mrpctl.cli.common import (
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
 from mrpctl.cli.verify_tracking import check_tracking_options, verify_tracking
+from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.design import (
     FlownVerdict,
     analyze_gains,
@@ -236,6 +237,8 @@ def _verify(args: argparse.Namespace) -> int:
             )
         scenario: Scenario | None = load_scenario(args.scenario)
         assert scenario is not None
+        if scenario.wheels is not None:
+            raise SpecificationError(WHEELS_NOT_CERTIFIED.format(command="verify"))
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         scenario = None

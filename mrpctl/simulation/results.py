@@ -33,6 +33,7 @@ __all__ = [
     "AXES",
     "FLIGHT_RECORDS",
     "STATE",
+    "WHEEL_VARIABLES",
     "BatchResult",
     "SimulationResult",
     "WheelRecord",
@@ -706,6 +707,38 @@ FLIGHT_RECORDS: tuple[tuple[str, tuple[str, ...], dict[str, str]], ...] = (
 )
 
 
+#: A run on wheels in its dataset: name -> (dimensions, the field of its `WheelRecord` or, for ``wheel_`` names
+#: of the cluster, of its `WheelCluster` (``cluster.<field>``), units). ``wheel`` counts the wheels.
+WHEEL_VARIABLES: dict[str, tuple[tuple[str, ...], str, str]] = {
+    "wheel_speed": (("time", "wheel"), "speeds", "rad/s"),
+    "wheel_motor_torque": (("time", "wheel"), "motor_torque", "N m"),
+    "wheel_final_speed": (("wheel",), "final_speeds", "rad/s"),
+    "wheel_peak_speed": (("wheel",), "peak_speed", "rad/s"),
+    "wheel_torque_limited_time": (("wheel",), "torque_limited_time", "s"),
+    "wheel_speed_limited_time": (("wheel",), "speed_limited_time", "s"),
+    "wheel_peak_momentum": ((), "peak_momentum", "N m s"),
+    "worst_wheel": ((), "worst_wheel", "1"),
+    "wheel_spin_axes": (("axis", "wheel"), "cluster.spin_axes", "1"),
+    "wheel_spin_inertia": (("wheel",), "cluster.spin_inertia", "kg m^2"),
+    "wheel_torque_limit": (("wheel",), "cluster.torque_limit", "N m"),
+    "wheel_speed_limit": (("wheel",), "cluster.speed_limit", "rad/s"),
+    "wheel_viscous": (("wheel",), "cluster.viscous", "N m s"),
+    "wheel_coulomb": (("wheel",), "cluster.coulomb", "N m"),
+    "wheel_limit_cycle_speed": (("wheel",), "cluster.limit_cycle_speed", "rad/s"),
+    "wheel_initial_speed": (("wheel",), "cluster.speeds", "rad/s"),
+    "wheel_bias_speed": (("wheel",), "cluster.bias_speeds", "rad/s"),
+    "wheel_control_axes": (("control_axis", "axis"), "cluster.control_axes", "1"),
+    "wheel_null_gain": ((), "cluster.null_gain", "1/s"),
+    "wheel_gyroscopic": ((), "cluster.gyroscopic", "1"),
+}
+
+
+def _wheel_value(record: WheelRecord, field: str) -> Any:
+    owner = record.cluster if field.startswith("cluster.") else record
+    value = getattr(owner, field.removeprefix("cluster."))
+    return value if isinstance(value, bool | int | float) else np.asarray(value)
+
+
 def _run_dataset(result: SimulationResult) -> xr.Dataset:
     # deferred: xarray (about 0.5 s to import), only for labelled data
     import xarray as xr  # deferred: xarray takes about 0.5 s to import
@@ -762,6 +795,9 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
         value = getattr(result, name)
         if value is not None:
             data[name] = (dims, np.asarray(value), attributes)
+    if result.wheels is not None:  # the wheels' speeds, torques, metrics and the cluster itself
+        for name, (dims, source, unit) in WHEEL_VARIABLES.items():
+            data[name] = (dims, _wheel_value(result.wheels, source), {"units": unit})
     if (result.settling_attitude, result.settling_rate) != (SETTLING_ATTITUDE_DEG, SETTLING_OMEGA):
         # the tolerances of settling_time, written when they are not the defaults
         data["settling_attitude"] = ((), result.settling_attitude, {"units": "deg", "long_name": "settled below"})
