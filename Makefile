@@ -1,5 +1,6 @@
 # Two set-up commands, both idempotent on a fresh machine with python3, make and gcc:
-#   make demo   create .venv, install mrpctl (its runtime dependencies only), run the paper example
+#   make demo   create .venv, install mrpctl (its runtime dependencies only), run the paper example, reproduce
+#               the paper's figures and fly the shipped nadir-pointing scenario (results/pointing_nadir.png)
 #   make test   create .venv, install mrpctl with its test extras, ruff + mypy, then the whole suite (figures
 #               compared with their baseline images) and doctests
 VENV ?= .venv
@@ -23,6 +24,7 @@ $(TEST_STAMP): $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/mrpctl example
 	$(VENV)/bin/mrpctl reproduce --out results --overwrite
+	$(VENV)/bin/mrpctl simulate nadir --pointing-plot results/pointing_nadir.png
 
 # One BLAS thread per xdist worker: two workers on two cores, no oversubscription.
 BLAS1 := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1

@@ -20,6 +20,7 @@ from mrpctl._validation import (
 )
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
+from mrpctl.flight.tracking import ErrorTime
 from mrpctl.guidance import (
     CircularOrbit,
     EigenaxisSlew,
@@ -312,6 +313,50 @@ def check_keys(table: str, data: dict[str, Any], allowed: set[str]) -> None:
         raise SpecificationError(f"unknown key {unknown[0]!r} in {where} of the scenario; allowed: {sorted(allowed)}")
 
 
+#: The keys of [reference] every type takes: how the controller forms and follows the error, and the slew time's
+#: tolerance (keywords of simulate: error_time, feedforward, pointing_tolerance).
+TRACKING_KEYS = {"error_time", "feedforward", "pointing_tolerance_deg", "gravity_gradient"}
+
+
+def tracking_keys(data: dict[str, Any]) -> dict[str, Any]:
+    """The tracking keywords of the [reference] table (``error_time``: "measurement" or "current";
+    ``feedforward``: true or false; ``pointing_tolerance_deg`` > 0; ``gravity_gradient``: true or false, nadir
+    pointing only: the plant flies the gravity-gradient torque of the reference's orbit) as keywords of the
+    scenario; {} without them."""
+    table = data.get(REFERENCE_TABLE)
+    if not isinstance(table, dict):
+        return {}
+    options: dict[str, Any] = {}
+    if "error_time" in table:
+        names = {time.value: time for time in ErrorTime}
+        if table["error_time"] not in names:
+            raise SpecificationError(
+                f"[reference] error_time must be one of {sorted(names)}, got {table['error_time']!r}"
+            )
+        options["error_time"] = names[table["error_time"]]
+    if "feedforward" in table:
+        if not isinstance(table["feedforward"], bool):
+            raise SpecificationError(f"[reference] feedforward must be true or false, got {table['feedforward']!r}")
+        options["feedforward"] = table["feedforward"]
+    if "pointing_tolerance_deg" in table:
+        tolerance = positive_scalar("[reference] pointing_tolerance_deg", table["pointing_tolerance_deg"])
+        if tolerance > 180.0:
+            raise SpecificationError(f"[reference] pointing_tolerance_deg must be at most 180, got {tolerance:g}")
+        options["pointing_tolerance"] = tolerance
+    if "gravity_gradient" in table:
+        if not isinstance(table["gravity_gradient"], bool):
+            raise SpecificationError(
+                f"[reference] gravity_gradient must be true or false, got {table['gravity_gradient']!r}"
+            )
+        if table["gravity_gradient"] and table.get("type") != "nadir":
+            raise SpecificationError(
+                "[reference] gravity_gradient = true needs an orbit: it applies to type = 'nadir' only, got type = "
+                f"{table.get('type')!r}"
+            )
+        options["gravity_gradient"] = table["gravity_gradient"]
+    return options
+
+
 def reference_table(data: dict[str, Any], rate: float, horizon: Horizon) -> GuidanceProfile | None:
     """The [reference] table (optional) as a guidance profile; every error names [reference] and the key.
 
@@ -322,7 +367,8 @@ def reference_table(data: dict[str, Any], rate: float, horizon: Horizon) -> Guid
     ``mu`` (m³/s², default the Earth's) for the last two, and ``inclination_deg``, ``raan_deg``,
     ``latitude_deg`` (the argument of latitude at t = 0), each default 0. ``type = "file"``: ``file``, a
     .csv or .npy file of n rows of 9 numbers (σ_R/N, ω_R/N, ω̇_R/N, N components), n = floor(t_final ·
-    rate) + 1, relative to the scenario file.
+    rate) + 1, relative to the scenario file. Every type also takes the keys of
+    [`tracking_keys`][mrpctl._scenario_tables.tracking_keys].
     """
     if REFERENCE_TABLE not in data:
         return None
@@ -332,7 +378,7 @@ def reference_table(data: dict[str, Any], rate: float, horizon: Horizon) -> Guid
     kind = table.get("type")
     if not isinstance(kind, str) or kind not in _REFERENCE_KEYS:
         raise SpecificationError(f"[reference] needs type, one of {sorted(_REFERENCE_KEYS)}, got {kind!r}")
-    check_keys(REFERENCE_TABLE, table, _REFERENCE_KEYS[kind] | {"type"})
+    check_keys(REFERENCE_TABLE, table, _REFERENCE_KEYS[kind] | {"type"} | TRACKING_KEYS)
     try:
         return _REFERENCE_BUILDERS[kind](table, rate, horizon)
     except (SpecificationError, DimensionError) as exc:

@@ -23,15 +23,25 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mrpctl._files import memory_limit, regular_file, size_text
-from mrpctl._validation import finite_array, integer, nonnegative_scalar, positive_scalar, readonly
+from mrpctl._validation import finite_array, integer, nonnegative_scalar, positive_scalar, readonly, sealed
 from mrpctl.errors import DimensionError, MrpctlError, SpecificationError
 from mrpctl.loop import check_substeps, delay_samples
 from mrpctl.predictor import Predictor
 from mrpctl.provenance import versions
 from mrpctl.rules import RULE_NAMES, rule_from_name
 from mrpctl.scenario import sample_count
-from mrpctl.simulation.results import AXES, FLIGHT_RECORDS, STATE, SimulationResult, to_pandas, to_xarray
+from mrpctl.simulation.results import (
+    AXES,
+    FLIGHT_RECORDS,
+    STATE,
+    WHEEL_VARIABLES,
+    SimulationResult,
+    WheelRecord,
+    to_pandas,
+    to_xarray,
+)
 from mrpctl.spacecraft import Spacecraft
+from mrpctl.wheels import WheelCluster
 
 if TYPE_CHECKING:
     # deferred: xarray (about 0.5 s to import), only for labelled data
@@ -75,7 +85,9 @@ def save(result: SimulationResult, path: str | Path, *, seed: int | None = None)
     """Save one run with its inputs, the package versions and (optionally) the seed it came from.
 
     The file is NetCDF-3 (64-bit offset) written by xarray's scipy engine into a temporary
-    file beside ``path`` and renamed over it, so an interrupted save leaves any old file intact.
+    file beside ``path`` and renamed over it, so an interrupted save leaves any old file intact. A run on
+    wheels also holds its wheel speeds and motor torques over (``time``, ``wheel``), its wheel metrics and its
+    cluster (`mrpctl.simulation.results.WHEEL_VARIABLES`); [`load`][mrpctl.data.load] rebuilds them.
 
     Parameters
     ----------
@@ -152,6 +164,11 @@ _OPTIONAL: dict[str, tuple[tuple[str, ...], str]] = {
     "sigma_predicted": (("time", "axis"), "f"),
     "omega_predicted": (("time", "axis"), "f"),
     "history": (("history_sample", "state"), "f"),
+    # a run on wheels: all of WHEEL_VARIABLES or none
+    **{
+        name: (dims, "i" if name == "worst_wheel" else "b" if name == "wheel_gyroscopic" else "f")
+        for name, (dims, _, _) in WHEEL_VARIABLES.items()
+    },
 }
 _KIND_NAMES = {"f": "floats", "i": "integers", "b": "flags", "s": "names"}
 _SIZES = {"axis": 3, "state": 6, "row": 3, "col": 3, "input": 3, "command": 4}
@@ -266,6 +283,10 @@ def _check_values(dataset: xr.Dataset, path: Path) -> dict[str, Any]:
     parameter = np.asarray(attrs.get("rule_parameter"))
     if parameter.shape != () or parameter.dtype.kind not in "fi" or np.isnan(parameter):
         raise SpecificationError("the attribute rule_parameter must be a number")
+    wheels = [name in dataset for name in WHEEL_VARIABLES]
+    if any(wheels) and not all(wheels):
+        missing = next(name for name in WHEEL_VARIABLES if name not in dataset)
+        raise SpecificationError(f"a run on wheels has all the wheel variables, but {missing} is missing")
     if ("predictor_inertia" in dataset) != (attrs["rule_type"] == "on-predicted"):
         raise SpecificationError("predictor_inertia must be present exactly with the rule 'on-predicted'")
     versions = attrs.get("versions")
@@ -389,6 +410,8 @@ def _result(dataset: xr.Dataset, checked: dict[str, Any]) -> SimulationResult:
     for name in ("settling_attitude", "settling_rate"):  # written when not the defaults
         if name in dataset:
             flown[name] = float(dataset[name])
+    if "wheel_spin_axes" in dataset:
+        flown["wheels"] = _wheel_record(dataset)
     return SimulationResult(
         t=readonly(dataset["time"].values),
         sigma=readonly(dataset["sigma"].values),
@@ -418,6 +441,39 @@ def _result(dataset: xr.Dataset, checked: dict[str, Any]) -> SimulationResult:
         keep_every=keep_every,
         predictor=predictor,
         **flown,
+    )
+
+
+def _wheel_record(dataset: xr.Dataset) -> WheelRecord:
+    """The `WheelRecord` of a saved run on wheels, its cluster rebuilt (and checked) from the saved values."""
+
+    def value(name: str) -> Any:
+        return dataset[name].values
+
+    cluster = WheelCluster(
+        value("wheel_spin_axes"),
+        value("wheel_spin_inertia"),
+        value("wheel_torque_limit"),
+        value("wheel_speed_limit"),
+        viscous=value("wheel_viscous"),
+        coulomb=value("wheel_coulomb"),
+        limit_cycle_speed=value("wheel_limit_cycle_speed"),
+        speeds=value("wheel_initial_speed"),
+        control_axes=value("wheel_control_axes"),
+        null_gain=float(value("wheel_null_gain")),
+        bias_speeds=value("wheel_bias_speed"),
+        gyroscopic=bool(value("wheel_gyroscopic")),
+    )
+    return WheelRecord(
+        cluster=cluster,
+        speeds=sealed(np.array(value("wheel_speed"), dtype=float)),
+        motor_torque=sealed(np.array(value("wheel_motor_torque"), dtype=float)),
+        final_speeds=readonly(value("wheel_final_speed")),
+        peak_speed=readonly(value("wheel_peak_speed")),
+        torque_limited_time=readonly(value("wheel_torque_limited_time")),
+        speed_limited_time=readonly(value("wheel_speed_limited_time")),
+        peak_momentum=float(value("wheel_peak_momentum")),
+        worst_wheel=int(value("worst_wheel")),
     )
 
 

@@ -400,6 +400,12 @@ class CircularOrbit:
         """ĥ (3), the unit orbit normal in N components."""
         return self._frame()[:, 2].copy()
 
+    @property
+    def in_plane_axes(self) -> np.ndarray:
+        """(3, 2): the columns ê₁ (to the ascending node) and ê₂ = ĥ × ê₁ (N components), so that
+        r̂_N(t) = cos(u₀ + n t) ê₁ + sin(u₀ + n t) ê₂."""
+        return self._frame()[:, 0:2].copy()
+
     def r_hat(self, t: Any) -> np.ndarray:
         """r̂_N(t) (len(t), 3): the unit vector from the body's centre to the spacecraft, N components."""
         u = self.latitude + self.orbit_rate * _times(t)

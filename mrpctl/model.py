@@ -33,12 +33,16 @@ from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "INPUT_SIZE",
+    "ORBIT_SIZE",
     "STATE_SIZE",
     "PlantModel",
     "dynamics_expr",
     "gain_from_pd",
     "gain_matrix",
     "gravity_gradient_expr",
+    "orbit_phase_expr",
+    "orbit_position_expr",
+    "orbit_turn_expr",
     "pd_from_gain",
     "plant_model",
     "state",
@@ -50,6 +54,10 @@ __all__ = [
 
 STATE_SIZE = 6
 INPUT_SIZE = 3
+#: A circular orbit as the run-time constants of a compiled sample: (n, u₀, ê₁ (3), ê₂ (3), cos δ, sin δ) with δ
+#: the angle the orbit turns in half an RK4 substep; see [`orbit_position_expr`][mrpctl.model.orbit_position_expr]
+#: and [`orbit_turn_expr`][mrpctl.model.orbit_turn_expr].
+ORBIT_SIZE = 10
 
 
 def dynamics_expr(
@@ -159,8 +167,39 @@ def gravity_gradient_expr(sigma_BN: Any, r_hat_N: Any, n: Any, inertia: Any) -> 
         J, 3 × 3 (kg m²).
     """
     sigma_BN, r_hat_N, inertia = (_casadi(v) for v in (sigma_BN, r_hat_N, inertia))
-    r_b = dcm_expr(sigma_BN) @ r_hat_N
+    # r̂_B = [BN] r̂_N = r̂ + (8 σ × (σ × r̂) − 4 (1 − |σ|²) σ × r̂)/(1 + |σ|²)²: dcm_expr's matrix applied by two
+    # cross products (no 3 × 3 matrix)
+    squared = ca.dot(sigma_BN, sigma_BN)
+    once = ca.cross(sigma_BN, r_hat_N)
+    r_b = r_hat_N + (8 * ca.cross(sigma_BN, once) - 4 * (1 - squared) * once) / ((1 + squared) * (1 + squared))
     return 3 * n**2 * ca.cross(r_b, inertia @ r_b)
+
+
+def orbit_phase_expr(orbit: Any, t: Any) -> tuple[Any, Any]:
+    """(cos u, sin u), u = u₀ + n t, of a circular orbit ``orbit`` (`ORBIT_SIZE`, see `orbit_position_expr`) at
+    ``t`` (s), as CasADi expressions."""
+    angle = orbit[1] + orbit[0] * t
+    return ca.cos(angle), ca.sin(angle)
+
+
+def orbit_turn_expr(orbit: Any, phase: tuple[Any, Any]) -> tuple[Any, Any]:
+    """The phase (cos u, sin u) turned by δ, the orbit's angle in half an RK4 substep, by the angle-addition
+    formulas with the constants cos δ, sin δ of ``orbit`` (no libm call): (cos(u + δ), sin(u + δ))."""
+    cosine, sine = phase
+    return cosine * orbit[8] - sine * orbit[9], sine * orbit[8] + cosine * orbit[9]
+
+
+def orbit_position_expr(orbit: Any, phase: tuple[Any, Any]) -> Any:
+    """r̂_N = cos u ê₁ + sin u ê₂ (N components) of a circular orbit at the phase (cos u, sin u), as a CasADi
+    expression: with `orbit_phase_expr`, r̂_N(t) = cos(u₀ + n t) ê₁ + sin(u₀ + n t) ê₂.
+
+    ``orbit`` holds (n, u₀, ê₁ (3), ê₂ (3), cos δ, sin δ) (`ORBIT_SIZE`): the orbit rate (rad/s), the argument of
+    latitude at t = 0 (rad), the two in-plane unit axes, ê₁ to the ascending node and ê₂ = ĥ × ê₁
+    ([`CircularOrbit.in_plane_axes`][mrpctl.guidance.CircularOrbit.in_plane_axes]), and the cosine and sine of
+    δ = n dt/2, the angle of half an RK4 substep dt (`orbit_turn_expr`).
+    """
+    cosine, sine = phase
+    return cosine * orbit[2:5] + sine * orbit[5:8]
 
 
 def _casadi(value: Any) -> Any:

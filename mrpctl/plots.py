@@ -1,4 +1,5 @@
-"""Figures of simulations, sweeps and Monte Carlo batches: the only module that imports matplotlib.
+"""Figures of simulations, sweeps and Monte Carlo batches: with its private figure modules (`_plots_common`,
+`_plots_pointing`, re-exported here) the only place that imports matplotlib.
 
 The functions build `matplotlib.figure.Figure` objects and never select a backend,
 so they work headless (``save_figure`` renders through Agg) and in notebooks (the figure
@@ -17,7 +18,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import tempfile
 import textwrap
 from collections.abc import Sequence
@@ -30,6 +30,11 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from scipy.stats import chi2
 
+from mrpctl._plots_common import legend_outside as _legend_outside
+from mrpctl._plots_common import new_axes as _new_axes
+from mrpctl._plots_common import rule_words as _rule_words
+from mrpctl._plots_common import typeset as _typeset
+from mrpctl._plots_pointing import plot_pointing
 from mrpctl.conventions import state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 
@@ -99,6 +104,7 @@ __all__ = [
     "plot_monte_carlo",
     "plot_nees",
     "plot_noise_study",
+    "plot_pointing",
     "plot_response",
     "plot_sweep",
     "plot_wheels",
@@ -114,39 +120,9 @@ SETTLING_CAPTION = "settled: |σ| < 10⁻² and |ω| < 10⁻³ rad/s to the end"
 #: A cluster of at least this many switches in at most this fraction of the run gets a zoom inset.
 _INSET_MIN_SWITCHES = 10
 _INSET_MAX_FRACTION = 0.1
-_WORDS = {"eps": "ε", "tau": "τ", "sigma": "σ", "omega": "ω", "alpha": "α", "delta": "δ", "Phi": "Φ"}
-_WORD_RE = re.compile(r"\b(" + "|".join(_WORDS) + r")\b")
-
-
-def _typeset(text: str) -> str:
-    """σ, τ, ε, ω typeset the same everywhere: ASCII names from callers and rules become Greek."""
-    return _WORD_RE.sub(lambda m: _WORDS[m.group(1)], text)
 
 
 # ------------------------------------------------------------------------------ axes plumbing
-def _new_axes(n: int, ax: Any, *, figsize: tuple[float, float], sharex: bool = True) -> tuple[Figure, list[Axes]]:
-    """The figure and ``n`` axes: the caller's ``ax`` (one Axes or a sequence) or a new Figure (no pyplot)."""
-    if ax is None:
-        fig = Figure(figsize=figsize, layout="constrained")
-        made = fig.subplots(n, 1, sharex=sharex, squeeze=False)[:, 0]
-        return fig, list(made)
-    axes = [ax] if isinstance(ax, Axes) else list(np.ravel(np.asarray(ax, dtype=object)))
-    if len(axes) != n or not all(isinstance(a, Axes) for a in axes):
-        raise DimensionError(f"ax must be {'one matplotlib Axes' if n == 1 else f'{n} matplotlib Axes'}, got {ax!r}")
-    owner: Any = axes[0].figure
-    while not isinstance(owner, Figure) and getattr(owner, "figure", None) is not None:  # a SubFigure
-        owner = owner.figure
-    if not isinstance(owner, Figure):  # pragma: no cover - an Axes always belongs to a Figure
-        raise SpecificationError("ax must belong to a matplotlib Figure")
-    return owner, axes
-
-
-def _legend_outside(ax: Axes, **kwargs: Any) -> None:
-    """Legend to the right of the axes, never over the data."""
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8, **kwargs)
-
-
 def _components(
     ax: Axes, t: np.ndarray, values: np.ndarray, symbol: str, *, drawstyle: str = "default", marker: str | None = None
 ) -> None:
@@ -195,28 +171,6 @@ def _status(result: RunView) -> str:
     if result.settling_time is not None:
         return f"settled at {result.settling_time:.1f} s ({SETTLING_CAPTION.split(': ', 1)[1]})"
     return f"did not settle in {result.t_final:g} s ({SETTLING_CAPTION.split(': ', 1)[1]})"
-
-
-def _rule_words(rule: Any) -> str:
-    """What a switching rule does, in words and the figures' notation (never its class name or repr)."""
-    name = type(rule).__name__
-    if name == "NoSwitching":
-        return "no shadow-set switching"
-    if name == "OnCurrent":
-        return "switching when the current |σ(t)| ≥ 1"
-    if name == "OnDelayed":
-        return "switching when the delayed |σ(t − τ)| ≥ 1"
-    if name == "BoundaryLayer":
-        return f"switching when 1 ≤ |σ(t − τ)| ≤ 1 + ε (ε = {rule.eps:g})"
-    if name == "DelayAware":
-        return f"delay-aware switching when |σ(t − τ)| ≥ α (α = {rule.alpha:g})"
-    if name == "Hysteretic":
-        return f"controller-side set selection with hysteresis δ = {rule.delta:g}"
-    if name == "OnPredicted":
-        alpha = getattr(rule, "alpha", None)
-        return "predictor, no switching" if alpha is None else f"predictor, switching when |σ̂| ≥ α (α = {alpha:g})"
-    words = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", name).lower()  # a rule of the user's: its class name in words
-    return _typeset(words)
 
 
 def _title(result: RunView) -> str:

@@ -27,7 +27,9 @@ from mrpctl._scenario_tables import (
     sample_count,
     samples_file,
     torque_rows,
+    tracking_keys,
 )
+from mrpctl._scenario_wheels import WHEELS_TABLE, check_wheel_scenario, wheels_table, wheels_text, wheels_toml
 from mrpctl._validation import (
     finite_array,
     finite_scalar,
@@ -40,6 +42,7 @@ from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.estimation import EstimatedLoop
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, SensorModel
+from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime
 from mrpctl.guidance import (
     EigenaxisSlew,
     FileReference,
@@ -55,6 +58,7 @@ from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationR
 from mrpctl.simulation.estimated import EstimatedResult
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 __all__ = [
     "RULE_NAMES",
@@ -185,6 +189,16 @@ class Scenario:
         [`FileReference`][mrpctl.guidance.FileReference]. None: regulation to the inertial origin.
         [`simulate`][mrpctl.Scenario.simulate] flies the tracking loop on it
         (``simulate(..., reference=...)``: the controller-side rule or the predictor).
+    error_time, feedforward, pointing_tolerance : ErrorTime or None, bool, float
+        How a tracking scenario's controller forms its error (``[reference] error_time``: "measurement" or
+        "current"; None: simulate's default), whether it adds the feedforward terms (``feedforward``), and
+        the slew time's tolerance on the pointing error in degrees (``pointing_tolerance_deg``, default 0.1).
+    gravity_gradient : bool
+        Nadir pointing only (``[reference] gravity_gradient = true``): the plant flies the gravity-gradient torque
+        3n² r̂ × (J r̂) of the reference's orbit (``simulate(..., gravity_gradient=reference)``). Default False.
+    wheels : WheelCluster or None
+        The reaction wheels the body torque is flown on (``[wheels]``, `mrpctl._scenario_wheels`;
+        ``simulate(..., wheels=...)``, ``design/wheels.md``). None: the torque as commanded (or ``actuator``).
     estimated_loop : EstimatedLoop or None
         The loop on an estimator of a late star tracker and a gyro (``[estimator]``; ``design/estimation.md``),
         flown by [`simulate_estimated`][mrpctl.Scenario.simulate_estimated]. None: the loop above.
@@ -210,6 +224,11 @@ class Scenario:
     settling_attitude: float = SETTLING_ATTITUDE_DEG
     settling_rate: float = SETTLING_OMEGA
     reference: GuidanceProfile | None = None
+    error_time: ErrorTime | None = None
+    feedforward: bool = False
+    pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE
+    gravity_gradient: bool = False
+    wheels: WheelCluster | None = None
     estimated_loop: EstimatedLoop | None = None
 
     @property
@@ -266,8 +285,24 @@ class Scenario:
             settling_attitude=self.settling_attitude,
             settling_rate=self.settling_rate,
             reference=self.reference,
+            **self.tracking_options,
             **self.run_options,
+            wheels=self.wheels,
         )
+
+    @property
+    def tracking_options(self) -> dict[str, Any]:
+        """A tracking scenario's ``error_time``, ``feedforward``, ``pointing_tolerance`` (and, with
+        ``gravity_gradient``, the orbit) as keywords of [`mrpctl.simulate`][mrpctl.simulation.simulate]; {} when
+        the scenario regulates."""
+        if self.reference is None:
+            return {}
+        return {
+            "error_time": self.error_time,
+            "feedforward": self.feedforward,
+            "pointing_tolerance": self.pointing_tolerance,
+            **({"gravity_gradient": self.reference} if self.gravity_gradient else {}),
+        }
 
     def simulate_estimated(self) -> EstimatedResult:
         """Run the scenario's [estimator] loop: ``simulate(..., sensors=..., estimator=...)``."""
@@ -277,7 +312,7 @@ class Scenario:
         return simulate(
             self.spacecraft, self.K, self.x0, tau=self.tau, rule=self.rule, t_final=self.t_final, rate=self.rate,
             history=self.history, substeps=self.substeps, reference=self.reference, sensors=loop.sensors,
-            estimator=loop.estimator, **self.run_options,
+            estimator=loop.estimator, wheels=self.wheels, **self.run_options,
         )  # fmt: skip
 
     def __str__(self) -> str:
@@ -292,6 +327,7 @@ class Scenario:
                 *(f"  {value}" for value in self.run_options.values()),
                 *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
                 *([f"  reference: {self.reference}"] if self.reference is not None else []),
+                *([f"  {wheels_text(self.wheels)}"] if self.wheels is not None else []),
                 *([f"  {self.estimated_loop}"] if self.estimated_loop is not None else []),
             )
         )
@@ -454,11 +490,17 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     * ``"file"``: ``file``, a .csv or .npy file of n = floor(t_final · rate) + 1 rows of 9 numbers
       (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
 
+    The optional ``[wheels]`` table sets [`Scenario.wheels`][mrpctl.Scenario], the reaction wheels the torque is
+    flown on (keys and refusals: `mrpctl._scenario_wheels`).
     The optional ``[estimator]`` table (with ``[estimator.star_tracker]``, ``[estimator.gyro]`` and optionally
     ``[estimator.tuning]``) sets [`Scenario.estimated_loop`][mrpctl.Scenario]: the loop on an estimator of a late
     star tracker and a gyro (its keys: ``design/estimation.md``; an example: ``docs/how-to/estimation.md``).
     """
-    check_keys("", data, _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE})
+    check_keys(
+        "",
+        data,
+        _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, WHEELS_TABLE},
+    )
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
         raise SpecificationError("[spacecraft] needs inertia (3 principal values or a 3x3 matrix, kg m^2)")
@@ -495,6 +537,9 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         )
     except SpecificationError as exc:
         raise SpecificationError(f"{exc} (scenario keys settling_attitude_deg, settling_rate)") from exc
+    reference = reference_table(data, rate, Horizon(None if base is None else Path(base), samples))
+    wheels = wheels_table(data, spacecraft)
+    check_wheel_scenario(wheels, rule, actuator=flight.get("actuator"), predictor=predictor, reference=reference)
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
@@ -511,9 +556,11 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         uncertainty=_uncertainty_table(data, spacecraft),
         settling_attitude=settle_attitude,
         settling_rate=settle_rate,
-        reference=reference_table(data, rate, Horizon(None if base is None else Path(base), samples)),
+        reference=reference,
+        **tracking_keys(data),
         estimated_loop=estimator_table(data, spacecraft=spacecraft, rule=rule, tau=tau, rate=rate, history=history),
         **flight,
+        wheels=wheels,
     )
 
 
@@ -679,6 +726,17 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
     lines += _flight_toml(scenario)
     lines += _reference_toml(scenario.reference)
+    if scenario.reference is not None:
+        if scenario.error_time is not None:
+            lines.append(f'error_time = "{scenario.error_time.value}"  # the reference at the measurement time or now')
+        if scenario.feedforward:
+            lines.append("feedforward = true  # omega x J omega and J (domega_R - omega x omega_R)")
+        if scenario.pointing_tolerance != DEFAULT_POINTING_TOLERANCE:
+            tolerance = _toml_value(scenario.pointing_tolerance)
+            lines.append(f"pointing_tolerance_deg = {tolerance}  # the slew time's tolerance")
+        if scenario.gravity_gradient:
+            lines.append("gravity_gradient = true  # the plant flies 3 n^2 r x (J r) of the orbit")
+    lines += wheels_toml(scenario.wheels)
     lines += estimator_toml(scenario.estimated_loop)
     if scenario.uncertainty is not None:
         lines += [
@@ -869,6 +927,8 @@ delta = 0.1
 # [sensor]       attitude_noise = 0.01 (rad, 1 sigma per axis), rate_noise = 1e-4 (rad/s), gyro_bias, seed = 1
 # [disturbance]  torque = [1e-3, 0.0, 0.0] (N m, body frame)
 # [delay]        tau_min = 0.15 (s; the delay jitters over the whole periods in [tau_min, tau]), seed = 2
+# [wheels]       reaction wheels instead of [actuator]: layout = "orthogonal", spin_inertia = 0.05 (kg m^2),
+#                torque_limit = 0.2 (N m), speed_limit_rpm = 6000.0 (see `mrpctl simulate cubesat_wheels`)
 #
 # What `mrpctl verify` certifies besides the idealised constant delay (any rule): the sampled loop at
 # `rate` (exact lifted check + certificate), the [delay] jitter (interval certificate), and

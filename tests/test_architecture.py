@@ -54,13 +54,14 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("the predictor and the rules by name", ("mrpctl.predictor", "mrpctl.rules")),
     ("the closed loop as CasADi Functions", ("mrpctl.loop",)),
     ("engines", ("mrpctl.engines",)),
-    ("figures", ("mrpctl.plots",)),
+    ("figures", ("mrpctl._plots_common", "mrpctl._plots_pointing", "mrpctl.plots")),
     ("simulate and its results", ("mrpctl.simulation",)),
     (
         "files and bridges",
         (
             "mrpctl.scenario",
             "mrpctl._scenario_tables",
+            "mrpctl._scenario_wheels",
             "mrpctl.data",
             "mrpctl.interop",
             "mrpctl._export",
@@ -78,6 +79,8 @@ HEAVY = {"cvxpy", "xarray", "zarr", "pandas", "matplotlib", "control", "dask", "
 #: python-control bridge.
 HEAVY_OWN = {
     "mrpctl.plots",
+    "mrpctl._plots_common",
+    "mrpctl._plots_pointing",
     "mrpctl.campaign.run",
     "mrpctl.campaign.store",
     "mrpctl.campaign.report",

@@ -10,12 +10,15 @@ between FreeType builds; a moved line, a changed label or axis range exceeds it.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
 from mrpctl import paper, plots, simulate
 from mrpctl.flight import ActuatorModel
+from mrpctl.scenario import load_scenario
 from mrpctl.switching import OnCurrent, OnDelayed
 
 pytest.importorskip("pytest_mpl")
@@ -68,3 +71,10 @@ def test_noise_study_image() -> Figure:
         settling_time=[[50.0, 52.0], [np.nan, 53.5]],
         title="controller-side rule under attitude noise",
     )
+
+
+@pytest.mark.mpl_image_compare(filename="pointing_nadir.png", **COMPARE)
+def test_pointing_image() -> Figure:
+    """The shipped nadir-pointing scenario: Φ_B/R from 20° down past the 0.05° band, slew time and settling."""
+    scenario = load_scenario(Path(__file__).resolve().parents[1] / "examples" / "scenarios" / "nadir.toml")
+    return plots.plot_pointing(scenario.simulate())

@@ -24,6 +24,8 @@ def test_demo_installs_only_the_runtime(tmp_path: Path) -> None:
     out = _dry_run("demo", tmp_path)
     assert "pip install" in out and "-e ." in out and "[test]" not in out
     assert "mrpctl example" in out
+    # the shipped nadir-pointing scenario, by its name (installed as package data, no checkout path needed)
+    assert "mrpctl simulate nadir --pointing-plot results/pointing_nadir.png" in out
 
 
 def test_test_installs_the_test_extras_and_compares_images(tmp_path: Path) -> None:

@@ -59,8 +59,10 @@ def test_examples_are_the_package_data_files() -> None:
     """One copy: examples/scenarios is the package-data folder mrpctl/scenarios (shipped in the wheel)."""
     assert EXAMPLES.resolve() == PACKAGE.resolve()
     shipped = shipped_scenarios()
-    # predictor-paper: checked against mrpctl._predictor_study in tests/test_scenario_predictor.py
-    expected = set(paper_scenarios()) | set(flight_scenarios()) | {"predictor-paper"}
+    # predictor-paper: checked against mrpctl._predictor_study in tests/test_scenario_predictor.py;
+    # nadir: checked in tests/test_scenario_tracking.py;
+    # cubesat_wheels: in tests/test_scenario_wheels.py and by the how-to that sizes its wheels (test_docs_wheels.py)
+    expected = set(paper_scenarios()) | set(flight_scenarios()) | {"predictor-paper", "nadir", "cubesat_wheels"}
     assert set(shipped) == expected == {p.stem for p in PACKAGE.glob("*.toml")}
     assert all(path.resolve().parent == PACKAGE.resolve() for path in shipped.values())
 
@@ -71,7 +73,9 @@ def test_shipped_names_resolve(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     assert resolve_scenario("paper_fig4_on_delayed.toml") == shipped_scenarios()["paper_fig4_on_delayed"]
     (tmp_path / "paper_fig4_on_delayed.toml").write_text("x = 1\n", encoding="utf-8")
     assert resolve_scenario("paper_fig4_on_delayed.toml") == Path("paper_fig4_on_delayed.toml")  # a file wins
-    with pytest.raises(SpecificationError, match=r"not found: nope.*shipped scenario names: delay_aware"):
+    with pytest.raises(
+        SpecificationError, match=r"not found: nope.*shipped scenario names: cubesat_wheels, delay_aware"
+    ):
         load_scenario("nope")
 
 

@@ -184,6 +184,7 @@ def test_the_writer_keeps_a_tuning_of_python() -> None:
         ({**_with(), "rule": {"type": "on-delayed"}}, ["[estimator] needs [rule] type = 'hysteretic'"]),
         ({**_with(), "history": "zero-input"}, ["[estimator] needs history = 'constant'"]),
         ({**_with(), "actuator": {"u_max": 1.0}}, ["[estimator]", "without [actuator]"]),
+        ({**_with(), "wheels": {}}, ["[estimator]", "without [wheels]"]),
         ({**_with(), "reference": {"type": "inertial", "sigma": [0.0, 0.0, 0.1]}}, ["without [reference]"]),
         (
             {**_with(), "spacecraft": {"inertia": [[140.0, 1.0, 0.0], [1.0, 100.0, 0.0], [0.0, 0.0, 80.0]]}},
@@ -269,6 +270,7 @@ def test_cli_mrp_ekf_sigma_is_the_mekf_sigma_in_rotation_units(tmp_path: Path, c
     [
         (["--torque-limit", "1"], "--torque-limit does not apply to a scenario with an [estimator] table"),
         (["--predictor"], "--predictor does not apply"),
+        (["--wheels-plot", "w.png"], "--wheels-plot does not apply"),
         (["--noise-seed", "-1"], "--noise-seed must be >= 0"),
         (["--hysteresis", "1.5"], "--hysteresis"),
         (["--tau", "0.3"], "tau"),

@@ -185,23 +185,3 @@ def test_a_profile_without_a_file_is_not_written() -> None:
     rows = np.zeros((21, 9))
     with pytest.raises(SpecificationError, match=r"reference: a FileReference is not written"):
         scenario_toml(replace(scenario, reference=FileReference(rows=rows, rate=10.0)))
-
-
-def test_verify_export_and_campaigns_refuse_a_tracking_scenario_rather_than_treat_it_as_regulation(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from mrpctl.campaign.spec import parse_campaign
-    from mrpctl.cli import main
-
-    data = _data({"type": "inertial", "sigma": [0.1, 0.0, 0.0]}, rule={"type": "hysteretic"})
-    path = tmp_path / "tracking.toml"
-    path.write_text(scenario_toml(parse_scenario(data)), encoding="utf-8")
-    for argv, needle in (
-        (["verify", str(path)], "verify certifies the regulation loop only"),
-        (["export", str(path), "--out", str(tmp_path / "out"), "--no-compile"], "tracking=True"),
-    ):
-        assert main(argv) == 2
-        err = capsys.readouterr().err
-        assert err.startswith("mrpctl: error: [reference]") and err.count("\n") == 1 and needle in err, err
-    with pytest.raises(SpecificationError, match=r"\[reference\]: campaigns of the tracking loop"):
-        parse_campaign({**data, "count": 2, "seed": 1})

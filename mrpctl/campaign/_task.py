@@ -130,6 +130,7 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
         settling_rate=base.settling_rate,
         reference=tracked,
         tracking=tracking_keywords(spec),
+        wheels=base.wheels,
     )
     sigma_norm = np.linalg.norm(inputs.sigma0, axis=1)
     return {

@@ -24,6 +24,7 @@ from mrpctl.campaign.integrity import StoreDamagedError
 from mrpctl.campaign.sampling import run_inputs
 from mrpctl.campaign.simulation import METRICS, POINTING_METRICS, flight_keywords
 from mrpctl.campaign.store import STORE_NAME, open_campaign, spec_of, stored_names, stored_noise_revision
+from mrpctl.campaign.wheels import WHEEL_METRICS, wheel_summary, wheel_summary_lines
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
 from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE
@@ -173,6 +174,8 @@ class CampaignReport:
     #: The store's check: ``verified`` (False: written without checksum records) and the ``damaged`` chunks
     #: left out of this report (only with ``intact_only``).
     integrity: dict[str, Any] = field(default_factory=dict, repr=False)
+    #: A campaign on wheels: the wheel metrics per wheel ([wheel_summary][mrpctl.campaign.wheels.wheel_summary]).
+    wheels: dict[str, Any] | None = field(default=None, repr=False)
 
     def summary(self) -> dict[str, Any]:
         """The report as JSON-ready values."""
@@ -193,6 +196,7 @@ class CampaignReport:
             "by_rule": [{**entry.__dict__, "wilson": list(entry.wilson)} for entry in self.by_rule],
             "integrity": self.integrity,
             **({} if self.pointing is None else {"pointing": self.pointing}),
+            **({} if self.wheels is None else {"wheels": self.wheels}),
         }
 
     def _worst_entry(self, case: WorstCase) -> dict[str, Any]:
@@ -213,6 +217,7 @@ class CampaignReport:
             f"  settling (s)  median {s['median']:.4g}, p95 {s['p95']:.4g}, max {s['max']:.4g} (converged runs)",
             f"  switches      median {w['median']:.4g}, p95 {w['p95']:.4g}, max {w['max']:.4g}",
             f"  peak torque   max {self.peak_torque_max:.4g} N m",
+            *wheel_summary_lines(self.wheels),
         ]
         if self.pointing is not None:
             p = self.pointing
@@ -389,6 +394,7 @@ def report(
         by_rule=tuple(by_rule),
         integrity=json.loads(str(dataset.attrs.get("integrity", "{}"))),
         pointing=pointing,
+        wheels=_wheels(dataset),
     )
 
 
@@ -403,6 +409,15 @@ def _pointing_tolerance(dataset: xr.Dataset) -> float:
     table = json.loads(str(dataset.attrs.get("campaign", "{}"))).get("reference", {})
     value = table.get("pointing_tolerance_deg", DEFAULT_POINTING_TOLERANCE) if isinstance(table, dict) else None
     return float(value) if isinstance(value, int | float) else DEFAULT_POINTING_TOLERANCE
+
+
+def _wheels(dataset: xr.Dataset) -> dict[str, Any] | None:
+    """The wheel summary of a campaign on wheels (its cluster's limits from the stored campaign), or None."""
+    if "wheel_peak_speed" not in dataset:
+        return None
+    cluster = spec_of(dataset).base.wheels
+    limits = None if cluster is None else (np.asarray(cluster.speed_limit), np.asarray(cluster.momentum_capacity))
+    return wheel_summary(dataset, *(limits or (None, None)))
 
 
 def _rule_labels(dataset: xr.Dataset) -> list[str]:
@@ -576,8 +591,14 @@ class ReplayResult:
                 f"  the store was written with noise revision {self.noise_revisions[0]}, this mrpctl computes revision "
                 f"{self.noise_revisions[1]}: runs with attitude noise differ in their last bits (see CHANGELOG.md)"
             )
-        for name in [*METRICS, *(key for key in POINTING_METRICS if key in self.stored)]:
-            lines.append(f"  {name:<18} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
+        names = [
+            *METRICS,
+            *(key for key in POINTING_METRICS if key in self.stored),
+            *(key for key in WHEEL_METRICS if key in self.stored),
+        ]
+        width = max(18, *(len(name) for name in names))
+        for name in names:
+            lines.append(f"  {name:<{width}} stored {self.stored[name]!s:>24}  replayed {self.replayed[name]!s:>24}")
         return "\n".join(lines)
 
 
@@ -616,7 +637,7 @@ def replay(out: str | Path, run: int, *, trajectory: bool = False) -> ReplayResu
         raise SpecificationError(f"run: run {run} has not been stored yet (its chunk is not complete)")
     spec = spec_of(dataset)
     values = simulate_chunk(spec, run, run + 1)
-    names = stored_names(spec.tracking)
+    names = stored_names(spec.tracking) + [name for name in WHEEL_METRICS if name in dataset]
     stored = {name: np.asarray(dataset[name].sel(run=run).values) for name in names}
     replayed = {name: np.asarray(values[name][0]) for name in names}
     mismatches = tuple(name for name in names if not _same(stored[name], replayed[name]))
@@ -667,6 +688,7 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
         **({} if models is None else flight_keywords(models)),
         **({} if spec.predictor is None else {"predictor": spec.predictor}),
         **({} if not spec.tracking else {"reference": run_tracking(spec, inputs, 0), **tracking_keywords(spec)}),
+        **({} if base.wheels is None else {"wheels": base.wheels}),
     )
 
 

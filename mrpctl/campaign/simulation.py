@@ -20,11 +20,13 @@ from typing import Any
 
 import numpy as np
 
+from mrpctl.campaign.wheels import wheel_metrics
 from mrpctl.flight import Disturbance
 from mrpctl.predictor import Predictor
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, kept_run_bytes, simulate_batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
+from mrpctl.wheels import WheelCluster
 
 __all__ = ["METRICS", "POINTING_METRICS", "TRACKING_BATCH_BYTES", "flight_keywords", "simulate_runs"]
 
@@ -80,11 +82,16 @@ def _batch(
     rule: Sequence[SwitchingRule],
     options: dict[str, Any],
 ) -> dict[str, np.ndarray]:
-    """The runs' metrics from one metrics-only batch (the peak torque is accumulated by the engine), and with a
-    reference (``options["reference"]``, one per run) their pointing metrics from the kept samples."""
+    """The runs' metrics from one metrics-only batch (the peak torque is accumulated by the engine), with a
+    reference (``options["reference"]``, one per run) their pointing metrics from the kept samples, and on a
+    wheel cluster (``options["wheels"]``) the `WHEEL_METRICS`."""
     if options.get("reference") is None:
         batch = simulate_batch(spacecraft, K, x0, tau=tau, rule=rule, **options)
-        return {name: np.asarray(getattr(batch, name)) for name in METRICS}
+        found = {name: np.asarray(getattr(batch, name)) for name in METRICS}
+        wheels = options.get("wheels")
+        if wheels is not None:
+            found.update(wheel_metrics(batch.wheels, len(x0), wheels.count))
+        return found
     batch = simulate_batch(spacecraft, K, x0, tau=tau, rule=rule, trajectories=True, keep_every=1, **options)
     out = {name: np.asarray(getattr(batch, name)) for name in METRICS}
     runs: Sequence[Any] = batch.runs or ()
@@ -163,6 +170,7 @@ def simulate_runs(
     settling_rate: float = SETTLING_OMEGA,
     reference: Sequence[Any] | None = None,
     tracking: dict[str, Any] | None = None,
+    wheels: WheelCluster | None = None,
 ) -> dict[str, np.ndarray]:
     """Simulate N runs, each with its own inertia, gain, initial state, delay, rule and flight models.
 
@@ -202,11 +210,15 @@ def simulate_runs(
     tracking : dict, optional
         ``error_time``, ``feedforward``, ``pointing_tolerance`` of [`mrpctl.simulate_batch`][mrpctl.simulate_batch]
         for every run (with ``reference``).
+    wheels : WheelCluster or None, optional
+        The reaction-wheel cluster every run flies on (every rule a [`Hysteretic`][mrpctl.flight.Hysteretic]);
+        the wheel metrics of `mrpctl.campaign.wheels.WHEEL_METRICS` are returned too.
 
     Returns
     -------
     dict of numpy.ndarray
-        One (N,) array per name in `METRICS` (and `POINTING_METRICS` with ``reference``), in input order.
+        One (N,) array per name in `METRICS` (and `POINTING_METRICS` with ``reference``, the (N,) or (N, wheels)
+        arrays of `WHEEL_METRICS` with ``wheels``), in input order.
     """
     n = len(x0)
     options: dict[str, Any] = dict(t_final=t_final, rate=rate, history=history, substeps=substeps, threads=threads)
@@ -217,8 +229,13 @@ def simulate_runs(
     names = {**METRICS, **(POINTING_METRICS if reference is not None else {})}
     if reference is not None:
         options.update(tracking or {})
+    if wheels is not None:
+        options["wheels"] = wheels
     if n == 0:
-        return {name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in names.items()}
+        return {
+            **{name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in names.items()},
+            **({} if wheels is None else wheel_metrics(None, 0, wheels.count)),
+        }
     rules = [rule] * n if isinstance(rule, SwitchingRule) else list(rule)
     models = [None] * n if flight is None else list(flight)
     crafts = _spacecraft(inertia)
@@ -226,6 +243,8 @@ def simulate_runs(
     for i in range(n):
         groups.setdefault(_flight_key(models[i]), []).append(i)
     out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in names.items()}
+    if wheels is not None:
+        out.update(wheel_metrics(None, n, wheels.count))
     flown_calls = sum(key is not None for key in groups)  # the calls after the first run on a pool
     concurrent = max(1, min(flown_calls - 1, threads or _cpus()))
 
@@ -262,7 +281,7 @@ def simulate_runs(
             [rules[i] for i in members],
             {**options, **extra, **found},
         )
-        for name in names:
+        for name in batch:  # the metrics, and the pointing or the wheel metrics of the campaign
             out[name][members] = batch[name]
 
     plain = groups.pop(None, None)

@@ -114,6 +114,7 @@ from mrpctl._files import read_toml
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.campaign.distributions import Distribution, parse_distribution
 from mrpctl.campaign.reference import REFERENCE_KEYS, ReferenceDispersion, parse_reference_dispersion
+from mrpctl.campaign.wheels import campaign_wheels, check_campaign_wheels
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
 from mrpctl.guidance import FileReference
@@ -660,8 +661,11 @@ def parse_campaign(
             "(see design/campaigns.md), not as scenario tables"
         )
     scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
+    wheels = scenario_part.pop("wheels", None)  # read below, with the campaign's rules (check_campaign_wheels)
     nominal = parse_scenario(scenario_part, name=name, base=folder)
-    nominal = nominal.with_rule(parse_rule("[rule]", data["rule"]))
+    nominal = replace(
+        nominal.with_rule(parse_rule("[rule]", data["rule"])), wheels=campaign_wheels(wheels, nominal.spacecraft)
+    )
     nominal, reference_file = _reference_rows(nominal, given_rows)
     for key in ("count", "seed"):
         if key not in data:
@@ -738,6 +742,11 @@ def parse_campaign(
     reference = None
     if "reference" in tables:
         reference = parse_reference_dispersion(tables["reference"], nominal.reference)
+    if getattr(nominal, "gravity_gradient", False) and reference is not None and reference.orbit_rate is not None:
+        raise SpecificationError(
+            "dispersions.reference.orbit_rate with [reference] gravity_gradient = true: the runs of a batch share "
+            "one orbit's gravity gradient; remove one of the two"
+        )
     spec = CampaignSpec(
         base=nominal,
         count=count,
@@ -759,6 +768,7 @@ def parse_campaign(
     _check_tracking(spec)
     _check_flight(spec)
     _check_predictor(spec)
+    check_campaign_wheels(spec)
     return spec
 
 

@@ -52,6 +52,7 @@ from mrpctl.campaign import integrity
 from mrpctl.campaign.reference import REFERENCE_INPUTS
 from mrpctl.campaign.simulation import METRICS, POINTING_METRICS
 from mrpctl.campaign.spec import CampaignSpec, SampleFile, parse_campaign
+from mrpctl.campaign.wheels import WHEEL_METRICS
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import NOISE_REVISION
 from mrpctl.provenance import versions
@@ -178,6 +179,12 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
         data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=(chunk, *shape[1:])))
     for name, (dtype, missing) in _metrics(spec.tracking).items():
         data[name] = (("run",), da.full((n,), missing, dtype=dtype, chunks=(chunk,)))
+    wheels = spec.base.wheels
+    if wheels is not None:
+        for name, (dims, dtype, missing, unit) in WHEEL_METRICS.items():
+            shape = (n, *([wheels.count] if dims else []))
+            chunks = (chunk, *shape[1:])
+            data[name] = (("run", *dims), da.full(shape, missing, dtype=dtype, chunks=chunks), {"units": unit})
     for key, each in spec.files.items():
         name, dims = FILE_ARRAYS[key]
         data[name] = (dims, np.array(each.values), {"units": _FILE_UNITS[key]})
@@ -187,20 +194,24 @@ def _template(spec: CampaignSpec, chunk: int) -> xr.Dataset:
     return dataset
 
 
-def run_arrays(tracking: bool = False) -> dict[str, int]:
+def run_arrays(tracking: bool = False, wheels: bool = False) -> dict[str, int]:
     """The per-run arrays (chunked by the campaign chunk) and their number of dimensions (``tracking``: a
-    tracking campaign's, with its reference inputs and pointing metrics)."""
+    tracking campaign's, with its reference inputs and pointing metrics; ``wheels``: a campaign on wheels, with
+    the wheel metrics)."""
     return {
         **{name: 1 + len(dims) for name, (dims, _) in _inputs(tracking).items()},
         **{name: 1 for name in _metrics(tracking)},
+        **({name: 1 + len(dims) for name, (dims, *_) in WHEEL_METRICS.items()} if wheels else {}),
     }
 
 
-def bytes_per_run(tracking: bool = False) -> int:
-    """Uncompressed bytes one run takes in the store (inputs, metrics and its coordinate)."""
+def bytes_per_run(tracking: bool = False, wheels: int = 0) -> int:
+    """Uncompressed bytes one run takes in the store (inputs, metrics and its coordinate; with ``wheels``
+    wheels, their metrics)."""
     inputs = sum(8 * int(np.prod([_SIZES[d] for d in dims])) for dims, _ in _inputs(tracking).values())
     metrics = sum(np.dtype(dtype).itemsize for dtype, _ in _metrics(tracking).values())
-    return inputs + metrics + 8
+    wheel = sum(8 * (wheels if dims else 1) for dims, *_ in WHEEL_METRICS.values()) if wheels else 0
+    return inputs + metrics + wheel + 8
 
 
 class CampaignStore:
@@ -229,6 +240,10 @@ class CampaignStore:
         with integrity.writer_lock(self.out):
             self._open(chunk)
         self.chunks = -(-spec.count // self.chunk)
+
+    @property
+    def _arrays(self) -> dict[str, int]:
+        return run_arrays(self.spec.tracking, self.spec.base.wheels is not None)
 
     def _open(self, chunk: int | None) -> None:
         spec = self.spec
@@ -265,7 +280,8 @@ class CampaignStore:
         temporary = self.out / (STORE_NAME + ".tmp")
         if temporary.exists():
             shutil.rmtree(temporary)
-        estimate = self.spec.count * bytes_per_run(self.spec.tracking) + sum(
+        wheels = self.spec.base.wheels
+        estimate = self.spec.count * bytes_per_run(self.spec.tracking, 0 if wheels is None else wheels.count) + sum(
             each.values.nbytes for each in self.spec.files.values()
         )
         free = shutil.disk_usage(self.out).free
@@ -291,13 +307,13 @@ class CampaignStore:
         with dask.config.set(scheduler="synchronous"):
             dataset.to_zarr(str(temporary), mode="w", encoding=encoding, consolidated=False)
         # the per-sample files' arrays are checked by their own SHA-256 (attrs["flight_files"], stored_files)
-        skip = {*run_arrays(self.spec.tracking), "chunk_complete", *(name for name, _ in FILE_ARRAYS.values())}
+        skip = {*self._arrays, "chunk_complete", *(name for name, _ in FILE_ARRAYS.values())}
         integrity.record_static(temporary, skip=skip)
         os.replace(temporary, self.path)
 
     def check(self) -> integrity.StoreCheck:
         """Every complete chunk checked against its SHA-256 record."""
-        return integrity.check_store(self.path, run_arrays(self.spec.tracking), self.chunk, self.spec.count)
+        return integrity.check_store(self.path, self._arrays, self.chunk, self.spec.count)
 
     def complete(self) -> np.ndarray:
         """(chunks,) True for every chunk whose runs are all written and intact (damaged chunks are not).
@@ -329,15 +345,17 @@ class CampaignStore:
         flags = zarr.open_array(str(self.path / "chunk_complete"), mode="r+")
         if verified:
             flags[index] = False
-            integrity.forget_chunk(self.path, run_arrays(tracking), index)
+            integrity.forget_chunk(self.path, self._arrays, index)
         data = {}
         for name, (dims, _) in _inputs(tracking).items():
             data[name] = (("run", *dims), values[name])
         for name in _metrics(tracking):
             data[name] = (("run",), values[name])
+        for name, (dims, *_) in WHEEL_METRICS.items() if self.spec.base.wheels is not None else ():
+            data[name] = (("run", *dims), values[name])
         xr.Dataset(data).to_zarr(str(self.path), region={"run": slice(start, stop)}, mode="r+", consolidated=False)
         if verified:
-            integrity.record_chunk(self.path, run_arrays(tracking), index)
+            integrity.record_chunk(self.path, self._arrays, index)
         flags[index] = True
 
 
@@ -375,7 +393,8 @@ def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: b
         raise SpecificationError(f"out: no campaign store at {path}")
     with xr.open_zarr(str(path), consolidated=False) as stored:
         tracking = tracking_store(stored.attrs)
-        estimate = stored.sizes["run"] * bytes_per_run(tracking)
+        wheels = "wheel_peak_speed" in stored  # a campaign on wheels
+        estimate = stored.sizes["run"] * bytes_per_run(tracking, stored.sizes.get("wheel", 0) if wheels else 0)
         available = _available_memory()
         if available is not None and estimate > available // 2:
             raise SpecificationError(
@@ -384,7 +403,7 @@ def open_campaign(out: str | Path, *, complete_only: bool = True, intact_only: b
             )
         runs_per_chunk = int(str(stored["chunk_complete"].attrs["runs_per_chunk"]))
         count = stored.sizes["run"]
-        check = integrity.check_store(path, run_arrays(tracking), runs_per_chunk, count)
+        check = integrity.check_store(path, run_arrays(tracking, wheels), runs_per_chunk, count)
         repair = f"mrpctl campaign run CAMPAIGN.toml --out {out} (CAMPAIGN.toml: the file this store was run from)"
         if check.static or (check.damaged and not (intact_only and complete_only)):
             raise check.error(repair=repair)

@@ -19,6 +19,7 @@ from mrpctl.cli.common import (
     print_json,
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
+from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.design.performance import (
     hinf_bound,
     hinf_norm,
@@ -51,6 +52,8 @@ def _analyze(args: argparse.Namespace) -> int:
                 "leave out the file or the option"
             )
         scenario = load_scenario(args.scenario)
+        if scenario.wheels is not None:
+            raise SpecificationError(WHEELS_NOT_CERTIFIED.format(command="analyze"))
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         spacecraft = spacecraft_from(list(paper.INERTIA) if args.inertia is None else args.inertia)

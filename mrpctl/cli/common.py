@@ -77,9 +77,11 @@ exit codes:
 VERIFY_EXIT_CODES = """\
 exit codes:
   0    checked: the loop as flown is VERIFIED (one certificate covers it jointly) and, with tau > 0,
-       at least one LMI criterion certifies the idealised loop at tau
+       at least one LMI criterion certifies the idealised loop at tau; a tracking scenario ([reference]):
+       every check of its linearised loop holds and nothing of it is left uncovered
   1    checked, but not verified: the joint verdict is PARTIAL, NOT_CERTIFIED or UNSTABLE, or no
-       criterion certifies the idealised loop at tau (the output says which and why)
+       criterion certifies the idealised loop at tau (the output says which and why); a tracking
+       scenario ([reference]) whose linearised loop fails a check, or has a part no check covers
   2    user error: bad option or scenario, missing file, a request that would not fit
   130  interrupted (Ctrl-C)
   141  the output pipe was closed (mrpctl ... | head)

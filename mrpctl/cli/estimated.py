@@ -52,6 +52,8 @@ _OTHER_OPTIONS = (
     ("--jitter-seed", "jitter_seed"),
     ("--predictor-inertia", "predictor_inertia"),
     ("--predictor-error", "predictor_error"),
+    ("--pointing-plot", "pointing_plot"),
+    ("--wheels-plot", "wheels_plot"),
 )
 
 
@@ -85,7 +87,7 @@ def _apply(scenario: Scenario, args: argparse.Namespace) -> tuple[Scenario, Esti
     if others:
         raise SpecificationError(
             f"{others[0]} does not apply to a scenario with an [estimator] table: the estimated loop flies the PD law "
-            "on the estimate without actuator limits, disturbance, delay jitter or predictor"
+            "on the estimate without actuator limits, disturbance, delay jitter, predictor, reference or wheels"
         )
     if getattr(args, "hysteresis", None) is not None:
         try:

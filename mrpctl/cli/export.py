@@ -1,4 +1,6 @@
-"""``mrpctl export``: the closed loop of a scenario as CasADi functions and C code."""
+"""``mrpctl export``: the closed loop of a scenario as CasADi functions and C code; a scenario with [reference]
+exports the tracking loop (``export(..., tracking=True)``: ``tracking_controller`` takes the reference row of its
+error time)."""
 
 from __future__ import annotations
 
@@ -6,23 +8,21 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from mrpctl._export import export
+from mrpctl._export import ExportResult, export, export_wheel_controller
+from mrpctl._scenario_wheels import check_wheel_scenario
 from mrpctl.cli.common import EXIT_CODES, Formatter, add_flight_options, add_json, add_rule_options, print_json
 from mrpctl.cli.limits import check_history_fits
 from mrpctl.cli.overrides import apply_flight_options, apply_overrides
 from mrpctl.errors import SpecificationError
-from mrpctl.scenario import load_scenario
+from mrpctl.flight import Hysteretic
+from mrpctl.flight.tracking import ErrorTime
+from mrpctl.scenario import Scenario, load_scenario
 
 __all__ = ["add_parser"]
 
 
 def _export(args: argparse.Namespace) -> int:
     scenario = apply_flight_options(apply_overrides(load_scenario(args.scenario), args), args)
-    if scenario.reference is not None:
-        raise SpecificationError(
-            "[reference]: the command exports the regulation controller; export the tracking controller with "
-            "mrpctl.export(..., tracking=True) in Python (its reference ports are the profile's rows)"
-        )
     if scenario.estimated_loop is not None:
         raise SpecificationError(
             "[estimator]: the command exports the loop on the delayed measurement; export the estimator's sample "
@@ -31,6 +31,13 @@ def _export(args: argparse.Namespace) -> int:
     check_history_fits(scenario)
     if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
         raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")
+    if scenario.gravity_gradient:
+        raise SpecificationError(
+            "[reference] gravity_gradient = true: the exported plant functions (dynamics, step, sample) do not model "
+            "the gravity-gradient torque; remove the key to export (the controller does not depend on it)"
+        )
+    if scenario.wheels is not None:
+        return _print(_export_wheels(scenario, args), args, scenario)
     result = export(
         scenario.spacecraft,
         scenario.K,
@@ -42,8 +49,38 @@ def _export(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         compile=not args.no_compile,
         physical=args.physical,
+        **_tracking(scenario),
         **scenario.run_options,
     )
+    return _print(result, args, scenario)
+
+
+def _export_wheels(scenario: Scenario, args: argparse.Namespace) -> ExportResult:
+    """A wheel scenario's controller with its allocation (wheel torques out): ``export_wheel_controller``."""
+    check_wheel_scenario(scenario.wheels, scenario.rule, actuator=scenario.actuator, predictor=scenario.predictor)
+    if scenario.flight_options:
+        raise SpecificationError(
+            f"[wheels]: the wheel controller is exported without the {', '.join(scenario.flight_options)} model(s) "
+            "(they act on the plant, not in the controller); remove them to export the wheel controller"
+        )
+    if args.physical:
+        raise SpecificationError("--physical: the wheel controller's ports are x = [sigma; omega/4]; leave it out")
+    assert scenario.wheels is not None and isinstance(scenario.rule, Hysteretic)
+    return export_wheel_controller(
+        scenario.spacecraft,
+        scenario.K,
+        scenario.wheels,
+        args.out,
+        tau=scenario.tau,
+        rule=scenario.rule,
+        rate=scenario.rate,
+        substeps=scenario.substeps,
+        overwrite=args.overwrite,
+        compile=not args.no_compile,
+    )
+
+
+def _print(result: ExportResult, args: argparse.Namespace, scenario: Scenario) -> int:
     if args.json:
         print_json(
             {
@@ -56,7 +93,30 @@ def _export(args: argparse.Namespace) -> int:
         )
     else:
         print(result)
+        if scenario.reference is not None:
+            print(
+                _REFERENCE_NOTE.format(reference=scenario.reference, error_time=_tracking(scenario)["error_time"].value)
+            )
     return 0
+
+
+#: What the export of a tracking scenario leaves to the caller: the reference rows.
+_REFERENCE_NOTE = (
+    "  tracking   reference input: one row (sigma_RN, omega_RN_N, domega_RN_N) per sample, of the {error_time} "
+    "time;\n             the profile itself is not exported: feed its rows (mrpctl.guidance.reference_samples)"
+)
+
+
+def _tracking(scenario: Scenario) -> dict[str, Any]:
+    """A tracking scenario's keywords of export (``tracking=True``, its error time and feedforward); {} without
+    [reference]."""
+    if scenario.reference is None:
+        return {}
+    return {
+        "tracking": True,
+        "error_time": ErrorTime.MEASUREMENT if scenario.error_time is None else scenario.error_time,
+        "feedforward": scenario.feedforward,
+    }
 
 
 def add_parser(commands: Any) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 from tqdm import tqdm  # type: ignore[import-untyped]
 
 from mrpctl import paper
+from mrpctl._scenario_wheels import check_wheel_scenario
 from mrpctl._validation import integer
 from mrpctl.cli.common import (
     EXIT_CODES,
@@ -30,6 +31,13 @@ from mrpctl.cli.common import (
 from mrpctl.cli.estimated import add_estimator_options, estimator_options_given, simulate_estimated_scenario
 from mrpctl.cli.limits import check_run_fits, check_sweep_fits
 from mrpctl.cli.overrides import apply_flight_options, apply_overrides, scenario_from_args
+from mrpctl.cli.wheels import (
+    add_wheel_options,
+    check_wheel_options,
+    wheel_lines,
+    wheel_summary,
+    wheels_json,
+)
 from mrpctl.conventions import state_parts
 from mrpctl.design import linearized_loop
 from mrpctl.errors import SpecificationError
@@ -76,6 +84,18 @@ def _result_summary(result: SimulationResult) -> dict[str, Any]:
         "final_omega": result.omega[-1],
         "saturated_fraction": result.saturated_fraction,
         "peak_command": result.peak_command,
+        **(
+            {}
+            if result.error_time is None
+            else {
+                "error_time": result.error_time.value,
+                "feedforward": result.feedforward,
+                "pointing_max_deg": result.pointing_max,
+                "pointing_rms_deg": result.pointing_rms,
+                "slew_time": result.slew_time,
+                "pointing_tolerance_deg": result.pointing_tolerance,
+            }
+        ),
     }
 
 
@@ -97,6 +117,8 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "substeps": scenario.substeps,
         "flight_models": {name: str(model) for name, model in scenario.flight_options.items()},
         "predictor_inertia": None if scenario.predictor is None else scenario.predictor.model.inertia,
+        "wheels": wheels_json(scenario),
+        "reference": None if scenario.reference is None else str(scenario.reference),
     }
 
 
@@ -106,14 +128,25 @@ def _simulate(args: argparse.Namespace) -> int:
         return simulate_estimated_scenario(scenario, args, _scenario_summary)
     scenario = apply_flight_options(scenario, args)
     check_plot_path(args.plot)
+    check_plot_path(args.pointing_plot)
+    if args.pointing_plot is not None and scenario.reference is None:
+        raise SpecificationError(
+            "--pointing-plot draws a tracking run's pointing error: give a scenario with a [reference] table"
+        )
+    check_wheel_options(scenario, args)
     check_run_fits(scenario)
     result = scenario.simulate()
     files: dict[str, Path] = {}
-    if args.plot is not None:
-        # deferred: matplotlib (through mrpctl.plots), only for --plot
+    if args.plot is not None or args.pointing_plot is not None or args.wheels_plot is not None:
+        # deferred: matplotlib (through mrpctl.plots), only for --plot / --pointing-plot / --wheels-plot
         from mrpctl import plots
 
-        files["plot"] = save_plot(plots.plot_response(result), Path(args.plot))
+        if args.plot is not None:
+            files["plot"] = save_plot(plots.plot_response(result), Path(args.plot))
+        if args.pointing_plot is not None:
+            files["pointing_plot"] = save_plot(plots.plot_pointing(result), Path(args.pointing_plot))
+        if args.wheels_plot is not None:  # a wheel scenario (check_wheel_options)
+            files["wheels_plot"] = save_plot(plots.plot_wheels(result), Path(args.wheels_plot))
     if args.csv is not None:
         path = Path(args.csv)
         rows = np.column_stack((result.t, result.sigma, result.omega, result.u))
@@ -122,12 +155,18 @@ def _simulate(args: argparse.Namespace) -> int:
             np.savetxt(stream, rows, delimiter=",", fmt="%.17g")
         files["csv"] = path
     if args.json:
-        print_json({"scenario": _scenario_summary(scenario), "result": _result_summary(result), "files": files})
+        summary = {**_result_summary(result), "wheels": wheel_summary(result)}
+        print_json({"scenario": _scenario_summary(scenario), "result": summary, "files": files})
     else:
         print(scenario)
         print(result)
+        print(*wheel_lines(result), sep="\n")
+        if "wheels_plot" in files:
+            print(f"wheel plot written to {files['wheels_plot']}")
         if "plot" in files:
             print(f"plot written to {files['plot']}")
+        if "pointing_plot" in files:
+            print(f"pointing error plot written to {files['pointing_plot']}")
         if "csv" in files:
             print(f"trajectory written to {files['csv']}")
     if result.diverged and args.fail_on_divergence:
@@ -157,8 +196,16 @@ def add_simulate(commands: Any) -> None:
     add_run_options(
         parser, plot="write sigma, omega, u against t to this image", csv="write the trajectory to this CSV"
     )
+    parser.add_argument(
+        "--pointing-plot",
+        type=Path,
+        metavar="FILE",
+        help="a tracking scenario ([reference]): write the pointing error (deg, log scale, tolerance band) to this "
+        "image",
+    )
     add_flight_options(parser)
     add_estimator_options(parser)
+    add_wheel_options(parser)
     parser.set_defaults(handler=_simulate)
 
 
@@ -252,6 +299,7 @@ def _sweep(args: argparse.Namespace) -> int:
     check_plot_path(args.plot)
     chunk = integer("--chunk", args.chunk, minimum=1)
     values, label, runs = _sweep_runs(args, base)
+    check_wheel_scenario(base.wheels, runs[0].get("rule", base.rule), actuator=base.actuator, reference=base.reference)
     check_sweep_fits(base, len(runs), [r.get("tau", base.tau) for r in runs], chunk)
     rows: list[tuple[Any, ...]] = []
     batches: list[Any] = []
@@ -272,6 +320,7 @@ def _sweep(args: argparse.Namespace) -> int:
                 settling_attitude=base.settling_attitude,
                 settling_rate=base.settling_rate,
                 **base.flight_options,  # a flight scenario's models, shared by the runs
+                wheels=base.wheels,  # a shared wheel cluster, or None
             )
             batches.append(batch)
             for i in range(len(part)):

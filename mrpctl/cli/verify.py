@@ -1,5 +1,6 @@
 """``mrpctl verify``: the LMI verdict per criterion, the exact delay margin and the certificates of the loop
-as flown (sampled, jittering delay, inertia box)."""
+as flown (sampled, jittering delay, inertia box); a tracking scenario's verdict is
+[`verify_tracking`][mrpctl.cli.verify_tracking]'s."""
 
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ from mrpctl.cli.common import (
     print_json,
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
+from mrpctl.cli.verify_tracking import check_tracking_options, verify_tracking
+from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.design import (
     FlownVerdict,
     analyze_gains,
@@ -37,7 +40,7 @@ from mrpctl.design import (
 )
 from mrpctl.design.interval import rate_value
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.scenario import Scenario, load_scenario
+from mrpctl.scenario import Scenario, check_delay, load_scenario
 from mrpctl.spacecraft import Spacecraft
 
 __all__ = ["add_parser"]
@@ -234,12 +237,8 @@ def _verify(args: argparse.Namespace) -> int:
             )
         scenario: Scenario | None = load_scenario(args.scenario)
         assert scenario is not None
-        if scenario.reference is not None:
-            raise SpecificationError(
-                "[reference]: verify certifies the regulation loop only; the tracking loop's linearisation and "
-                "its margins are mrpctl.design.tracking's (design/tracking.md): remove [reference] to verify "
-                "the regulation loop"
-            )
+        if scenario.wheels is not None:
+            raise SpecificationError(WHEELS_NOT_CERTIFIED.format(command="verify"))
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         scenario = None
@@ -250,6 +249,14 @@ def _verify(args: argparse.Namespace) -> int:
         tau = args.tau
     if not math.isfinite(tau) or tau < 0:
         raise SpecificationError(f"--tau must be finite and >= 0 s, got {tau}")
+    if scenario is not None and scenario.reference is not None:
+        # a tracking scenario: the tracking-error loop linearised about its reference (verify_tracking)
+        check_tracking_options(args)
+        try:
+            check_delay(tau, scenario.rate)
+        except SpecificationError as exc:
+            raise SpecificationError(f"--tau {tau:g} at the scenario's rate {scenario.rate:g} Hz: {exc}") from exc
+        return verify_tracking(args, scenario, tau)
     # The loop as flown first: a refusal (bad option, lifted system too large) comes before the long searches.
     flown = _flown_checks(args, spacecraft, gain, tau, scenario)
     joint = _joint_verdict(args, spacecraft, gain, tau, scenario)
@@ -385,7 +392,9 @@ def add_parser(commands: Any) -> None:
     flown = parser.add_argument_group(
         "the loop as flown (each adds a certificate; see design/lmi.md section 7). A scenario file adds them "
         "itself: its rate (sampled loop), [delay] (jitter, rate unknown) and [uncertainty] (inertia box); "
-        "these options override the file's values"
+        "these options override the file's values. A tracking scenario ([reference]) is verified as its tracking "
+        "loop linearised about the reference (exact margin, LMI at tau, the sampled loop at its rate); these "
+        "options do not apply to it, and what its checks do not cover is listed and makes it NOT VERIFIED"
     )
     flown.add_argument(
         "--jitter",

@@ -559,6 +559,7 @@ def lane_engine(
     reference_input: bool = False,
     feedforward: bool = False,
     reference_per_lane: bool = False,
+    gravity_gradient: bool = False,
     **options: Any,
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
@@ -578,7 +579,9 @@ def lane_engine(
     stream of each lane's own torque; ``disturbed`` is then implied). With ``reference_input`` the flight
     sample tracks a reference shared by the lanes (its rows ``reference``, ``reference_error`` streamed
     beside the noise and the torque; ``feedforward``: with the feedforward terms; with ``reference_per_lane``
-    each lane's own reference, a per-lane stream). The keywords are ignored for the other rules. The
+    each lane's own reference, a per-lane stream). With ``gravity_gradient`` the flight sample's plant flies the
+    gravity-gradient torque of the orbit whose constants follow the flight constants (shared or per lane, like
+    them; the sample's time from the lane's sample counter). The keywords are ignored for the other rules. The
     engine's `LaneEngine.structure` is the flight sample's structure.
 
     Raises
@@ -611,6 +614,8 @@ def lane_engine(
     )
     tracking = flight and reference_input
     key += (("tracking", feedforward) + (("lanes",) if reference_per_lane else ()),) if tracking else ()
+    gravity = flight and gravity_gradient
+    key += ("gravity",) if gravity else ()  # without it the key of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -629,12 +634,14 @@ def lane_engine(
                     disturbed=structure["disturbed"],
                     reference_input=tracking,
                     feedforward=tracking and feedforward,
+                    gravity_gradient=gravity,
                 )
                 label += f"_{saturation.value}" + ("" if structure["sensor"] else "_ideal")
                 label += ("" if structure["limited"] else "_unlimited") + ("" if structure["disturbed"] else "_free")
                 label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
                 label += ("_tracking" + ("_ff" if feedforward else "")) if tracking else ""
                 label += "_lanes" if tracking and reference_per_lane else ""
+                label += "_gravity" if gravity else ""
                 noise = ("noise",) if structure["sensor"] else ()
                 rows = ("reference", "reference_error") if tracking else ()
                 shared_rows, lane_rows = ((), rows) if reference_per_lane else (rows, ())

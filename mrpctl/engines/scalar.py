@@ -87,7 +87,7 @@ from mrpctl.loop import (
 )
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, predictor_memory
 from mrpctl.loop.wheels import wheel_core_function, wheel_memory
-from mrpctl.model import INPUT_SIZE, STATE_SIZE
+from mrpctl.model import INPUT_SIZE, ORBIT_SIZE, STATE_SIZE
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import (
     MEMORY_SIZE,
@@ -190,8 +190,12 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     x_delayed = ca.SX.sym("x_delayed", core.size1_in(2))  # STATE_SIZE; PREDICTOR_RING_WIDTH for the predictor
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
-    extra = [ca.SX.sym(core.name_in(i), core.sparsity_in(i)) for i in range(5, core.n_in())]
-    outs = core(x, memory, x_delayed, gain, parameters, *extra)
+    # the core's inputs after the parameters are the sample's, but for the sample index (a gravity-gradient
+    # sample's time t_k = k h), which is the statistics' sample counter k
+    ports = [i for i in range(5, core.n_in()) if core.name_in(i) != "sample_index"]
+    extra = [ca.SX.sym(core.name_in(i), core.sparsity_in(i)) for i in ports]
+    fed = dict(zip(ports, extra, strict=True))
+    outs = core(x, memory, x_delayed, gain, parameters, *(fed.get(i, stats[S_K]) for i in range(5, core.n_in())))
     x_raw, memory_rule, x_meas, u, switched = outs[0:5]
     more, more_names = list(outs[5:]), [core.name_out(i) for i in range(5, core.n_out())]  # the flight measurement
     settling_state = x_meas  # tracking: the true error [σ_B/R; ω_B/R/4] at t_k, for the settling statistics
@@ -242,7 +246,7 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
         name,
         [x, memory, stats, x_delayed, gain, parameters, *extra],
         [x_next, memory_next, stats_next, x_meas, u, switched, *more],
-        ["x", "memory", "stats", "x_delayed", "K", "parameters"] + [core.name_in(i) for i in range(5, core.n_in())],
+        ["x", "memory", "stats", "x_delayed", "K", "parameters"] + [core.name_in(i) for i in ports],
         ["x_next", "memory_next", "stats_next", "x_meas", "u", "switched", *more_names],
     )
 
@@ -309,6 +313,7 @@ class Engine:
         *,
         wheels: WheelCluster | None = None,
         law: SteeringLaw | None = None,
+        gravity_gradient: bool = False,
     ) -> None:
         self.d = d
         self.wheels = wheels
@@ -322,6 +327,12 @@ class Engine:
         self._squared_peak = self.flight and not self.predictor and limited  # squared_peak of the flight sample
         self._sensor = sensor
         self._law = law
+        self.gravity_gradient = gravity_gradient
+        if gravity_gradient and (wheels is not None or predictor is not None or not self.flight):
+            raise SpecificationError(
+                "gravity_gradient: the gravity-gradient torque is flown by the flight sample only "
+                "(rule=Hysteretic(...), no predictor, no wheel cluster)"
+            )
         if wheels is not None:
             if not isinstance(rule, Hysteretic) or predictor is not None:
                 raise SpecificationError("wheels: the wheel cluster flies with rule=Hysteretic(...) only")
@@ -377,6 +388,7 @@ class Engine:
                 squared_peak=limited,
                 **({"reference_input": True, "feedforward": feedforward} if reference_input else {}),
                 law=law,
+                gravity_gradient=gravity_gradient,
             )
         else:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
@@ -399,6 +411,7 @@ class Engine:
             label += "_torque" if torque_input else ""
             label += ("_tracking" + ("_ff" if feedforward else "")) if reference_input else ""
             label += "" if law is None else "_" + law.label()
+            label += "_gravity" if gravity_gradient else ""
         # the scalar driver runs counted samples only: the flight samples drop the memory guard
         self.sample = engine_sample(core, d, f"mrpctl_sample_{label}", frozen_memory=not self.flight)
         min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
@@ -448,6 +461,7 @@ class Engine:
             limited=limited,
             disturbed=disturbed,
             law=self._law,
+            gravity_gradient=self.gravity_gradient,
         )
         return engine_sample(core, d, self.sample.name() + "_vm")
 
@@ -561,6 +575,11 @@ class Engine:
             raise ValueError(f"this engine takes a {self.inertia.value} inertia, got {spacecraft}")
         inertia, inertia_inverse = inertia_values(spacecraft, self.inertia)
         options = np.ascontiguousarray(NO_FLIGHT_OPTIONS if flight_options is None else flight_options, dtype=float)
+        if self.flight and "flight" in self.sample.name_in() and options.size != self.sample.nnz_in("flight"):
+            raise ValueError(
+                f"flight_options: this engine takes {self.sample.nnz_in('flight')} flight constants (with the orbit's "
+                f"{ORBIT_SIZE} when it flies the gravity gradient), got {options.size}"
+            )
         if keep_every is None:
             measurements = u = None
             keep = 0
@@ -722,6 +741,7 @@ def engine(
     reference_input: bool = False,
     feedforward: bool = False,
     law: SteeringLaw | None = None,
+    gravity_gradient: bool = False,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
@@ -734,7 +754,9 @@ def engine(
     sensor port when ``sensor``, the actuator when ``limited`` and the disturbance add when
     ``disturbed`` (`flight_structure` of a run's constants; one library per structure). ``law``: the flight
     sample's steering law ([`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]; its numbers are compiled in,
-    one library per law); None: the PD law.
+    one library per law); None: the PD law. ``gravity_gradient``: the flight sample's plant flies the
+    gravity-gradient torque of an orbit whose constants follow the flight constants
+    ([`flight_core_function`][mrpctl.loop.flight_core_function]); without it the library of before.
     """
     model = None if predictor is None else inertia_input(predictor)
     flight = isinstance(rule, Hysteretic)
@@ -754,6 +776,7 @@ def engine(
         ) + ((sensor, limited, disturbed, torque_input) if flight else ())
         key += (("tracking", feedforward),) if flight and reference_input else ()  # else the key of before
         key += () if law is None or not flight else (law,)  # without a law the key of before
+        key += ("gravity",) if gravity_gradient and flight else ()  # without it the key of before
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
         key += ("torque",) if torque_input else ()  # without it the key (and the library) of before
@@ -776,6 +799,7 @@ def engine(
                 reference_input=bool(reference_input and (flight or model is not None)),
                 feedforward=bool(feedforward and reference_input and (flight or model is not None)),
                 law=law if flight else None,
+                gravity_gradient=bool(gravity_gradient),
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)

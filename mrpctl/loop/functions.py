@@ -31,7 +31,17 @@ from mrpctl.flight import (
 )
 from mrpctl.flight.steering import SteeringLaw, steering_command_expr
 from mrpctl.flight.tracking import REFERENCE_WIDTH, feedforward_expr, tracking_error_expr
-from mrpctl.model import INPUT_SIZE, STATE_SIZE, dynamics_expr, plant_model
+from mrpctl.model import (
+    INPUT_SIZE,
+    ORBIT_SIZE,
+    STATE_SIZE,
+    dynamics_expr,
+    gravity_gradient_expr,
+    orbit_phase_expr,
+    orbit_position_expr,
+    orbit_turn_expr,
+    plant_model,
+)
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
 
@@ -88,32 +98,65 @@ def _inertia_symbols(kind: InertiaInput) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
 
 
 def step_function(
-    spacecraft: Spacecraft, period: float, substeps: int, *, inertia: InertiaInput | None = None
+    spacecraft: Spacecraft,
+    period: float,
+    substeps: int,
+    *,
+    inertia: InertiaInput | None = None,
+    gravity_gradient: bool = False,
 ) -> ca.Function:
     """``step(x, u) -> x_next``: RK4 over one period h with ``substeps`` equal substeps.
 
     With ``inertia`` the spacecraft's J and J⁻¹ are inputs instead of constants:
     ``step(x, u, J, J_inv) -> x_next`` (the layout of ``inertia``, see [`InertiaInput`][mrpctl.loop.InertiaInput]).
+    With ``gravity_gradient`` two more inputs ``orbit`` (`ORBIT_SIZE`: n, u₀, ê₁, ê₂, cos δ, sin δ of a circular
+    orbit, δ = n dt/2) and ``time`` (t_k, s, the start of the period) add the gravity-gradient torque of the
+    plant's own J, [`gravity_gradient_expr`][mrpctl.model.gravity_gradient_expr] of the stage's attitude and of
+    r̂_N = [`orbit_position_expr`][mrpctl.model.orbit_position_expr] at the stage's time (t_k + j dt, + dt/2,
+    + dt/2, + dt for substep j, dt = h/substeps), to the held torque u inside every RK4 stage. The phase
+    (cos u, sin u) is computed once a sample at t_k ([`orbit_phase_expr`][mrpctl.model.orbit_phase_expr]) and
+    turned by δ to the later stage times ([`orbit_turn_expr`][mrpctl.model.orbit_turn_expr]: one cosine and one
+    sine a sample, whatever the substeps).
     """
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", INPUT_SIZE)
     extra: list[ca.SX] = []
     if inertia is None:
         dynamics = plant_model(spacecraft).dynamics
+        j_matrix: Any = ca.DM(spacecraft.inertia)
     else:
-        j_in, j_inv_in, j, j_inv = _inertia_symbols(inertia)
+        j_in, j_inv_in, j_matrix, j_inv = _inertia_symbols(inertia)
         extra = [j_in, j_inv_in]
-        xdot = dynamics_expr(None, x, u, inertia=j, inertia_inverse=j_inv)
+        xdot = dynamics_expr(None, x, u, inertia=j_matrix, inertia_inverse=j_inv)
         dynamics = ca.Function("dynamics", [x, u, j_in, j_inv_in], [xdot])
+    names = ["x", "u"] + (["J", "J_inv"] if extra else [])
+    orbit = ca.SX.sym("orbit", ORBIT_SIZE)
+    time = ca.SX.sym("time")
     dt = period / substeps
+
+    def torque(z: Any, phase: Any) -> Any:
+        """The torque of one stage: u, plus the gravity gradient at the stage's attitude and orbit phase."""
+        if not gravity_gradient:
+            return u
+        return u + gravity_gradient_expr(z[0:3], orbit_position_expr(orbit, phase), orbit[0], j_matrix)
+
+    # the orbit's phase (cos u, sin u) at t_k from libm, then turned by δ = n dt/2 to each later stage time
+    start: Any = orbit_phase_expr(orbit, time) if gravity_gradient else None
     z = x
     for _ in range(substeps):
-        k1 = dynamics(z, u, *extra)
-        k2 = dynamics(z + (dt / 2) * k1, u, *extra)
-        k3 = dynamics(z + (dt / 2) * k2, u, *extra)
-        k4 = dynamics(z + dt * k3, u, *extra)
+        middle: Any = orbit_turn_expr(orbit, start) if gravity_gradient else None
+        end: Any = orbit_turn_expr(orbit, middle) if gravity_gradient else None
+        k1 = dynamics(z, torque(z, start), *extra)
+        z2 = z + (dt / 2) * k1
+        k2 = dynamics(z2, torque(z2, middle), *extra)
+        z3 = z + (dt / 2) * k2
+        k3 = dynamics(z3, torque(z3, middle), *extra)
+        z4 = z + dt * k3
+        k4 = dynamics(z4, torque(z4, end), *extra)
         z = z + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
-    names = ["x", "u"] + (["J", "J_inv"] if extra else [])
+        start = end
+    if gravity_gradient:
+        return ca.Function("step", [x, u, *extra, orbit, time], [z], [*names, "orbit", "time"], ["x_next"])
     return ca.Function("step", [x, u, *extra], [z], names, ["x_next"])
 
 
@@ -174,6 +217,7 @@ def flight_core_function(
     reference_input: bool = False,
     feedforward: bool = False,
     law: SteeringLaw | None = None,
+    gravity_gradient: bool = False,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
@@ -236,12 +280,18 @@ def flight_core_function(
     [`feedforward_expr`][mrpctl.flight.tracking.feedforward_expr] of the measured delayed ω̃), and a last output
     ``tracking_error`` (6) is the true error [σ_B/R; ω_B/R/4] at t_k (from x_meas and the first row), which
     the records (10: (h, σ_c, u_c, σ_B/R)) and the engine's settling statistics use.
+
+    With ``gravity_gradient`` the plant flies the gravity-gradient torque 3 n² r̂_B × (J r̂_B) of a circular orbit
+    inside its RK4 stages ([`step_function`][mrpctl.loop.step_function]): ``flight`` grows by the orbit's
+    constants (n, u₀, ê₁, ê₂, cos δ, sin δ) (`ORBIT_SIZE`, after the ten flight constants) and a last input
+    ``sample_index`` (k, the sample's index; the engines feed it from their sample counter) gives the
+    sample's time t_k = k h. The controller does not know the torque (no feedforward of it).
     """
     if feedforward and not reference_input:
         raise SpecificationError("feedforward: the feedforward terms need a reference (reference_input)")
     if short_measurements and sensor:
         raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
-    step = step_function(spacecraft, period, substeps, inertia=inertia)
+    step = step_function(spacecraft, period, substeps, inertia=inertia, gravity_gradient=gravity_gradient)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", FLIGHT_MEMORY_SIZE)
     x_delayed = ca.SX.sym("x_delayed", STATE_SIZE)
@@ -249,7 +299,8 @@ def flight_core_function(
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
     symbols = None if inertia is None else _inertia_symbols(inertia)
     extra = [] if symbols is None else list(symbols[:2])
-    flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE)
+    flight = ca.SX.sym("flight", FLIGHT_CONSTANTS_SIZE + (ORBIT_SIZE if gravity_gradient else 0))
+    sample_index = ca.SX.sym("sample_index")
     noise = ca.SX.sym("noise", NOISE_SIZE)
     torque = ca.SX.sym("torque", INPUT_SIZE)
     reference = ca.SX.sym("reference", REFERENCE_WIDTH)  # at t_k
@@ -290,7 +341,11 @@ def flight_core_function(
         # if_else in the actuator does (the recorded u keeps its bits, sign of zero included)
         u, count = command + memory[5], memory[5]
         u_plant = u + w if disturbed else u
-    x_next = step(x_meas, u_plant, *extra)
+    if gravity_gradient:  # the orbit's constants after the flight constants, t_k = k h
+        orbit = flight[FLIGHT_CONSTANTS_SIZE : FLIGHT_CONSTANTS_SIZE + ORBIT_SIZE]
+        x_next = step(x_meas, u_plant, *extra, orbit, sample_index * period)
+    else:
+        x_next = step(x_meas, u_plant, *extra)
     size = ca.fabs(command)
     memory_next = ca.vertcat(
         h_next,
@@ -309,6 +364,9 @@ def flight_core_function(
     if reference_input:
         inputs += [reference, reference_error]
         names += ["reference", "reference_error"]
+    if gravity_gradient:
+        inputs.append(sample_index)
+        names.append("sample_index")
     output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
     outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
     if reference_input:  # the true pointing error at t_k: the metrics' state

@@ -22,7 +22,9 @@ from mrpctl.flight import (
     Saturation,
     SensorModel,
 )
+from mrpctl.guidance import CircularOrbit, NadirPointing
 from mrpctl.loop.functions import PREDICTOR_MEMORY_SIZE, inertia_input, inertia_values
+from mrpctl.model import ORBIT_SIZE
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.spacecraft import Spacecraft
 
@@ -34,6 +36,8 @@ __all__ = [
     "flight_memory",
     "flight_options",
     "flight_structure",
+    "gravity_gradient_options",
+    "orbit_constants",
     "predictor_constants",
     "predictor_disturbance",
     "predictor_memory",
@@ -227,3 +231,58 @@ def flight_structure(options: np.ndarray | None, sensor: SensorModel | None) -> 
         "limited": bool(np.any(np.isfinite(constants[..., 0:4]))),
         "disturbed": bool(np.any(constants[..., 4:7] != 0.0)),
     }
+
+
+def orbit_constants(value: Any, period: float, substeps: int, name: str = "gravity_gradient") -> np.ndarray:
+    """The (`ORBIT_SIZE`,) constants (n, u₀, ê₁, ê₂, cos δ, sin δ) of a
+    [`CircularOrbit`][mrpctl.guidance.CircularOrbit], or of the orbit of a
+    [`NadirPointing`][mrpctl.guidance.NadirPointing], for RK4 substeps of dt = period/substeps (δ = n dt/2):
+    what a gravity-gradient sample's ``flight`` input holds after the ten flight constants
+    (``mrpctl.model.orbit_position_expr``, ``orbit_turn_expr``)."""
+    orbit = value.orbit if isinstance(value, NadirPointing) else value
+    if not isinstance(orbit, CircularOrbit):
+        raise SpecificationError(
+            f"{name} must be a mrpctl.guidance.CircularOrbit (or a NadirPointing, whose orbit is used) or None, "
+            f"got {type(value).__name__}"
+        )
+    axes = orbit.in_plane_axes
+    half = orbit.orbit_rate * (period / substeps / 2)  # the SX's dt/2, as the step function writes it
+    constants = np.concatenate(
+        ([orbit.orbit_rate, orbit.latitude], axes[:, 0], axes[:, 1], [np.cos(half), np.sin(half)])
+    )
+    assert constants.size == ORBIT_SIZE
+    return constants
+
+
+def gravity_gradient_options(
+    value: Any,
+    rule: Any,
+    options: np.ndarray | None,
+    *,
+    period: float,
+    substeps: int,
+    predictor: Any = None,
+    wheels: Any = None,
+) -> np.ndarray | None:
+    """The flight constants of a run with the gravity-gradient torque of ``value`` (`orbit_constants`) after
+    ``options`` (None: `NO_FLIGHT_OPTIONS`); ``options`` unchanged when ``value`` is None. The torque is flown by the
+    flight sample (``rule=Hysteretic(...)``) only: refused with the plant-side rules, the predictor and wheels."""
+    if value is None:
+        return options
+    constants = orbit_constants(value, period, substeps)
+    if predictor is not None:
+        raise SpecificationError(
+            "gravity_gradient: the predictor's plant does not fly the gravity-gradient torque yet (nor its model "
+            "copy); fly it with rule=mrpctl.flight.Hysteretic(delta) and no predictor"
+        )
+    if wheels is not None:
+        raise SpecificationError(
+            "gravity_gradient: the wheel cluster's plant does not fly the gravity-gradient torque yet; fly it with an "
+            "ideal body torque (wheels=None)"
+        )
+    if not isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            "gravity_gradient: the gravity-gradient torque is flown by the flight loop only; use "
+            f"rule=mrpctl.flight.Hysteretic(delta) (Hysteretic(0.0) is OnCurrent's control), got {rule}"
+        )
+    return np.concatenate((NO_FLIGHT_OPTIONS if options is None else options, constants))

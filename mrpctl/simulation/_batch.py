@@ -42,6 +42,7 @@ from mrpctl.loop.options import (
     flight_memory,
     flight_options,
     flight_structure,
+    gravity_gradient_options,
     predictor_constants,
     predictor_disturbance,
     varying_delay,
@@ -211,6 +212,7 @@ def simulate_batch(
     law: SteeringLaw | None = None,
     sigma0: Any = None,
     omega0: Any = None,
+    gravity_gradient: Any = None,
     sensors: Any = None,
     estimator: Any = None,
 ) -> BatchResult:
@@ -312,6 +314,11 @@ def simulate_batch(
         The flight loop's steering law (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run;
         on an ideal torque such runs take the scalar engine (on the thread pool), also when ``trajectories`` is
         False; on ``wheels`` metrics-only runs take the wheel lane engine (the law compiled in).
+    gravity_gradient : mrpctl.guidance.CircularOrbit or NadirPointing, keyword-only
+        The gravity-gradient torque of this orbit in every run's plant (as in [`simulate`][mrpctl.simulation.simulate];
+        every rule a [`Hysteretic`][mrpctl.flight.Hysteretic]), the orbit shared by the runs. Metrics-only runs take
+        the lane engine (the orbit's constants a per-lane constant), each run bit for bit
+        [`simulate`][mrpctl.simulation.simulate]'s.
     sigma0, omega0 : array_like, keyword-only
         The initial states in physical form instead of ``x0``: (3,) or (N, 3) MRPs σ₀ and (3,) or
         (N, 3) body rates ω₀ (rad/s; default zero), broadcast against each other; each run is bit
@@ -423,8 +430,17 @@ def simulate_batch(
     streamed_by_run: list[Disturbance | None] = [None] * n_runs
     predictor_by_run: list[np.ndarray | None] = [None] * n_runs  # the predictor sample's constants per run
     if checked is None:
+        orbit_rows: dict[bytes | None, np.ndarray | None] = {}  # by the run's flight constants
         for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
             options_by_run[i], saturation = flight_options(one, actuator, items[i], sensor)
+            if gravity_gradient is not None:  # the orbit's constants after the flight constants, shared by the runs
+                constants = options_by_run[i]
+                row_key = None if constants is None else constants.tobytes()
+                if row_key not in orbit_rows:
+                    orbit_rows[row_key] = gravity_gradient_options(
+                        gravity_gradient, one, constants, period=1.0 / rate, substeps=substeps, wheels=wheels
+                    )
+                options_by_run[i] = orbit_rows[row_key]
             streamed_by_run[i] = (
                 streamed_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]", hint)
                 if (i == 0 or not shared)
@@ -434,6 +450,9 @@ def simulate_batch(
         jitter = jitter_bytes(varying[0], max(samples_by_run))  # one delay model for every run
         check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
+        gravity_gradient_options(  # refused with a predictor
+            gravity_gradient, rules[0], None, period=1.0 / rate, substeps=substeps, predictor=checked
+        )
         for i in range(n_runs):
             if i == 0 or not shared:
                 item = predictor_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]")
@@ -498,12 +517,15 @@ def simulate_batch(
             tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
             settling=settling,
             law=law,
+            gravity_gradient=gravity_gradient is not None,
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
     engines: dict[int, Any] = {}
     for i in scalar_runs:
-        structure = engine_structure(checked, options_by_run[i], sensor, actuator)
+        structure = engine_structure(
+            checked, options_by_run[i], sensor, actuator, gravity_gradient=gravity_gradient is not None
+        )
         torque_input = streamed_by_run[i] is not None
         tracking = tracked_by_run[i] is not None
         key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input, tracking)
@@ -519,7 +541,7 @@ def simulate_batch(
                 disturbed=structure["disturbed"],
                 torque_input=torque_input,
                 law=law,
-            )
+            )  # (wheels with the gravity gradient are refused above)
         if key not in by_structure:
             by_structure[key] = engine(
                 crafts[i],
@@ -687,6 +709,7 @@ def _run_lanes(
     tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
     settling: tuple[float, float] | None = None,
     law: SteeringLaw | None = None,
+    gravity_gradient: bool = False,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -699,7 +722,9 @@ def _run_lanes(
     (`wheel_lane_engine`: one library per spacecraft inertia), the memory rows written into the array beside it.
     ``tracking``: each run's reference, the feedforward and
     whether the references are per run (then, or beside per-run torques, each lane is streamed its own rows;
-    a shared one is streamed beside the noise). ``law``: the wheel runs' steering law (the wheel lanes take it)."""
+    a shared one is streamed beside the noise). ``law``: the wheel runs' steering law (the wheel lanes take it).
+    ``gravity_gradient``: the runs' plant flies the gravity-gradient torque (the orbit's constants at the end of
+    each run's flight constants)."""
     options_by_run, saturation, sensor, varying = flight
     streamed_by_run, shared = torques
     tracked_by_run, feedforward, per_run_reference = (
@@ -772,6 +797,7 @@ def _run_lanes(
                             "reference_per_lane": own_reference,
                         }
                     ),
+                    **({"gravity_gradient": True} if gravity_gradient and is_flight else {}),
                 )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
@@ -860,7 +886,8 @@ def _run_lanes(
 
 
 def _lane_options(options_by_run: list[np.ndarray | None], members: list[int]) -> np.ndarray | None:
-    """The flight constants of a lane group: one shared row, or (members, 10) when they differ by run."""
+    """The flight constants of a lane group: one shared row, or (members, 10) when they differ by run
+    ((members, 20) with the gravity gradient's orbit: no run's row is then None)."""
     rows = [options_by_run[i] for i in members]
     if all(row is rows[0] for row in rows):
         return rows[0]

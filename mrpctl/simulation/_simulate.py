@@ -29,6 +29,7 @@ from mrpctl.loop.options import (
     flight_constants,
     flight_options,
     flight_structure,
+    gravity_gradient_options,
     predictor_constants,
     predictor_disturbance,
     varying_delay,
@@ -99,12 +100,15 @@ def streamed_disturbance(disturbance: Any, n: int, name: str = "disturbance", hi
     return disturbance
 
 
-def engine_structure(checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any) -> dict[str, bool]:
+def engine_structure(
+    checked: Any, options: np.ndarray | None, sensor: Any, actuator: Any, *, gravity_gradient: bool = False
+) -> dict[str, bool]:
     """The engine's structure keywords: the predictor's (sensor given, actuator given), or the
-    flight sample's specialisation to the run's constants (`flight_structure`)."""
+    flight sample's specialisation to the run's constants (`flight_structure`), with ``gravity_gradient=True``
+    when the plant flies the gravity-gradient torque (the key is absent without it: the engine of before)."""
     if checked is not None:
         return {"sensor": sensor is not None, "limited": actuator is not None}
-    return flight_structure(options, sensor)
+    return flight_structure(options, sensor) | ({"gravity_gradient": True} if gravity_gradient else {})
 
 
 @overload
@@ -139,6 +143,7 @@ def simulate(
     omega0: Any = ...,
     sensors: None = ...,
     estimator: None = ...,
+    gravity_gradient: Any = ...,
 ) -> SimulationResult: ...
 
 
@@ -174,6 +179,7 @@ def simulate(
     omega0: Any = ...,
     sensors: Sensors,
     estimator: Estimator | None = ...,
+    gravity_gradient: None = ...,
 ) -> EstimatedResult: ...
 
 
@@ -208,6 +214,7 @@ def simulate(
     estimator: Estimator | None = None,
     sigma0: Any = None,
     omega0: Any = None,
+    gravity_gradient: Any = None,
 ) -> SimulationResult | EstimatedResult:
     """Simulate the closed loop u(t) = K x(t − τ) with sampled measurements and switching.
 
@@ -323,6 +330,13 @@ def simulate(
     sigma0, omega0 : array_like, keyword-only
         The initial state in physical form instead of ``x0``: (3,) MRPs σ₀ and (3,) body rates ω₀
         (rad/s; default zero); the run is bit for bit the one of x0 = [σ₀; ω₀/4].
+    gravity_gradient : mrpctl.guidance.CircularOrbit or NadirPointing, keyword-only
+        Fly the gravity-gradient torque 3 n² r̂_B × (J r̂_B) of this circular orbit (a ``NadirPointing``: its
+        orbit) in the plant (``design/tracking.md``, "The gravity gradient in the flown plant";
+        ``rule=Hysteretic(...)``, no predictor, no wheels): a torque of the attitude, evaluated inside every RK4
+        stage with r̂_N(t) = cos(u₀ + n t) ê₁ + sin(u₀ + n t) ê₂ at the stage's time (t_k = k h, h = 1/rate, in
+        the sample k), J the plant's inertia. The controller does not know it (no feedforward of it). None
+        (default): no environment torque, the plant of before bit for bit.
 
     Returns
     -------
@@ -340,7 +354,7 @@ def simulate(
     if sensors is not None or estimator is not None:
         others = {"actuator": actuator, "disturbance": disturbance, "sensor": sensor, "delay": delay}
         others |= {"predictor": predictor, "progress": progress, "memory_limit": memory_limit}
-        others |= {"wheels": wheels, "reference": reference, "law": law}
+        others |= {"wheels": wheels, "reference": reference, "law": law, "gravity_gradient": gravity_gradient}
         if sensors is None:
             raise SpecificationError("estimator: give the sensors it estimates from (sensors=Sensors(...))")
         given = [name for name, value in others.items() if value is not None]
@@ -378,9 +392,15 @@ def simulate(
     law = check_law(law, (rule,), gain, predictor=checked)
     if checked is None:
         options, saturation = flight_options(rule, actuator, disturbance, sensor)
+        options = gravity_gradient_options(
+            gravity_gradient, rule, options, period=1.0 / rate, substeps=substeps, wheels=wheels
+        )
         varying = varying_delay(rule, delay, d, rate, n)
         streamed = streamed_disturbance(disturbance, n)
     else:
+        gravity_gradient_options(  # refused with a predictor
+            gravity_gradient, rule, None, period=1.0 / rate, substeps=substeps, predictor=checked
+        )
         disturbance = predictor_disturbance(disturbance, n)
         options, saturation = flight_constants(actuator, disturbance, sensor)
         options, varying = predictor_constants(options, float(tau), checked.model), None
@@ -433,7 +453,7 @@ def simulate(
         substeps,
         saturation,
         predictor=None if checked is None else checked.model,
-        **engine_structure(checked, options, sensor, actuator),
+        **engine_structure(checked, options, sensor, actuator, gravity_gradient=gravity_gradient is not None),
         **({} if streamed is None else {"torque_input": True}),
         **({} if tracked is None else {"reference_input": True, "feedforward": feedforward}),
         law=law,

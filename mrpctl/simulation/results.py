@@ -33,6 +33,7 @@ __all__ = [
     "AXES",
     "FLIGHT_RECORDS",
     "STATE",
+    "WHEEL_VARIABLES",
     "BatchResult",
     "SimulationResult",
     "WheelRecord",
@@ -299,6 +300,7 @@ class SimulationResult(_Conversions):
         last = "" if self.last_switch_time is None else f", last at {self.last_switch_time:.3f} s"
         first = "" if self.first_switch_time is None else f", first at {self.first_switch_time:.3f} s"
         kept = {1: "every sample", None: "metrics only"}.get(self.keep_every, f"every {self.keep_every}th sample")
+        tracking = self.error_time is not None
         return "\n".join(
             (
                 f"Simulation {self.t_final:g} s, tau = {self.tau:g} s ({self.delay_samples} samples at "
@@ -309,7 +311,7 @@ class SimulationResult(_Conversions):
             + (
                 f"  switches     {self.switch_count}{first}{last}",
                 f"  sign flips   u1 {self.sign_flips[0]}, u2 {self.sign_flips[1]}, u3 {self.sign_flips[2]}",
-                f"  max |sigma|  {self.max_sigma:.6f}",
+                f"  max |sigma|  {self.max_sigma:.6f}" + (" (the tracking error sigma_B/R)" if tracking else ""),
                 f"  peak torque  {self.peak_torque:.6g} N m",
             )
             + (
@@ -321,7 +323,26 @@ class SimulationResult(_Conversions):
                 )
             )
             + (f"  status       {status}",)
+            + (self._tracking_lines() if tracking else ())
         )
+
+    def _tracking_lines(self) -> tuple[str, ...]:
+        """The tracking run's convention and pointing figures, in words."""
+        time = {"measurement": "measurement's time", "current": "current time"}.get(
+            str(getattr(self.error_time, "value", self.error_time)), str(self.error_time)
+        )
+        lines = [
+            f"  tracking     error against the reference at the {time}, feedforward "
+            f"{'on' if self.feedforward else 'off'}"
+        ]
+        if self.pointing_max is not None and self.pointing_rms is not None:
+            lines.append(
+                f"  pointing     after settling max {self.pointing_max:.4g} deg, RMS {self.pointing_rms:.4g} deg"
+            )
+        if self.pointing_tolerance is not None:
+            slew = "never" if self.slew_time is None else f"{self.slew_time:.3f} s"
+            lines.append(f"  slew time    {slew} (pointing error within {self.pointing_tolerance:g} deg from then on)")
+        return tuple(lines)
 
 
 def assemble_run(
@@ -686,6 +707,38 @@ FLIGHT_RECORDS: tuple[tuple[str, tuple[str, ...], dict[str, str]], ...] = (
 )
 
 
+#: A run on wheels in its dataset: name -> (dimensions, the field of its `WheelRecord` or, for ``wheel_`` names
+#: of the cluster, of its `WheelCluster` (``cluster.<field>``), units). ``wheel`` counts the wheels.
+WHEEL_VARIABLES: dict[str, tuple[tuple[str, ...], str, str]] = {
+    "wheel_speed": (("time", "wheel"), "speeds", "rad/s"),
+    "wheel_motor_torque": (("time", "wheel"), "motor_torque", "N m"),
+    "wheel_final_speed": (("wheel",), "final_speeds", "rad/s"),
+    "wheel_peak_speed": (("wheel",), "peak_speed", "rad/s"),
+    "wheel_torque_limited_time": (("wheel",), "torque_limited_time", "s"),
+    "wheel_speed_limited_time": (("wheel",), "speed_limited_time", "s"),
+    "wheel_peak_momentum": ((), "peak_momentum", "N m s"),
+    "worst_wheel": ((), "worst_wheel", "1"),
+    "wheel_spin_axes": (("axis", "wheel"), "cluster.spin_axes", "1"),
+    "wheel_spin_inertia": (("wheel",), "cluster.spin_inertia", "kg m^2"),
+    "wheel_torque_limit": (("wheel",), "cluster.torque_limit", "N m"),
+    "wheel_speed_limit": (("wheel",), "cluster.speed_limit", "rad/s"),
+    "wheel_viscous": (("wheel",), "cluster.viscous", "N m s"),
+    "wheel_coulomb": (("wheel",), "cluster.coulomb", "N m"),
+    "wheel_limit_cycle_speed": (("wheel",), "cluster.limit_cycle_speed", "rad/s"),
+    "wheel_initial_speed": (("wheel",), "cluster.speeds", "rad/s"),
+    "wheel_bias_speed": (("wheel",), "cluster.bias_speeds", "rad/s"),
+    "wheel_control_axes": (("control_axis", "axis"), "cluster.control_axes", "1"),
+    "wheel_null_gain": ((), "cluster.null_gain", "1/s"),
+    "wheel_gyroscopic": ((), "cluster.gyroscopic", "1"),
+}
+
+
+def _wheel_value(record: WheelRecord, field: str) -> Any:
+    owner = record.cluster if field.startswith("cluster.") else record
+    value = getattr(owner, field.removeprefix("cluster."))
+    return value if isinstance(value, bool | int | float) else np.asarray(value)
+
+
 def _run_dataset(result: SimulationResult) -> xr.Dataset:
     # deferred: xarray (about 0.5 s to import), only for labelled data
     import xarray as xr  # deferred: xarray takes about 0.5 s to import
@@ -742,6 +795,9 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
         value = getattr(result, name)
         if value is not None:
             data[name] = (dims, np.asarray(value), attributes)
+    if result.wheels is not None:  # the wheels' speeds, torques, metrics and the cluster itself
+        for name, (dims, source, unit) in WHEEL_VARIABLES.items():
+            data[name] = (dims, _wheel_value(result.wheels, source), {"units": unit})
     if (result.settling_attitude, result.settling_rate) != (SETTLING_ATTITUDE_DEG, SETTLING_OMEGA):
         # the tolerances of settling_time, written when they are not the defaults
         data["settling_attitude"] = ((), result.settling_attitude, {"units": "deg", "long_name": "settled below"})
