@@ -45,6 +45,9 @@ BASE: dict[str, Any] = {
 }
 
 
+WHEELS = {"layout": "orthogonal", "spin_inertia": 3e-5, "torque_limit": 5e-3, "speed_limit_rpm": 6000.0}
+
+
 def _with(**changes: Any) -> dict[str, Any]:
     """BASE with keys of [estimator] or of its sub-tables changed ("star_tracker.rate" = ...); None removes."""
     data = copy.deepcopy(BASE)
@@ -184,7 +187,7 @@ def test_the_writer_keeps_a_tuning_of_python() -> None:
         ({**_with(), "rule": {"type": "on-delayed"}}, ["[estimator] needs [rule] type = 'hysteretic'"]),
         ({**_with(), "history": "zero-input"}, ["[estimator] needs history = 'constant'"]),
         ({**_with(), "actuator": {"u_max": 1.0}}, ["[estimator]", "without [actuator]"]),
-        ({**_with(), "wheels": {}}, ["[estimator]", "without [wheels]"]),
+        ({**_with(), "wheels": WHEELS}, ["[estimator]", "without [wheels]"]),
         ({**_with(), "reference": {"type": "inertial", "sigma": [0.0, 0.0, 0.1]}}, ["without [reference]"]),
         (
             {**_with(), "spacecraft": {"inertia": [[140.0, 1.0, 0.0], [1.0, 100.0, 0.0], [0.0, 0.0, 80.0]]}},
