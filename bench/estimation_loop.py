@@ -13,7 +13,12 @@ stay nominal. Three controllers on the same sensors (``mrpctl.loop.estimated``):
 
 Per case, ``seeds`` sensor-noise seeds (default 10): pointing RMS (principal angle of the true attitude)
 over t ∈ [150, 300] s, and the settling time (the last time the pointing error exceeds 0.01 rad), mean over
-the seeds. Then the cost of one sample (CPU time of the whole call over 30 001 samples, median of 5): the
+the seeds. Three more rows give the factors: (b') the predictor with the exact model (J_m = J), (d) the same
+PD law on the true state at t_k (perfect knowledge: no sensor, no delay, no noise), and
+(d') on the true attitude with the body's mean rate over the last period (what the noise-free gyro reads), (d'')
+on the true state predicted to the middle of the torque's hold period. Then
+the settling time of (b), (c) and (d) against the true inertia from −20 % to +20 %.
+Then the cost of one sample (CPU time of the whole call over 30 001 samples, median of 5): the
 MEKF and MRP-EKF loops' samples against the same loop's plain sample (a), and against ``simulate``'s flight loop
 (Hysteretic(0) with a noisy, biased sensor at the same rate and substeps: the compiled engine's plain sample).
 
@@ -30,11 +35,13 @@ import sys
 import time
 from collections.abc import Callable
 
+import casadi as ca
 import numpy as np
 
-from mrpctl import paper, simulate
-from mrpctl.estimation import ARCSEC, Estimator, Gyro, Sensors, StarTracker
+from mrpctl import mrp, paper, simulate
+from mrpctl.estimation import ARCSEC, Estimator, Gyro, Sensors, StarTracker, relative_rotation_expr
 from mrpctl.flight import Hysteretic, SensorModel
+from mrpctl.loop import InertiaInput, step_function
 from mrpctl.loop.estimated import estimated_sample
 from mrpctl.simulation.estimated import simulate_estimated
 from mrpctl.spacecraft import Spacecraft
@@ -53,7 +60,11 @@ MODES = (
 SETTLED = 0.01
 
 
-def metrics(mode: str, estimator: Estimator, scale: float, seed: int) -> tuple[float, float]:
+def metrics(
+    mode: str, estimator: Estimator, scale: float, seed: int, *, exact_model: bool = False
+) -> tuple[float, float]:
+    """(pointing RMS over t >= 150 s (rad), settling time to 0.01 rad (s)) of one run; the predictor's model is
+    the nominal spacecraft, or the plant itself with ``exact_model``."""
     plant = Spacecraft(np.array(paper.INERTIA) * scale)
     run = simulate_estimated(
         plant,
@@ -65,13 +76,61 @@ def metrics(mode: str, estimator: Estimator, scale: float, seed: int) -> tuple[f
         estimator=estimator,
         substeps=SUBSTEPS,
         mode=mode,
-        model_spacecraft=paper.SPACECRAFT,
+        model_spacecraft=plant if exact_model else paper.SPACECRAFT,
     )
-    error = run.pointing_error
-    rms = float(np.sqrt(np.mean(error[run.t >= 150.0] ** 2)))
+    return run.pointing_rms(150.0), run.settling_time(SETTLED)
+
+
+def true_state_loop(scale: float, *, at: str = "now") -> tuple[float, float]:
+    """The same plant, gain and rule under u_k = K [σ; ω/4] of the true state: no sensor, no delay, no noise
+    (perfect knowledge). ``at``: ``"now"``, the state at t_k; ``"mean"``, the attitude at t_k and the body's mean
+    rate over [t_{k-1}, t_k] (what the noise-free gyro reads, and the estimator's ω̂ = ω̃ − β̂ carries);
+    ``"mid"``, the state predicted to the middle of the hold period t_k + h/2 by the nominal model under the last
+    torque (a compensation of the zero-order hold's h/2). The plant is ``mrpctl.loop.step_function``'s RK4 (the
+    estimated loop's); the loop runs in Python."""
+    inertia, model = np.array(paper.INERTIA) * scale, np.array(paper.INERTIA)
+    step = step_function(paper.SPACECRAFT, 1 / RATE, SUBSTEPS, inertia=InertiaInput.DIAGONAL)
+    half = step_function(paper.SPACECRAFT, 0.5 / RATE, SUBSTEPS // 2, inertia=InertiaInput.DIAGONAL)
+    a, b = ca.SX.sym("a", 3), ca.SX.sym("b", 3)
+    rotation = ca.Function("rotation", [a, b], [relative_rotation_expr(a, b)])
+    gain = np.asarray(paper.GAIN)
+    x = np.array(paper.INITIAL_STATE, dtype=float)
+    mean, u = 4 * x[3:6], np.zeros(3)  # before t = 0 the body turned at its initial rate
+    n = round(T_FINAL * RATE) + 1
+    error = np.empty(n)
+    for k in range(n):
+        x[0:3] = mrp.short(x[0:3])  # Hysteretic(0) on the true attitude: the short set
+        error[k] = 4 * np.arctan(np.linalg.norm(x[0:3]))
+        if at == "mid":
+            seen = np.asarray(half(x, u, model, 1 / model)).ravel()
+            seen[0:3] = mrp.short(seen[0:3])
+        else:
+            seen = np.concatenate((x[0:3], mean / 4 if at == "mean" else x[3:6]))
+        u = gain @ seen
+        x_next = np.asarray(step(x, u, inertia, 1 / inertia)).ravel()
+        mean = np.asarray(rotation(x[0:3], x_next[0:3])).ravel() * RATE
+        x = x_next
+    t = np.arange(n) / RATE
     above = np.nonzero(error > SETTLED)[0]
-    settling = float(run.t[above[-1] + 1]) if len(above) else 0.0
-    return rms, settling
+    return float(np.sqrt(np.mean(error[t >= 150.0] ** 2))), float(t[above[-1] + 1]) if len(above) else 0.0
+
+
+def lobes(mode: str, scale: float, *, exact_model: bool = False) -> list[tuple[float, float]]:
+    """(time (s), pointing error (rad)) of the local maxima above 0.003 rad after 5 s of one run (seed 0): the
+    lobes of the decaying oscillation whose last one above 0.01 rad sets the settling time."""
+    plant = Spacecraft(np.array(paper.INERTIA) * scale)
+    run = simulate_estimated(
+        plant, paper.GAIN, paper.INITIAL_STATE, sensors=Sensors(TRACKER, GYRO, 0), t_final=80.0, rate=RATE,
+        estimator=ESTIMATOR, substeps=SUBSTEPS, mode=mode, model_spacecraft=plant if exact_model else paper.SPACECRAFT,
+    )  # fmt: skip
+    e = run.pointing_error
+    peaks = [i for i in range(1, len(e) - 1) if e[i - 1] <= e[i] >= e[i + 1] and run.t[i] > 5.0 and e[i] > 0.003]
+    return [(float(run.t[i]), float(e[i])) for i in peaks]
+
+
+def _mean(mode: str, estimator: Estimator, scale: float, seeds: int, exact_model: bool = False) -> tuple[float, float]:
+    values = np.array([metrics(mode, estimator, scale, seed, exact_model=exact_model) for seed in range(seeds)])
+    return float(values[:, 0].mean()), float(values[:, 1].mean())
 
 
 def _median_cpu(call: Callable[[], object]) -> float:
@@ -121,16 +180,41 @@ def flight_cost() -> float:
     )
 
 
+def _inertia(scale: float) -> str:
+    return "nominal" if scale == 1.0 else f"{scale - 1:+.0%}"
+
+
 def main(seeds: int) -> None:
     arcsec = 180 * 3600 / np.pi
     print(f"| controller | inertia | pointing RMS, t >= 150 s (arcsec) | settling time to {SETTLED} rad (s) |")
     print("|---|---|---|---|")
-    for label, mode, estimator in MODES:
+    rows: list[tuple[str, Callable[[float], tuple[float, float]]]] = [
+        (label, lambda scale, mode=mode, estimator=estimator: _mean(mode, estimator, scale, seeds))
+        for label, mode, estimator in MODES
+    ]
+    rows.insert(
+        2, ("(b') model predictor, exact model (J_m = J)", lambda s: _mean("predictor", ESTIMATOR, s, seeds, True))
+    )
+    rows.append(("(d) PD on the true state at t_k (no sensor)", true_state_loop))
+    rows.append(("(d') PD on the true attitude and mean rate", lambda s: true_state_loop(s, at="mean")))
+    rows.append(("(d'') PD on the true state predicted to t_k + h/2", lambda s: true_state_loop(s, at="mid")))
+    for label, measure in rows:
         for scale in (1.0, 1.1, 0.9):
-            values = np.array([metrics(mode, estimator, scale, seed) for seed in range(seeds)])
-            rms, settling = values.mean(axis=0)
-            name = "nominal" if scale == 1.0 else f"{scale - 1:+.0%}"
-            print(f"| {label} | {name} | {rms * arcsec:.1f} | {settling:.1f} |")
+            rms, settling = measure(scale)
+            print(f"| {label} | {_inertia(scale)} | {rms * arcsec:.1f} | {settling:.1f} |")
+    print()
+    scan_seeds = min(seeds, 3)
+    print(f"settling time to {SETTLED} rad (s) against the true inertia ({scan_seeds} seeds; the model nominal):")
+    print("| inertia | (b) model predictor | (c) MEKF loop | (d) PD on the true state |")
+    print("|---|---|---|---|")
+    for scale in (0.8, 0.85, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15, 1.2):
+        cells = [_mean(mode, ESTIMATOR, scale, scan_seeds)[1] for mode in ("predictor", "estimator")]
+        cells.append(true_state_loop(scale)[1])
+        print(f"| {_inertia(scale)} | " + " | ".join(f"{c:.1f}" for c in cells) + " |")
+    print()
+    print("the lobes of the pointing error at -10 % (seed 0; time s, peak rad):")
+    for label, mode, exact in (("(b)", "predictor", False), ("(b')", "predictor", True), ("(c)", "estimator", False)):
+        print(f"  {label} " + ", ".join(f"{t:.1f} s {e:.4f}" for t, e in lobes(mode, 0.9, exact_model=exact)))
     lean = Estimator(attitude_error=1e-3, bias_error=2e-3, covariance_now=False)
     plain, flight = cost("pd"), flight_cost()
     print()

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._files import read_toml
+from mrpctl._scenario_estimator import ESTIMATOR_TABLE, estimator_table, estimator_toml
 from mrpctl._scenario_tables import (
     FLIGHT_TABLES,
     REFERENCE_TABLE,
@@ -39,6 +40,7 @@ from mrpctl._validation import (
 )
 from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.estimation import EstimatedLoop
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, SensorModel
 from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime
 from mrpctl.guidance import (
@@ -53,6 +55,7 @@ from mrpctl.model import gain_matrix
 from mrpctl.predictor import OnPredicted, Predictor
 from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationResult, settling_tolerances, simulate
+from mrpctl.simulation.estimated import EstimatedResult
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
 from mrpctl.wheels import WheelCluster
@@ -91,7 +94,7 @@ _TOP_KEYS = {
     "settling_attitude_deg",
     "settling_rate",
 }
-_TABLES = {"spacecraft", "gains", "initial", "rule"}
+_TABLES = {"spacecraft", "gains", "initial", "rule", ESTIMATOR_TABLE}
 #: The predictor controller's table (``[rule] type = "on-predicted"`` only, and then required).
 _PREDICTOR_TABLE = "predictor"
 #: The inertia uncertainty that ``mrpctl verify`` certifies (any rule; the simulation flies the nominal J).
@@ -196,6 +199,9 @@ class Scenario:
     wheels : WheelCluster or None
         The reaction wheels the body torque is flown on (``[wheels]``, `mrpctl._scenario_wheels`;
         ``simulate(..., wheels=...)``, ``design/wheels.md``). None: the torque as commanded (or ``actuator``).
+    estimated_loop : EstimatedLoop or None
+        The loop on an estimator of a late star tracker and a gyro (``[estimator]``; ``design/estimation.md``),
+        flown by [`simulate_estimated`][mrpctl.Scenario.simulate_estimated]. None: the loop above.
     """
 
     name: str
@@ -223,6 +229,7 @@ class Scenario:
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE
     gravity_gradient: bool = False
     wheels: WheelCluster | None = None
+    estimated_loop: EstimatedLoop | None = None
 
     @property
     def gains(self) -> PDGains:
@@ -263,6 +270,8 @@ class Scenario:
 
     def simulate(self) -> SimulationResult:
         """Run the scenario with [`mrpctl.simulate`][mrpctl.simulation.simulate]."""
+        if self.estimated_loop is not None:
+            raise SpecificationError("scenario: its [estimator] loop runs with Scenario.simulate_estimated()")
         return simulate(
             self.spacecraft,
             self.K,
@@ -295,6 +304,17 @@ class Scenario:
             **({"gravity_gradient": self.reference} if self.gravity_gradient else {}),
         }
 
+    def simulate_estimated(self) -> EstimatedResult:
+        """Run the scenario's [estimator] loop: ``simulate(..., sensors=..., estimator=...)``."""
+        if self.estimated_loop is None:
+            raise SpecificationError("scenario: no [estimator] table; run it with Scenario.simulate()")
+        loop = self.estimated_loop
+        return simulate(
+            self.spacecraft, self.K, self.x0, tau=self.tau, rule=self.rule, t_final=self.t_final, rate=self.rate,
+            history=self.history, substeps=self.substeps, reference=self.reference, sensors=loop.sensors,
+            estimator=loop.estimator, wheels=self.wheels, **self.run_options,
+        )  # fmt: skip
+
     def __str__(self) -> str:
         sigma0, omega0 = self.sigma0, self.omega0
         return "\n".join(
@@ -308,6 +328,7 @@ class Scenario:
                 *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
                 *([f"  reference: {self.reference}"] if self.reference is not None else []),
                 *([f"  {wheels_text(self.wheels)}"] if self.wheels is not None else []),
+                *([f"  {self.estimated_loop}"] if self.estimated_loop is not None else []),
             )
         )
 
@@ -471,6 +492,9 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
 
     The optional ``[wheels]`` table sets [`Scenario.wheels`][mrpctl.Scenario], the reaction wheels the torque is
     flown on (keys and refusals: `mrpctl._scenario_wheels`).
+    The optional ``[estimator]`` table (with ``[estimator.star_tracker]``, ``[estimator.gyro]`` and optionally
+    ``[estimator.tuning]``) sets [`Scenario.estimated_loop`][mrpctl.Scenario]: the loop on an estimator of a late
+    star tracker and a gyro (its keys: ``design/estimation.md``; an example: ``docs/how-to/estimation.md``).
     """
     check_keys(
         "",
@@ -534,6 +558,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         settling_rate=settle_rate,
         reference=reference,
         **tracking_keys(data),
+        estimated_loop=estimator_table(data, spacecraft=spacecraft, rule=rule, tau=tau, rate=rate, history=history),
         **flight,
         wheels=wheels,
     )
@@ -712,6 +737,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         if scenario.gravity_gradient:
             lines.append("gravity_gradient = true  # the plant flies 3 n^2 r x (J r) of the orbit")
     lines += wheels_toml(scenario.wheels)
+    lines += estimator_toml(scenario.estimated_loop)
     if scenario.uncertainty is not None:
         lines += [
             "",

@@ -640,6 +640,12 @@ def parse_campaign(
     scenario_part.setdefault("initial", {"sigma": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]})
     if "rule" not in data:
         raise SpecificationError(f"[rule] needs type, one of {sorted([*RULE_NAMES, 'hysteretic'])}")
+    if "estimator" in scenario_part:
+        raise SpecificationError(
+            "[estimator]: campaigns of the estimated loop are not run (its compiled engine flies one run per call, "
+            "not lanes of runs); run mrpctl simulate per case (--noise-seed N), or "
+            "mrpctl.simulation.estimated.simulate_estimated per seed from Python"
+        )
     table = scenario_part.get("reference")
     given_rows = (
         (files or {}).get("reference_file") if isinstance(table, dict) and table.get("type") == "file" else None

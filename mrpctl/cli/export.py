@@ -23,6 +23,11 @@ __all__ = ["add_parser"]
 
 def _export(args: argparse.Namespace) -> int:
     scenario = apply_flight_options(apply_overrides(load_scenario(args.scenario), args), args)
+    if scenario.estimated_loop is not None:
+        raise SpecificationError(
+            "[estimator]: the command exports the loop on the delayed measurement; export the estimator's sample "
+            "(its buffer and ports) with mrpctl.estimation.export.export_estimator in Python"
+        )
     check_history_fits(scenario)
     if args.out.exists() and any(args.out.iterdir()) and not args.overwrite:
         raise SpecificationError(f"--out {args.out} is not empty; choose a new folder or pass --overwrite")

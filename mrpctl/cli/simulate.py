@@ -28,6 +28,7 @@ from mrpctl.cli.common import (
     print_json,
     save_plot,
 )
+from mrpctl.cli.estimated import add_estimator_options, estimator_options_given, simulate_estimated_scenario
 from mrpctl.cli.limits import check_run_fits, check_sweep_fits
 from mrpctl.cli.overrides import apply_flight_options, apply_overrides, scenario_from_args
 from mrpctl.cli.wheels import (
@@ -122,7 +123,10 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    scenario = apply_flight_options(apply_overrides(scenario_from_args(args, file=args.scenario), args), args)
+    scenario = apply_overrides(scenario_from_args(args, file=args.scenario), args)
+    if scenario.estimated_loop is not None or estimator_options_given(args):
+        return simulate_estimated_scenario(scenario, args, _scenario_summary)
+    scenario = apply_flight_options(scenario, args)
     check_plot_path(args.plot)
     check_plot_path(args.pointing_plot)
     if args.pointing_plot is not None and scenario.reference is None:
@@ -200,6 +204,7 @@ def add_simulate(commands: Any) -> None:
         "image",
     )
     add_flight_options(parser)
+    add_estimator_options(parser)
     add_wheel_options(parser)
     parser.set_defaults(handler=_simulate)
 
@@ -272,6 +277,12 @@ def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, s
 
 def _sweep(args: argparse.Namespace) -> int:
     base = scenario_from_args(args, file=args.scenario or None)
+    if base.estimated_loop is not None:
+        raise SpecificationError(
+            "sweep does not fly the estimated loop of an [estimator] scenario (one compiled run per case): run "
+            "mrpctl simulate once per case (--noise-seed N), or mrpctl.simulation.estimated.simulate_estimated "
+            "from Python"
+        )
     if args.parameter == "tau" and (base.delay is not None or args.jitter is not None or args.delay_file is not None):
         raise SpecificationError(
             "sweep tau with a jittering delay (the scenario's [delay], --jitter or --delay-file): the delay model "

@@ -6,6 +6,8 @@
   CasADi Functions (pure SX), the delayed star-tracker update by buffered re-propagation, the tuning
   (Farrenkopf's steady state as the default initial covariance);
 * [`run`][mrpctl.estimation.run]: the sensors' streams and the filter compiled over a whole run;
+* [`setup`][mrpctl.estimation.setup]: [`EstimatedLoop`][mrpctl.estimation.EstimatedLoop], a scenario's sensors and
+  estimator (its ``[estimator]`` table);
 * [`export`][mrpctl.estimation.export]: the estimator's sample as a CasADi Function, C source and a manifest.
 
 The equations, the shadow-set covariance mapping and the measurements are in ``design/estimation.md``.
@@ -34,11 +36,13 @@ from mrpctl.estimation.run import (
     sensor_streams,
 )
 from mrpctl.estimation.sensors import ARCSEC, Gyro, SensorClock, Sensors, StarTracker
+from mrpctl.estimation.setup import EstimatedLoop
 
 __all__ = [
     "ARCSEC",
     "CHUNK",
     "COVARIANCE_SIZE",
+    "EstimatedLoop",
     "Estimator",
     "EstimatorFunctions",
     "EstimatorKind",

@@ -220,8 +220,46 @@ def _inverse3(m: Any) -> Any:
     return cofactor / determinant
 
 
-def _symmetric(p: Any) -> Any:
-    return 0.5 * (p + p.T)
+def _block_propagation(f: Any, g: Any, p: Any, q: Any) -> Any:
+    """Φ P Φᵀ + Q for Φ = [[F, G], [0, I]] and a symmetric P = [[A, B], [Bᵀ, C]], by blocks:
+    [[M Fᵀ + N Gᵀ, N], [Nᵀ, C]] + Q with M = F A + G Bᵀ, N = F B + G C. Only the upper triangle of M Fᵀ + N Gᵀ
+    is formed (the result is symmetric by construction, so it needs no symmetrising): a third of the
+    arithmetic of the full products."""
+    a, b, c = p[0:3, 0:3], p[0:3, 3:6], p[3:6, 3:6]
+    m = f @ a + g @ b.T
+    n = f @ b + g @ c
+    top = _upper(m, f) + _upper(n, g)
+    return ca.vertcat(ca.horzcat(top, n), ca.horzcat(n.T, c)) + q
+
+
+def _upper(x: Any, y: Any) -> Any:
+    """The upper triangle of x yᵀ (3 × 3 blocks), mirrored: x yᵀ where it, or the sum it enters, is symmetric
+    (mirroring is linear, so the sum of mirrored terms is the mirrored sum)."""
+    out = ca.SX(3, 3)
+    for i in range(3):
+        for j in range(i, 3):
+            out[i, j] = ca.dot(x[i, :], y[j, :])
+            if j != i:
+                out[j, i] = out[i, j]
+    return out
+
+
+def _block_joseph(p: Any, gain: Any, r: Any) -> Any:
+    """The Joseph form (I − K H) P (I − K H)ᵀ + K R Kᵀ for H = [I 0] and a symmetric P = [[A, B], [Bᵀ, C]], by
+    blocks (K = [K₁; K₂], L = I − K₁): the same terms as the 6 × 6 products, without their zero and identity
+    blocks, and the two diagonal blocks formed on their upper triangle (symmetric by construction)::
+
+        [[L A Lᵀ + K₁ R K₁ᵀ,  L B − L A K₂ᵀ + K₁ R K₂ᵀ], [·ᵀ,  C − K₂ B − Bᵀ K₂ᵀ + K₂ A K₂ᵀ + K₂ R K₂ᵀ]]
+    """
+    a, b, c = p[0:3, 0:3], p[0:3, 3:6], p[3:6, 3:6]
+    k1, k2 = gain[0:3, :], gain[3:6, :]
+    ell = ca.DM.eye(3) - k1
+    la, k1r, k2a = ell @ a, k1 @ r, k2 @ a
+    top = _upper(la, ell) + _upper(k1r, k1)
+    cross = ell @ b - la @ k2.T + k1r @ k2.T
+    k2b = k2 @ b
+    bottom = c - k2b - k2b.T + _upper(k2a, k2) + _upper(k2 @ r, k2)
+    return ca.vertcat(ca.horzcat(top, cross), ca.horzcat(cross.T, bottom))
 
 
 def _phi_coefficients(omega: Any, h: float) -> tuple[Any, Any, Any]:
@@ -273,8 +311,10 @@ def _switch(sigma: Any, p: Any) -> tuple[Any, Any, Any]:
     long_set = squared > 1
     safe = ca.if_else(long_set, squared, 1.0)
     s = (2 * (sigma @ sigma.T) - safe * ca.DM.eye(3)) / (safe * safe)
-    m = ca.diagcat(s, ca.DM.eye(3))
-    mapped = _symmetric(m @ p @ m.T)
+    # M P Mᵀ for M = diag(S, I), by blocks: [[S A Sᵀ, S B], [Bᵀ Sᵀ, C]]
+    a, b, c = p[0:3, 0:3], p[0:3, 3:6], p[3:6, 3:6]
+    sb = s @ b
+    mapped = ca.vertcat(ca.horzcat(_upper(s @ a, s), sb), ca.horzcat(sb.T, c))
     return (
         ca.if_else(long_set, -sigma / safe, sigma),
         ca.if_else(long_set, mapped, p),
@@ -294,8 +334,7 @@ def _mekf_propagate(attitude: Any, bias: Any, p: Any, gyro: Any, h: float, q: np
     w2 = w @ w
     phi11 = ca.DM.eye(3) - a * w + b * w2
     phi12 = b * w - h * ca.DM.eye(3) - c * w2
-    phi = ca.vertcat(ca.horzcat(phi11, phi12), ca.horzcat(ca.DM.zeros(3, 3), ca.DM.eye(3)))
-    return attitude_next, _symmetric(phi @ p @ phi.T + ca.DM(q))
+    return attitude_next, _block_propagation(phi11, phi12, p, ca.DM(q))
 
 
 def _mekf_update(attitude: Any, bias: Any, p: Any, measured: Any, r: np.ndarray) -> tuple[Any, Any, Any, Any]:
@@ -304,9 +343,7 @@ def _mekf_update(attitude: Any, bias: Any, p: Any, measured: Any, r: np.ndarray)
     y = _rotation_vector_of_quaternion(_quaternion_product(q_m, conjugate))
     innovation_covariance = p[0:3, 0:3] + ca.DM(r)
     gain = p[:, 0:3] @ _inverse3(innovation_covariance)
-    h_matrix = ca.horzcat(ca.DM.eye(3), ca.DM.zeros(3, 3))
-    joseph = ca.DM.eye(6) - gain @ h_matrix
-    p_next = _symmetric(joseph @ p @ joseph.T + gain @ ca.DM(r) @ gain.T)
+    p_next = _block_joseph(p, gain, ca.DM(r))
     dx = gain @ y
     attitude_next = _quaternion_product(_rotation_quaternion(dx[0:3]), attitude)
     attitude_next = attitude_next / ca.norm_2(attitude_next)
@@ -321,10 +358,14 @@ def _mrp_propagate(sigma: Any, bias: Any, p: Any, gyro: Any, h: float, q: np.nda
         return ca.if_else(squared > 1, -sigma_next / ca.if_else(squared > 1, squared, 1.0), sigma_next), None
     quarter_b = b_matrix_expr(sigma) / 4
     a_block = 0.5 * (sigma @ omega.T - omega @ sigma.T - skew_expr(omega) + ca.dot(sigma, omega) * ca.DM.eye(3))
-    f = ca.vertcat(ca.horzcat(a_block, -quarter_b), ca.DM.zeros(3, 6))
-    phi = ca.DM.eye(6) + f * h + (f @ f) * (h * h / 2)
-    t = ca.diagcat(quarter_b, ca.DM.eye(3))
-    p_next = _symmetric(phi @ p @ phi.T + t @ ca.DM(q) @ t.T)
+    # Φ = I + F h + F² h²/2 for F = [[A, −¼B], [0, 0]]: F² = [[A², −A ¼B], [0, 0]]
+    phi11 = ca.DM.eye(3) + a_block * h + (a_block @ a_block) * (h * h / 2)
+    phi12 = -quarter_b * h - (a_block @ quarter_b) * (h * h / 2)
+    # T Q Tᵀ for T = diag(¼B, I) and Q's blocks q_ij I
+    q11, q12, q22 = q[0, 0], q[0, 3], q[3, 3]
+    cross = q12 * quarter_b
+    noise = ca.vertcat(ca.horzcat(q11 * _upper(quarter_b, quarter_b), cross), ca.horzcat(cross.T, q22 * ca.DM.eye(3)))
+    p_next = _block_propagation(phi11, phi12, p, noise)
     sigma_next, p_next, _ = _switch(sigma_next, p_next)
     return sigma_next, p_next
 
@@ -337,9 +378,7 @@ def _mrp_update(sigma: Any, bias: Any, p: Any, measured: Any, r: np.ndarray) -> 
     b = b_matrix_expr(sigma)
     r_sigma = b @ ca.DM(r) @ b.T / 16
     gain = p[:, 0:3] @ _inverse3(p[0:3, 0:3] + r_sigma)
-    h_matrix = ca.horzcat(ca.DM.eye(3), ca.DM.zeros(3, 3))
-    joseph = ca.DM.eye(6) - gain @ h_matrix
-    p_next = _symmetric(joseph @ p @ joseph.T + gain @ r_sigma @ gain.T)
+    p_next = _block_joseph(p, gain, r_sigma)
     dx = gain @ y
     sigma_next, p_next, _ = _switch(sigma + dx[0:3], p_next)
     return sigma_next, bias + dx[3:6], p_next, y

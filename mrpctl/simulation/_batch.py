@@ -213,6 +213,8 @@ def simulate_batch(
     sigma0: Any = None,
     omega0: Any = None,
     gravity_gradient: Any = None,
+    sensors: Any = None,
+    estimator: Any = None,
 ) -> BatchResult:
     """Simulate many runs at once on several threads.
 
@@ -321,11 +323,20 @@ def simulate_batch(
         The initial states in physical form instead of ``x0``: (3,) or (N, 3) MRPs σ₀ and (3,) or
         (N, 3) body rates ω₀ (rad/s; default zero), broadcast against each other; each run is bit
         for bit the one of x0 = [σ₀; ω₀/4].
+    sensors, estimator : keyword-only
+        Refused: the estimated loop (``simulate(..., sensors=..., estimator=...)``) flies one case per compiled
+        call, not lanes of runs; call it once per run.
 
     Returns
     -------
     BatchResult
     """
+    if sensors is not None or estimator is not None:
+        raise SpecificationError(
+            "sensors, estimator: simulate_batch does not fly the estimated loop (its compiled run flies one case "
+            "per call, not lanes of runs); call simulate(..., sensors=Sensors(..., seed=s), estimator=...) once "
+            "per run, or mrpctl.simulation.estimated.simulate_estimated"
+        )
     settle_attitude, settle_rate, settling = settling_tolerances(settling_attitude, settling_rate)
     if not isinstance(switches, bool):
         raise SpecificationError(f"switches must be True or False, got {switches!r}")

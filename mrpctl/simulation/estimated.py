@@ -20,7 +20,7 @@ import numpy as np
 
 from mrpctl import mrp
 from mrpctl._compile import SIMULATION_FLAGS, compile_function
-from mrpctl._validation import available_memory, finite_array, positive_scalar, readonly
+from mrpctl._validation import available_memory, finite_array, finite_scalar, positive_scalar, readonly
 from mrpctl.errors import SpecificationError
 from mrpctl.estimation import CHUNK, Estimator, EstimatorFunctions, NativeFunction, Sensors, sensor_streams
 from mrpctl.flight import Hysteretic
@@ -92,6 +92,26 @@ class EstimatedResult:
     def pointing_error(self) -> np.ndarray:
         """(N,) the true attitude's principal angle Φ = 4 arctan|σ| (rad): the error from the target."""
         return 4.0 * np.arctan(np.linalg.norm(self.sigma, axis=1))
+
+    def pointing_rms(self, start: float = 0.0) -> float:
+        """RMS of `pointing_error` (rad) over the samples at t >= ``start`` (s)."""
+        start = finite_scalar("start", start)
+        kept = self.pointing_error[self.t >= start]
+        if not len(kept):
+            raise SpecificationError(f"start: {start:g} s is after the run's last sample ({self.t[-1]:g} s)")
+        return float(np.sqrt(np.mean(kept**2)))
+
+    def settling_time(self, attitude: float = 0.01, rate: float | None = None) -> float:
+        """The first time (s) from which the pointing error stays at or below ``attitude`` (rad) and, when given,
+        |ω| at or below ``rate`` (rad/s) to the run's end; 0 if settled from the start, NaN if never."""
+        attitude = positive_scalar("attitude", attitude)
+        outside = self.pointing_error > attitude
+        if rate is not None:
+            outside |= np.linalg.norm(self.omega, axis=1) > positive_scalar("rate", rate)
+        if outside[-1]:
+            return math.nan
+        above = np.nonzero(outside)[0]
+        return float(self.t[above[-1] + 1]) if len(above) else 0.0
 
     @property
     def estimation_error(self) -> np.ndarray:
