@@ -38,6 +38,7 @@ __all__ = [
     "sampled_h2_norm",
     "sampled_hinf_norm",
     "sampled_loop_matrices",
+    "sampled_sigma",
 ]
 
 #: Largest lifted state (n + m d) the dense solves accept.
@@ -388,3 +389,22 @@ def _peak(sigma: Any, theta: float, value: float, lo: float, hi: float) -> tuple
         if -float(res.fun) > best:
             best, where = -float(res.fun), float(res.x)
     return best, where
+
+
+def sampled_sigma(
+    A: Any, B: Any, K: Any, period: Any, omega: Any, *, delay_samples: int = 0, B_w: Any = None, C: Any
+) -> np.ndarray:
+    """σ_max(T(e^{iωh})) of the held-disturbance loop of
+    [`sampled_hinf_norm`][mrpctl.design.sampled_performance.sampled_hinf_norm] at the frequencies ω (rad/s)."""
+    loop = _loop(A, B, K, period, delay_samples, B_w, C)
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    if w.ndim != 1 or not np.all(np.isfinite(w)) or np.any(w < 0.0):
+        raise SpecificationError("omega must be a 1-D array of finite frequencies >= 0 (rad/s)")
+    f, _, e = _matrices(loop)
+    _, gam_w = lifted_matrices(loop.a, loop.bw, loop.h)
+    g = e @ gam_w
+    hm = np.hstack((loop.c, np.zeros((loop.c.shape[0], f.shape[0] - loop.a.shape[0]))))
+    z = np.exp(1j * w * loop.h)
+    m = z[:, None, None] * np.eye(f.shape[0]) - f
+    tf = hm @ np.linalg.solve(m, np.broadcast_to(g, (len(w), *g.shape)))
+    return np.asarray(np.linalg.svd(tf, compute_uv=False)[:, 0], dtype=float)
