@@ -3,7 +3,8 @@
 the performance designs (H-infinity / H2 / decay-optimal PD and PID, full-matrix refinement), plus the sampled loop
 of the paper spacecraft.
 
-Run with ``OPENBLAS_NUM_THREADS=1 python bench/synthesis_comparison.py`` (several minutes). Prints Markdown.
+Run with ``OPENBLAS_NUM_THREADS=1 python bench/synthesis_comparison.py`` (several minutes; ``--sampled``: only the
+sampled loop's table). Prints Markdown.
 """
 
 # ruff: noqa: E501  (Markdown table rows are one line each)
@@ -20,7 +21,7 @@ from mrpctl.design import synthesize_lmi, synthesize_pd
 from mrpctl.design.fixed_order import pid_loop, refine_full_gain, synthesize_fixed_order
 from mrpctl.design.performance import hinf_bound, hinf_norm, loop_margins_delayed
 from mrpctl.design.pointing import h2_norm, pointing_budget, torque_to_attitude
-from mrpctl.design.sampled_performance import sampled_h2_norm, sampled_hinf_norm
+from mrpctl.design.sampled_performance import sampled_h2_norm, sampled_hinf_norm, sampled_l2_gain
 from mrpctl.design.spectra import spectral_abscissa
 from mrpctl.model import gain_matrix
 from mrpctl.spacecraft import Spacecraft
@@ -67,9 +68,13 @@ def comparison(case: str, sc: Spacecraft, tau: float) -> list[str]:
     if case == "paper":
         out.append(row(case, sc, tau, "paper K", np.array(paper.GAIN), seconds=0.0))
     pd1, t = _timed(synthesize_pd, sc, tau, zeta=1.0)
-    out.append(row(case, sc, tau, f"LMI-decay PD, zeta = 1 (alpha = {pd1.decay_rate:.4g} certified)", pd1.gains.K, seconds=t))
+    out.append(
+        row(case, sc, tau, f"LMI-decay PD, zeta = 1 (alpha = {pd1.decay_rate:.4g} certified)", pd1.gains.K, seconds=t)
+    )
     pdf, t = _timed(synthesize_pd, sc, tau, zeta=None, allow_underdamped=True)
-    out.append(row(case, sc, tau, f"LMI-decay PD, zeta free (alpha = {pdf.decay_rate:.4g} certified)", pdf.gains.K, seconds=t))
+    out.append(
+        row(case, sc, tau, f"LMI-decay PD, zeta free (alpha = {pdf.decay_rate:.4g} certified)", pdf.gains.K, seconds=t)
+    )
     alpha = 0.5 * pd1.decay_rate
     lmi, t = _timed(synthesize_lmi, sc, tau, decay_rate=alpha)
     if lmi.K is not None:
@@ -97,23 +102,39 @@ def sampled_rows() -> list[str]:
         d = round(paper.TAU / h)
         h2, t2 = _timed(sampled_h2_norm, a, b, k, h, delay_samples=d, C=c)
         hi, ti = _timed(sampled_hinf_norm, a, b, k, h, delay_samples=d, C=c)
+        l2, tl = _timed(sampled_l2_gain, a, b, k, h, delay_samples=d, C=c)
         samples = math.sqrt(float(np.trace(h2.sample_covariance)))
         out.append(
-            f"| {rate} Hz, d = {d} | {h2.value:.8g} ({1e3 * t2:.0f} ms) | {samples:.8g} | {hi.value:.8g} at {hi.frequency:.4g} rad/s ({1e3 * ti:.0f} ms) |"
+            f"| {rate} Hz, d = {d} | {h2.value:.8g} ({1e3 * t2:.0f} ms) | {samples:.8g} | {hi.value:.8g} at {hi.frequency:.4g} rad/s ({1e3 * ti:.0f} ms) "
+            f"| {l2.value:.8g} at {l2.frequency:.4g} rad/s, {'certified' if l2.bracket_certified else 'NOT certified'} ({1e3 * tl:.0f} ms) |"
         )
     return out
 
 
 def main() -> None:
-    print("| case | gains | abscissa (1/s) | GM | PM (deg) | DM (s) | H-inf exact | certified N = 2 (ratio) | H2 | 3-sigma total (arcsec) | synthesis (s) |")
+    import sys
+
+    if sys.argv[1:] == ["--sampled"]:
+        print(
+            "| sampled paper loop | H2 period-averaged | H2 at the samples | H-inf, held torque | L2 gain, continuous torque and attitude |"
+        )
+        print("|---|---|---|---|---|")
+        for line in sampled_rows():
+            print(line, flush=True)
+        return
+    print(
+        "| case | gains | abscissa (1/s) | GM | PM (deg) | DM (s) | H-inf exact | certified N = 2 (ratio) | H2 | 3-sigma total (arcsec) | synthesis (s) |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for line in comparison("paper", paper.SPACECRAFT, paper.TAU):
         print(line, flush=True)
     for line in comparison("cubesat", CUBESAT, 0.2):
         print(line, flush=True)
     print()
-    print("| sampled paper loop | H2 period-averaged | H2 at the samples | H-inf, held torque |")
-    print("|---|---|---|---|")
+    print(
+        "| sampled paper loop | H2 period-averaged | H2 at the samples | H-inf, held torque | L2 gain, continuous torque and attitude |"
+    )
+    print("|---|---|---|---|---|")
     for line in sampled_rows():
         print(line, flush=True)
 

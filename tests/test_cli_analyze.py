@@ -66,6 +66,8 @@ def test_analyze_sampled_loop_and_sigma_plot(capsys: pytest.CaptureFixture[str],
     assert payload["sampled_hinf"] == pytest.approx(0.0900822607, rel=1e-8)
     assert payload["sampled_h2"] == pytest.approx(0.05294702241, rel=1e-8)
     assert payload["sampled_hinf"] > payload["hinf_exact"]
+    assert payload["sampled_l2_gain"] == pytest.approx(0.09008379608, rel=1e-8)
+    assert payload["sampled_l2_bracket_certified"] is True
     assert figure.stat().st_size > 0
 
 
@@ -73,6 +75,7 @@ def test_analyze_unstable_sampled_loop_says_infinite_and_exits_1(capsys: pytest.
     assert main(["analyze", "--tau", "2", "--period", "0.1"]) == 1
     out = capsys.readouterr().out
     assert "sampled-loop H-infinity norm infinite" in out and "sampled-data H2 norm infinite" in out
+    assert "sampled-data L2 gain infinite" in out
 
 
 def test_analyze_synthesizes_and_analyses_a_design(capsys: pytest.CaptureFixture[str]) -> None:

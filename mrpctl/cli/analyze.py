@@ -33,7 +33,7 @@ from mrpctl.design.pointing import (
     pointing_budget,
     torque_to_attitude,
 )
-from mrpctl.design.sampled_performance import sampled_h2_norm, sampled_hinf_norm, sampled_sigma
+from mrpctl.design.sampled_performance import sampled_h2_norm, sampled_hinf_norm, sampled_l2_gain, sampled_sigma
 from mrpctl.design.spectra import characteristic_roots, plot_spectrum
 from mrpctl.errors import SpecificationError
 from mrpctl.model import gain_matrix
@@ -142,10 +142,12 @@ def _analyze(args: argparse.Namespace) -> int:
         k = gain_matrix(gain)
         sh2 = sampled_h2_norm(a, b, k, args.period, delay_samples=samples, C=c)
         shinf = sampled_hinf_norm(a, b, k, args.period, delay_samples=samples, C=c)
+        sl2 = sampled_l2_gain(a, b, k, args.period, delay_samples=samples, C=c)
         sampled_stable = shinf.finite
         lines += [
             f"  sampled loop, period {args.period:g} s, {samples} samples of delay (ZOH):",
             f"    {sh2}",
+            f"    {sl2} (continuous torque -> continuous attitude)",
             f"    {shinf} (torque held over each sample, attitude sampled)",
         ]
         payload.update(
@@ -156,6 +158,8 @@ def _analyze(args: argparse.Namespace) -> int:
                 "sampled_h2": sh2.value if sh2.finite else None,
                 "sampled_hinf": shinf.value if shinf.finite else None,
                 "sampled_hinf_frequency": shinf.frequency if shinf.finite else None,
+                "sampled_l2_gain": sl2.value if sl2.finite else None,
+                "sampled_l2_bracket_certified": sl2.bracket_certified,
             }
         )
     if args.plot_sigma is not None:
