@@ -11,6 +11,9 @@ samples; the discrete state is ξ_k = (x_k, v_{k−1}, …, v_{k−d}), of size 
 - [`sampled_hinf_norm`][mrpctl.design.sampled_performance.sampled_hinf_norm]: w held over each sample (a
   commanded torque, or the sample mean of a slow disturbance) and z sampled: the H∞ norm of the discrete
   transfer function, by the level set of its symplectic pencil (global on the unit circle).
+- [`sampled_l2_gain`][mrpctl.design.sampled_performance.sampled_l2_gain]: the L₂ gain from the continuous w
+  to the continuous z through the hold (the intersample behaviour included), by bisection on the
+  unit-circle eigenvalues of the lifted Hamiltonian pencil of one period.
 
 The methods, their checks and the numbers of the paper loop are in ``design/performance.md``.
 """
