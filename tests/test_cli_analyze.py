@@ -42,9 +42,48 @@ def test_analyze_unstable_loop_says_infinite_and_exits_1(capsys: pytest.CaptureF
         (["--attitude-noise", "inf"], "--attitude-noise"),
         (["--inertia", "1", "2"], "--inertia"),
         (["--order", "-1"], "order"),
+        (["--period", "0"], "--period"),
+        (["--period", "nan"], "--period"),
+        (["--period", "0.3"], "--period"),
+        (["--plot-sigma", "sigma.foo"], "--plot-sigma"),
+        (["--synthesize", "pd-h2", "--starts", "0"], "starts"),
+        (["--synthesize", "pid-hinf", "--torque-psd", "1e-6"], "--synthesize"),
+        (["--synthesize", "pd-h2", "--k-sigma", "100", "100", "100", "--k-omega", "500", "500", "500"], "--synthesize"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(argv, word, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["analyze", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and word in err
+
+
+def test_analyze_sampled_loop_and_sigma_plot(capsys: pytest.CaptureFixture[str], tmp_path) -> None:
+    figure = tmp_path / "sigma.png"
+    assert main(["analyze", "--period", "0.05", "--plot-sigma", str(figure), "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["delay_samples"] == 10
+    # the library's sampled figures of the paper loop at 20 Hz (tests/test_design_sampled_performance.py checks them)
+    assert payload["sampled_hinf"] == pytest.approx(0.0900822607, rel=1e-8)
+    assert payload["sampled_h2"] == pytest.approx(0.05294702241, rel=1e-8)
+    assert payload["sampled_hinf"] > payload["hinf_exact"]
+    assert payload["sampled_l2_gain"] == pytest.approx(0.09008379608, rel=1e-8)
+    assert payload["sampled_l2_bracket_certified"] is True
+    assert figure.stat().st_size > 0
+
+
+def test_analyze_unstable_sampled_loop_says_infinite_and_exits_1(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["analyze", "--tau", "2", "--period", "0.1"]) == 1
+    out = capsys.readouterr().out
+    assert "sampled-loop H-infinity norm infinite" in out and "sampled-data H2 norm infinite" in out
+    assert "sampled-data L2 gain infinite" in out
+
+
+def test_analyze_synthesizes_and_analyses_a_design(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["analyze", "--synthesize", "pd-h2", "--starts", "1", "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["design"]["objective"] == "h2"
+    # the H2-optimal PD has a lower H2 norm than the paper's gains (0.0524870196, design/performance.md)
+    assert payload["h2"] < 0.0524870196
+    assert main(["analyze", "--synthesize", "pid-abscissa", "--starts", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "PID optimal for abscissa" in out and "H-infinity norm" in out

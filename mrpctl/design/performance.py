@@ -50,6 +50,7 @@ __all__ = [
     "hinf_bound",
     "hinf_norm",
     "loop_margins_delayed",
+    "sigma_max",
     "spacecraft_margins",
 ]
 
@@ -299,6 +300,20 @@ def spacecraft_margins(spacecraft: Spacecraft, K: Any, tau: Any) -> SpacecraftMa
         a_axis = np.array(plant.A[np.ix_((0, 3), (0, 3))])
         axes = tuple(loop_margins_delayed(a_axis, [[0.0], [1.0]], [[k1[i, i], k2[i, i]]], tau) for i in range(3))
     return SpacecraftMargins(axes=axes, coupled=coupled)
+
+
+def sigma_max(A0: Any, A: Any, tau: Any, B: Any, C: Any, omega: Any) -> np.ndarray:
+    """σ_max(C M(iω)⁻¹ B) at the frequencies ω (rad/s), M(s) = sI − A₀ − Σ Aₖ e^{−sτₖ} (a singular-value plot)."""
+    system = delay_system(A0, A, tau)
+    b, c = _io_matrices(system, B, C)
+    w = np.atleast_1d(np.asarray(omega, dtype=float))
+    if w.ndim != 1 or not np.all(np.isfinite(w)) or np.any(w < 0.0):
+        raise SpecificationError("omega must be a 1-D array of finite frequencies >= 0 (rad/s)")
+    m = 1j * w[:, None, None] * np.eye(system.n) - system.A0
+    for a, t in zip(system.A, system.tau, strict=True):
+        m = m - np.exp(-1j * w * t)[:, None, None] * a
+    tf = c @ np.linalg.solve(m, np.broadcast_to(b, (len(w), *b.shape)))
+    return np.asarray(np.linalg.svd(tf, compute_uv=False)[:, 0], dtype=float)
 
 
 # ------------------------------------------------------------------------------ H-infinity (exact)
