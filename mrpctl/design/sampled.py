@@ -154,29 +154,45 @@ def _radius(a: np.ndarray, b: np.ndarray, k: np.ndarray, h: float, d: int) -> tu
 def _stable_by_winding(a: np.ndarray, b: np.ndarray, k: np.ndarray, h: float, d: int) -> bool:
     """Stability of the lifted loop by the argument principle (O(n³ M) for M circle points, any d).
 
-    det(zI − M) = p(z) = z^{nd} q(z), q(z) = det(zI − Φ − z^{−d} Γ K), of degree n(d+1): every zero is
-    inside the unit circle iff the winding number of q(e^{iθ}) about 0 is n. The grid is doubled
-    until no phase step exceeds π/2 (then no winding is missed); a grid of 2²⁰ points that still
-    fails falls back to the dense eigenvalues (which refuses companions above MAX_LIFTED_SIZE).
+    det(zI − M) = p(z) = z^{nd} q(z), q(z) = det(M(θ)), M(θ) = zI − Φ − z^{−d} Γ K at z = e^{iθ}, of degree
+    n(d+1): every zero is inside the unit circle iff the winding number of q about 0 is n. The count is
+    certified arc by arc, not read off a grid that merely looks fine (a zero a distance δ inside the circle turns
+    the phase by about 2π over an arc of width δ, which a coarse grid aliases to a small step):
+    ‖dM/dθ‖ ≤ L = 1 + d ‖ΓK‖, so on an arc of width Δθ from θ_i, σ_min(M) ≥ σ_i − L Δθ with σ_i = σ_min(M(θ_i)),
+    and |d arg q/dθ| = |tr(M⁻¹ dM/dθ)| ≤ n L / (σ_i − L Δθ). An arc is accepted when that bound times Δθ is
+    below π/2: then q has no zero on it and its phase change is the principal argument of q_{i+1}/q_i. Arcs
+    that fail are halved (only next to a zero); with more than 2²⁰ points (a zero on or within round-off of
+    the circle) the dense eigenvalues decide (which refuses companions above MAX_LIFTED_SIZE).
     """
     n = a.shape[0]
     phi, gam = lifted_matrices(a, b, h)
     gk = gam @ k
-    points = max(4096, 32 * (d + 1))
-    while points <= 2**20:
-        theta = np.linspace(0.0, 2.0 * np.pi, points, endpoint=False)
+    lipschitz = 1.0 + d * float(np.linalg.norm(gk, 2))
+
+    def evaluate(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         z = np.exp(1j * theta)
-        mats = z[:, None, None] * np.eye(n) - phi[None] - (z ** (-d))[:, None, None] * gk[None]
-        q = np.linalg.det(mats)
-        if np.any(q == 0.0):
-            return False
-        ang = np.angle(np.concatenate((q, q[:1])))
-        steps = np.angle(np.exp(1j * np.diff(ang)))
-        if np.max(np.abs(steps)) <= np.pi / 2:
-            winding = round(float(np.sum(steps)) / (2.0 * np.pi))
-            return winding == n
-        points *= 2
-    return _radius(a, b, k, h, d)[0] < 1.0
+        mats = z[:, None, None] * np.eye(n) - phi[None] - np.exp(-1j * d * theta)[:, None, None] * gk[None]
+        return np.linalg.det(mats), np.linalg.svd(mats, compute_uv=False)[:, -1]
+
+    theta = np.linspace(0.0, 2.0 * np.pi, max(4096, 32 * (d + 1)) + 1)
+    q, smallest = evaluate(theta)
+    while True:
+        width = np.diff(theta)
+        room = smallest[:-1] - lipschitz * width
+        bad = (room <= 0.0) | (n * lipschitz * width >= 0.5 * np.pi * np.maximum(room, 0.0))
+        if not np.any(bad):
+            break
+        if theta.size + int(np.count_nonzero(bad)) > 2**20:
+            return _radius(a, b, k, h, d)[0] < 1.0
+        middle = 0.5 * (theta[:-1][bad] + theta[1:][bad])
+        q_mid, s_mid = evaluate(middle)
+        order = np.argsort(np.concatenate((theta, middle)), kind="stable")
+        theta = np.concatenate((theta, middle))[order]
+        q = np.concatenate((q, q_mid))[order]
+        smallest = np.concatenate((smallest, s_mid))[order]
+    steps = np.angle(q[1:] / q[:-1])
+    winding = round(float(np.sum(steps)) / (2.0 * np.pi))
+    return winding == n
 
 
 def sampled_stability(A: Any, B: Any, K: Any, period: float, *, delay_samples: int = 0) -> SampledStability:
