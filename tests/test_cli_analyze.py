@@ -68,6 +68,16 @@ def test_analyze_sampled_loop_and_sigma_plot(capsys: pytest.CaptureFixture[str],
     assert payload["sampled_hinf"] > payload["hinf_exact"]
     assert payload["sampled_l2_gain"] == pytest.approx(0.09008379608, rel=1e-8)
     assert payload["sampled_l2_bracket_certified"] is True
+    # the coupled sampled margins are the library's (tests/test_design_sampled_margins.py checks them)
+    from mrpctl import paper
+    from mrpctl.design.sampled_margins import loop_margins_sampled
+    from mrpctl.model import gain_matrix, plant_model
+
+    plant = plant_model(paper.SPACECRAFT)
+    margins = loop_margins_sampled(plant.A, plant.B, gain_matrix(paper.GAIN), 0.05, delay_samples=10)
+    assert payload["sampled_gain_margin"] == margins.gain_margin
+    assert payload["sampled_delay_margin_samples"] == margins.delay_margin_samples == 20
+    assert payload["sampled_gain_margin"] < payload["gain_margin"]  # the hold costs margin
     assert figure.stat().st_size > 0
 
 

@@ -33,6 +33,7 @@ from mrpctl.design.pointing import (
     pointing_budget,
     torque_to_attitude,
 )
+from mrpctl.design.sampled_margins import loop_margins_sampled
 from mrpctl.design.sampled_performance import sampled_h2_norm, sampled_hinf_norm, sampled_l2_gain, sampled_sigma
 from mrpctl.design.spectra import characteristic_roots, plot_spectrum
 from mrpctl.errors import SpecificationError
@@ -143,9 +144,11 @@ def _analyze(args: argparse.Namespace) -> int:
         sh2 = sampled_h2_norm(a, b, k, args.period, delay_samples=samples, C=c)
         shinf = sampled_hinf_norm(a, b, k, args.period, delay_samples=samples, C=c)
         sl2 = sampled_l2_gain(a, b, k, args.period, delay_samples=samples, C=c)
+        sampled_margins = loop_margins_sampled(a, b, k, args.period, delay_samples=samples)
         sampled_stable = shinf.finite
         lines += [
             f"  sampled loop, period {args.period:g} s, {samples} samples of delay (ZOH):",
+            f"    margins: {sampled_margins}",
             f"    {sh2}",
             f"    {sl2} (continuous torque -> continuous attitude)",
             f"    {shinf} (torque held over each sample, attitude sampled)",
@@ -160,6 +163,9 @@ def _analyze(args: argparse.Namespace) -> int:
                 "sampled_hinf_frequency": shinf.frequency if shinf.finite else None,
                 "sampled_l2_gain": sl2.value if sl2.finite else None,
                 "sampled_l2_bracket_certified": sl2.bracket_certified,
+                "sampled_gain_margin": sampled_margins.gain_margin,
+                "sampled_phase_margin_deg": math.degrees(sampled_margins.phase_margin),
+                "sampled_delay_margin_samples": sampled_margins.delay_margin_samples,
             }
         )
     if args.plot_sigma is not None:
