@@ -7,6 +7,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from mrpctl import paper
 from mrpctl.cli.common import (
     NOT_VERIFIED,
@@ -235,7 +237,6 @@ def _plot_sigma(
 ) -> None:
     """σ_max of torque → attitude angle over ω, the exact H∞ peak marked; the sampled loop's too with --period."""
     # deferred: matplotlib, only for --plot-sigma
-    import numpy as np
     from matplotlib.figure import Figure
 
     top = 10.0 * max(exact.frequency if exact.finite else 1.0, 1.0 / tau)
