@@ -205,10 +205,10 @@ def check_wheel_scenario(
     actuator: Any = None,
     predictor: Any = None,
     reference: Any = None,
-    law: Any = None,
 ) -> None:
     """Refuse, naming what to use instead, a scenario whose wheels would fly with what they do not take:
-    a rule other than ``"hysteretic"``, an ``[actuator]``, the predictor, a ``[reference]``."""
+    a rule other than ``"hysteretic"``, an ``[actuator]``, the predictor, a ``[reference]`` (the steering law
+    ``[steering]`` flies on the wheels: `mrpctl._scenario_steering`)."""
     if wheels is None:
         return
     if predictor is not None:
@@ -231,10 +231,6 @@ def check_wheel_scenario(
         raise SpecificationError(
             "[wheels] and [reference]: tracking a reference on a wheel cluster is not modelled yet; regulate on "
             "the wheels (remove [reference]) or track with an ideal body torque (remove [wheels])"
-        )
-    if law is not None:
-        raise SpecificationError(
-            "[wheels]: the steering law on a wheel cluster is not modelled yet; fly the wheels with the PD law"
         )
 
 

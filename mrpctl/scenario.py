@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._files import read_toml
+from mrpctl._scenario_steering import STEERING_TABLE, check_steering_scenario, steering_table, steering_toml
 from mrpctl._scenario_tables import (
     FLIGHT_TABLES,
     REFERENCE_TABLE,
@@ -40,6 +41,7 @@ from mrpctl._validation import (
 from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, SensorModel
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime
 from mrpctl.guidance import (
     EigenaxisSlew,
@@ -196,6 +198,9 @@ class Scenario:
     wheels : WheelCluster or None
         The reaction wheels the body torque is flown on (``[wheels]``, `mrpctl._scenario_wheels`;
         ``simulate(..., wheels=...)``, ``design/wheels.md``). None: the torque as commanded (or ``actuator``).
+    law : SteeringLaw or None
+        The rate-limited steering law flown instead of the PD law (``[steering]``, `mrpctl._scenario_steering`;
+        ``simulate(..., law=...)``, ``design/wheels.md``); K is the law near the target. None: the PD law.
     """
 
     name: str
@@ -223,6 +228,7 @@ class Scenario:
     pointing_tolerance: float = DEFAULT_POINTING_TOLERANCE
     gravity_gradient: bool = False
     wheels: WheelCluster | None = None
+    law: SteeringLaw | None = None
 
     @property
     def gains(self) -> PDGains:
@@ -279,6 +285,7 @@ class Scenario:
             **self.tracking_options,
             **self.run_options,
             wheels=self.wheels,
+            law=self.law,
         )
 
     @property
@@ -308,6 +315,7 @@ class Scenario:
                 *([f"  {self.uncertainty}"] if self.uncertainty is not None else []),
                 *([f"  reference: {self.reference}"] if self.reference is not None else []),
                 *([f"  {wheels_text(self.wheels)}"] if self.wheels is not None else []),
+                *([f"  steering: {self.law}"] if self.law is not None else []),
             )
         )
 
@@ -470,12 +478,16 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
       (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
 
     The optional ``[wheels]`` table sets [`Scenario.wheels`][mrpctl.Scenario], the reaction wheels the torque is
-    flown on (keys and refusals: `mrpctl._scenario_wheels`).
+    flown on (keys and refusals: `mrpctl._scenario_wheels`); ``[steering]`` sets [`Scenario.law`][mrpctl.Scenario],
+    the steering law (`mrpctl._scenario_steering`).
     """
     check_keys(
         "",
         data,
-        _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, WHEELS_TABLE},
+        _TOP_KEYS
+        | _TABLES
+        | FLIGHT_TABLES
+        | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, WHEELS_TABLE, STEERING_TABLE},
     )
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
@@ -516,10 +528,13 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     reference = reference_table(data, rate, Horizon(None if base is None else Path(base), samples))
     wheels = wheels_table(data, spacecraft)
     check_wheel_scenario(wheels, rule, actuator=flight.get("actuator"), predictor=predictor, reference=reference)
+    K = readonly(_gain(spacecraft, _table(data, "gains")))
+    law = steering_table(data, spacecraft)
+    check_steering_scenario(law, rule, K, predictor=predictor, reference=reference)
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
-        K=readonly(_gain(spacecraft, _table(data, "gains"))),
+        K=K,
         x0=readonly(_initial_state(_table(data, "initial"))),
         tau=tau,
         rule=rule,
@@ -536,6 +551,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         **tracking_keys(data),
         **flight,
         wheels=wheels,
+        law=law,
     )
 
 
@@ -712,6 +728,7 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         if scenario.gravity_gradient:
             lines.append("gravity_gradient = true  # the plant flies 3 n^2 r x (J r) of the orbit")
     lines += wheels_toml(scenario.wheels)
+    lines += steering_toml(scenario.law, scenario.spacecraft)
     if scenario.uncertainty is not None:
         lines += [
             "",
@@ -903,6 +920,8 @@ delta = 0.1
 # [delay]        tau_min = 0.15 (s; the delay jitters over the whole periods in [tau_min, tau]), seed = 2
 # [wheels]       reaction wheels instead of [actuator]: layout = "orthogonal", spin_inertia = 0.05 (kg m^2),
 #                torque_limit = 0.2 (N m), speed_limit_rpm = 6000.0 (see `mrpctl simulate cubesat_wheels`)
+# [steering]     the rate-limited steering law instead of the PD law: rate_limit = 0.19 (rad/s), acceleration =
+#                0.012 (rad/s^2), lag = 0.42 (s), momentum_limit (N m s, optional); `mrpctl design --torque-limit`
 #
 # What `mrpctl verify` certifies besides the idealised constant delay (any rule): the sampled loop at
 # `rate` (exact lifted check + certificate), the [delay] jitter (interval certificate), and

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from mrpctl import paper
+from mrpctl._scenario_steering import STEERING_NOT_CERTIFIED
 from mrpctl.cli.common import (
     NOT_VERIFIED,
     VERIFY_EXIT_CODES,
@@ -54,6 +55,8 @@ def _analyze(args: argparse.Namespace) -> int:
         scenario = load_scenario(args.scenario)
         if scenario.wheels is not None:
             raise SpecificationError(WHEELS_NOT_CERTIFIED.format(command="analyze"))
+        if scenario.law is not None:
+            raise SpecificationError(STEERING_NOT_CERTIFIED.format(command="analyze"))
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         spacecraft = spacecraft_from(list(paper.INERTIA) if args.inertia is None else args.inertia)
