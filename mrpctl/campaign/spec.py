@@ -114,6 +114,7 @@ from mrpctl._files import read_toml
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.campaign.distributions import Distribution, parse_distribution
 from mrpctl.campaign.reference import REFERENCE_KEYS, ReferenceDispersion, parse_reference_dispersion
+from mrpctl.campaign.steering import campaign_law, check_campaign_law
 from mrpctl.campaign.wheels import campaign_wheels, check_campaign_wheels
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
@@ -656,9 +657,12 @@ def parse_campaign(
         )
     scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
     wheels = scenario_part.pop("wheels", None)  # read below, with the campaign's rules (check_campaign_wheels)
+    steering = scenario_part.pop("steering", None)  # read below, with the campaign's rules (check_campaign_law)
     nominal = parse_scenario(scenario_part, name=name, base=folder)
     nominal = replace(
-        nominal.with_rule(parse_rule("[rule]", data["rule"])), wheels=campaign_wheels(wheels, nominal.spacecraft)
+        nominal.with_rule(parse_rule("[rule]", data["rule"])),
+        wheels=campaign_wheels(wheels, nominal.spacecraft),
+        law=campaign_law(steering, nominal.spacecraft),
     )
     nominal, reference_file = _reference_rows(nominal, given_rows)
     for key in ("count", "seed"):
@@ -763,6 +767,7 @@ def parse_campaign(
     _check_flight(spec)
     _check_predictor(spec)
     check_campaign_wheels(spec)
+    check_campaign_law(spec)
     return spec
 
 
