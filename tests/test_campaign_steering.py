@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -138,3 +139,17 @@ def test_what_a_campaign_with_the_law_refuses(change: dict, needle: str) -> None
     with pytest.raises(SpecificationError) as error:
         parse_campaign(data)
     assert needle in str(error.value)
+
+
+def test_the_example_campaign_flies_the_design_for_its_wheels() -> None:
+    from mrpctl.campaign import load_campaign
+    from mrpctl.design.actuator import design_for_actuator
+
+    spec = load_campaign(Path(__file__).parents[1] / "examples" / "campaigns" / "wheels" / "cubesat_steering.toml")
+    speed = 6000.0 * RPM
+    cluster = WheelCluster.orthogonal(0.020 / speed, 5e-3, speed)  # 20 mN m s at 6000 rpm, exactly
+    design = design_for_actuator(Spacecraft(INERTIA), 0.2, cluster, max_rate=0.05, settling_time=120.0)
+    assert spec.base.wheels is not None and spec.base.wheels.key() == cluster.key()
+    assert spec.base.law == design.law and np.array_equal(spec.base.K, design.K)
+    assert spec.count == 300 and spec.base.rule == Hysteretic(0.0) and spec.base.t_final == 300.0
+    assert spec.attitude is not None and spec.attitude.full and spec.omega is not None
