@@ -62,6 +62,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "mrpctl.scenario",
             "mrpctl._scenario_tables",
             "mrpctl._scenario_wheels",
+            "mrpctl._scenario_steering",
             "mrpctl.data",
             "mrpctl.interop",
             "mrpctl._export",

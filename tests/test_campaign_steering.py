@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from mrpctl import simulate
-from mrpctl.campaign import parse_campaign, run_campaign
-from mrpctl.campaign._task import simulate_chunk
+from mrpctl.campaign import parse_campaign, run_campaign, simulate_chunk
 from mrpctl.campaign.report import replay
 from mrpctl.campaign.sampling import run_inputs
 from mrpctl.campaign.store import open_campaign
