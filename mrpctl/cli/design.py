@@ -571,18 +571,19 @@ def _actuator_scenario(
     axis = np.ones(3) / math.sqrt(3.0)
     x0 = state(math.tan(angle / 4.0) * axis, np.array([max_rate, 0.0, 0.0]))
     wheels = actuator if isinstance(actuator, WheelCluster) else None
+    limit = actuator if isinstance(actuator, ActuatorModel) else None
     return replace(
         paper_base(),
         name=Path(args.toml).stem,
         description=f"mrpctl design: tau = {args.tau:g} s, the steering law for "
-        + ("the wheels" if wheels is not None else f"a {float(np.max(actuator.u_max)):g} N m torque limit"),
+        + ("the wheels" if limit is None else f"a {float(np.max(limit.u_max)):g} N m torque limit"),
         spacecraft=spacecraft,
         x0=x0,
         tau=float(args.tau),
         rate=float(rate),
         t_final=60.0 if args.t_final is None else float(args.t_final),
         rule=rule,
-        actuator=None if wheels is not None else actuator,
+        actuator=limit,
         wheels=wheels,
     )
 
