@@ -96,7 +96,11 @@ def test_every_run_on_the_wheels_is_simulate_of_its_inputs(stored) -> None:
             float(dataset["settling_time"].values[i]), pd.settling_time
         )
     assert differs > 0  # the law flew, not the PD law
-    assert replay(stored, 5).matches
+    replayed = replay(stored, 5, trajectory=True)  # the stored trajectories fly the law too
+    assert replayed.matches and replayed.trajectory is not None
+    assert _same(float(dataset["max_sigma"].values[5]), replayed.trajectory.max_sigma)
+    assert replayed.trajectory.wheels is not None
+    assert replayed.trajectory.wheels.peak_momentum == dataset["wheel_peak_momentum"].values[5]
 
 
 def test_every_run_on_a_torque_limit_is_simulate_of_its_inputs() -> None:
