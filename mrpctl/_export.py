@@ -50,6 +50,7 @@ from mrpctl.clock import delay_samples
 from mrpctl.conventions import PDGains, physical_function
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, SensorModel
+from mrpctl.flight.steering import SteeringLaw, check_law
 from mrpctl.flight.tracking import ErrorTime
 from mrpctl.loop import (
     FLIGHT_MEMORY_LAYOUT,
@@ -429,6 +430,18 @@ _WHEEL_DESCRIPTIONS = {
 }
 
 
+def _steering_manifest(law: SteeringLaw) -> dict[str, Any]:
+    """The steering law's numbers in the wheel controller's manifest (the ``[steering]`` keys)."""
+    return {
+        "rate_limit": law.rate_limit,
+        "acceleration": law.acceleration,
+        "lag": law.lag,
+        "momentum_limit": law.momentum_limit,
+        "momentum_inertia": None if law.spacecraft is None else law.spacecraft.inertia.tolist(),
+        "command": "u_c = K_omega omega/4 + s K_sigma sigma_c, s = min(1, L(phi)/|omega_lin|, h/|J omega_lin|)",
+    }
+
+
 def export_wheel_controller(
     spacecraft: Spacecraft,
     K: Any,
@@ -441,6 +454,7 @@ def export_wheel_controller(
     substeps: int = 1,
     overwrite: bool = False,
     compile: bool = True,
+    law: SteeringLaw | None = None,
 ) -> ExportResult:
     """Write the wheel loop's controller with its allocation (wheel torques out), its dynamics and its step.
 
@@ -467,6 +481,10 @@ def export_wheel_controller(
         The controller-side rule (default ``Hysteretic(0)``).
     rate, substeps, overwrite, compile : keyword-only
         As in [`export`][mrpctl._export.export].
+    law : SteeringLaw, keyword-only
+        The steering law the controller computes its body torque request with (its numbers compiled in, recorded
+        in the manifest's ``parameters.steering``; ``command`` is its u_c), as the simulated wheel loop with
+        ``simulate(..., wheels=..., law=...)``. None (default): the PD law.
     """
     overwrite = _flag("overwrite", overwrite)
     compile = _flag("compile", compile)
@@ -478,9 +496,10 @@ def export_wheel_controller(
     if not isinstance(rule, Hysteretic):
         raise SpecificationError(f"rule: the wheel controller takes Hysteretic(delta), got {type(rule).__name__}")
     wheel_hub_inertia(spacecraft, wheels)
+    law = check_law(law, (rule,), gain)
     d = delay_samples(tau, rate)
     period = 1.0 / float(rate)
-    controller = wheel_controller_function(spacecraft, wheels)
+    controller = wheel_controller_function(spacecraft, wheels, law=law)
     x_meas, memory = ca.SX.sym("x_meas", 6), ca.SX.sym("memory", 5)
     speeds = ca.SX.sym("speeds", wheels.count)
     outputs = controller(x_meas, memory, speeds, ca.DM(gain), ca.DM(list(rule.parameters())))
@@ -518,6 +537,7 @@ def export_wheel_controller(
                 "J": spacecraft.inertia.tolist(),
                 "rule": {"class": "Hysteretic", "str": str(rule), "parameters": list(rule.parameters())},
                 "initial_memory": [1.0, 1.0, "short(sigma) of the first measurement the controller sees"],
+                **({} if law is None else {"steering": _steering_manifest(law)}),
             },
             "wheels": {
                 "count": wheels.count,

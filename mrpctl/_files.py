@@ -286,3 +286,16 @@ def read_numbers(path: Path, key: str) -> np.ndarray:
             "spreadsheet shows them); every value must be finite (no NaN or inf)"
         )
     return array
+
+
+def toml_value(value: Any) -> str:
+    """A bool, a string, a float or a (nested) list or array of them as TOML, floats to full precision (repr)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    return repr(float(value))

@@ -78,7 +78,7 @@ _TRACKER_KEYS = {"noise", "noise_arcsec", "rate", "latency", "dropout", "boresig
 _GYRO_KEYS = {"rate_noise", "bias_walk", "initial_bias", "scale_factor"}
 _TUNING_KEYS = {"rate_noise", "bias_walk", "measurement_covariance", "initial_covariance"}
 #: The tables of other loops: the estimated loop flies none of them.
-_OTHER_LOOPS = ("actuator", "sensor", "disturbance", "delay", "predictor", "reference", "wheels")
+_OTHER_LOOPS = ("actuator", "sensor", "disturbance", "delay", "predictor", "reference", "wheels", "steering")
 
 
 def _keys(where: str, table: Any, allowed: set[str]) -> dict[str, Any]:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._files import read_numbers
+from mrpctl._files import read_numbers, toml_value
 from mrpctl._validation import (
     finite_array,
     finite_scalar,
@@ -19,7 +19,7 @@ from mrpctl._validation import (
     positive_scalar,
 )
 from mrpctl.errors import DimensionError, SpecificationError
-from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
+from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
 from mrpctl.flight.tracking import ErrorTime
 from mrpctl.guidance import (
     CircularOrbit,
@@ -458,3 +458,88 @@ _REFERENCE_BUILDERS: dict[str, Callable[[dict[str, Any], float, Horizon], Guidan
     "nadir": _nadir_reference,
     "file": _file_reference,
 }
+
+
+def reference_toml(reference: GuidanceProfile | None) -> list[str]:
+    """The [reference] table of a scenario's guidance profile (none when the scenario regulates)."""
+    if reference is None:
+        return []
+    lines = ["", "[reference]"]
+    if isinstance(reference, InertialPointing):
+        lines += ['type = "inertial"', f"sigma = {toml_value(reference.sigma)}  # sigma_RN"]
+    elif isinstance(reference, EigenaxisSlew):
+        lines += ['type = "slew"', f"start = {toml_value(reference.start)}  # sigma_RN at t_start"]
+        if reference.target is not None:
+            lines.append(f"target = {toml_value(reference.target)}  # the short way")
+        else:
+            lines += [
+                f"axis = {toml_value(reference.axis)}  # unit eigenaxis, start-frame components",
+                f"angle_deg = {toml_value(math.degrees(float(reference.angle or 0.0)))}",
+            ]
+        lines += [
+            f"rate_limit = {toml_value(reference.rate_limit)}  # rad/s",
+            f"acceleration_limit = {toml_value(reference.acceleration_limit)}  # rad/s^2",
+            f"t_start = {toml_value(reference.t_start)}  # s",
+        ]
+    elif isinstance(reference, NadirPointing):
+        orbit = reference.orbit
+        lines += [
+            'type = "nadir"  # the Hill frame: x radial out, y along-track, z orbit normal',
+            f"orbit_rate = {toml_value(orbit.orbit_rate)}  # rad/s",
+            f"inclination_deg = {toml_value(math.degrees(orbit.inclination))}",
+            f"raan_deg = {toml_value(math.degrees(orbit.raan))}",
+            f"latitude_deg = {toml_value(math.degrees(orbit.latitude))}  # argument of latitude at t = 0",
+        ]
+    elif isinstance(reference, FileReference) and reference.source:
+        lines += ['type = "file"', f"file = {toml_value(reference.source)}  # n rows of 9, one per sample"]
+    else:
+        raise SpecificationError(
+            f"reference: a {type(reference).__name__} is not written into a scenario file; save its rows "
+            "(mrpctl.guidance.reference_samples) as a .npy or .csv file and name it in [reference] file"
+        )
+    return lines
+
+
+def flight_toml(
+    actuator: ActuatorModel | None,
+    sensor: SensorModel | None,
+    disturbance: Disturbance | None,
+    delay: DelayModel | None,
+) -> list[str]:
+    """The [actuator], [sensor], [disturbance] and [delay] tables of a scenario (those that are set)."""
+    lines: list[str] = []
+    if actuator is not None:
+        lines += ["", "[actuator]", f"u_max = {toml_value(actuator.u_max)}  # N m per axis"]
+        if actuator.norm_max is not None:
+            lines.append(f"u_norm = {toml_value(actuator.norm_max)}  # N m")
+        lines.append(f"saturation = {toml_value(actuator.mode.value)}")
+    if sensor is not None:
+        lines += [
+            "",
+            "[sensor]",
+            f"attitude_noise = {toml_value(sensor.attitude_noise)}  # rad, 1 sigma per axis",
+            f"rate_noise = {toml_value(sensor.rate_noise)}  # rad/s, 1 sigma per axis",
+            f"gyro_bias = {toml_value(sensor.gyro_bias)}  # rad/s",
+            f"seed = {sensor.seed}",
+        ]
+    if disturbance is not None:
+        if not disturbance.constant:
+            raise SpecificationError(
+                "disturbance: a per-sample torque is not written into a scenario file; save its rows as a .npy or "
+                ".csv file and name it in [disturbance] torque_file"
+            )
+        lines += ["", "[disturbance]", f"torque = {toml_value(disturbance.torque)}  # N m, body frame"]
+    if delay is not None:
+        if delay.kind is not DelayKind.JITTER:
+            raise SpecificationError(
+                f"delay: only seeded jitter is written into a scenario file, got {delay.kind.value}; save a "
+                "delay sequence as a .npy or .csv file and name it in [delay] sequence_file"
+            )
+        lines += [
+            "",
+            "[delay]",
+            f"tau_min = {toml_value(delay.tau_min)}  # s; jitter uniform over the whole periods in [tau_min, tau]",
+            f"tau_max = {toml_value(delay.tau_max)}",
+            f"seed = {delay.seed}",
+        ]
+    return lines

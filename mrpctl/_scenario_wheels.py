@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from mrpctl._files import toml_value
 from mrpctl._validation import finite_array, finite_scalar
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import Hysteretic
@@ -205,10 +206,10 @@ def check_wheel_scenario(
     actuator: Any = None,
     predictor: Any = None,
     reference: Any = None,
-    law: Any = None,
 ) -> None:
     """Refuse, naming what to use instead, a scenario whose wheels would fly with what they do not take:
-    a rule other than ``"hysteretic"``, an ``[actuator]``, the predictor, a ``[reference]``."""
+    a rule other than ``"hysteretic"``, an ``[actuator]``, the predictor, a ``[reference]`` (the steering law
+    ``[steering]`` flies on the wheels: `mrpctl._scenario_steering`)."""
     if wheels is None:
         return
     if predictor is not None:
@@ -231,10 +232,6 @@ def check_wheel_scenario(
         raise SpecificationError(
             "[wheels] and [reference]: tracking a reference on a wheel cluster is not modelled yet; regulate on "
             "the wheels (remove [reference]) or track with an ideal body torque (remove [wheels])"
-        )
-    if law is not None:
-        raise SpecificationError(
-            "[wheels]: the steering law on a wheel cluster is not modelled yet; fly the wheels with the PD law"
         )
 
 
@@ -271,14 +268,6 @@ def _value(values: np.ndarray) -> Any:
     return array.tolist()
 
 
-def _toml(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    return repr(float(value))
-
-
 def wheels_toml(wheels: WheelCluster | None) -> list[str]:
     """The ``[wheels]`` lines of a cluster (none without it), read back by
     [`wheels_table`][mrpctl._scenario_wheels.wheels_table] to the same cluster bit for bit: the spin axes
@@ -288,9 +277,9 @@ def wheels_toml(wheels: WheelCluster | None) -> list[str]:
     lines = [
         "",
         "[wheels]",
-        f"spin_axes = {_toml(wheels.spin_axes.T.tolist())}  # one unit axis per wheel (body frame)",
-        f"spin_inertia = {_toml(_value(wheels.spin_inertia))}  # Js, kg m^2",
-        f"torque_limit = {_toml(_value(wheels.torque_limit))}  # u_max, N m",
+        f"spin_axes = {toml_value(wheels.spin_axes.T.tolist())}  # one unit axis per wheel (body frame)",
+        f"spin_inertia = {toml_value(_value(wheels.spin_inertia))}  # Js, kg m^2",
+        f"torque_limit = {toml_value(_value(wheels.torque_limit))}  # u_max, N m",
     ]
     for name, stem in _SPEEDS:
         values = np.asarray(getattr(wheels, name))
@@ -298,17 +287,17 @@ def wheels_toml(wheels: WheelCluster | None) -> list[str]:
             continue
         rpm = _exact_rpm(values)
         if rpm is not None:
-            lines.append(f"{stem}_rpm = {_toml(_value(rpm))}")
+            lines.append(f"{stem}_rpm = {toml_value(_value(rpm))}")
         else:
-            lines.append(f"{stem}_rad_s = {_toml(_value(values))}")
+            lines.append(f"{stem}_rad_s = {toml_value(_value(values))}")
     for name, key in _PER_WHEEL[2:]:
         values = np.asarray(getattr(wheels, name))
         if not np.array_equal(values, np.full(wheels.count, _DEFAULTS[name])):
-            lines.append(f"{key} = {_toml(_value(values))}")
+            lines.append(f"{key} = {toml_value(_value(values))}")
     if not np.array_equal(wheels.control_axes, np.eye(3)):
-        lines.append(f"control_axes = {_toml(wheels.control_axes.tolist())}  # unit rows")
+        lines.append(f"control_axes = {toml_value(wheels.control_axes.tolist())}  # unit rows")
     if wheels.null_gain:
-        lines.append(f"null_gain = {_toml(wheels.null_gain)}  # 1/s")
+        lines.append(f"null_gain = {toml_value(wheels.null_gain)}  # 1/s")
     if wheels.gyroscopic:
         lines.append("gyroscopic = true")
     return lines

@@ -11,8 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl._files import read_toml
+from mrpctl._files import read_toml, toml_value
 from mrpctl._scenario_estimator import ESTIMATOR_TABLE, estimator_table, estimator_toml
+from mrpctl._scenario_steering import STEERING_TABLE, check_steering_scenario, steering_table, steering_toml
 from mrpctl._scenario_tables import (
     FLIGHT_TABLES,
     REFERENCE_TABLE,
@@ -23,7 +24,9 @@ from mrpctl._scenario_tables import (
     delay_sequence,
     delay_values,
     flight_tables,
+    flight_toml,
     reference_table,
+    reference_toml,
     sample_count,
     samples_file,
     torque_rows,
@@ -41,14 +44,11 @@ from mrpctl._validation import (
 from mrpctl.conventions import PDGains, gain_from_pd, pd_from_gain, state, state_parts
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.estimation import EstimatedLoop
-from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, SensorModel
+from mrpctl.flight import ActuatorModel, DelayModel, Disturbance, Hysteretic, SensorModel
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE, ErrorTime
 from mrpctl.guidance import (
-    EigenaxisSlew,
-    FileReference,
     GuidanceProfile,
-    InertialPointing,
-    NadirPointing,
 )
 from mrpctl.loop import delay_samples
 from mrpctl.model import gain_matrix
@@ -202,6 +202,9 @@ class Scenario:
     estimated_loop : EstimatedLoop or None
         The loop on an estimator of a late star tracker and a gyro (``[estimator]``; ``design/estimation.md``),
         flown by [`simulate_estimated`][mrpctl.Scenario.simulate_estimated]. None: the loop above.
+    law : SteeringLaw or None
+        The rate-limited steering law flown instead of the PD law (``[steering]``, `mrpctl._scenario_steering`;
+        ``simulate(..., law=...)``, ``design/wheels.md``); K is the law near the target. None: the PD law.
     """
 
     name: str
@@ -230,6 +233,7 @@ class Scenario:
     gravity_gradient: bool = False
     wheels: WheelCluster | None = None
     estimated_loop: EstimatedLoop | None = None
+    law: SteeringLaw | None = None
 
     @property
     def gains(self) -> PDGains:
@@ -288,6 +292,7 @@ class Scenario:
             **self.tracking_options,
             **self.run_options,
             wheels=self.wheels,
+            law=self.law,
         )
 
     @property
@@ -329,6 +334,7 @@ class Scenario:
                 *([f"  reference: {self.reference}"] if self.reference is not None else []),
                 *([f"  {wheels_text(self.wheels)}"] if self.wheels is not None else []),
                 *([f"  {self.estimated_loop}"] if self.estimated_loop is not None else []),
+                *([f"  steering: {self.law}"] if self.law is not None else []),
             )
         )
 
@@ -491,7 +497,8 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
       (σ_R/N, ω_R/N in rad/s, ω̇_R/N in rad/s², N components), relative to ``base``.
 
     The optional ``[wheels]`` table sets [`Scenario.wheels`][mrpctl.Scenario], the reaction wheels the torque is
-    flown on (keys and refusals: `mrpctl._scenario_wheels`).
+    flown on (keys and refusals: `mrpctl._scenario_wheels`); ``[steering]`` sets [`Scenario.law`][mrpctl.Scenario],
+    the steering law (`mrpctl._scenario_steering`).
     The optional ``[estimator]`` table (with ``[estimator.star_tracker]``, ``[estimator.gyro]`` and optionally
     ``[estimator.tuning]``) sets [`Scenario.estimated_loop`][mrpctl.Scenario]: the loop on an estimator of a late
     star tracker and a gyro (its keys: ``design/estimation.md``; an example: ``docs/how-to/estimation.md``).
@@ -499,7 +506,10 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     check_keys(
         "",
         data,
-        _TOP_KEYS | _TABLES | FLIGHT_TABLES | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, WHEELS_TABLE},
+        _TOP_KEYS
+        | _TABLES
+        | FLIGHT_TABLES
+        | {_PREDICTOR_TABLE, _UNCERTAINTY_TABLE, REFERENCE_TABLE, WHEELS_TABLE, STEERING_TABLE},
     )
     spacecraft_table = _table(data, "spacecraft")
     if "inertia" not in spacecraft_table:
@@ -540,10 +550,13 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
     reference = reference_table(data, rate, Horizon(None if base is None else Path(base), samples))
     wheels = wheels_table(data, spacecraft)
     check_wheel_scenario(wheels, rule, actuator=flight.get("actuator"), predictor=predictor, reference=reference)
+    K = readonly(_gain(spacecraft, _table(data, "gains")))
+    law = steering_table(data, spacecraft)
+    check_steering_scenario(law, rule, K, predictor=predictor, reference=reference)
     return Scenario(
         name=str(data.get("name", name)),
         spacecraft=spacecraft,
-        K=readonly(_gain(spacecraft, _table(data, "gains"))),
+        K=K,
         x0=readonly(_initial_state(_table(data, "initial"))),
         tau=tau,
         rule=rule,
@@ -561,6 +574,7 @@ def parse_scenario(data: dict[str, Any], *, name: str = "scenario", base: str | 
         estimated_loop=estimator_table(data, spacecraft=spacecraft, rule=rule, tau=tau, rate=rate, history=history),
         **flight,
         wheels=wheels,
+        law=law,
     )
 
 
@@ -640,17 +654,6 @@ def load_scenario(path: str | Path) -> Scenario:
     return parse_scenario(data, name=path.stem, base=path.parent)
 
 
-def _toml_value(value: Any) -> str:
-    """A float, a string or a (nested) list of floats as TOML, floats to full precision (repr)."""
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    return repr(float(value))
-
-
 def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = False) -> str:
     """The scenario as a TOML file that [`load_scenario`][mrpctl.load_scenario] reads back to the same scenario.
 
@@ -674,132 +677,93 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
     sigma0, omega0 = scenario.sigma0, scenario.omega0
     lines = [f"# {line}" if line else "#" for line in comment.splitlines()]
     lines += [
-        f"name = {_toml_value(scenario.name)}",
-        f"description = {_toml_value(scenario.description)}",
-        f"tau = {_toml_value(scenario.tau)}          # measurement delay (s)",
-        f"rate = {_toml_value(scenario.rate)}        # measurement rate (Hz)",
-        f"t_final = {_toml_value(scenario.t_final)}     # horizon (s)",
-        f"history = {_toml_value(scenario.history)}",
+        f"name = {toml_value(scenario.name)}",
+        f"description = {toml_value(scenario.description)}",
+        f"tau = {toml_value(scenario.tau)}          # measurement delay (s)",
+        f"rate = {toml_value(scenario.rate)}        # measurement rate (Hz)",
+        f"t_final = {toml_value(scenario.t_final)}     # horizon (s)",
+        f"history = {toml_value(scenario.history)}",
         f"substeps = {scenario.substeps}",
         *(
-            [f"settling_attitude_deg = {_toml_value(scenario.settling_attitude)}  # settled: principal angle below"]
+            [f"settling_attitude_deg = {toml_value(scenario.settling_attitude)}  # settled: principal angle below"]
             if scenario.settling_attitude != SETTLING_ATTITUDE_DEG
             else []
         ),
         *(
-            [f"settling_rate = {_toml_value(scenario.settling_rate)}  # settled: |omega| below (rad/s)"]
+            [f"settling_rate = {toml_value(scenario.settling_rate)}  # settled: |omega| below (rad/s)"]
             if scenario.settling_rate != SETTLING_OMEGA
             else []
         ),
         "",
         "[spacecraft]",
-        f"inertia = {_toml_value(inertia_value)}  # kg m^2",
+        f"inertia = {toml_value(inertia_value)}  # kg m^2",
         "",
         "[gains]",
     ]
     if np.array_equal(k1, np.diag(np.diag(k1))) and np.array_equal(k2, np.diag(np.diag(k2))):
-        lines.append(f"# per axis: K1 = {_toml_value(np.diag(k1))} (1/s^2), K2 = {_toml_value(np.diag(k2))} (1/s)")
+        lines.append(f"# per axis: K1 = {toml_value(np.diag(k1))} (1/s^2), K2 = {toml_value(np.diag(k2))} (1/s)")
     lines += _gain_toml(scenario.K, physical)
     lines += [
         "",
         "[initial]",
-        f"sigma = {_toml_value(sigma0)}",
-        f"omega = {_toml_value(omega0)}  # rad/s, body frame",
+        f"sigma = {toml_value(sigma0)}",
+        f"omega = {toml_value(omega0)}  # rad/s, body frame",
         "",
         "[rule]",
-        f"type = {_toml_value(rule_name(scenario.rule))}",
+        f"type = {toml_value(rule_name(scenario.rule))}",
     ]
     if isinstance(scenario.rule, BoundaryLayer):
-        lines.append(f"eps = {_toml_value(scenario.rule.eps)}")
+        lines.append(f"eps = {toml_value(scenario.rule.eps)}")
     if isinstance(scenario.rule, DelayAware):
-        lines.append(f"alpha = {_toml_value(scenario.rule.alpha)}")
+        lines.append(f"alpha = {toml_value(scenario.rule.alpha)}")
     if isinstance(scenario.rule, Hysteretic):
         lines.append(
-            f"delta = {_toml_value(scenario.rule.delta)}  # hysteresis on q0; alpha = {scenario.rule.alpha:.6g}"
+            f"delta = {toml_value(scenario.rule.delta)}  # hysteresis on q0; alpha = {scenario.rule.alpha:.6g}"
         )
     if isinstance(scenario.rule, OnPredicted):
         alpha = math.inf if scenario.rule.alpha is None else scenario.rule.alpha
-        lines.append(f"alpha = {_toml_value(alpha)}  # switch when |sigma_hat| >= alpha; inf: never switch")
+        lines.append(f"alpha = {toml_value(alpha)}  # switch when |sigma_hat| >= alpha; inf: never switch")
     if scenario.predictor is not None:
         model = scenario.predictor.model
         model_inertia = np.diag(model.inertia) if model.is_diagonal else model.inertia
-        lines += ["", "[predictor]", f"inertia = {_toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
-    lines += _flight_toml(scenario)
-    lines += _reference_toml(scenario.reference)
+        lines += ["", "[predictor]", f"inertia = {toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
+    lines += flight_toml(scenario.actuator, scenario.sensor, scenario.disturbance, scenario.delay)
+    lines += reference_toml(scenario.reference)
     if scenario.reference is not None:
         if scenario.error_time is not None:
             lines.append(f'error_time = "{scenario.error_time.value}"  # the reference at the measurement time or now')
         if scenario.feedforward:
             lines.append("feedforward = true  # omega x J omega and J (domega_R - omega x omega_R)")
         if scenario.pointing_tolerance != DEFAULT_POINTING_TOLERANCE:
-            tolerance = _toml_value(scenario.pointing_tolerance)
+            tolerance = toml_value(scenario.pointing_tolerance)
             lines.append(f"pointing_tolerance_deg = {tolerance}  # the slew time's tolerance")
         if scenario.gravity_gradient:
             lines.append("gravity_gradient = true  # the plant flies 3 n^2 r x (J r) of the orbit")
     lines += wheels_toml(scenario.wheels)
     lines += estimator_toml(scenario.estimated_loop)
+    lines += steering_toml(scenario.law, scenario.spacecraft)
     if scenario.uncertainty is not None:
         lines += [
             "",
             "[uncertainty]",
-            f"inertia_tolerance = {_toml_value(scenario.uncertainty.tolerance)}  # relative, per axis (verify only)",
-            f"product_bound = {_toml_value(scenario.uncertainty.product_bound)}  # |J_ij|, kg m^2",
+            f"inertia_tolerance = {toml_value(scenario.uncertainty.tolerance)}  # relative, per axis (verify only)",
+            f"product_bound = {toml_value(scenario.uncertainty.product_bound)}  # |J_ij|, kg m^2",
         ]
     return "\n".join(lines) + "\n"
-
-
-def _reference_toml(reference: GuidanceProfile | None) -> list[str]:
-    """The [reference] table of a scenario's guidance profile (none when the scenario regulates)."""
-    if reference is None:
-        return []
-    lines = ["", "[reference]"]
-    if isinstance(reference, InertialPointing):
-        lines += ['type = "inertial"', f"sigma = {_toml_value(reference.sigma)}  # sigma_RN"]
-    elif isinstance(reference, EigenaxisSlew):
-        lines += ['type = "slew"', f"start = {_toml_value(reference.start)}  # sigma_RN at t_start"]
-        if reference.target is not None:
-            lines.append(f"target = {_toml_value(reference.target)}  # the short way")
-        else:
-            lines += [
-                f"axis = {_toml_value(reference.axis)}  # unit eigenaxis, start-frame components",
-                f"angle_deg = {_toml_value(math.degrees(float(reference.angle or 0.0)))}",
-            ]
-        lines += [
-            f"rate_limit = {_toml_value(reference.rate_limit)}  # rad/s",
-            f"acceleration_limit = {_toml_value(reference.acceleration_limit)}  # rad/s^2",
-            f"t_start = {_toml_value(reference.t_start)}  # s",
-        ]
-    elif isinstance(reference, NadirPointing):
-        orbit = reference.orbit
-        lines += [
-            'type = "nadir"  # the Hill frame: x radial out, y along-track, z orbit normal',
-            f"orbit_rate = {_toml_value(orbit.orbit_rate)}  # rad/s",
-            f"inclination_deg = {_toml_value(math.degrees(orbit.inclination))}",
-            f"raan_deg = {_toml_value(math.degrees(orbit.raan))}",
-            f"latitude_deg = {_toml_value(math.degrees(orbit.latitude))}  # argument of latitude at t = 0",
-        ]
-    elif isinstance(reference, FileReference) and reference.source:
-        lines += ['type = "file"', f"file = {_toml_value(reference.source)}  # n rows of 9, one per sample"]
-    else:
-        raise SpecificationError(
-            f"reference: a {type(reference).__name__} is not written into a scenario file; save its rows "
-            "(mrpctl.guidance.reference_samples) as a .npy or .csv file and name it in [reference] file"
-        )
-    return lines
 
 
 def _gain_toml(K: np.ndarray, physical: bool) -> list[str]:
     """The [gains] lines of K: with ``physical`` the attitude and rate gains (per axis, else 3x3) when they read
     back to K bit for bit (the sign of every zero included), else K itself with the physical gains as comments."""
     gains = PDGains.from_gain(K)
-    paper_rows = ["    " + _toml_value(row) + "," for row in K]
+    paper_rows = ["    " + toml_value(row) + "," for row in K]
     if not physical:
         shown = (np.diag(gains.attitude), np.diag(gains.rate)) if gains.is_diagonal else (gains.attitude, gains.rate)
         return [
             "# u = K x(t - tau) on x = [sigma; omega/4], K = [4 J K1, 4 J K2] (N m), row by row",
             "# physically u = -P_sigma sigma - P_omega omega, K = [-P_sigma, -4 P_omega]:",
-            f"#   attitude = {_toml_value(shown[0])}  # P_sigma, N m",
-            f"#   rate = {_toml_value(shown[1])}  # P_omega, N m s",
+            f"#   attitude = {toml_value(shown[0])}  # P_sigma, N m",
+            f"#   rate = {toml_value(shown[1])}  # P_omega, N m s",
             "K = [",
             *paper_rows,
             "]",
@@ -812,8 +776,8 @@ def _gain_toml(K: np.ndarray, physical: bool) -> list[str]:
         if np.array_equal(np.signbit(back), np.signbit(K)) and np.array_equal(back, K):
             return [
                 "# u = -P_sigma sigma - P_omega omega: attitude = P_sigma (N m), rate = P_omega (N m s)",
-                f"attitude = {_toml_value(attitude)}",
-                f"rate = {_toml_value(rate)}",
+                f"attitude = {toml_value(attitude)}",
+                f"rate = {toml_value(rate)}",
                 "# the paper's form u = K x(t - tau) on x = [sigma; omega/4], K = [-P_sigma, -4 P_omega]:",
                 "# K = [",
                 *("#" + row for row in paper_rows),
@@ -825,48 +789,6 @@ def _gain_toml(K: np.ndarray, physical: bool) -> list[str]:
         *paper_rows,
         "]",
     ]
-
-
-def _flight_toml(scenario: Scenario) -> list[str]:
-    """The [actuator], [sensor], [disturbance] and [delay] tables of ``scenario`` (those that are set)."""
-    lines: list[str] = []
-    if scenario.actuator is not None:
-        lines += ["", "[actuator]", f"u_max = {_toml_value(scenario.actuator.u_max)}  # N m per axis"]
-        if scenario.actuator.norm_max is not None:
-            lines.append(f"u_norm = {_toml_value(scenario.actuator.norm_max)}  # N m")
-        lines.append(f"saturation = {_toml_value(scenario.actuator.mode.value)}")
-    if scenario.sensor is not None:
-        sensor = scenario.sensor
-        lines += [
-            "",
-            "[sensor]",
-            f"attitude_noise = {_toml_value(sensor.attitude_noise)}  # rad, 1 sigma per axis",
-            f"rate_noise = {_toml_value(sensor.rate_noise)}  # rad/s, 1 sigma per axis",
-            f"gyro_bias = {_toml_value(sensor.gyro_bias)}  # rad/s",
-            f"seed = {sensor.seed}",
-        ]
-    if scenario.disturbance is not None:
-        if not scenario.disturbance.constant:
-            raise SpecificationError(
-                "disturbance: a per-sample torque is not written into a scenario file; save its rows as a .npy or "
-                ".csv file and name it in [disturbance] torque_file"
-            )
-        lines += ["", "[disturbance]", f"torque = {_toml_value(scenario.disturbance.torque)}  # N m, body frame"]
-    if scenario.delay is not None:
-        delay = scenario.delay
-        if delay.kind is not DelayKind.JITTER:
-            raise SpecificationError(
-                f"delay: only seeded jitter is written into a scenario file, got {delay.kind.value}; save a "
-                "delay sequence as a .npy or .csv file and name it in [delay] sequence_file"
-            )
-        lines += [
-            "",
-            "[delay]",
-            f"tau_min = {_toml_value(delay.tau_min)}  # s; jitter uniform over the whole periods in [tau_min, tau]",
-            f"tau_max = {_toml_value(delay.tau_max)}",
-            f"seed = {delay.seed}",
-        ]
-    return lines
 
 
 #: The commented starter scenario written by ``mrpctl init``.
@@ -929,6 +851,8 @@ delta = 0.1
 # [delay]        tau_min = 0.15 (s; the delay jitters over the whole periods in [tau_min, tau]), seed = 2
 # [wheels]       reaction wheels instead of [actuator]: layout = "orthogonal", spin_inertia = 0.05 (kg m^2),
 #                torque_limit = 0.2 (N m), speed_limit_rpm = 6000.0 (see `mrpctl simulate cubesat_wheels`)
+# [steering]     the rate-limited steering law instead of the PD law: rate_limit = 0.19 (rad/s), acceleration =
+#                0.012 (rad/s^2), lag = 0.42 (s), momentum_limit (N m s, optional); `mrpctl design --torque-limit`
 #
 # What `mrpctl verify` certifies besides the idealised constant delay (any rule): the sampled loop at
 # `rate` (exact lifted check + certificate), the [delay] jitter (interval certificate), and

@@ -63,6 +63,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "mrpctl._scenario_tables",
             "mrpctl._scenario_wheels",
             "mrpctl._scenario_estimator",
+            "mrpctl._scenario_steering",
             "mrpctl.data",
             "mrpctl.interop",
             "mrpctl._export",

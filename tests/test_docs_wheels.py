@@ -67,3 +67,28 @@ def test_the_sizing_table_is_what_the_code_prints(
     code = _blocks("python")[0]
     exec(compile(code, "docs/how-to/wheels.md", "exec"), {})
     assert capsys.readouterr().out == _blocks("text")[3]
+
+
+def test_the_steering_section_prints_what_the_page_shows(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    texts = _blocks("text")
+    monkeypatch.chdir(tmp_path)
+    command = re.search(r"```sh\n(mrpctl design [^\n]*--wheels[^\n]*)\n```", PAGE)
+    assert command is not None
+    assert main(command.group(1).split()[1:]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    for line in texts[4].splitlines():
+        assert line in printed, line
+    written = tomllib.loads((tmp_path / "steer.toml").read_text(encoding="utf-8"))
+    assert written["steering"] == tomllib.loads(_blocks("toml")[2])["steering"]
+    assert main(["simulate", "steer.toml"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    for line in texts[5].splitlines():
+        assert line in printed, line
+    example = ROOT / "examples" / "campaigns" / "wheels" / "cubesat_steering.toml"
+    assert f"mrpctl campaign run {example.relative_to(ROOT)} --out results/steering --report" in PAGE
+    run_campaign(load_campaign(example), tmp_path / "results", threads=1)
+    text = str(report(tmp_path / "results")).splitlines()
+    for line in texts[6].splitlines():
+        assert line in text, line

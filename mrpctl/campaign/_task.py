@@ -131,6 +131,7 @@ def simulate_chunk(spec: CampaignSpec, start: int, stop: int, *, threads: int | 
         reference=tracked,
         tracking=tracking_keywords(spec),
         wheels=base.wheels,
+        law=base.law,
     )
     sigma_norm = np.linalg.norm(inputs.sigma0, axis=1)
     return {

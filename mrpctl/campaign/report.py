@@ -689,6 +689,7 @@ def _trajectory(spec: Any, run: int, values: dict[str, np.ndarray]) -> Simulatio
         **({} if spec.predictor is None else {"predictor": spec.predictor}),
         **({} if not spec.tracking else {"reference": run_tracking(spec, inputs, 0), **tracking_keywords(spec)}),
         **({} if base.wheels is None else {"wheels": base.wheels}),
+        **({} if base.law is None else {"law": base.law}),
     )
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from mrpctl.campaign.wheels import wheel_metrics
 from mrpctl.flight import Disturbance
+from mrpctl.flight.steering import SteeringLaw
 from mrpctl.predictor import Predictor
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, kept_run_bytes, simulate_batch
 from mrpctl.spacecraft import Spacecraft
@@ -171,6 +172,7 @@ def simulate_runs(
     reference: Sequence[Any] | None = None,
     tracking: dict[str, Any] | None = None,
     wheels: WheelCluster | None = None,
+    law: SteeringLaw | None = None,
 ) -> dict[str, np.ndarray]:
     """Simulate N runs, each with its own inertia, gain, initial state, delay, rule and flight models.
 
@@ -213,6 +215,9 @@ def simulate_runs(
     wheels : WheelCluster or None, optional
         The reaction-wheel cluster every run flies on (every rule a [`Hysteretic`][mrpctl.flight.Hysteretic]);
         the wheel metrics of `mrpctl.campaign.wheels.WHEEL_METRICS` are returned too.
+    law : SteeringLaw or None, optional
+        The steering law every run flies ([`mrpctl.simulate_batch`][mrpctl.simulate_batch]'s ``law``; every rule a
+        [`Hysteretic`][mrpctl.flight.Hysteretic]), each run's K the law near the target. None: the PD law.
 
     Returns
     -------
@@ -231,6 +236,8 @@ def simulate_runs(
         options.update(tracking or {})
     if wheels is not None:
         options["wheels"] = wheels
+    if law is not None:
+        options["law"] = law
     if n == 0:
         return {
             **{name: np.full(0, missing, dtype=dtype) for name, (dtype, missing) in names.items()},

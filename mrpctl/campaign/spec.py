@@ -114,6 +114,8 @@ from mrpctl._files import read_toml
 from mrpctl._validation import finite_array, finite_scalar, integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.campaign.distributions import Distribution, parse_distribution
 from mrpctl.campaign.reference import REFERENCE_KEYS, ReferenceDispersion, parse_reference_dispersion
+from mrpctl.campaign.rules import parse_rule, rule_label
+from mrpctl.campaign.steering import campaign_law, check_campaign_law
 from mrpctl.campaign.wheels import campaign_wheels, check_campaign_wheels
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
@@ -128,13 +130,11 @@ from mrpctl.scenario import (
     delay_values,
     parse_scenario,
     predictor_model,
-    rule_from_name,
-    rule_name,
     sample_count,
     samples_file,
     torque_rows,
 )
-from mrpctl.switching import BoundaryLayer, DelayAware, SwitchingRule
+from mrpctl.switching import SwitchingRule
 
 __all__ = [
     "AttitudeDispersion",
@@ -149,8 +149,6 @@ __all__ = [
     "TauDispersion",
     "load_campaign",
     "parse_campaign",
-    "parse_rule",
-    "rule_label",
 ]
 
 _CAMPAIGN_KEYS = {"count", "seed", "dispersions", "peak_torque", "flight", "rule", "predictor"}
@@ -195,8 +193,6 @@ _FLIGHT_KEYS = {
     "disturbance_file",
     "delay_file",
 }
-#: The one parameter a rule string "name:value" sets, by rule name.
-_RULE_PARAMETER = {"boundary-layer": "eps", "delay-aware": "alpha", "hysteretic": "delta", "on-predicted": "alpha"}
 #: Largest count a specification accepts (the run index is a 64-bit spawn key; this is a sanity bound).
 MAX_COUNT = 10**9
 
@@ -285,59 +281,6 @@ class GainDispersion:
     scale: Distribution
 
 
-def rule_label(rule: SwitchingRule) -> str:
-    """The campaign-file string of ``rule``: ``"name"`` or ``"name:parameter"`` (the inverse of
-    [`parse_rule`][mrpctl.campaign.spec.parse_rule])."""
-    if isinstance(rule, Hysteretic):
-        return f"hysteretic:{rule.delta!r}"
-    if isinstance(rule, OnPredicted):
-        if rule.alpha is None:
-            return "on-predicted:inf"
-        return "on-predicted" if float(rule.alpha) == 1.0 else f"on-predicted:{float(rule.alpha)!r}"
-    name = rule_name(rule)
-    if isinstance(rule, BoundaryLayer):
-        return f"{name}:{float(rule.eps)!r}"
-    if isinstance(rule, DelayAware) and float(rule.alpha) != 1.0:
-        return f"{name}:{float(rule.alpha)!r}"
-    return name
-
-
-def parse_rule(where: str, value: Any) -> SwitchingRule:
-    """A rule from ``"name"``, ``"name:parameter"`` or a table ``{type = ..., eps/alpha/delta = ...}``.
-
-    The names are those of `mrpctl.rules.RULE_NAMES` and ``"hysteretic"``
-    ([`mrpctl.flight.Hysteretic`][mrpctl.flight.Hysteretic], parameter delta, default 0).
-    """
-    names = sorted([*RULE_NAMES, "hysteretic"])
-    if isinstance(value, str):
-        name, colon, parameter = value.partition(":")
-        table: dict[str, Any] = {"type": name.strip()}
-        if colon:
-            key = _RULE_PARAMETER.get(name.strip())
-            if key is None:
-                raise SpecificationError(f"{where}: rule {name!r} takes no parameter, got {value!r}")
-            try:
-                table[key] = float(parameter)
-            except ValueError:
-                raise SpecificationError(f"{where}: the parameter of {value!r} is not a number") from None
-    elif isinstance(value, dict):
-        table = _check_keys(where, value, {"type", "eps", "alpha", "delta"})
-    else:
-        raise SpecificationError(f"{where}: a rule is a string such as 'delay-aware' or a table, got {value!r}")
-    if "type" not in table:
-        raise SpecificationError(f"{where} needs type, one of {names}")
-    name = str(table["type"])
-    if name == "hysteretic":
-        if "eps" in table or "alpha" in table:
-            raise SpecificationError(f"{where}: 'hysteretic' takes delta only")
-        return Hysteretic(finite_scalar(f"{where}.delta", table.get("delta", 0.0)))
-    if "delta" in table:
-        raise SpecificationError(f"{where}: delta applies only to 'hysteretic', not to {name!r}")
-    if name not in RULE_NAMES:
-        raise SpecificationError(f"{where}: rule type must be one of {names}, got {name!r}")
-    return rule_from_name(name, eps=table.get("eps"), alpha=table.get("alpha"))
-
-
 @dataclass(frozen=True, eq=False)
 class RuleDispersion:
     """Several rules, crossed with the cases: run i is case ⌊i / R⌋ under rule i mod R.
@@ -352,7 +295,7 @@ class RuleDispersion:
 
     @property
     def labels(self) -> tuple[str, ...]:
-        """The rules' campaign-file strings ([`rule_label`][mrpctl.campaign.spec.rule_label]), stored with the
+        """The rules' campaign-file strings ([`rule_label`][mrpctl.campaign.rules.rule_label]), stored with the
         results."""
         return tuple(rule_label(rule) for rule in self.rules)
 
@@ -555,7 +498,7 @@ class CampaignSpec:
 
     @property
     def rule_labels(self) -> tuple[str, ...]:
-        """[`rule_label`][mrpctl.campaign.spec.rule_label] of each rule of
+        """[`rule_label`][mrpctl.campaign.rules.rule_label] of each rule of
         [`rule_list`][mrpctl.campaign.CampaignSpec.rule_list] (what the results store per rule index)."""
         return tuple(rule_label(rule) for rule in self.rule_list)
 
@@ -662,9 +605,12 @@ def parse_campaign(
         )
     scenario_part["rule"] = {"type": "none"}  # the campaign reads the rule itself (it knows 'hysteretic')
     wheels = scenario_part.pop("wheels", None)  # read below, with the campaign's rules (check_campaign_wheels)
+    steering = scenario_part.pop("steering", None)  # read below, with the campaign's rules (check_campaign_law)
     nominal = parse_scenario(scenario_part, name=name, base=folder)
     nominal = replace(
-        nominal.with_rule(parse_rule("[rule]", data["rule"])), wheels=campaign_wheels(wheels, nominal.spacecraft)
+        nominal.with_rule(parse_rule("[rule]", data["rule"])),
+        wheels=campaign_wheels(wheels, nominal.spacecraft),
+        law=campaign_law(steering, nominal.spacecraft),
     )
     nominal, reference_file = _reference_rows(nominal, given_rows)
     for key in ("count", "seed"):
@@ -769,6 +715,7 @@ def parse_campaign(
     _check_flight(spec)
     _check_predictor(spec)
     check_campaign_wheels(spec)
+    check_campaign_law(spec)
     return spec
 
 

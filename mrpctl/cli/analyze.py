@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl import paper
+from mrpctl._scenario_steering import STEERING_NOT_CERTIFIED
 from mrpctl.cli.common import (
     NOT_VERIFIED,
     VERIFY_EXIT_CODES,
@@ -65,6 +66,8 @@ def _analyze(args: argparse.Namespace) -> int:
         scenario = load_scenario(args.scenario)
         if scenario.wheels is not None:
             raise SpecificationError(WHEELS_NOT_CERTIFIED.format(command="analyze"))
+        if scenario.law is not None:
+            raise SpecificationError(STEERING_NOT_CERTIFIED.format(command="analyze"))
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         spacecraft = spacecraft_from(list(paper.INERTIA) if args.inertia is None else args.inertia)

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 import mrpctl.design
+from mrpctl._scenario_steering import check_steering_scenario
 from mrpctl._validation import nonnegative_scalar, positive_scalar
 from mrpctl.cli.common import (
     EXIT_CODES,
@@ -26,15 +27,16 @@ from mrpctl.cli.common import (
     refuse_existing,
 )
 from mrpctl.cli.overrides import paper_base, spacecraft_from
-from mrpctl.conventions import PDGains
+from mrpctl.conventions import PDGains, state
 from mrpctl.design import FlownVerdict, SynthesisStatus, analyze_gains, synthesize_lmi, verify_flown
 from mrpctl.design.actuator import design_for_actuator
 from mrpctl.design.robust import RobustPDSynthesis, RobustStatus
 from mrpctl.errors import MrpctlError, SpecificationError
-from mrpctl.flight import ActuatorModel
+from mrpctl.flight import ActuatorModel, Hysteretic
 from mrpctl.rules import DEFAULT_DELTA, DEFAULT_RULE
-from mrpctl.scenario import check_delay, rule_from_name, scenario_toml
+from mrpctl.scenario import Scenario, check_delay, load_scenario, rule_from_name, scenario_toml
 from mrpctl.spacecraft import Spacecraft
+from mrpctl.wheels import WheelCluster
 
 __all__ = ["add_parser"]
 
@@ -83,7 +85,7 @@ def _design(args: argparse.Namespace) -> int:
         )
     positive_scalar("--tau", args.tau)
     spacecraft = spacecraft_from(args.inertia)
-    if args.torque_limit is not None or args.max_rate is not None or args.settling_time is not None:
+    if any(v is not None for v in (args.torque_limit, args.wheels, args.max_rate, args.settling_time)):
         return _actuator_design(args, spacecraft)
     toml_path = None if args.toml is None else Path(args.toml)
     if args.product_bound and args.inertia_tolerance is None:
@@ -476,28 +478,58 @@ def _lmi_design(args: argparse.Namespace, spacecraft: Spacecraft, toml_path: Pat
 
 
 def _actuator_design(args: argparse.Namespace, spacecraft: Spacecraft) -> int:
-    """``--torque-limit``: the steering law for the actuator and the envelope (``design_for_actuator``)."""
-    if args.torque_limit is None:
-        raise SpecificationError("--max-rate and --settling-time apply only with --torque-limit U (N m)")
+    """``--torque-limit`` or ``--wheels``: the steering law for the actuator and the envelope
+    (``design_for_actuator``), and with ``--toml`` the scenario that flies it."""
+    if args.torque_limit is None and args.wheels is None:
+        raise SpecificationError(
+            "--max-rate and --settling-time apply only with --torque-limit U (N m) or --wheels SCENARIO"
+        )
+    if args.torque_limit is not None and args.wheels is not None:
+        raise SpecificationError("give --torque-limit U (an ideal torque) or --wheels SCENARIO (its wheels), not both")
     given = options_given(
         ("--method lmi", args.method == "lmi" or None),
         ("--inertia-tolerance", args.inertia_tolerance),
         ("--sampled", args.sampled),
         ("--jitter", args.jitter),
-        ("--toml", args.toml),
         ("--decay-rate", args.decay_rate),
     )
     if given:
-        raise SpecificationError(f"--torque-limit: the design for the actuator does not take {', '.join(given)}")
-    torque = positive_scalar("--torque-limit", args.torque_limit)
+        option = "--torque-limit" if args.wheels is None else "--wheels"
+        raise SpecificationError(f"{option}: the design for the actuator does not take {', '.join(given)}")
+    actuator: ActuatorModel | WheelCluster
+    if args.wheels is not None:
+        wheels = load_scenario(args.wheels).wheels
+        if wheels is None:
+            raise SpecificationError(f"--wheels {args.wheels}: the scenario has no [wheels] table")
+        actuator = wheels
+    else:
+        actuator = ActuatorModel(positive_scalar("--torque-limit", args.torque_limit))
     max_rate = 0.0 if args.max_rate is None else nonnegative_scalar("--max-rate", args.max_rate)
     settling = 60.0 if args.settling_time is None else positive_scalar("--settling-time", args.settling_time)
     order = 3 if args.order is None else args.order
-    design = design_for_actuator(
-        spacecraft, args.tau, ActuatorModel(torque), max_rate=max_rate, settling_time=settling, order=order
-    )
+    toml_path = None if args.toml is None else Path(args.toml)
+    scenario = None
+    if toml_path is not None:
+        refuse_existing(toml_path, args.overwrite, "--toml")
+        scenario = _actuator_scenario(args, spacecraft, actuator, max_rate)  # its options checked before the design
+    design = design_for_actuator(spacecraft, args.tau, actuator, max_rate=max_rate, settling_time=settling, order=order)
     if not design.designed:
         raise SpecificationError(f"--settling-time {settling:g}: {design.status.value}: {design.reason}")
+    if toml_path is not None and scenario is not None:
+        scenario = replace(scenario, K=design.K, law=design.law)
+        check_steering_scenario(design.law, scenario.rule, design.K)
+        comment = (
+            f"Written by: mrpctl design --inertia {' '.join(f'{v:g}' for v in args.inertia)} --tau {args.tau:g} "
+            + (f"--torque-limit {args.torque_limit:g}" if args.wheels is None else f"--wheels {args.wheels}")
+            + f" --max-rate {max_rate:g} --settling-time {settling:g}\n"
+            f"{design.status.value}: predicted worst-case settling {design.predicted_time:.4g} s of the envelope "
+            f"(|omega0| <= {max_rate:g} rad/s, any attitude), lower bound of any law {design.lower_bound:.4g} s\n"
+            "[steering] is the designed law, [gains] its K near the target. Initial state: a 170 deg slew about "
+            "(1, 1, 1) with |omega0| = --max-rate about x; edit freely. The [steering] table goes into a campaign "
+            "file as it is."
+        )
+        with atomic_output(toml_path) as stream:
+            stream.write(scenario_toml(scenario, comment=comment))
     if args.json:
         print_json(
             {
@@ -506,16 +538,54 @@ def _actuator_design(args: argparse.Namespace, spacecraft: Spacecraft) -> int:
                 "rate_limit": design.law.rate_limit,
                 "acceleration": design.law.acceleration,
                 "lag": design.law.lag,
+                "momentum_limit": design.law.momentum_limit,
                 "predicted_time": design.predicted_time,
                 "lower_bound": design.lower_bound,
                 "reason": design.reason,
+                "toml": toml_path,
             }
         )
         return 0
     print(design)
     print("K (3x6, N m) on x = [sigma; omega/4] (the law near the target):")
     print(np.array2string(design.K, precision=6, max_line_width=200, suppress_small=False))
+    if toml_path is not None:
+        print(f"scenario written to {toml_path} (run: mrpctl simulate {toml_path})")
     return 0
+
+
+def _actuator_scenario(
+    args: argparse.Namespace, spacecraft: Spacecraft, actuator: ActuatorModel | WheelCluster, max_rate: float
+) -> Scenario:
+    """The scenario ``design --torque-limit/--wheels --toml`` writes (K and the law set after the design): the
+    actuator's [actuator] or [wheels], the rule (hysteretic), rate and horizon of the options."""
+    rate = 1000.0 if args.rate is None else args.rate
+    check_delay(args.tau, rate)
+    rule = DEFAULT_RULE if args.rule is None else rule_from_name(args.rule, eps=args.eps, alpha=args.alpha)
+    if not isinstance(rule, Hysteretic):
+        raise SpecificationError(
+            f"--rule {args.rule}: the steering law flies with the controller-side rule only; use --rule hysteretic "
+            "(with --alpha, or the default delta)"
+        )
+    angle = math.radians(170.0)
+    axis = np.ones(3) / math.sqrt(3.0)
+    x0 = state(math.tan(angle / 4.0) * axis, np.array([max_rate, 0.0, 0.0]))
+    wheels = actuator if isinstance(actuator, WheelCluster) else None
+    limit = actuator if isinstance(actuator, ActuatorModel) else None
+    return replace(
+        paper_base(),
+        name=Path(args.toml).stem,
+        description=f"mrpctl design: tau = {args.tau:g} s, the steering law for "
+        + ("the wheels" if limit is None else f"a {float(np.max(limit.u_max)):g} N m torque limit"),
+        spacecraft=spacecraft,
+        x0=x0,
+        tau=float(args.tau),
+        rate=float(rate),
+        t_final=60.0 if args.t_final is None else float(args.t_final),
+        rule=rule,
+        actuator=limit,
+        wheels=wheels,
+    )
 
 
 def add_parser(commands: Any) -> None:
@@ -586,13 +656,19 @@ def add_parser(commands: Any) -> None:
         "--torque-limit", type=float, metavar="U", help="body torque limit per axis (N m): design the steering law"
     )
     actuator.add_argument(
+        "--wheels",
+        metavar="SCENARIO",
+        help="design the steering law for the wheels of this scenario's [wheels] table (a file or a shipped name), "
+        "with their momentum limit; instead of --torque-limit",
+    )
+    actuator.add_argument(
         "--max-rate", type=float, metavar="W", help="with --torque-limit: largest initial rate to recover (rad/s)"
     )
     actuator.add_argument(
         "--settling-time",
         type=float,
         metavar="T",
-        help="with --torque-limit: the time the envelope must settle in (s); default 60",
+        help="with --torque-limit or --wheels: the time the envelope must settle in (s); default 60",
     )
     parser.add_argument("--toml", type=Path, help="write a runnable scenario with the designed K to this file")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --toml file")

@@ -36,6 +36,12 @@ def _export(args: argparse.Namespace) -> int:
             "[reference] gravity_gradient = true: the exported plant functions (dynamics, step, sample) do not model "
             "the gravity-gradient torque; remove the key to export (the controller does not depend on it)"
         )
+    if scenario.law is not None and scenario.wheels is None:
+        raise SpecificationError(
+            "[steering]: export writes the PD law's controller (u = K x) on an ideal torque; the steering law is "
+            "exported with a [wheels] table (the wheel controller), or remove [steering] from a copy of the scenario "
+            "to export its gains"
+        )
     if scenario.wheels is not None:
         return _print(_export_wheels(scenario, args), args, scenario)
     result = export(
@@ -77,6 +83,7 @@ def _export_wheels(scenario: Scenario, args: argparse.Namespace) -> ExportResult
         substeps=scenario.substeps,
         overwrite=args.overwrite,
         compile=not args.no_compile,
+        law=scenario.law,
     )
 
 

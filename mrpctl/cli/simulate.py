@@ -13,6 +13,7 @@ import numpy as np
 from tqdm import tqdm  # type: ignore[import-untyped]
 
 from mrpctl import paper
+from mrpctl._scenario_steering import check_steering_scenario, steering_json
 from mrpctl._scenario_wheels import check_wheel_scenario
 from mrpctl._validation import integer
 from mrpctl.cli.common import (
@@ -119,6 +120,7 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "predictor_inertia": None if scenario.predictor is None else scenario.predictor.model.inertia,
         "wheels": wheels_json(scenario),
         "reference": None if scenario.reference is None else str(scenario.reference),
+        "steering": None if scenario.law is None else steering_json(scenario.law),
     }
 
 
@@ -134,6 +136,9 @@ def _simulate(args: argparse.Namespace) -> int:
             "--pointing-plot draws a tracking run's pointing error: give a scenario with a [reference] table"
         )
     check_wheel_options(scenario, args)
+    check_steering_scenario(
+        scenario.law, scenario.rule, scenario.K, predictor=scenario.predictor, reference=scenario.reference
+    )
     check_run_fits(scenario)
     result = scenario.simulate()
     files: dict[str, Path] = {}
@@ -300,6 +305,7 @@ def _sweep(args: argparse.Namespace) -> int:
     chunk = integer("--chunk", args.chunk, minimum=1)
     values, label, runs = _sweep_runs(args, base)
     check_wheel_scenario(base.wheels, runs[0].get("rule", base.rule), actuator=base.actuator, reference=base.reference)
+    check_steering_scenario(base.law, runs[0].get("rule", base.rule), base.K, reference=base.reference)
     check_sweep_fits(base, len(runs), [r.get("tau", base.tau) for r in runs], chunk)
     rows: list[tuple[Any, ...]] = []
     batches: list[Any] = []
@@ -321,6 +327,7 @@ def _sweep(args: argparse.Namespace) -> int:
                 settling_rate=base.settling_rate,
                 **base.flight_options,  # a flight scenario's models, shared by the runs
                 wheels=base.wheels,  # a shared wheel cluster, or None
+                law=base.law,  # the scenario's steering law, or None (the PD law)
             )
             batches.append(batch)
             for i in range(len(part)):

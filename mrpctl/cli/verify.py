@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl import paper
+from mrpctl._scenario_steering import STEERING_NOT_CERTIFIED
 from mrpctl._validation import nonnegative_scalar, positive_scalar
 from mrpctl.cli.common import (
     NOT_VERIFIED,
@@ -239,6 +240,8 @@ def _verify(args: argparse.Namespace) -> int:
         assert scenario is not None
         if scenario.wheels is not None:
             raise SpecificationError(WHEELS_NOT_CERTIFIED.format(command="verify"))
+        if scenario.law is not None:
+            raise SpecificationError(STEERING_NOT_CERTIFIED.format(command="verify"))
         spacecraft, gain, tau = scenario.spacecraft, scenario.K, scenario.tau
     else:
         scenario = None

@@ -109,7 +109,9 @@ def wheel_allocation_function(spacecraft: Spacecraft, wheels: WheelCluster) -> c
     )
 
 
-def wheel_controller_function(spacecraft: Spacecraft, wheels: WheelCluster) -> ca.Function:
+def wheel_controller_function(
+    spacecraft: Spacecraft, wheels: WheelCluster, *, law: SteeringLaw | None = None
+) -> ca.Function:
     """``wheel_controller(x_meas, memory, speeds, K, parameters) -> (motor, body, memory_next, command,
     torque_limited, speed_limited)`` (pure SX): the flight software of the wheel loop, once per sample.
 
@@ -119,7 +121,10 @@ def wheel_controller_function(spacecraft: Spacecraft, wheels: WheelCluster) -> c
     K [σ_c; ω̃/4] (``command``, N m) and the allocation of
     [`wheel_allocation_function`][mrpctl.loop.wheels.wheel_allocation_function]: ``motor`` the wheel motor
     torques u_s (N m, clipped and speed-cut), ``body`` = −Gs u_s. The same expressions as the controller
-    part of [`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function].
+    part of [`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]. With ``law`` (a
+    [`SteeringLaw`][mrpctl.flight.steering.SteeringLaw]) u_c is the steering law's
+    ([`steering_command_expr`][mrpctl.flight.steering.steering_command_expr], as in the wheel sample); None
+    (default): the PD law.
     """
     allocation = wheel_allocation_function(spacecraft, wheels)
     x_meas = ca.SX.sym("x_meas", STATE_SIZE)
@@ -129,7 +134,10 @@ def wheel_controller_function(spacecraft: Spacecraft, wheels: WheelCluster) -> c
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
     sigma_seen = short_expr(x_meas[0:3])
     h_next, c_next, sigma_c, _ = selection_function()(memory[0], memory[1], sigma_seen, memory[2:5], parameters[0])
-    command = gain @ ca.vertcat(sigma_c, x_meas[3:6])
+    if law is None:
+        command = gain @ ca.vertcat(sigma_c, x_meas[3:6])
+    else:
+        command = steering_command_expr(law, gain, sigma_c, x_meas[3:6])[0]
     motor, body, torque_limited, speed_limited = allocation(command, 4 * x_meas[3:6], speeds)
     return ca.Function(
         "wheel_controller",
