@@ -67,6 +67,8 @@ def test_the_commands_run_and_report_the_numbers_the_page_quotes(
     report = json.loads(capsys.readouterr().out)
     margins = [check["exact_delay_margin"] for check in report["checks"]]
     assert f"margins are {margins[0]:.7f} s\nand {margins[1]:.7f} s" in page
+    assert "starts 20 deg from its reference" in report["local"]  # VERIFIED is local, as the page says
+    assert "starts 20° from its\nreference" in page and "VERIFIED certifies no region of attraction" in page
     radius = report["checks"][0]["spectral_radius"]
     assert f"spectral radius at d = 10 is {radius:.9f}" in page
     assert main([*unstable, "--json"]) == 1

@@ -67,8 +67,8 @@ EXIT_BROKEN_PIPE = 141
 
 EXIT_CODES = """\
 exit codes:
-  0    success (a diverged run is a result: 0 unless --fail-on-divergence)
-  1    a run diverged and --fail-on-divergence was given
+  0    success (a diverged run is a result: 0 unless simulate or sweep was given --fail-on-divergence)
+  1    simulate, sweep: a run diverged and --fail-on-divergence was given
   2    user error: bad option or scenario, missing file, no certified gains, a request that would not fit
   130  interrupted (Ctrl-C); no half-written output file is left
   141  the output pipe was closed (mrpctl ... | head)
@@ -78,7 +78,8 @@ VERIFY_EXIT_CODES = """\
 exit codes:
   0    checked: the loop as flown is VERIFIED (one certificate covers it jointly) and, with tau > 0,
        at least one LMI criterion certifies the idealised loop at tau; a tracking scenario ([reference]):
-       every check of its linearised loop holds and nothing of it is left uncovered
+       every check of its linearised loop holds and nothing is listed as not covered (a local verdict:
+       the loop about its reference motion; no region of attraction is certified)
   1    checked, but not verified: the joint verdict is PARTIAL, NOT_CERTIFIED or UNSTABLE, or no
        criterion certifies the idealised loop at tau (the output says which and why); a tracking
        scenario ([reference]) whose linearised loop fails a check, or has a part no check covers
