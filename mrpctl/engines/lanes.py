@@ -66,7 +66,14 @@ from mrpctl._validation import available_memory as _available_memory  # patched 
 from mrpctl._validation import integer
 from mrpctl.engines.isa import host_isa_flags
 from mrpctl.engines.lane_code import LaneProgram, emit_lanes
-from mrpctl.engines.lane_streams import lane_reference_rows, lane_torque_rows, noise_and_torque_rows, tracking_rows
+from mrpctl.engines.lane_streams import (
+    lane_flight_rows,
+    lane_newest_arrived,
+    lane_reference_rows,
+    lane_torque_rows,
+    noise_and_torque_rows,
+    tracking_rows,
+)
 from mrpctl.engines.scalar import engine_sample, noise_rows, rule_key
 from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
@@ -291,13 +298,15 @@ class LaneEngine:
         if self._dll.mrpctl_lanes_width() != self.width:
             raise CodegenError(f"{self.library} was built for {self._dll.mrpctl_lanes_width()} lanes, not {self.width}")
         self._run = self._dll.mrpctl_lanes_run
-        self._run.restype = ctypes.c_int
-        self._run.argtypes = (
-            [ctypes.c_void_p] * 3
-            + [ctypes.c_longlong] * 3
-            + [ctypes.c_void_p] * 2
-            + [ctypes.c_longlong, ctypes.c_void_p]
-        )
+        self._run_lanes = self._dll.mrpctl_lanes_run_lanes  # j*(k) per lane (each run its own jitter)
+        for function in (self._run, self._run_lanes):
+            function.restype = ctypes.c_int
+            function.argtypes = (
+                [ctypes.c_void_p] * 3
+                + [ctypes.c_longlong] * 3
+                + [ctypes.c_void_p] * 2
+                + [ctypes.c_longlong, ctypes.c_void_p]
+            )
 
     @property
     def history_columns(self) -> int:
@@ -320,7 +329,8 @@ class LaneEngine:
         slice_samples: int = SLICE_SAMPLES,
         finished: str | None = None,
         stream: Callable[..., np.ndarray] | np.ndarray | None = None,
-        schedule: Callable[[int, int, int], np.ndarray] | None = None,
+        schedule: Callable[..., np.ndarray] | None = None,
+        lane_schedule: bool = False,
     ) -> LaneBatches:
         """The N runs packed into batches of W lanes, checked and ready to run (see `run`).
 
@@ -335,7 +345,8 @@ class LaneEngine:
         newest_before)`` gives the newest arrived measurement j*(k) (int64, in [k − d, k − 1])
         of the samples of a slice under a time-varying delay
         (``newest_before`` is j*(k0 − 1), −1 − d at k0 = 0), shared by every run; None: the
-        constant delay d.
+        constant delay d. With ``lane_schedule`` each lane has its own: ``schedule(k0, k1, newest_before, runs)``
+        gives (k1 − k0, W) values, ``newest_before`` and ``runs`` (W,) per lane.
         """
         if (self.streamed or self.lane_streamed) and stream is None:
             names = sorted([*self.streamed, *self.lane_streamed])
@@ -384,8 +395,9 @@ class LaneEngine:
             port, _, index = finished.partition("[")
             row = self.carried[port].start + int(index.rstrip("]"))
         return LaneBatches(
-            self, full_carried, full_constants, history_array, n, slice_samples, row, stream=stream, schedule=schedule
-        )
+            self, full_carried, full_constants, history_array, n, slice_samples, row, stream=stream, schedule=schedule,
+            lane_schedule=lane_schedule,
+        )  # fmt: skip
 
     def run(
         self,
@@ -443,11 +455,13 @@ class LaneBatches:
         finished_row: int | None,
         *,
         stream: Callable[..., np.ndarray] | np.ndarray | None = None,
-        schedule: Callable[[int, int, int], np.ndarray] | None = None,
+        schedule: Callable[..., np.ndarray] | None = None,
+        lane_schedule: bool = False,
     ) -> None:
         self.engine = engine
         self._stream = stream
         self._schedule = schedule
+        self._lane_schedule = lane_schedule and schedule is not None
         self.runs = len(carried)
         self.count = -(-self.runs // engine.width)
         self.n = n
@@ -478,7 +492,8 @@ class LaneBatches:
             constant_row = np.ascontiguousarray(self._stream, dtype=float)
             if constant_row.shape != (engine.stream_size,):
                 raise DimensionError(f"stream: expected shape ({engine.stream_size},) but found {constant_row.shape}")
-        newest = -1 - engine.d
+        newest: Any = np.full(width, -1 - engine.d, dtype=np.int64) if self._lane_schedule else -1 - engine.d
+        run_slice = engine._run_lanes if self._lane_schedule else engine._run
         k = 0
         while k < self.n:
             k1 = min(k + self._slice, self.n)
@@ -492,15 +507,17 @@ class LaneBatches:
                     )
             used = None
             if self._schedule is not None:
-                used = np.ascontiguousarray(self._schedule(k, k1, newest), dtype=np.int64)
+                given = self._schedule(k, k1, newest, lanes) if self._lane_schedule else self._schedule(k, k1, newest)
+                used = np.ascontiguousarray(given, dtype=np.int64)
+                samples = np.arange(k, k1)[:, None] if self._lane_schedule else np.arange(k, k1)
                 if (
-                    used.shape != (k1 - k,)
-                    or np.any(used >= np.arange(k, k1))
-                    or np.any(used < np.arange(k, k1) - engine.d)
+                    used.shape != ((k1 - k, width) if self._lane_schedule else (k1 - k,))
+                    or np.any(used >= samples)
+                    or np.any(used < samples - engine.d)
                 ):
                     raise SpecificationError(f"schedule: j*(k) must lie in [k - d, k - 1] with d = {engine.d}")
-                newest = int(used[-1])
-            status = engine._run(
+                newest = used[-1].copy() if self._lane_schedule else int(used[-1])
+            status = run_slice(
                 *pointers,
                 k,
                 k1,
@@ -560,6 +577,7 @@ def lane_engine(
     feedforward: bool = False,
     reference_per_lane: bool = False,
     gravity_gradient: bool = False,
+    noise_per_lane: bool = False,
     **options: Any,
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
@@ -581,8 +599,9 @@ def lane_engine(
     beside the noise and the torque; ``feedforward``: with the feedforward terms; with ``reference_per_lane``
     each lane's own reference, a per-lane stream). With ``gravity_gradient`` the flight sample's plant flies the
     gravity-gradient torque of the orbit whose constants follow the flight constants (shared or per lane, like
-    them; the sample's time from the lane's sample counter). The keywords are ignored for the other rules. The
-    engine's `LaneEngine.structure` is the flight sample's structure.
+    them; the sample's time from the lane's sample counter). With ``noise_per_lane`` (and a ``sensor``) the
+    ``noise`` is a per-lane stream: each run its own sensor's rows. The keywords are ignored for the other
+    rules. The engine's `LaneEngine.structure` is the flight sample's structure.
 
     Raises
     ------
@@ -616,6 +635,8 @@ def lane_engine(
     key += (("tracking", feedforward) + (("lanes",) if reference_per_lane else ()),) if tracking else ()
     gravity = flight and gravity_gradient
     key += ("gravity",) if gravity else ()  # without it the key of before
+    own_noise = bool(flight and noise_per_lane and sensor)
+    key += ("noise_lanes",) if own_noise else ()
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -642,13 +663,16 @@ def lane_engine(
                 label += ("_tracking" + ("_ff" if feedforward else "")) if tracking else ""
                 label += "_lanes" if tracking and reference_per_lane else ""
                 label += "_gravity" if gravity else ""
-                noise = ("noise",) if structure["sensor"] else ()
+                label += "_noiselanes" if own_noise else ""
+                noise = ("noise",) if structure["sensor"] and not own_noise else ()
                 rows = ("reference", "reference_error") if tracking else ()
                 shared_rows, lane_rows = ((), rows) if reference_per_lane else (rows, ())
                 options = {
                     "delayed": ("x_delayed", "measurement" if structure["sensor"] else "x_meas"),
                     "streamed": ((*noise, "torque") if torque_input and not torque_per_lane else noise) + shared_rows,
-                    "lane_streamed": (("torque",) if torque_input and torque_per_lane else ()) + lane_rows,
+                    "lane_streamed": (("noise",) if own_noise else ())
+                    + (("torque",) if torque_input and torque_per_lane else ())
+                    + lane_rows,
                     "structure": structure,
                     **options,
                 }
@@ -739,8 +763,8 @@ def closed_loop_batches(
     threads: int = 1,
     slice_samples: int = SLICE_SAMPLES,
     flight_options: np.ndarray | None = None,
-    sensor: SensorModel | None = None,
-    delay: DelayModel | None = None,
+    sensor: SensorModel | Sequence[SensorModel | None] | None = None,
+    delay: DelayModel | Sequence[DelayModel | None] | None = None,
     rate: float = 1.0,
     disturbance: Disturbance | Sequence[Disturbance] | None = None,
     reference: ReferenceStream | Sequence[ReferenceStream] | None = None,
@@ -768,7 +792,9 @@ def closed_loop_batches(
     shared by the runs (an engine of `lane_engine` with ``reference_input``), its two blocks of rows of each
     slice ([`ReferenceStream.rows`][mrpctl.flight.tracking.ReferenceStream.rows]) streamed after the noise and
     the torque, or one per run (an engine with per-lane reference streams: ``reference_per_lane``); ``memory0``
-    then holds each run's σ_B/R at k = 0 (`mrpctl.engines.scalar.tracking_memory`).
+    then holds each run's σ_B/R at k = 0 (`mrpctl.engines.scalar.tracking_memory`). ``sensor`` may be one per run
+    (an engine of `lane_engine` with ``noise_per_lane``: each lane streamed its own run's noise rows) and
+    ``delay`` one per run (None: the constant delay d; each lane its own newest-arrived schedule).
     """
     runs = len(x0)
     crafts = (spacecraft,) * runs if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
@@ -794,11 +820,17 @@ def closed_loop_batches(
             inertia[i, 0], inertia[i, 1] = values[0].ravel(), values[1].ravel()  # column-major, as Engine.run
         constants["J"], constants["J_inv"] = inertia[:, 0], inertia[:, 1]
     stream: Callable[..., np.ndarray] | np.ndarray | None = None
-    schedule: Callable[[int, int, int], np.ndarray] | None = None
+    schedule: Callable[..., np.ndarray] | None = None
     structure = engine.structure
     if structure is not None:
         options = NO_FLIGHT_OPTIONS if flight_options is None else np.asarray(flight_options, dtype=float)
         constants["flight"] = np.broadcast_to(options, (runs, options.shape[-1]))
+        sensors = tuple(sensor) if isinstance(sensor, Sequence) else None
+        if ("noise" in engine.lane_streamed) != (sensors is not None) or len(sensors or [None] * runs) != runs:
+            raise SpecificationError(f"sensor: a lane engine with noise_per_lane takes one sensor per run ({runs})")
+        # the structure's sensor: per run, any noisy one (the biases are in the options rows)
+        sensor = next((one for one in sensors if one is not None and not one.ideal), None) if sensors else sensor
+        assert sensor is None or isinstance(sensor, SensorModel)
         needed = flight_structure(options, sensor)  # the union over the rows
         missing = [name for name, used in needed.items() if used and not structure[name]]
         if missing:
@@ -816,7 +848,12 @@ def closed_loop_batches(
         own_reference = "reference" in engine.lane_streamed
         if ("reference" in engine.streamed or own_reference) != (reference is not None):
             raise SpecificationError("reference: a tracked reference needs a lane engine with a reference stream")
-        if own_reference:
+        if sensors is not None:
+            stream = functools.partial(
+                lane_flight_rows, dict(engine.streamed), dict(engine.lane_streamed), engine.stream_size, sensors,
+                disturbance, reference, rate, engine.width,
+            )  # fmt: skip
+        elif own_reference:
             references = tuple(reference) if isinstance(reference, Sequence) else ()
             torques = tuple(disturbance) if per_lane and isinstance(disturbance, Sequence) else None
             if len(references) != runs or (per_lane and (torques is None or len(torques) != runs)):
@@ -852,7 +889,11 @@ def closed_loop_batches(
             )
         elif sensor is not None and noisy:
             stream = functools.partial(noise_rows, sensor)
-        if delay is not None:
+        if isinstance(delay, Sequence):
+            if len(delay) != runs:
+                raise DimensionError(f"delay: expected one delay model per run ({runs}) but found {len(delay)}")
+            schedule = functools.partial(lane_newest_arrived, tuple(delay), rate, engine.d)
+        elif delay is not None:
             schedule = functools.partial(newest_arrived_slice, delay, rate, engine.d)
     elif flight_options is not None or sensor is not None or delay is not None:
         raise SpecificationError("flight_options, sensor, delay: this lane engine does not run the flight sample")
@@ -866,6 +907,7 @@ def closed_loop_batches(
         finished=f"stats[{S_DIVERGED}]",
         stream=stream,
         schedule=schedule,
+        lane_schedule=isinstance(delay, Sequence),
     )
 
 

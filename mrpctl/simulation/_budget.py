@@ -11,6 +11,7 @@ from mrpctl.engines.scalar import STATE_BLOCK, slice_samples
 from mrpctl.engines.stats import STATS_SIZE
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import (
+    NOISE_SIZE,
     DelayKind,
     DelayModel,
 )
@@ -140,3 +141,13 @@ def lane_bytes(runs: int, d: int, workers: int) -> int:
     per_run = 2 * STATE_BLOCK + INPUT_SIZE * STATE_SIZE + 1 + 18
     per_batch = DEFAULT_WIDTH * (2 * STATE_BLOCK + INPUT_SIZE * STATE_SIZE + 1 + 18 + STATE_SIZE * (2 * d + 2))
     return 8 * (runs * per_run + min(workers, runs) * per_batch)
+
+
+def lane_stream_bytes(n: int, substeps: int, workers: int, *, noise: bool, jitter: bool) -> int:
+    """Bytes of the per-lane streams of one slice per worker when the runs have their own sensors (each lane's
+    noise rows: the stream row, the W-lane block and one run's rows) or their own delay models (each lane's
+    newest-arrived schedule and its checks, and the slice's arrival arrays of one run)."""
+    rows = min(slice_samples(substeps), n)
+    per_sample = (2 * DEFAULT_WIDTH + 1) * NOISE_SIZE if noise else 0
+    per_sample += 4 * DEFAULT_WIDTH + 8 if jitter else 0
+    return 8 * workers * rows * per_sample
