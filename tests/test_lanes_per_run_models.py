@@ -187,8 +187,10 @@ def test_per_lane_streams_are_in_the_memory_budget(monkeypatch):
 
     monkeypatch.setattr(_batch, "check_memory", record)
     simulate_batch(**shared, **long)
-    streams = _batch.lane_stream_bytes(20001, 1, 2, noise=True, jitter=True)
-    assert streams == 8 * 2 * 20001 * ((2 * 8 + 1) * 6 + 4 * 8 + 8)  # slice rows x (noise blocks, schedules)
+    streams = _batch.lane_stream_bytes(20001, 50, 1, 2, noise=True, jitter=True)
+    # per worker: the noise block of 64 rows of 8 lanes and one lane's, the keys; the jitter state and a slice's
+    # per-lane schedule with its checks and one run's arrival arrays
+    assert streams == 8 * 2 * (64 * 6 * 9 + 4 * 8 + 54 * 8 + 3 * 8 * 20001 + 5 * 20051)
     limit = max(estimates) + streams / 2
     simulate_batch(**shared, **long, memory_limit=limit)
     ran = []

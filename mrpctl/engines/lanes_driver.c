@@ -37,15 +37,13 @@
  * when there are none. used: null for the constant delay d, else the newest arrived measurement
  * j*(k) in [k - d, k - 1] of each sample of the slice (a time-varying delay, d = d_max; shared
  * by the lanes), read from the ring, or from the history for j* < 0, as the scalar driver does.
- * per_lane: used holds one j*(k) per lane (see mrpctl_lanes_run_lanes). Returns 0. */
-static inline __attribute__((always_inline)) int mrpctl_lanes_drive(double* carried, const double* constants,
-                                                                    const double* history, long long k0,
-                                                                    long long k1, long long d, double* ring,
-                                                                    const double* stream, long long stream_stride,
-                                                                    const long long* used, int per_lane) {
+ * Returns 0. */
+__attribute__((visibility("default"))) int mrpctl_lanes_run(double* carried, const double* constants,
+                                                            const double* history, long long k0, long long k1,
+                                                            long long d, double* ring, const double* stream,
+                                                            long long stream_stride, const long long* used) {
   static double* const unused = 0;
   double buffers[2][MRPCTL_BLOCK] __attribute__((aligned(64)));
-  double gathered[MRPCTL_COLUMN] __attribute__((aligned(64)));
   const double* arg[MRPCTL_N_IN];
   double* res[MRPCTL_N_OUT];
   long long k, slot = k0 % (d + 1), delayed_slot = k0 >= d ? (k0 - d) % (d + 1) : 0;
@@ -57,17 +55,9 @@ static inline __attribute__((always_inline)) int mrpctl_lanes_drive(double* carr
     double* now = buffers[now_index];
     double* next = buffers[now_index ^ 1];
     const double* delayed = d == 0 ? history : k < d ? history + MRPCTL_COLUMN * k : ring + MRPCTL_COLUMN * delayed_slot;
-    if (used && !per_lane) {
+    if (used) {
       const long long j = used[k - k0];
       delayed = j < 0 ? history + MRPCTL_COLUMN * (j + d) : ring + MRPCTL_COLUMN * (j % (d + 1));
-    } else if (used) { /* each lane its own j*(k): its values gathered from its column */
-      int l, m;
-      for (l = 0; l < MRPCTL_W; ++l) {
-        const long long j = used[(k - k0) * MRPCTL_W + l];
-        const double* column = j < 0 ? history + MRPCTL_COLUMN * (j + d) : ring + MRPCTL_COLUMN * (j % (d + 1));
-        for (m = 0; m < MRPCTL_MEASURED; ++m) gathered[m * MRPCTL_W + l] = column[m * MRPCTL_W + l];
-      }
-      delayed = gathered;
     }
     for (i = 0; i < MRPCTL_N_IN; ++i) {
       if (mrpctl_in_role[i] == MRPCTL_ROLE_CARRIED) arg[i] = now + mrpctl_in_offset[i] * MRPCTL_W;
@@ -85,24 +75,6 @@ static inline __attribute__((always_inline)) int mrpctl_lanes_drive(double* carr
   }
   memcpy(carried, buffers[now_index], sizeof(buffers[0]));
   return 0;
-}
-
-__attribute__((visibility("default"))) int mrpctl_lanes_run(double* carried, const double* constants,
-                                                            const double* history, long long k0, long long k1,
-                                                            long long d, double* ring, const double* stream,
-                                                            long long stream_stride, const long long* used) {
-  return mrpctl_lanes_drive(carried, constants, history, k0, k1, d, ring, stream, stream_stride, used, 0);
-}
-
-/* As mrpctl_lanes_run with a time-varying delay per lane: used holds (k1 - k0, W) values, j*(k) of
- * lane l at used[(k - k0) * W + l] (each run its own jitter sequence); lane l reads its nonzeros of
- * m_{j*(k)} from the ring (or the history for j* < 0), as the scalar driver does for its run. */
-__attribute__((visibility("default"))) int mrpctl_lanes_run_lanes(double* carried, const double* constants,
-                                                                  const double* history, long long k0,
-                                                                  long long k1, long long d, double* ring,
-                                                                  const double* stream, long long stream_stride,
-                                                                  const long long* used) {
-  return mrpctl_lanes_drive(carried, constants, history, k0, k1, d, ring, stream, stream_stride, used, 1);
 }
 
 /* The lane count this library was built for (checked by the loader). */

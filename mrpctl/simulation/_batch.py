@@ -439,7 +439,9 @@ def simulate_batch(
     mode = _shared_saturation(actuators)
     per_run_models = isinstance(actuator, list | tuple) or per_run_sensor or per_run_delay
     if per_run_models:  # each worker's per-lane noise rows and schedules of one slice
-        estimate += lane_stream_bytes(n, substeps, workers, noise=per_run_sensor, jitter=per_run_delay)
+        estimate += lane_stream_bytes(
+            n, max(samples_by_run), substeps, workers, noise=per_run_sensor, jitter=per_run_delay
+        )
         check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     checked = None
     for one in rules:
@@ -801,9 +803,15 @@ def _run_lanes(
         options = _lane_options(options_by_run, members) if is_flight else None
         sensor, own_sensors = _lane_sensors(sensors, members)
         own_noise = own_sensors is not None
-        delay = varying[first] if all(varying[i] is varying[first] for i in members) else [varying[i] for i in members]
-        if own_noise and wheels is not None:  # the wheel lane sample streams the noise shared (not done per lane)
-            _LOGGER.info("the scalar engine runs %d wheel runs with their own sensor noise", len(members))
+        delay: Any = varying[first]
+        if any(varying[i] is not delay for i in members):  # each run its own jitter (or sequence)
+            delay = [varying[i] for i in members]
+        # each lane's own noise and seeded jitter, drawn and scheduled by the lane driver
+        own = is_flight and wheels is None and (own_noise or isinstance(delay, list))
+        if own and own_sensors is None:
+            own_sensors = [sensor] * len(members)
+        if wheels is not None and (own_noise or isinstance(delay, list)):  # the wheel lanes share their streams
+            _LOGGER.info("the scalar engine runs %d wheel runs with their own noise or jitter", len(members))
             left.extend(members)
             continue
         # the group's structure: the union over its runs (flight_structure of their rows), as the scalar engine's
@@ -843,7 +851,7 @@ def _run_lanes(
                         }
                     ),
                     **({"gravity_gradient": True} if gravity_gradient and is_flight else {}),
-                    **({"noise_per_lane": True} if own_noise and is_flight else {}),
+                    **({"own_streams": True} if own else {}),
                 )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
@@ -935,8 +943,8 @@ def _lane_sensors(
     sensors: list[SensorModel | None], members: list[int]
 ) -> tuple[SensorModel | None, list[SensorModel | None] | None]:
     """A lane group's sensor for its structure and its noise: the shared one and None; or, when the runs' sensors
-    differ, a noisy one of them and the run's sensors (each lane streamed its own run's noise rows), or None and
-    None when none of them is noisy (no noise stream: the gyro biases are in the runs' constants)."""
+    differ, a noisy one of them and the run's sensors (each lane's own noise, drawn by the lane driver), or None and
+    None when none of them is noisy (no noise: the gyro biases are in the runs' constants)."""
     first = sensors[members[0]]
     if all(sensors[i] is first for i in members):
         return first, None

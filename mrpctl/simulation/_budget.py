@@ -143,11 +143,12 @@ def lane_bytes(runs: int, d: int, workers: int) -> int:
     return 8 * (runs * per_run + min(workers, runs) * per_batch)
 
 
-def lane_stream_bytes(n: int, substeps: int, workers: int, *, noise: bool, jitter: bool) -> int:
-    """Bytes of the per-lane streams of one slice per worker when the runs have their own sensors (each lane's
-    noise rows: the stream row, the W-lane block and one run's rows) or their own delay models (each lane's
-    newest-arrived schedule and its checks, and the slice's arrival arrays of one run)."""
+def lane_stream_bytes(n: int, d: int, substeps: int, workers: int, *, noise: bool, jitter: bool) -> int:
+    """Bytes of the per-lane streams per worker when the runs have their own sensors (the driver's block of
+    64 noise rows of every lane and one lane's, the lanes' keys and scales) or their own delay models (the lanes'
+    jitter state: keys, d_min, j* and the d + 1 arrival ring; for a given sequence the slice's (samples, W)
+    schedule, its checks and the arrival arrays of one run)."""
     rows = min(slice_samples(substeps), n)
-    per_sample = (2 * DEFAULT_WIDTH + 1) * NOISE_SIZE if noise else 0
-    per_sample += 4 * DEFAULT_WIDTH + 8 if jitter else 0
-    return 8 * workers * rows * per_sample
+    size = (64 * NOISE_SIZE * (DEFAULT_WIDTH + 1) + 4 * DEFAULT_WIDTH) if noise else 0
+    size += ((4 + d) * DEFAULT_WIDTH + 3 * DEFAULT_WIDTH * rows + 5 * (rows + d)) if jitter else 0
+    return 8 * workers * size
