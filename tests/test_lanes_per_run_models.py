@@ -198,3 +198,44 @@ def test_per_lane_streams_are_in_the_memory_budget(monkeypatch):
     with pytest.raises(SpecificationError, match="memory_limit"):
         simulate_batch(**case, **long, memory_limit=limit)
     assert not ran
+
+
+def _rotating(n: int, rate: float, spin: float, axis: tuple[float, float, float]) -> np.ndarray:
+    """Reference rows (σ_R/N, ω_R/N, ω̇_R/N) of a frame spinning at ``spin`` rad/s about a fixed axis (|σ| <= 1)."""
+    e = np.asarray(axis, float) / np.linalg.norm(axis)
+    angle = np.mod(spin * np.arange(n) / rate + np.pi, 2.0 * np.pi) - np.pi  # the short set: |angle| <= π
+    rows = np.zeros((n, 9))
+    rows[:, 0:3] = np.tan(angle / 4.0)[:, None] * e
+    rows[:, 3:6] = spin * e
+    return rows
+
+
+@pytest.mark.parametrize("per_run_reference", [False, True])
+def test_per_run_sequences_and_tracking_with_own_noise_equal_each_run_alone(per_run_reference, monkeypatch):
+    """Given delay sequences per run (each lane's schedule from NumPy beside its own noise drawn by the driver), and
+    a tracked reference (shared, or one per run) beside the runs' own sensors: each run as its own call."""
+    case = _case()
+    rate, n = 100.0, 1201
+    rng = np.random.default_rng(9)
+    sequences = [DelayModel.sequence(rng.integers(2, 6, n) / rate, tau_min=0.02, tau_max=0.05) for _ in range(COUNT)]
+    sequences[4] = None
+    references: object = [_rotating(n, rate, spin, (1.0, i, 0.5)) for i, spin in enumerate(np.linspace(0.01, 0.2, 19))]
+    if not per_run_reference:
+        references = references[0]  # type: ignore[index]
+    given = dict(case, delay=sequences)
+    packed: list[tuple[int, bool]] = []
+    pack = lane_engines.closed_loop_batches
+
+    def spy(engine, x0, *args, **kwargs):
+        packed.append((len(x0), engine.own_streams))
+        return pack(engine, x0, *args, **kwargs)
+
+    for extra in ({}, {"reference": references}):
+        monkeypatch.setattr(lane_engines, "closed_loop_batches", spy)
+        batch = simulate_batch(**given, **extra, **COMMON, threads=2)
+        monkeypatch.setattr(lane_engines, "closed_loop_batches", pack)
+        assert packed.pop() == (COUNT, True) and not packed  # every run on one own-streams lane group
+        for i in range(COUNT):
+            one = {"reference": references[i] if per_run_reference else references} if extra else {}  # type: ignore[index]
+            alone = simulate_batch(**_one(given, i), **one, **COMMON, threads=1)
+            _assert_same_bits(batch, alone, [i])
