@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -11,14 +11,11 @@ from mrpctl import _compile
 from mrpctl.engines.lane_streams import OwnStreams
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 
-if TYPE_CHECKING:
-    from mrpctl.engines.lanes import LaneEngine
-
 __all__ = ["LaneBatches"]
 
 
 class LaneBatches:
-    """N runs of one `LaneEngine` packed into ``count`` batches of W lanes.
+    """N runs of one `mrpctl.engines.lanes.LaneEngine` packed into ``count`` batches of W lanes.
 
     `run` advances one batch to the horizon slice by slice and writes its lanes'
     carried values into `out` (N, carried nonzeros); batches are independent (a thread
@@ -27,7 +24,7 @@ class LaneBatches:
 
     def __init__(
         self,
-        engine: LaneEngine,
+        engine: Any,  # a mrpctl.engines.lanes.LaneEngine (not imported: lanes imports this module)
         carried: np.ndarray,
         constants: np.ndarray,
         history: np.ndarray,
