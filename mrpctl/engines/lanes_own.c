@@ -91,21 +91,32 @@ __attribute__((visibility("default"))) int mrpctl_lanes_run_own(double* carried,
     double* next = buffers[now_index ^ 1];
     const double* delayed = d == 0 ? history : k < d ? history + MRPCTL_COLUMN * k : ring + MRPCTL_COLUMN * delayed_slot;
     if (jitter || used) { /* each lane its own j*(k): its values gathered from its column */
-      for (l = 0; l < MRPCTL_W; ++l) {
-        long long j;
-        const double* column;
-        if (jitter) {
+      long long chosen[MRPCTL_W];
+      if (jitter) {
+        /* the lanes' delays of measurement k (mrpctl_stream_integer's numbers, side by side: vectorised), then
+           each lane's arrival ring */
+        const uint64_t base = (((uint64_t)k << 12) + 1u) * UINT64_C(0x9E3779B97F4A7C15);
+        long long arrivals[MRPCTL_W];
+        for (l = 0; l < MRPCTL_W; ++l) {
+          const uint64_t h = mrpctl_mix13((uint64_t)keys[l] + base);
+          arrivals[l] = slot + d_min[l] + (long long)(((h >> 32) * (uint64_t)(d - d_min[l] + 1)) >> 32);
+        }
+        for (l = 0; l < MRPCTL_W; ++l) {
           long long* entry = latest + slot * MRPCTL_W + l;
-          long long arrival = slot + mrpctl_stream_integer((uint64_t)keys[l], (uint64_t)k, d_min[l], d);
-          if (arrival > d) arrival -= d + 1;
-          if (*entry > newest[l]) newest[l] = *entry;
-          if (k - d > newest[l]) newest[l] = k - d; /* the history sample k - d arrives at k */
+          const long long arrival = arrivals[l] > d ? arrivals[l] - (d + 1) : arrivals[l];
+          long long j = newest[l];
+          if (*entry > j) j = *entry;
+          if (k - d > j) j = k - d; /* the history sample k - d arrives at k */
+          newest[l] = chosen[l] = j;
           *entry = LLONG_MIN;
           latest[arrival * MRPCTL_W + l] = k; /* every measurement registered before is older than k */
-          j = newest[l];
-        } else {
-          j = used[(k - k0) * MRPCTL_W + l];
         }
+      } else {
+        for (l = 0; l < MRPCTL_W; ++l) chosen[l] = used[(k - k0) * MRPCTL_W + l];
+      }
+      for (l = 0; l < MRPCTL_W; ++l) {
+        const long long j = chosen[l];
+        const double* column;
         if (j < 0) {
           column = history + MRPCTL_COLUMN * (j + d);
         } else { /* slot of j = k's slot - (k - j), 1 <= k - j <= d */
