@@ -79,7 +79,8 @@ def _case(mode: Saturation | None = Saturation.SCALE) -> dict:
 
 
 def _one(case: dict, i: int) -> dict:
-    return {name: value[i] for name, value in case.items()}
+    """Run i's arguments: its item of every per-run list (a shared value as it is)."""
+    return {name: value[i] if isinstance(value, list | np.ndarray) else value for name, value in case.items()}
 
 
 def _assert_same_bits(got: BatchResult, want: BatchResult, rows: slice | list[int] = slice(None)) -> None:
@@ -239,3 +240,13 @@ def test_per_run_sequences_and_tracking_with_own_noise_equal_each_run_alone(per_
             one = {"reference": references[i] if per_run_reference else references} if extra else {}  # type: ignore[index]
             alone = simulate_batch(**_one(given, i), **one, **COMMON, threads=1)
             _assert_same_bits(batch, alone, [i])
+
+
+def test_per_run_jitter_without_a_sensor_equals_each_run_alone():
+    """Each lane's own jitter on an engine without a noise input (no sensor: the driver draws no noise)."""
+    case = dict(_case(), sensor=None)
+    batch = simulate_batch(**case, **COMMON, threads=2)
+    for i in range(COUNT):
+        _assert_same_bits(batch, simulate_batch(**_one(case, i), **COMMON, threads=1), [i])
+    engines = [engine for key, engine in lane_engines._ENGINES.items() if "own streams" in key]
+    assert any(engine.own_noise is None for engine in engines)
