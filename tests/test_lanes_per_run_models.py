@@ -159,6 +159,18 @@ def test_per_lane_schedules_are_each_runs_newest_arrived_measurements():
     assert not np.array_equal(got[:, 0], got[:, 1])
 
 
+def test_per_run_models_alone_give_the_number_of_runs():
+    """One initial state, gain and rule with N sensors and N delay models: N runs, each its own models."""
+    case = _case()
+    given = dict(case, x0=case["x0"][1], K=case["K"][1], spacecraft=case["spacecraft"][1], rule=case["rule"][1])
+    batch = simulate_batch(**given, **COMMON)
+    assert len(batch.max_sigma) == COUNT
+    for i in (0, 7):
+        own = {name: case[name][i] for name in ("sensor", "delay", "actuator", "disturbance")}
+        _assert_same_bits(batch, simulate_batch(**dict(given, **own), **COMMON), [i])
+    assert not np.array_equal(batch.max_sigma[0], batch.max_sigma[7])
+
+
 def test_per_run_models_are_checked():
     case = _case()
     with pytest.raises(DimensionError, match="sensor: expected 1 or 19 entries"):

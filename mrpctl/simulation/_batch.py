@@ -376,7 +376,9 @@ def simulate_batch(
         raise SpecificationError("rule: give a switching rule or a non-empty sequence of rules")
     for one in rules:
         check_rule(one)
-    n_runs = max(len(states), len(gains), len(delays), len(rules), len(crafts))
+    given: tuple[Any, ...] = (actuator, sensor, delay)
+    models = [len(value) for value in given if isinstance(value, list | tuple)]  # per run
+    n_runs = max(len(states), len(gains), len(delays), len(rules), len(crafts), *models)
     if len(states) == 0:
         raise DimensionError("x0: expected at least one initial state (shape (6,) or (N, 6)) but found none")
     for name, count in (
