@@ -127,8 +127,25 @@ def _spacecraft(inertia: np.ndarray) -> list[Spacecraft]:
     return crafts
 
 
-def _flight_key(models: dict[str, Any] | None) -> Any:
-    """Runs with equal flight models share one simulate_batch call (the models are per call).
+def _model_keys(models: dict[str, Any]) -> tuple[Any, Any, Any]:
+    """The actuator's, the sensor's and the delay model's values as keys: runs with equal keys have equal models."""
+    actuator, sensor, delay = models["actuator"], models["sensor"], models["delay"]
+    return (
+        None if actuator is None else (actuator.u_max.tobytes(), actuator.norm_limit, actuator.mode),
+        (sensor.attitude_noise, sensor.rate_noise, sensor.gyro_bias.tobytes(), 0 if sensor.ideal else sensor.seed),
+        None if delay is None else (delay.kind, delay.tau_min, delay.tau_max, delay.seed, id(delay.delays)),
+    )
+
+
+def _flight_key(models: dict[str, Any] | None, per_run: bool) -> Any:
+    """Runs with the same key share one simulate_batch call.
+
+    With ``per_run`` the key is the models' structure only (whether there is an actuator and its saturation
+    mode, the shared rows of a ``disturbance_file``): simulate_batch takes each run's actuator, sensor (its noise
+    seed, levels and gyro bias) and delay model (its jitter seed), and the lanes stream each run its own noise
+    rows and newest-arrived schedule, so a fully dispersed chunk is one call that fills every lane. Without it
+    (the wheel and the predictor loops, whose engines share one noise stream and one schedule per call) runs with
+    equal models share a call.
 
     A constant torque w is not part of the key: runs that differ only in w (``[dispersions.disturbance]``)
     share one call with one w per run (simulate_batch's per-run constants, on the lanes; with a
@@ -137,14 +154,12 @@ def _flight_key(models: dict[str, Any] | None) -> Any:
     """
     if models is None:
         return None
-    actuator, sensor, delay = models["actuator"], models["sensor"], models["delay"]
     rows = models.get("disturbance_rows")  # shared by the runs (one array): its identity names it
-    return (
-        None if actuator is None else (actuator.u_max.tobytes(), actuator.norm_limit, actuator.mode),
-        None if rows is None else id(rows),
-        (sensor.attitude_noise, sensor.rate_noise, sensor.gyro_bias.tobytes(), 0 if sensor.ideal else sensor.seed),
-        None if delay is None else (delay.kind, delay.tau_min, delay.tau_max, delay.seed, id(delay.delays)),
-    )
+    actuator = models["actuator"]
+    if per_run:
+        return ("per run", None if actuator is None else actuator.mode, None if rows is None else id(rows))
+    keys = _model_keys(models)
+    return (keys[0], None if rows is None else id(rows), *keys[1:])
 
 
 def _rows_plus(rows: np.ndarray, constant: np.ndarray, rate: float, times: np.ndarray) -> np.ndarray:
@@ -196,7 +211,8 @@ def simulate_runs(
         Per run, None or the flight models (``actuator``, ``disturbance``, ``sensor``, ``delay``
         of [`mrpctl.simulate_batch`][mrpctl.simulate_batch], and ``disturbance_rows``: see
         [`flight_keywords`][mrpctl.campaign.simulation.flight_keywords]).
-        Runs with equal models share one call; the calls
+        Runs whose models share their structure share one call, each with its own actuator, sensor and delay
+        model (on the wheel and the predictor loops: runs with equal models); the calls
         run on ``threads`` threads (one each), and every run's result is the same either way.
     predictor : Predictor or None, optional
         The predictor controller shared by every run (every rule an
@@ -247,8 +263,9 @@ def simulate_runs(
     models = [None] * n if flight is None else list(flight)
     crafts = _spacecraft(inertia)
     groups: dict[Any, list[int]] = {}
+    per_run = predictor is None and wheels is None  # the loops whose lanes take per-run models
     for i in range(n):
-        groups.setdefault(_flight_key(models[i]), []).append(i)
+        groups.setdefault(_flight_key(models[i], per_run), []).append(i)
     out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in names.items()}
     if wheels is not None:
         out.update(wheel_metrics(None, n, wheels.count))
@@ -270,6 +287,11 @@ def simulate_runs(
     def one_call(members: list[int], **extra: Any) -> None:
         given = models[members[0]]
         found = {} if given is None else flight_keywords(given)
+        if given is not None and len(members) > 1:  # each run's own models where the runs' differ
+            keys = [_model_keys(models[i] or given) for i in members]
+            for slot, name in enumerate(("actuator", "sensor", "delay")):
+                if any(key[slot] != keys[0][slot] for key in keys[1:]):
+                    found[name] = [(models[i] or given)[name] for i in members]
         if given is not None:
             torques = [np.asarray((models[i] or given)["disturbance"], dtype=np.float64) for i in members]
             rows = given.get("disturbance_rows")

@@ -65,8 +65,17 @@ from mrpctl import _compile
 from mrpctl._validation import available_memory as _available_memory  # patched by tests as lanes._available_memory
 from mrpctl._validation import integer
 from mrpctl.engines.isa import host_isa_flags
+from mrpctl.engines.lane_batches import LaneBatches
 from mrpctl.engines.lane_code import LaneProgram, emit_lanes
-from mrpctl.engines.lane_streams import lane_reference_rows, lane_torque_rows, noise_and_torque_rows, tracking_rows
+from mrpctl.engines.lane_streams import (
+    OwnStreams,
+    lane_newest_arrived,
+    lane_reference_rows,
+    lane_torque_rows,
+    noise_and_torque_rows,
+    own_streams,
+    tracking_rows,
+)
 from mrpctl.engines.scalar import engine_sample, noise_rows, rule_key
 from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
@@ -108,7 +117,7 @@ SLICE_SAMPLES = 2**16
 
 
 _DRIVER_FILE = "lanes_driver.c"
-_ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT, _ROLE_STREAMED = 0, 1, 2, 3
+_ROLE_CARRIED, _ROLE_DELAYED, _ROLE_CONSTANT, _ROLE_STREAMED, _ROLE_NOISE = 0, 1, 2, 3, 4
 _ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
 #: The keywords of the flight sample's structure (`mrpctl.loop.options.flight_structure`).
 _STRUCTURE = ("sensor", "limited", "disturbed")
@@ -121,8 +130,8 @@ def _build_library(code: str, name: str, flags: tuple[str, ...]) -> Path:
     return _compile.compile_source(code, name, flags=flags)
 
 
-def _driver_source() -> str:
-    return importlib.resources.files("mrpctl.engines").joinpath(_DRIVER_FILE).read_text(encoding="utf-8")
+def _driver_source(name: str = _DRIVER_FILE) -> str:
+    return importlib.resources.files("mrpctl.engines").joinpath(name).read_text(encoding="utf-8")
 
 
 # ------------------------------------------------------------------ the lane engine
@@ -161,6 +170,10 @@ class LaneEngine:
         ``disturbed`` of [`mrpctl.loop.flight_core_function`][mrpctl.loop.flight_core_function] (kept as `structure`,
         the
         explicit mark of a flight engine); None (default) for any other sample.
+    own_streams : bool, keyword-only
+        The flight sample with each lane's own sensor noise (its ``noise`` input, when it has one) and seeded
+        jitter, drawn and scheduled by the driver (``noise.c`` compiled in; `LaneBatches` with an
+        `mrpctl.engines.lane_streams.OwnStreams`).
     """
 
     def __init__(
@@ -177,6 +190,7 @@ class LaneEngine:
         streamed: Sequence[str] = (),
         lane_streamed: Sequence[str] = (),
         structure: Mapping[str, bool] | None = None,
+        own_streams: bool = False,
     ) -> None:
         self.d = integer("delay_samples", delay_samples, minimum=0)
         if structure is not None and set(structure) != set(_STRUCTURE):
@@ -186,7 +200,10 @@ class LaneEngine:
             None if structure is None else {name: bool(structure[name]) for name in _STRUCTURE}
         )
         self.width = integer("width", width, minimum=1)
+        self.own_streams = bool(own_streams)
         names_in = [sample.name_in(i) for i in range(sample.n_in())]
+        #: The input fed each lane's own noise rows by the driver (own streams), or None.
+        self.own_noise = "noise" if self.own_streams and "noise" in names_in else None
         names_out = [sample.name_out(i) for i in range(sample.n_out())]
         delayed_in, measured_out = delayed
         if delayed_in not in names_in or measured_out not in names_out:
@@ -239,6 +256,9 @@ class LaneEngine:
             elif name == delayed_in:
                 in_role.append(_ROLE_DELAYED)
                 in_offset.append(0)
+            elif name == self.own_noise:
+                in_role.append(_ROLE_NOISE)
+                in_offset.append(0)
             else:
                 in_role.append(_ROLE_CONSTANT)
                 in_offset.append(offset_constant)
@@ -273,7 +293,8 @@ class LaneEngine:
             f"#define MRPCTL_ROLE_CARRIED {_ROLE_CARRIED}\n#define MRPCTL_ROLE_DELAYED {_ROLE_DELAYED}\n"
             f"#define MRPCTL_ROLE_CONSTANT {_ROLE_CONSTANT}\n#define MRPCTL_ROLE_MEASUREMENT {_ROLE_MEASUREMENT}\n"
             f"#define MRPCTL_ROLE_DROPPED {_ROLE_DROPPED}\n#define MRPCTL_ROLE_STREAMED {_ROLE_STREAMED}\n"
-            f"static const int mrpctl_in_role[] = {{{', '.join(map(str, in_role))}}};\n"
+            + (f"#define MRPCTL_ROLE_NOISE {_ROLE_NOISE}\n" if own_streams else "")
+            + f"static const int mrpctl_in_role[] = {{{', '.join(map(str, in_role))}}};\n"
             f"static const long long mrpctl_in_offset[] = {{{', '.join(map(str, in_offset))}}};\n"
             f"static const int mrpctl_out_role[] = {{{', '.join(map(str, out_role))}}};\n"
             f"static const long long mrpctl_out_offset[] = {{{', '.join(map(str, out_offset))}}};\n"
@@ -282,9 +303,11 @@ class LaneEngine:
         self.flags = (*flags, *(host_isa_flags() if isa is None else isa))
         code = (
             header
+            + (_driver_source("noise.c") if own_streams else "")  # the one generator, for the driver's own streams
             + program.code
             + "#define mrpctl_lanes_sample(arg, res) mrpctl_lanes_sample_body_call(arg, res)\n"
             + _driver_source()
+            + (_driver_source("lanes_own.c") if own_streams else "")
         )
         self.library = _build_library(code, f"{sample.name()}_w{self.width}", self.flags)
         self._dll = ctypes.CDLL(str(self.library))
@@ -298,6 +321,10 @@ class LaneEngine:
             + [ctypes.c_void_p] * 2
             + [ctypes.c_longlong, ctypes.c_void_p]
         )
+        if self.own_streams:  # and each lane's noise keys, scales and jitter state
+            self._run_own = self._dll.mrpctl_lanes_run_own
+            self._run_own.restype = ctypes.c_int
+            self._run_own.argtypes = [*self._run.argtypes, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
 
     @property
     def history_columns(self) -> int:
@@ -320,7 +347,9 @@ class LaneEngine:
         slice_samples: int = SLICE_SAMPLES,
         finished: str | None = None,
         stream: Callable[..., np.ndarray] | np.ndarray | None = None,
-        schedule: Callable[[int, int, int], np.ndarray] | None = None,
+        schedule: Callable[..., np.ndarray] | None = None,
+        lane_schedule: bool = False,
+        own: OwnStreams | None = None,
     ) -> LaneBatches:
         """The N runs packed into batches of W lanes, checked and ready to run (see `run`).
 
@@ -335,8 +364,15 @@ class LaneEngine:
         newest_before)`` gives the newest arrived measurement j*(k) (int64, in [k − d, k − 1])
         of the samples of a slice under a time-varying delay
         (``newest_before`` is j*(k0 − 1), −1 − d at k0 = 0), shared by every run; None: the
-        constant delay d.
+        constant delay d. With ``lane_schedule`` (an engine with ``own_streams``) each lane has
+        its own: ``schedule(k0, k1, newest_before, runs)`` gives (k1 − k0, W) values, ``newest_before`` and ``runs``
+        (W,) per lane. ``own``: each run's noise and jitter, drawn and scheduled by the driver (an engine with
+        ``own_streams``).
         """
+        if (own is not None) != self.own_streams or (lane_schedule and own is None):
+            raise SpecificationError(
+                "own, lane_schedule: an engine with own_streams takes each run's OwnStreams (and only it does)"
+            )
         if (self.streamed or self.lane_streamed) and stream is None:
             names = sorted([*self.streamed, *self.lane_streamed])
             raise SpecificationError(f"stream: the inputs {names} are streamed; give their values")
@@ -384,8 +420,9 @@ class LaneEngine:
             port, _, index = finished.partition("[")
             row = self.carried[port].start + int(index.rstrip("]"))
         return LaneBatches(
-            self, full_carried, full_constants, history_array, n, slice_samples, row, stream=stream, schedule=schedule
-        )
+            self, full_carried, full_constants, history_array, n, slice_samples, row, stream=stream, schedule=schedule,
+            lane_schedule=lane_schedule, own=own,
+        )  # fmt: skip
 
     def run(
         self,
@@ -422,103 +459,6 @@ class LaneEngine:
         packed = self.batches(carried, constants, history, n, threads=workers)
         _pool_map(packed.run, packed.count, workers)
         return {name: packed.out[:, where] for name, where in self.carried.items()}
-
-
-class LaneBatches:
-    """N runs of one `LaneEngine` packed into ``count`` batches of W lanes.
-
-    `run` advances one batch to the horizon slice by slice and writes its lanes'
-    carried values into `out` (N, carried nonzeros); batches are independent (a thread
-    pool may run them in any order: each lane's bits do not depend on it).
-    """
-
-    def __init__(
-        self,
-        engine: LaneEngine,
-        carried: np.ndarray,
-        constants: np.ndarray,
-        history: np.ndarray,
-        n: int,
-        slice_samples: int,
-        finished_row: int | None,
-        *,
-        stream: Callable[..., np.ndarray] | np.ndarray | None = None,
-        schedule: Callable[[int, int, int], np.ndarray] | None = None,
-    ) -> None:
-        self.engine = engine
-        self._stream = stream
-        self._schedule = schedule
-        self.runs = len(carried)
-        self.count = -(-self.runs // engine.width)
-        self.n = n
-        self._carried, self._constants, self._history = carried, constants, history
-        self._slice = slice_samples
-        self._finished_row = finished_row
-        self.out = np.empty_like(carried)
-
-    def lanes(self, b: int) -> int:
-        """Runs (not padding) in batch b."""
-        return min((b + 1) * self.engine.width, self.runs) - b * self.engine.width
-
-    def run(self, b: int, stop: Callable[[int], bool] | None = None) -> bool:
-        """Run batch b; ``stop(samples)`` after each slice (samples: run-samples done in this
-        batch) returning True abandons it. Returns True when the batch reached the horizon."""
-        engine, width = self.engine, self.engine.width
-        lanes = np.arange(b * width, (b + 1) * width)
-        lanes[lanes >= self.runs] = b * width  # padding lanes repeat the batch's first run
-        block = np.ascontiguousarray(self._carried[lanes].T)
-        values = np.ascontiguousarray(self._constants[lanes].T)
-        columns = np.empty((engine.history_columns, engine.measured, width))  # m_{-d}.., (measured, W) each
-        columns[...] = self._history[lanes].transpose(1, 2, 0)  # broadcasts a constant (1-column) history
-        ring = np.empty((engine.d + 1, engine.measured, width))
-        pointers = (_compile.address(block), _compile.address(values), _compile.address(columns))
-        real = self.lanes(b)
-        constant_row = None
-        if self._stream is not None and not callable(self._stream):
-            constant_row = np.ascontiguousarray(self._stream, dtype=float)
-            if constant_row.shape != (engine.stream_size,):
-                raise DimensionError(f"stream: expected shape ({engine.stream_size},) but found {constant_row.shape}")
-        newest = -1 - engine.d
-        k = 0
-        while k < self.n:
-            k1 = min(k + self._slice, self.n)
-            rows, stride = constant_row, 0
-            if callable(self._stream):
-                given = self._stream(k, k1, lanes) if engine.lane_streamed else self._stream(k, k1)
-                rows, stride = np.ascontiguousarray(given, dtype=float), engine.stream_size
-                if rows.shape != (k1 - k, engine.stream_size):
-                    raise DimensionError(
-                        f"stream: expected shape ({k1 - k}, {engine.stream_size}) but found {rows.shape}"
-                    )
-            used = None
-            if self._schedule is not None:
-                used = np.ascontiguousarray(self._schedule(k, k1, newest), dtype=np.int64)
-                if (
-                    used.shape != (k1 - k,)
-                    or np.any(used >= np.arange(k, k1))
-                    or np.any(used < np.arange(k, k1) - engine.d)
-                ):
-                    raise SpecificationError(f"schedule: j*(k) must lie in [k - d, k - 1] with d = {engine.d}")
-                newest = int(used[-1])
-            status = engine._run(
-                *pointers,
-                k,
-                k1,
-                engine.d,
-                _compile.address(ring),
-                None if rows is None else _compile.address(rows),
-                stride,
-                None if used is None else _compile.address(used),
-            )
-            if status != 0:
-                raise CodegenError(f"the lane engine {engine.library} failed")
-            k = k1
-            if stop is not None and stop(k * real):
-                return False
-            if self._finished_row is not None and k < self.n and np.all(block[self._finished_row] >= 0):
-                break  # every lane is done: only their sample counters would still move
-        self.out[b * width : b * width + real] = block.T[:real]
-        return True
 
 
 def _threads(threads: int | None) -> int:
@@ -560,6 +500,7 @@ def lane_engine(
     feedforward: bool = False,
     reference_per_lane: bool = False,
     gravity_gradient: bool = False,
+    own_streams: bool = False,
     **options: Any,
 ) -> LaneEngine:
     """The (cached) lane engine of the scalar engine's sample for one structure.
@@ -581,8 +522,9 @@ def lane_engine(
     beside the noise and the torque; ``feedforward``: with the feedforward terms; with ``reference_per_lane``
     each lane's own reference, a per-lane stream). With ``gravity_gradient`` the flight sample's plant flies the
     gravity-gradient torque of the orbit whose constants follow the flight constants (shared or per lane, like
-    them; the sample's time from the lane's sample counter). The keywords are ignored for the other rules. The
-    engine's `LaneEngine.structure` is the flight sample's structure.
+    them; the sample's time from the lane's sample counter). With ``own_streams`` each lane has its own sensor
+    noise and seeded jitter, drawn and scheduled by the driver (`LaneEngine`'s ``own_streams``). The keywords are
+    ignored for the other rules. The engine's `LaneEngine.structure` is the flight sample's structure.
 
     Raises
     ------
@@ -616,6 +558,8 @@ def lane_engine(
     key += (("tracking", feedforward) + (("lanes",) if reference_per_lane else ()),) if tracking else ()
     gravity = flight and gravity_gradient
     key += ("gravity",) if gravity else ()  # without it the key of before
+    own = bool(flight and own_streams)
+    key += ("own streams",) if own else ()
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -642,13 +586,15 @@ def lane_engine(
                 label += ("_tracking" + ("_ff" if feedforward else "")) if tracking else ""
                 label += "_lanes" if tracking and reference_per_lane else ""
                 label += "_gravity" if gravity else ""
-                noise = ("noise",) if structure["sensor"] else ()
+                label += "_own" if own else ""
+                noise = ("noise",) if structure["sensor"] and not own else ()
                 rows = ("reference", "reference_error") if tracking else ()
                 shared_rows, lane_rows = ((), rows) if reference_per_lane else (rows, ())
                 options = {
                     "delayed": ("x_delayed", "measurement" if structure["sensor"] else "x_meas"),
                     "streamed": ((*noise, "torque") if torque_input and not torque_per_lane else noise) + shared_rows,
                     "lane_streamed": (("torque",) if torque_input and torque_per_lane else ()) + lane_rows,
+                    "own_streams": own,
                     "structure": structure,
                     **options,
                 }
@@ -739,8 +685,8 @@ def closed_loop_batches(
     threads: int = 1,
     slice_samples: int = SLICE_SAMPLES,
     flight_options: np.ndarray | None = None,
-    sensor: SensorModel | None = None,
-    delay: DelayModel | None = None,
+    sensor: SensorModel | Sequence[SensorModel | None] | None = None,
+    delay: DelayModel | Sequence[DelayModel | None] | None = None,
     rate: float = 1.0,
     disturbance: Disturbance | Sequence[Disturbance] | None = None,
     reference: ReferenceStream | Sequence[ReferenceStream] | None = None,
@@ -768,7 +714,10 @@ def closed_loop_batches(
     shared by the runs (an engine of `lane_engine` with ``reference_input``), its two blocks of rows of each
     slice ([`ReferenceStream.rows`][mrpctl.flight.tracking.ReferenceStream.rows]) streamed after the noise and
     the torque, or one per run (an engine with per-lane reference streams: ``reference_per_lane``); ``memory0``
-    then holds each run's σ_B/R at k = 0 (`mrpctl.engines.scalar.tracking_memory`).
+    then holds each run's σ_B/R at k = 0 (`mrpctl.engines.scalar.tracking_memory`). An engine with ``own_streams`` takes
+    ``sensor`` one per run and ``delay`` one per run or shared (None: the constant delay d), each lane's noise and
+    jitter drawn and scheduled by the driver (a given sequence: each lane's schedule from `lane_newest_arrived`);
+    another engine may take ``delay`` one per run too (each lane its own schedule, computed per slice).
     """
     runs = len(x0)
     crafts = (spacecraft,) * runs if isinstance(spacecraft, Spacecraft) else tuple(spacecraft)
@@ -794,11 +743,21 @@ def closed_loop_batches(
             inertia[i, 0], inertia[i, 1] = values[0].ravel(), values[1].ravel()  # column-major, as Engine.run
         constants["J"], constants["J_inv"] = inertia[:, 0], inertia[:, 1]
     stream: Callable[..., np.ndarray] | np.ndarray | None = None
-    schedule: Callable[[int, int, int], np.ndarray] | None = None
+    schedule: Callable[..., np.ndarray] | None = None
+    own: OwnStreams | None = None
     structure = engine.structure
     if structure is not None:
         options = NO_FLIGHT_OPTIONS if flight_options is None else np.asarray(flight_options, dtype=float)
         constants["flight"] = np.broadcast_to(options, (runs, options.shape[-1]))
+        sensors = tuple(sensor) if isinstance(sensor, Sequence) else None
+        if engine.own_streams != (sensors is not None) or len(sensors or [None] * runs) != runs:
+            raise SpecificationError(f"sensor: a lane engine with own_streams takes one sensor per run ({runs})")
+        if sensors is not None:  # the structure's sensor: any noisy one (the biases are in the options rows)
+            sensor = next((one for one in sensors if one is not None and not one.ideal), None)
+            delays = tuple(delay) if isinstance(delay, Sequence) else (delay,) * runs
+            own = own_streams(sensors, delays, rate, engine.d, noise=engine.own_noise is not None)
+            delay = None if own.jitter_keys is not None or all(one is None for one in delays) else list(delays)
+        assert sensor is None or isinstance(sensor, SensorModel)
         needed = flight_structure(options, sensor)  # the union over the rows
         missing = [name for name, used in needed.items() if used and not structure[name]]
         if missing:
@@ -808,8 +767,8 @@ def closed_loop_batches(
             )
         # the zero row at every sample (no noise, as Engine.run); none without a sensor and a shared torque
         stream = np.zeros(engine.stream_size) if engine.stream_size else None
-        noisy = sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
-        noise_columns = NOISE_SIZE if structure["sensor"] else 0
+        noisy = sensors is None and sensor is not None and (sensor.attitude_noise > 0.0 or sensor.rate_noise > 0.0)
+        noise_columns = NOISE_SIZE if structure["sensor"] and sensors is None else 0  # own noise: not streamed
         per_lane = "torque" in engine.lane_streamed
         if ("torque" in engine.streamed or per_lane) != (disturbance is not None):
             raise SpecificationError("disturbance: a per-sample torque needs a lane engine with a torque stream")
@@ -852,7 +811,11 @@ def closed_loop_batches(
             )
         elif sensor is not None and noisy:
             stream = functools.partial(noise_rows, sensor)
-        if delay is not None:
+        if isinstance(delay, Sequence):
+            if len(delay) != runs or own is None:
+                raise DimensionError(f"delay: one delay model per run ({runs}) needs a lane engine with own_streams")
+            schedule = functools.partial(lane_newest_arrived, tuple(delay), rate, engine.d)
+        elif delay is not None:
             schedule = functools.partial(newest_arrived_slice, delay, rate, engine.d)
     elif flight_options is not None or sensor is not None or delay is not None:
         raise SpecificationError("flight_options, sensor, delay: this lane engine does not run the flight sample")
@@ -866,6 +829,8 @@ def closed_loop_batches(
         finished=f"stats[{S_DIVERGED}]",
         stream=stream,
         schedule=schedule,
+        lane_schedule=isinstance(delay, Sequence),
+        own=own,
     )
 
 

@@ -57,6 +57,7 @@ from mrpctl.simulation._budget import (
     check_memory,
     jitter_bytes,
     lane_bytes,
+    lane_stream_bytes,
     memory_limit_bytes,
     sample_horizon,
     workspace_bytes,
@@ -126,6 +127,30 @@ def _one_disturbance(item: Any, name: str) -> Disturbance | None:
         return Disturbance(item)
     except ValueError as error:
         raise type(error)(f"{name}: {error}") from error
+
+
+def _per_run_models(name: str, value: Any, kind: type, n_runs: int) -> tuple[list[Any], bool]:
+    """simulate_batch's ``actuator``, ``sensor`` or ``delay``: one model per run, and whether a list or tuple
+    gave them per run (1 or N entries, each a ``kind`` or None); anything else is shared (checked later)."""
+    if not isinstance(value, list | tuple):
+        return [value] * n_runs, False
+    _broadcast(name, len(value), n_runs)
+    for i, item in enumerate(value):
+        if item is not None and not isinstance(item, kind):
+            raise SpecificationError(f"{name}[{i}] must be a mrpctl.flight.{kind.__name__} or None, got {item!r}")
+    return list(value) * (n_runs if len(value) == 1 else 1), True
+
+
+def _shared_saturation(actuators: Sequence[ActuatorModel | None]) -> Saturation | None:
+    """The saturation mode of the runs' actuators (None: no actuator); per-run actuators of different modes are
+    refused (the mode is a structure of the compiled sample)."""
+    modes = {one.mode for one in actuators if one is not None}
+    if len(modes) > 1:
+        raise SpecificationError(
+            f"actuator: the runs of one call share the saturation mode (a structure of the compiled engine), got "
+            f"{sorted(mode.value for mode in modes)}; give the runs of each mode in a call of their own"
+        )
+    return next(iter(modes), None)
 
 
 def _tracked_by_run(
@@ -261,11 +286,14 @@ def simulate_batch(
         the workers run; an exception raised by it stops the batch and propagates.
 
     actuator, sensor, delay : keyword-only
-        The flight loop's models (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run; each rule
+        The flight loop's models (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run, or a list
+        or tuple of N (one per run, each a model or None: its own limits, noise levels, gyro bias and noise seed,
+        its own jitter seed; the actuators of one call share their saturation mode); each rule
         must then be a [`mrpctl.flight.Hysteretic`][mrpctl.flight.Hysteretic]. Without trajectories flight runs take
-        the lane engine too (noise and jitter streamed per slice, shared by the lanes), bit
-        for bit the scalar engine's; the result then has ``saturated_fraction`` and
-        ``peak_command``.
+        the lane engine too (noise and jitter streamed per slice, shared by the lanes; with per-run sensors or
+        delays each lane is streamed its own run's noise rows and newest-arrived schedule), each run bit
+        for bit [`simulate`][mrpctl.simulation.simulate] with its own models; the result then has
+        ``saturated_fraction`` and ``peak_command``.
     disturbance : keyword-only
         The body-frame torque w (N m), shared by every run in any form [`simulate`][mrpctl.simulation.simulate] takes
         (constant (3,), (n, 3) rows, ``Disturbance(function=w)`` of the sample times), or one per
@@ -359,7 +387,9 @@ def simulate_batch(
         raise SpecificationError("rule: give a switching rule or a non-empty sequence of rules")
     for one in rules:
         check_rule(one)
-    n_runs = max(len(states), len(gains), len(delays), len(rules), len(crafts))
+    given: tuple[Any, ...] = (actuator, sensor, delay)
+    models = [len(value) for value in given if isinstance(value, list | tuple)]  # per run
+    n_runs = max(len(states), len(gains), len(delays), len(rules), len(crafts), *models)
     if len(states) == 0:
         raise DimensionError("x0: expected at least one initial state (shape (6,) or (N, 6)) but found none")
     for name, count in (
@@ -377,7 +407,11 @@ def simulate_batch(
     crafts = crafts * n_runs if len(crafts) == 1 else crafts
     if wheels is not None:
         for pair in {(id(c), id(r)): (c, r) for c, r in zip(crafts, rules, strict=True)}.values():
-            wheels = check_wheel_run(wheels, pair[0], pair[1], actuator=actuator, predictor=predictor)
+            wheels = check_wheel_run(
+                wheels, pair[0], pair[1], predictor=predictor,
+                actuator=next((one for one in actuator if one is not None), None) if isinstance(actuator, list | tuple)
+                else actuator,
+            )  # fmt: skip
         if reference is not None:
             raise SpecificationError(
                 "wheels: tracking a reference on a wheel cluster is not modelled yet; track with an ideal body "
@@ -412,9 +446,19 @@ def simulate_batch(
     check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
 
     saturation = Saturation.SCALE
+    actuators, _ = _per_run_models("actuator", actuator, ActuatorModel, n_runs)
+    sensors, per_run_sensor = _per_run_models("sensor", sensor, SensorModel, n_runs)
+    delay_models, per_run_delay = _per_run_models("delay", delay, DelayModel, n_runs)
+    mode = _shared_saturation(actuators)
+    per_run_models = isinstance(actuator, list | tuple) or per_run_sensor or per_run_delay
+    if per_run_models:  # each worker's per-lane noise rows and schedules of one slice
+        estimate += lane_stream_bytes(
+            n, max(samples_by_run), substeps, workers, noise=per_run_sensor, jitter=per_run_delay
+        )
+        check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     checked = None
     for one in rules:
-        checked = check_predictor(predictor, one, history, delay)
+        checked = check_predictor(predictor, one, history, next((m for m in delay_models if m is not None), None))
     tracked_by_run = _tracked_by_run(
         reference, error_time, feedforward, pointing_tolerance, rules, checked, n, rate, samples_by_run
     )
@@ -432,7 +476,7 @@ def simulate_batch(
     if checked is None:
         orbit_rows: dict[bytes | None, np.ndarray | None] = {}  # by the run's flight constants
         for i, one in enumerate(rules):  # every rule must be the flight rule when an option is given
-            options_by_run[i], saturation = flight_options(one, actuator, items[i], sensor)
+            options_by_run[i], saturation = flight_options(one, actuators[i], items[i], sensors[i])
             if gravity_gradient is not None:  # the orbit's constants after the flight constants, shared by the runs
                 constants = options_by_run[i]
                 row_key = None if constants is None else constants.tobytes()
@@ -446,17 +490,24 @@ def simulate_batch(
                 if (i == 0 or not shared)
                 else streamed_by_run[0]
             )
-        varying = [varying_delay(rules[i], delay, samples_by_run[i], rate, n) for i in range(n_runs)]
-        jitter = jitter_bytes(varying[0], max(samples_by_run))  # one delay model for every run
+        made_delays: dict[tuple[int, int], DelayModel | None] = {}  # by (model, d): alive during the call
+        varying = []
+        for i in range(n_runs):
+            delay_key = (id(delay_models[i]), samples_by_run[i])
+            if delay_key not in made_delays:
+                made_delays[delay_key] = varying_delay(rules[i], delay_models[i], samples_by_run[i], rate, n)
+            varying.append(made_delays[delay_key])
+        # the driver's arrival ring: one per worker (one delay model at a time)
+        jitter = max(jitter_bytes(model, max(samples_by_run)) for model in made_delays.values())
         check_memory(estimate + workers * jitter, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     else:  # the predictor: shared or per-run torques (constant or per sample), as the flight loop takes them
         gravity_gradient_options(  # refused with a predictor
             gravity_gradient, rules[0], None, period=1.0 / rate, substeps=substeps, predictor=checked
         )
         for i in range(n_runs):
-            if i == 0 or not shared:
+            if i == 0 or not shared or per_run_models:
                 item = predictor_disturbance(items[i], n, "disturbance" if shared else f"disturbance[{i}]")
-                options_by_run[i], saturation = flight_constants(actuator, item, sensor)
+                options_by_run[i], saturation = flight_constants(actuators[i], item, sensors[i])
                 streamed_by_run[i] = None if item is None or item.constant else item
             else:
                 options_by_run[i], streamed_by_run[i] = options_by_run[0], streamed_by_run[0]
@@ -467,6 +518,7 @@ def simulate_batch(
             if made_key not in made:
                 made[made_key] = predictor_constants(options_by_run[i], float(delays[i]), checked.model)
             predictor_by_run[i] = made[made_key]
+    saturation = saturation if mode is None else mode  # the runs' shared mode (a run without actuator: any)
     if any(each is not None for each in streamed_by_run):
         if find_compiler() is None:
             raise CodegenError(
@@ -511,7 +563,7 @@ def simulate_batch(
             substeps=substeps,
             threads=threads,
             progress=progress,
-            flight=(options_by_run, saturation, sensor, varying),
+            flight=(options_by_run, saturation, sensors, varying),
             torques=(streamed_by_run, shared),
             wheels=None if wheels is None or wheel_rows is None else (wheels, wheel_rows),
             tracking=(tracked_by_run, feedforward, isinstance(reference, list | tuple)),
@@ -524,7 +576,7 @@ def simulate_batch(
     engines: dict[int, Any] = {}
     for i in scalar_runs:
         structure = engine_structure(
-            checked, options_by_run[i], sensor, actuator, gravity_gradient=gravity_gradient is not None
+            checked, options_by_run[i], sensors[i], actuators[i], gravity_gradient=gravity_gradient is not None
         )
         torque_input = streamed_by_run[i] is not None
         tracking = tracked_by_run[i] is not None
@@ -595,7 +647,7 @@ def simulate_batch(
                 switch_limit=n if keep == 1 else SWITCH_LIMIT,
                 stop=stop,
                 flight_options=options_by_run[i] if checked is None else predictor_by_run[i],
-                sensor=sensor,
+                sensor=sensors[i],
                 delay=varying[i],
                 rate=rate,
                 **({} if streamed_by_run[i] is None else {"disturbance": streamed_by_run[i]}),
@@ -703,7 +755,7 @@ def _run_lanes(
     substeps: int,
     threads: int,
     progress: Callable[[int, int], Any] | None,
-    flight: tuple[list[np.ndarray | None], Saturation, SensorModel | None, list[DelayModel | None]],
+    flight: tuple[list[np.ndarray | None], Saturation, list[SensorModel | None], list[DelayModel | None]],
     torques: tuple[list[Disturbance | None], bool],
     wheels: tuple[WheelCluster, np.ndarray] | None = None,
     tracking: tuple[list[ReferenceStream | None], bool, bool] | None = None,
@@ -715,7 +767,8 @@ def _run_lanes(
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
     runs' `flight_structure`), W runs per C call, the batches on the thread
     pool; write the rows of ``stats`` (and of ``flight_rows``: the flight sample's memory).
-    ``flight`` is the flight loop's (per-run constants, saturation, sensor, per-run varying delay),
+    ``flight`` is the flight loop's (per-run constants, saturation, per-run sensor, per-run varying delay: a
+    group whose runs differ in them streams each lane its own noise rows and schedule),
     ``torques`` the per-run per-sample disturbances and whether one is shared by all runs (then
     streamed beside the noise; else each lane is streamed its run's rows). Returns the runs left
     to the scalar engine (a rule without lane form). ``wheels``: every run on this wheel cluster
@@ -725,7 +778,7 @@ def _run_lanes(
     a shared one is streamed beside the noise). ``law``: the wheel runs' steering law (the wheel lanes take it).
     ``gravity_gradient``: the runs' plant flies the gravity-gradient torque (the orbit's constants at the end of
     each run's flight constants)."""
-    options_by_run, saturation, sensor, varying = flight
+    options_by_run, saturation, sensors, varying = flight
     streamed_by_run, shared = torques
     tracked_by_run, feedforward, per_run_reference = (
         ([None] * len(crafts), False, False) if tracking is None else tracking
@@ -761,6 +814,19 @@ def _run_lanes(
         if own_torque:
             torque = [streamed_by_run[i] for i in members]
         options = _lane_options(options_by_run, members) if is_flight else None
+        sensor, own_sensors = _lane_sensors(sensors, members)
+        own_noise = own_sensors is not None
+        delay: Any = varying[first]
+        if any(varying[i] is not delay for i in members):  # each run its own jitter (or sequence)
+            delay = [varying[i] for i in members]
+        # each lane's own noise and seeded jitter, drawn and scheduled by the lane driver
+        own = is_flight and wheels is None and (own_noise or isinstance(delay, list))
+        if own and own_sensors is None:
+            own_sensors = [sensor] * len(members)
+        if wheels is not None and (own_noise or isinstance(delay, list)):  # the wheel lanes share their streams
+            _LOGGER.info("the scalar engine runs %d wheel runs with their own noise or jitter", len(members))
+            left.extend(members)
+            continue
         # the group's structure: the union over its runs (flight_structure of their rows), as the scalar engine's
         structure = flight_structure(options, sensor) if is_flight else {}
         try:
@@ -798,6 +864,7 @@ def _run_lanes(
                         }
                     ),
                     **({"gravity_gradient": True} if gravity_gradient and is_flight else {}),
+                    **({"own_streams": True} if own else {}),
                 )
         except CodegenError as error:
             _LOGGER.info("the scalar engine runs %d runs: %s", len(members), error)
@@ -832,8 +899,8 @@ def _run_lanes(
                     threads=threads,
                     slice_samples=step,
                     flight_options=options,
-                    sensor=sensor if is_flight else None,
-                    delay=varying[first] if is_flight else None,
+                    sensor=(sensor if own_sensors is None else own_sensors) if is_flight else None,
+                    delay=delay if is_flight else None,
                     rate=rate,
                     disturbance=torque,
                     **({} if reference is None else {"reference": reference}),
@@ -883,6 +950,22 @@ def _run_lanes(
         elif flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
             flight_rows[members] = lane_engines.lane_memory(packed)
     return left
+
+
+def _lane_sensors(
+    sensors: list[SensorModel | None], members: list[int]
+) -> tuple[SensorModel | None, list[SensorModel | None] | None]:
+    """A lane group's sensor for its structure and its noise: the shared one and None; or, when the runs' sensors
+    differ, a noisy one of them and the run's sensors (each lane's own noise, drawn by the lane driver), or None and
+    None when none of them is noisy (no noise: the gyro biases are in the runs' constants)."""
+    first = sensors[members[0]]
+    if all(sensors[i] is first for i in members):
+        return first, None
+    noisy = [one for one in (sensors[i] for i in members) if one is not None and not one.ideal]
+    noisy = [one for one in noisy if one.attitude_noise > 0.0 or one.rate_noise > 0.0]
+    if not noisy:
+        return None, None
+    return noisy[0], [sensors[i] for i in members]
 
 
 def _lane_options(options_by_run: list[np.ndarray | None], members: list[int]) -> np.ndarray | None:

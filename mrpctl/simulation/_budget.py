@@ -11,6 +11,7 @@ from mrpctl.engines.scalar import STATE_BLOCK, slice_samples
 from mrpctl.engines.stats import STATS_SIZE
 from mrpctl.errors import SpecificationError
 from mrpctl.flight import (
+    NOISE_SIZE,
     DelayKind,
     DelayModel,
 )
@@ -140,3 +141,14 @@ def lane_bytes(runs: int, d: int, workers: int) -> int:
     per_run = 2 * STATE_BLOCK + INPUT_SIZE * STATE_SIZE + 1 + 18
     per_batch = DEFAULT_WIDTH * (2 * STATE_BLOCK + INPUT_SIZE * STATE_SIZE + 1 + 18 + STATE_SIZE * (2 * d + 2))
     return 8 * (runs * per_run + min(workers, runs) * per_batch)
+
+
+def lane_stream_bytes(n: int, d: int, substeps: int, workers: int, *, noise: bool, jitter: bool) -> int:
+    """Bytes of the per-lane streams per worker when the runs have their own sensors (the driver's block of
+    64 noise rows of every lane and one lane's, the lanes' keys and scales) or their own delay models (the lanes'
+    jitter state: keys, d_min, j* and the d + 1 arrival ring; for a given sequence the slice's (samples, W)
+    schedule, its checks and the arrival arrays of one run)."""
+    rows = min(slice_samples(substeps), n)
+    size = (64 * NOISE_SIZE * (DEFAULT_WIDTH + 1) + 4 * DEFAULT_WIDTH) if noise else 0
+    size += ((4 + d) * DEFAULT_WIDTH + 3 * DEFAULT_WIDTH * rows + 5 * (rows + d)) if jitter else 0
+    return 8 * workers * size
