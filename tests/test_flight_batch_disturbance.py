@@ -12,7 +12,7 @@ from mrpctl import paper, simulate, simulate_batch
 from mrpctl.engines import scalar as _engine
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, Disturbance, Hysteretic, SensorModel
-from mrpctl.simulation import _batch
+from mrpctl.simulation import _batch_inputs
 
 GAINS = 0.05 * paper.GAIN
 RATE, T_FINAL, TAU = 100.0, 4.0, 0.05
@@ -127,7 +127,7 @@ def test_per_run_torques_equal_simulate_run_by_run(monkeypatch: pytest.MonkeyPat
 
 def test_a_runs_by_samples_array_is_read_through_views() -> None:
     torques = np.stack([_rows(5), _rows(6), _rows(7)])
-    per_run = _batch._per_run_disturbances(torques, 3, N)
+    per_run = _batch_inputs.per_run_disturbances(torques, 3, N)
     assert per_run is not None
     for i, each in enumerate(per_run):
         assert each is not None and np.shares_memory(each.torque, torques[i]) and not each.torque.flags.writeable
