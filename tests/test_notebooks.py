@@ -31,6 +31,8 @@ def test_there_are_notebooks() -> None:
         "design_small_satellite.py",
         "monte_carlo_rules.py",
         "flight_loop.py",
+        "tracking_nadir.py",
+        "wheels_cubesat.py",
     }
 
 
@@ -63,6 +65,15 @@ def test_notebook_executes_and_shows_figures(
     elif source.stem == "monte_carlo_rules":
         lines = {line.split()[0]: line for line in text.splitlines() if line.strip()}
         assert "still switching   0%" in lines["DelayAware"] and "still switching   0%" not in lines["OnDelayed"]
+    elif source.stem == "tracking_nadir":
+        steady = {line.split()[0]: float(line.split()[-2]) for line in text.splitlines() if "steady pointing" in line}
+        n_tau = float(text.split("n tau = ")[1].split()[0])
+        assert steady["measurement"] < 1e-6 and steady["current"] == pytest.approx(n_tau, rel=0.01)
+        assert "exact delay margin 1.5555" in text
+    elif source.stem == "wheels_cubesat":
+        settled = {line.split(":")[0]: float(line.split("at ")[1].split()[0]) for line in text.splitlines()
+                   if "settled at" in line}  # fmt: skip
+        assert "): designed" in text and settled["steering law"] < settled["PD alone"]
     elif source.stem == "flight_loop":
         changes = int(text.split("no hysteresis:")[1].split()[0])
         assert changes > 10 and "alpha = 1.2:   1 set change" in text
