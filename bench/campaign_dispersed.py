@@ -34,31 +34,12 @@ import numpy as np
 
 from mrpctl.campaign import _task, parse_campaign, run_inputs
 from mrpctl.campaign.simulation import METRICS, simulate_runs
-from mrpctl.engines import isa as host_isa
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _host import cpu_model, vector_isa
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "campaigns" / "flight.toml"
 T_FINAL = 10.0
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as handle:
-            for line in handle:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
-
-
-def vector_isa() -> str:
-    """The CPU's vector extensions (from its flags) and the ISA flags the lane engine compiles with."""
-    flags = host_isa._cpu_flags()
-    has = [name for name in ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512vl", "avx512dq") if name in flags]
-    compiled = host_isa.host_isa_flags()
-    chosen = [flag for flag in compiled if flag.startswith("-march=")]
-    chosen += [flag for flag in compiled if flag.startswith("-mavx") or flag.startswith("-mprefer-vector-width")]
-    return f"CPU flags {' '.join(has) or 'none'}; lanes compiled with {' '.join(chosen) or '(SSE2)'}"
 
 
 def spec_source(runs: int) -> dict[str, Any]:

@@ -27,6 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import vector
+from _host import cpu_model, vector_isa
 
 from mrpctl import paper
 from mrpctl.engines import isa as host_isa
@@ -104,6 +105,7 @@ def main() -> None:
         wall = vector.best_rates(pooled, counts, rounds, time.perf_counter)
     hand_rate = serial["hand-written SoA C, W=8"]
     print()
+    print(f"{cpu_model()}; {vector_isa()}")
     print(
         f"60 s DelayAware tumbling batch, {runs} runs, best of {rounds} interleaved rounds; load average "
         f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
