@@ -144,3 +144,74 @@ def test_shared_models_and_a_shared_torque_function_on_the_lanes_equal_the_scala
     _assert_same_bits(lanes, _scalar(**case, **COMMON, threads=1))
     run = simulate(**dict(case, x0=states[4]), **COMMON)
     assert np.asarray(lanes.max_sigma)[4].tobytes() == np.asarray(run.max_sigma).tobytes()
+
+
+def test_a_predictor_campaign_chunk_with_each_runs_own_noise_is_one_lane_call_equal_to_each_run_alone(monkeypatch):
+    """A chunk of predictor runs with dispersed sensor noise (each run its own seed), torque limits and disturbances
+    is one simulate_batch call on the lanes; each run equals simulate with the run's models (the replay contract)."""
+    from mrpctl.campaign import parse_campaign
+    from mrpctl.campaign import simulation as campaign_simulation
+    from mrpctl.campaign._task import run_models, simulate_chunk
+    from mrpctl.campaign.sampling import run_inputs
+    from mrpctl.campaign.simulation import METRICS, flight_keywords
+
+    spec = parse_campaign(
+        {
+            "name": "predicted-noise",
+            "count": 11,
+            "seed": 5,
+            "tau": 0.05,
+            "rate": 100.0,
+            "t_final": 5.0,
+            "spacecraft": {"inertia": [140.0, 100.0, 80.0]},
+            "gains": {"K1": -16.0, "K2": -8.0},
+            "rule": {"type": "on-predicted"},
+            "predictor": {"inertia_error": 0.05},
+            "flight": {"attitude_noise": 1e-3, "rate_noise": 1e-4},
+            "dispersions": {
+                "attitude": {"angle_deg": [150.0, 180.0]},
+                "inertia": {"axis_tolerance": 0.2, "product_tolerance": 2.0},
+                "actuator": {"u_max": [0.3, 2.0]},
+                "disturbance": {"magnitude": [0.0, 0.05]},
+                "sensor": {"attitude_noise": [0.0, 2e-3], "gyro_bias": [0.0, 1e-3]},
+            },
+        }
+    )
+    calls: list[int] = []
+    batch = campaign_simulation.simulate_batch
+
+    def spy(*args, **kwargs):
+        calls.append(len(kwargs["x0"] if "x0" in kwargs else args[2]))
+        return batch(*args, **kwargs)
+
+    monkeypatch.setattr(campaign_simulation, "simulate_batch", spy)
+    chunk = simulate_chunk(spec, 0, spec.count, threads=2)
+    assert calls == [spec.count]  # one call: each run's own actuator, sensor and torque on the lanes
+    inputs = run_inputs(spec, 0, spec.count)
+    seeds = {run_models(spec, inputs, j)[1]["sensor"].seed for j in range(spec.count)}  # type: ignore[index]
+    assert len(seeds) == spec.count
+    for j in range(spec.count):
+        rule, models = run_models(spec, inputs, j)
+        assert models is not None
+        run = simulate(
+            Spacecraft(inputs.inertia[j]),
+            inputs.gain_scale[j] * spec.base.K,
+            inputs.x0[j],
+            tau=float(inputs.tau[j]),
+            rule=rule,
+            rate=100.0,
+            t_final=5.0,
+            predictor=spec.predictor,
+            **flight_keywords(models),
+        )
+        settled = np.nan if run.settling_time is None else run.settling_time
+        assert np.asarray(settled, np.float64).tobytes() == chunk["settling_time"][j].tobytes(), j
+        assert run.switch_count == chunk["switch_count"][j], j
+        assert np.asarray(run.max_sigma, np.float64).tobytes() == chunk["max_sigma"][j].tobytes(), j
+    _batch._LANES = False
+    try:
+        scalar = simulate_chunk(spec, 0, spec.count, threads=1)
+    finally:
+        _batch._LANES = True
+    for name in METRICS:
+        assert np.asarray(chunk[name]).tobytes() == np.asarray(scalar[name]).tobytes(), name
