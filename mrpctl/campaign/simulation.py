@@ -143,9 +143,9 @@ def _flight_key(models: dict[str, Any] | None, per_run: bool) -> Any:
     With ``per_run`` the key is the models' structure only (whether there is an actuator and its saturation
     mode, the shared rows of a ``disturbance_file``): simulate_batch takes each run's actuator, sensor (its noise
     seed, levels and gyro bias) and delay model (its jitter seed), and the lanes stream each run its own noise
-    rows and newest-arrived schedule, so a fully dispersed chunk is one call that fills every lane. Without it
-    (the wheel and the predictor loops, whose engines share one noise stream and one schedule per call) runs with
-    equal models share a call.
+    rows and newest-arrived schedule, so a fully dispersed chunk is one call that fills every lane (the predictor's
+    lanes too: each run's actuator, sensor and torque). Without it (the wheel loop, whose lanes share one noise
+    stream and one schedule per call) runs with equal models share a call.
 
     A constant torque w is not part of the key: runs that differ only in w (``[dispersions.disturbance]``)
     share one call with one w per run (simulate_batch's per-run constants, on the lanes; with a
@@ -263,7 +263,7 @@ def simulate_runs(
     models = [None] * n if flight is None else list(flight)
     crafts = _spacecraft(inertia)
     groups: dict[Any, list[int]] = {}
-    per_run = predictor is None and wheels is None  # the loops whose lanes take per-run models
+    per_run = wheels is None  # the loops whose lanes take per-run models (the plain and flight laws, the predictor)
     for i in range(n):
         groups.setdefault(_flight_key(models[i], per_run), []).append(i)
     out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in names.items()}

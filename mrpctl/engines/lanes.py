@@ -82,7 +82,14 @@ from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
 from mrpctl.flight.steering import SteeringLaw
 from mrpctl.flight.tracking import ReferenceStream
-from mrpctl.loop import InertiaInput, core_function, flight_core_function, inertia_input, inertia_values
+from mrpctl.loop import (
+    InertiaInput,
+    core_function,
+    flight_core_function,
+    inertia_input,
+    inertia_values,
+    predictor_core_function,
+)
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_structure
 from mrpctl.loop.wheels import wheel_core_function
 from mrpctl.spacecraft import Spacecraft
@@ -100,6 +107,7 @@ __all__ = [
     "lane_engine",
     "lane_memory",
     "lane_stats",
+    "predictor_lane_engine",
     "simulate_lanes",
     "wheel_lane_engine",
 ]
@@ -667,6 +675,65 @@ def wheel_lane_engine(
                 streamed=(*noise, "torque") if torque_input and not torque_per_lane else noise,
                 lane_streamed=("torque",) if torque_input and torque_per_lane else (),
                 structure=structure,
+            )
+            _ENGINES[key] = found
+        return found
+
+
+def predictor_lane_engine(
+    spacecraft: Spacecraft,
+    model: InertiaInput,
+    d: int,
+    period: float,
+    substeps: int,
+    *,
+    width: int = DEFAULT_WIDTH,
+    saturation: Saturation = Saturation.SCALE,
+    sensor: bool = False,
+    limited: bool = True,
+    torque_input: bool = False,
+    torque_per_lane: bool = False,
+    own_streams: bool = False,
+) -> LaneEngine:
+    """The (cached) lane engine of the predictor sample (`mrpctl.loop.predictor_core_function`) of the scalar
+    engine's structure: the plant's inertia layout (J, J⁻¹ per lane), the model's layout ``model`` (τ, J_m, J_m⁻¹
+    per lane, in each run's ``flight`` constants: `mrpctl.loop.options.predictor_constants`), d, h, substeps,
+    ``saturation``, ``sensor`` (a sensor given: a ``noise`` stream shared by the lanes, or each lane's own with
+    ``own_streams``), ``limited`` (an actuator given) and ``torque_input`` (a per-sample torque, shared or with
+    ``torque_per_lane`` each lane's own). Its delayed input is fed from the ``ring`` output, (m_k, z_k): the
+    history of the measurements and of the model copy's states; its `LaneEngine.structure` is (``sensor``,
+    ``limited``, disturbed), the constant w being always in the sample.
+
+    Raises
+    ------
+    CodegenError
+        If the sample has an operation without a bit-identical lane form, or the compiler fails.
+    """
+    layout = inertia_input(spacecraft)
+    own = bool(own_streams and sensor)
+    per_lane = bool(torque_per_lane and torque_input)
+    key: tuple[Any, ...] = ("predictor", layout, model, d, period, substeps, width, saturation)
+    key += (bool(sensor), bool(limited), bool(torque_input), per_lane, own)
+    with _ENGINES_LOCK:
+        found = _ENGINES.get(key)
+        if found is None:
+            core = predictor_core_function(
+                spacecraft, d, period, substeps, inertia=layout, model_inertia=model, saturation=saturation,
+                sensor=bool(sensor), limited=bool(limited), torque_input=bool(torque_input),
+            )  # fmt: skip
+            label = f"onpredicted_d{d}_s{substeps}_{layout.value}_{saturation.value}_model_{model.value}"
+            label += ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
+            label += ("_torque" if torque_input else "") + ("_lanes" if per_lane else "") + ("_own" if own else "")
+            noise = ("noise",) if sensor and not own else ()
+            found = LaneEngine(
+                engine_sample(core, d, f"mrpctl_lanes_{label}"),
+                d,
+                width=width,
+                delayed=("x_delayed", "ring"),
+                streamed=(*noise, "torque") if torque_input and not per_lane else noise,
+                lane_streamed=("torque",) if per_lane else (),
+                structure={"sensor": bool(sensor), "limited": bool(limited), "disturbed": True},
+                own_streams=own,
             )
             _ENGINES[key] = found
         return found

@@ -45,6 +45,7 @@ from mrpctl.loop.options import (
     gravity_gradient_options,
     predictor_constants,
     predictor_disturbance,
+    predictor_memory,
     varying_delay,
 )
 from mrpctl.loop.wheels import wheel_memory
@@ -197,9 +198,11 @@ def simulate_batch(
         stream.
     predictor : mrpctl.Predictor, keyword-only
         The predictor controller (as in [`simulate`][mrpctl.simulation.simulate]), shared by every run; each rule must
-        then be a [`mrpctl.OnPredicted`][mrpctl.predictor.OnPredicted]. Predictor runs take the scalar engine (on the
-        thread
-        pool), also when ``trajectories`` is False; ``disturbance`` is taken in every form above
+        then be a [`mrpctl.OnPredicted`][mrpctl.predictor.OnPredicted]. Metrics-only predictor runs take the lane
+        engine (τ and the model's inertia per-lane constants, the delayed measurements and model states in the lane
+        driver's ring; one lane group per delay and structure: a sensor given, an actuator given; each run's sensor
+        noise shared or its own), bit for bit the scalar engine's; with ``trajectories``, ``switches`` or a
+        ``reference`` the scalar engine on the thread pool. ``disturbance`` is taken in every form above
         (shared or per run), each run streaming its own rows.
     wheels : mrpctl.wheels.WheelCluster, keyword-only
         Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
@@ -436,7 +439,9 @@ def simulate_batch(
     if reference is not None and find_compiler() is None:
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
     lanes_take_law = law is None or wheels is not None  # the flight sample's law is not on the lanes (not done)
-    on_lanes = not trajectories and not switches and _LANES and checked is None and lanes_take_law
+    # the predictor tracking a reference stays on the scalar engine (its lane form is not done)
+    lanes_take_predictor = checked is None or reference is None
+    on_lanes = not trajectories and not switches and _LANES and lanes_take_predictor and lanes_take_law
     if on_lanes and find_compiler() is not None:
         scalar_runs = _run_lanes(
             stats,
@@ -460,6 +465,7 @@ def simulate_batch(
             settling=settling,
             law=law,
             gravity_gradient=gravity_gradient is not None,
+            predicted=None if checked is None else (checked.model, predictor_by_run, actuators),
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -652,6 +658,7 @@ def _run_lanes(
     settling: tuple[float, float] | None = None,
     law: SteeringLaw | None = None,
     gravity_gradient: bool = False,
+    predicted: tuple[Spacecraft, list[np.ndarray | None], list[ActuatorModel | None]] | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -667,7 +674,8 @@ def _run_lanes(
     whether the references are per run (then, or beside per-run torques, each lane is streamed its own rows;
     a shared one is streamed beside the noise). ``law``: the wheel runs' steering law (the wheel lanes take it).
     ``gravity_gradient``: the runs' plant flies the gravity-gradient torque (the orbit's constants at the end of
-    each run's flight constants)."""
+    each run's flight constants). ``predicted``: the runs fly the predictor (its model, each run's predictor
+    constants, each run's actuator), a group per structure (a sensor given, an actuator given)."""
     options_by_run, saturation, sensors, varying = flight
     streamed_by_run, shared = torques
     tracked_by_run, feedforward, per_run_reference = (
@@ -688,12 +696,26 @@ def _run_lanes(
                 key += (crafts[i].inertia.tobytes(),)
             if tracked_by_run[i] is not None:  # a shared reference: the group's; per run: one per lane
                 key += (None if per_run_reference or own_torque else id(tracked_by_run[i]),)
+        if predicted is not None:  # the predictor sample's structure: a sensor given, an actuator given
+            key += (sensors[i] is not None, predicted[2][i] is not None)
         groups.setdefault(key, []).append(i)
     packs: list[tuple[list[int], lane_engines.LaneBatches]] = []
     step = slice_samples(substeps)
     for members in groups.values():
         first = members[0]
         d = samples_by_run[first]
+        if predicted is not None:
+            try:
+                packed = _predictor_batches(
+                    members, predicted, crafts, states, gains, rules, flight, torques, d=d, n=n, rate=rate,
+                    substeps=substeps, threads=threads, settling=settling,
+                )  # fmt: skip
+            except CodegenError as error:
+                _LOGGER.info("the scalar engine runs %d predictor runs: %s", len(members), error)
+                left.extend(members)
+                continue
+            packs.append((members, packed))
+            continue
         is_flight = isinstance(rules[first], Hysteretic)
         own_torque = is_flight and streamed_by_run[first] is not None and not shared
         torque: Any = streamed_by_run[first] if is_flight else None
@@ -838,8 +860,62 @@ def _run_lanes(
             if flight_rows is not None:
                 flight_rows[members] = memory[:, :FLIGHT_MEMORY_SIZE]
         elif flight_rows is not None and packed.engine.structure is not None:  # the flight sample's memory
-            flight_rows[members] = lane_engines.lane_memory(packed)
+            flight_rows[members] = lane_engines.lane_memory(packed)[:, :FLIGHT_MEMORY_SIZE]
     return left
+
+
+def _predictor_batches(
+    members: list[int],
+    predicted: tuple[Spacecraft, list[np.ndarray | None], list[ActuatorModel | None]],
+    crafts: Sequence[Spacecraft],
+    states: np.ndarray,
+    gains: np.ndarray,
+    rules: Sequence[SwitchingRule],
+    flight: tuple[list[np.ndarray | None], Saturation, list[SensorModel | None], list[DelayModel | None]],
+    torques: tuple[list[Disturbance | None], bool],
+    *,
+    d: int,
+    n: int,
+    rate: float,
+    substeps: int,
+    threads: int,
+    settling: tuple[float, float] | None,
+) -> lane_engines.LaneBatches:
+    """The lane batches of a group of predictor runs of one structure: each run's predictor constants (τ, the
+    model's J_m) a per-lane constant, its noise shared or its own, its torque rows shared or its own; the delayed
+    entries (m, z) start with z = m = x0 (the constant history), the memory with `predictor_memory`, as the scalar
+    engine's run."""
+    model, constants_by_run, actuators = predicted
+    _, saturation, sensors, _ = flight
+    streamed_by_run, shared = torques
+    first = members[0]
+    own_torque = streamed_by_run[first] is not None and not shared
+    torque: Any = [streamed_by_run[i] for i in members] if own_torque else streamed_by_run[first]
+    sensor, own_sensors = _lane_sensors(sensors, members)
+    lanes = lane_engines.predictor_lane_engine(
+        crafts[first], inertia_input(model), d, 1.0 / rate, substeps, saturation=saturation,
+        sensor=sensors[first] is not None, limited=actuators[first] is not None, torque_input=torque is not None,
+        torque_per_lane=own_torque, own_streams=own_sensors is not None,
+    )  # fmt: skip
+    x0 = states[members]
+    rows = np.concatenate((x0, x0), axis=1)[:, :, None]  # (m, z) = x0 before t = 0: one column, constant in time
+    return lane_engines.closed_loop_batches(
+        lanes,
+        x0,
+        np.array([predictor_memory(state) for state in x0]),
+        rows,
+        gains[members],
+        np.array([rules[i].parameters() for i in members], dtype=float),
+        n,
+        spacecraft=[crafts[i] for i in members],
+        threads=threads,
+        slice_samples=slice_samples(substeps),
+        flight_options=np.array([constants_by_run[i] for i in members]),
+        sensor=sensor if own_sensors is None else own_sensors,
+        rate=rate,
+        disturbance=torque,
+        settling=settling,
+    )
 
 
 def _lane_sensors(
