@@ -36,6 +36,7 @@ from scipy.optimize import minimize_scalar
 
 from mrpctl._validation import integer, nonnegative_scalar, positive_scalar, readonly
 from mrpctl.design._common import balancing, is_diagonal, order_value, real_matrix, similarity, solve
+from mrpctl.design._loop_eigen import negative_axis_factors, unit_circle_angles
 from mrpctl.design.lmi import PerThread, lmi_structure
 from mrpctl.design.spectra import DelaySystem, Spectrum, characteristic_roots, decoupled_blocks, delay_system
 from mrpctl.errors import DimensionError, SpecificationError
@@ -196,13 +197,8 @@ def loop_margins_delayed(A: Any, B: Any, K: Any, tau: Any = 0.0, *, points: int 
         if largest < 1.0 and 1.0 / largest >= gm_up:
             continue  # no eigenvalue here is large enough to give a smaller gain margin than the one found
         w = _bisect_count(upper, float(grid[i]), float(grid[i + 1]))
-        lam = eig(w)
-        near = np.abs(lam.imag) / np.maximum(np.abs(lam), 1e-300)
-        # every eigenvalue on the real axis here (identical axes cross together)
-        for j in np.flatnonzero(near <= max(1e3 * float(np.min(near)), 1e-9)):
-            if lam[j].real >= 0.0:
-                continue  # crossed the positive real axis: no gain factor > 0 reaches −1 there
-            factor = 1.0 / abs(lam[j])
+        # every eigenvalue on the negative real axis here (on the positive axis no gain factor > 0 reaches −1)
+        for factor in negative_axis_factors(eig(w)):
             if factor > 1.0 and factor < gm_up:
                 gm_up, wpc_up = factor, w
             elif factor < 1.0 and factor > gm_low:
@@ -211,10 +207,7 @@ def loop_margins_delayed(A: Any, B: Any, K: Any, tau: Any = 0.0, *, points: int 
     dm, wdc = math.inf, math.nan
     for i in np.flatnonzero(np.diff(outs)):
         w = _bisect_count(outside, float(grid[i]), float(grid[i + 1]))
-        lam = eig(w)
-        gap = np.abs(np.abs(lam) - 1.0)
-        for j in np.flatnonzero(gap <= max(1e3 * float(np.min(gap)), 1e-9)):
-            phase = float(np.angle(lam[j]))
+        for phase in unit_circle_angles(eig(w)):
             margin = math.pi - abs(phase)
             if margin < pm:
                 pm, wgc = margin, w

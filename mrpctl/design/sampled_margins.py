@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import integer, positive_scalar
+from mrpctl.design._loop_eigen import negative_axis_factors, unit_circle_angles
 from mrpctl.design.sampled import lifted_matrices, max_stable_delay_samples, sampled_stability, sampled_system
 from mrpctl.errors import SpecificationError
 
@@ -169,12 +170,7 @@ def loop_margins_sampled(
     crossings_at_nyquist = [len(grid) - 1]
     for i in crossings + crossings_at_nyquist:
         w = nyquist if i == len(grid) - 1 else _bisect(upper, float(grid[i]), float(grid[i + 1]))
-        lam = loop(np.array([w]))[0]
-        near = np.abs(lam.imag) / np.maximum(np.abs(lam), 1e-300)
-        for j in np.flatnonzero(near <= max(1e3 * float(np.min(near)), 1e-9)):
-            if lam[j].real >= 0.0:
-                continue
-            factor = 1.0 / abs(lam[j])
+        for factor in negative_axis_factors(loop(np.array([w]))[0]):
             if 1.0 < factor < gm_up and factor <= _GAIN_MARGIN_CAP:
                 gm_up, wpc_up = factor, w
             elif gm_low < factor < 1.0:
@@ -182,10 +178,8 @@ def loop_margins_sampled(
     pm, wgc = math.inf, math.nan
     for i in np.flatnonzero(np.diff(outs)):
         w = _bisect(outside, float(grid[i]), float(grid[i + 1]))
-        lam = loop(np.array([w]))[0]
-        gap = np.abs(np.abs(lam) - 1.0)
-        for j in np.flatnonzero(gap <= max(1e3 * float(np.min(gap)), 1e-9)):
-            margin = math.pi - abs(float(np.angle(lam[j])))
+        for phase in unit_circle_angles(loop(np.array([w]))[0]):
+            margin = math.pi - abs(phase)
             if margin < pm:
                 pm, wgc = margin, w
     stability = sampled_stability(a, b, k, h, delay_samples=d)
