@@ -8,6 +8,7 @@ import math
 import control  # type: ignore[import-untyped]
 import numpy as np
 import pytest
+from basilisk_hub import simulation_and_hub
 
 from mrpctl import DelayAware, NoSwitching, Spacecraft, paper, simulate
 from mrpctl.design import linearized_loop, pd_gains
@@ -237,21 +238,14 @@ def test_basilisk_closed_loop_matches_an_undelayed_run() -> None:
     pytest.importorskip("Basilisk")
     from Basilisk.architecture import messaging  # type: ignore[import-untyped]
     from Basilisk.fswAlgorithms import attTrackingError, inertial3D, mrpFeedback  # type: ignore[import-untyped]
-    from Basilisk.simulation import extForceTorque, simpleNav, spacecraft  # type: ignore[import-untyped]
-    from Basilisk.utilities import SimulationBaseClass, macros  # type: ignore[import-untyped]
+    from Basilisk.simulation import extForceTorque, simpleNav  # type: ignore[import-untyped]
+    from Basilisk.utilities import macros  # type: ignore[import-untyped]
 
     from mrpctl import OnCurrent
 
     t_final, period = 10.0, 1e-3
     bsk = basilisk_mrp_feedback(paper.GAIN)
-    sigma0, omega0 = basilisk_state(paper.INITIAL_STATE)
-    sim = SimulationBaseClass.SimBaseClass()
-    sim.CreateNewProcess("process").addTask(sim.CreateNewTask("task", macros.sec2nano(period)))
-    body = spacecraft.Spacecraft()
-    body.ModelTag = "spacecraft"
-    body.hub.IHubPntBc_B = np.diag(paper.INERTIA).tolist()
-    body.hub.sigma_BNInit = sigma0.reshape(3, 1).tolist()
-    body.hub.omega_BN_BInit = omega0.reshape(3, 1).tolist()
+    sim, body = simulation_and_hub(period, np.diag(paper.INERTIA), paper.INITIAL_STATE)
     torque = extForceTorque.ExtForceTorque()
     torque.ModelTag = "torque"
     body.addDynamicEffector(torque)

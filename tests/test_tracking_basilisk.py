@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from basilisk_hub import simulation_and_hub
 
 from mrpctl import simulate
 from mrpctl.flight import Hysteretic
 from mrpctl.guidance import CircularOrbit, InertialPointing, NadirPointing
-from mrpctl.interop import basilisk_mrp_feedback, basilisk_state
+from mrpctl.interop import basilisk_mrp_feedback
 from mrpctl.model import state
 from mrpctl.spacecraft import Spacecraft
 
@@ -45,18 +46,11 @@ def _basilisk_tracking_run(
     """σ_B/N, ω_B/N and Basilisk's σ_B/R at every control sample of Basilisk's closed tracking loop."""
     from Basilisk.architecture import messaging  # type: ignore[import-untyped]
     from Basilisk.fswAlgorithms import attTrackingError, hillPoint, inertial3D, mrpFeedback  # type: ignore[import-untyped]
-    from Basilisk.simulation import extForceTorque, simpleNav, spacecraft  # type: ignore[import-untyped]
-    from Basilisk.utilities import SimulationBaseClass, macros, simIncludeGravBody  # type: ignore[import-untyped]
+    from Basilisk.simulation import extForceTorque, simpleNav  # type: ignore[import-untyped]
+    from Basilisk.utilities import macros, simIncludeGravBody  # type: ignore[import-untyped]
 
     gains = basilisk_mrp_feedback(GAIN)
-    sigma0, omega0 = basilisk_state(x0)
-    sim = SimulationBaseClass.SimBaseClass()
-    sim.CreateNewProcess("process").addTask(sim.CreateNewTask("task", macros.sec2nano(PERIOD)))
-    body = spacecraft.Spacecraft()
-    body.ModelTag = "spacecraft"
-    body.hub.IHubPntBc_B = INERTIA.tolist()
-    body.hub.sigma_BNInit = sigma0.reshape(3, 1).tolist()
-    body.hub.omega_BN_BInit = omega0.reshape(3, 1).tolist()
+    sim, body = simulation_and_hub(PERIOD, INERTIA, x0)
     modules: list[object] = []
     if orbit is not None:
         gravity = simIncludeGravBody.gravBodyFactory()

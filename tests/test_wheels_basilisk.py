@@ -15,10 +15,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from basilisk_hub import simulation_and_hub
 
 from mrpctl import simulate
 from mrpctl.flight import Hysteretic
-from mrpctl.interop import basilisk_mrp_feedback, basilisk_state
+from mrpctl.interop import basilisk_mrp_feedback
 from mrpctl.model import state
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.wheels import WheelCluster
@@ -43,8 +44,8 @@ def test_basilisk_reaction_wheel_loop_matches_the_wheel_sample(law: int) -> None
         mrpFeedback,
         rwMotorTorque,
     )
-    from Basilisk.simulation import reactionWheelStateEffector, simpleNav, spacecraft  # type: ignore[import-untyped]
-    from Basilisk.utilities import SimulationBaseClass, macros, simIncludeRW  # type: ignore[import-untyped]
+    from Basilisk.simulation import reactionWheelStateEffector, simpleNav  # type: ignore[import-untyped]
+    from Basilisk.utilities import macros, simIncludeRW  # type: ignore[import-untyped]
 
     t_final, period = 30.0, 0.01
     craft = Spacecraft(INERTIA)
@@ -62,17 +63,9 @@ def test_basilisk_reaction_wheel_loop_matches_the_wheel_sample(law: int) -> None
         gyroscopic=law == 1,
     )
     gains = basilisk_mrp_feedback(K)
-    sigma0, omega0 = basilisk_state(x0)
-
-    sim = SimulationBaseClass.SimBaseClass()
-    sim.CreateNewProcess("process").addTask(sim.CreateNewTask("task", macros.sec2nano(period)))
-    body = spacecraft.Spacecraft()
-    body.ModelTag = "spacecraft"
     # BalancedWheels add no mass properties to the spacecraft (the effector's IEffPntB_B stays 0): the hub's
     # inertia is the whole spacecraft's, wheels included, which is mrpctl's J
-    body.hub.IHubPntBc_B = INERTIA.tolist()
-    body.hub.sigma_BNInit = sigma0.reshape(3, 1).tolist()
-    body.hub.omega_BN_BInit = omega0.reshape(3, 1).tolist()
+    sim, body = simulation_and_hub(period, INERTIA, x0)
     factory = simIncludeRW.rwFactory()
     for axis, speed in zip(np.eye(3), speeds0_rpm, strict=True):
         factory.create(
