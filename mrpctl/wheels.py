@@ -24,12 +24,14 @@ import numpy as np
 
 from mrpctl._validation import finite_array, finite_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
+from mrpctl.mrp import to_dcm
 
 __all__ = [
     "WHEEL_MEMORY_FIELDS",
     "WheelCluster",
     "allocation_matrix",
     "null_space_projector",
+    "rest_momentum_load",
     "wheel_memory_size",
 ]
 
@@ -201,6 +203,38 @@ class WheelCluster:
         omega = finite_array("speeds", speeds, (None, self.count))
         return (omega * self.spin_inertia) @ self.spin_axes.T
 
+    def momentum_load(self, momentum: Any) -> float:
+        """How full the wheels must be to hold ``momentum`` (N m s, body components) with the body at rest.
+
+        The smallest max_i |Ω_i| / Ω_max,i over the wheel speeds Ω with Gs diag(Js) Ω = ``momentum``
+        (a linear program, scipy's HiGHS); ``inf`` where no wheel speeds give it (a direction the
+        spin axes do not span). Without an external torque the total angular momentum is conserved,
+        so a loop that starts with a total momentum H_N can come to rest at the attitude R only if
+        the load of [RN] H_N is at most 1: above 1 it cannot settle on the wheels, whatever the law.
+        """
+        h = finite_array("momentum", momentum, (3,))
+        count = self.count
+        columns = self.spin_axes * self.spin_inertia  # Gs diag(Js)
+        # variables (Ω_1 … Ω_N, t): minimise t subject to Gs diag(Js) Ω = h and |Ω_i| <= t Ω_max,i
+        cost = np.zeros(count + 1)
+        cost[-1] = 1.0
+        eye = np.eye(count)
+        limits = self.speed_limit.reshape(count, 1)
+        upper = np.vstack((np.hstack((eye, -limits)), np.hstack((-eye, -limits))))
+        equality = np.hstack((columns, np.zeros((3, 1))))
+        # deferred: scipy.optimize, only for this check
+        from scipy.optimize import linprog
+
+        bounds = [(None, None)] * count + [(0.0, None)]
+        solution = linprog(cost, A_ub=upper, b_ub=np.zeros(2 * count), A_eq=equality, b_eq=h, bounds=bounds)
+        if solution.status == 2:  # infeasible: h is not in the span of the spin axes
+            return float("inf")
+        if solution.status != 0:
+            raise RuntimeError(
+                f"momentum_load: the linear program ended with status {solution.status}: {solution.message}"
+            )
+        return float(solution.x[-1])
+
     def key(self) -> tuple[Any, ...]:
         """What distinguishes the compiled samples of two clusters (their values, bit for bit)."""
         arrays = (
@@ -232,3 +266,24 @@ def null_space_projector(wheels: WheelCluster) -> np.ndarray:
     """P = I − Gs⁺ Gs (N, N): the wheel torques in the null space of Gs (Gs P = 0: no body torque)."""
     axes = wheels.spin_axes
     return readonly(np.eye(wheels.count) - np.linalg.pinv(axes) @ axes)
+
+
+def rest_momentum_load(wheels: WheelCluster, inertia: Any, sigma: Any, omega: Any) -> np.ndarray:
+    """The wheels' [`momentum_load`][mrpctl.wheels.WheelCluster.momentum_load] at rest at the origin, per run.
+
+    ``sigma`` (..., 3) and ``omega`` (..., 3, rad/s) are initial states of the body, ``inertia`` the
+    whole spacecraft's J (3 × 3, wheels included) and the wheels start at ``wheels.speeds``. The total
+    momentum H_B = J ω + Gs diag(Js) Ω is conserved in N without an external torque, so the body can
+    come to rest at σ = 0 (B = N) only where the returned load of H_N = [BN]ᵀ H_B is at most 1.
+    """
+    J = finite_array("inertia", inertia, (3, 3))
+    sigma = finite_array("sigma", sigma, (None, 3))
+    omega = finite_array("omega", omega, (None, 3))
+    sigma, omega = np.broadcast_arrays(sigma, omega)
+    flat_sigma, flat_omega = sigma.reshape(-1, 3), omega.reshape(-1, 3)
+    wheel_part = wheels.momentum(wheels.speeds)
+    loads = np.empty(len(flat_sigma))
+    for i, (s, w) in enumerate(zip(flat_sigma, flat_omega, strict=True)):
+        body = J @ w + wheel_part
+        loads[i] = wheels.momentum_load(to_dcm(s).T @ body)
+    return loads.reshape(sigma.shape[:-1])

@@ -159,3 +159,26 @@ def test_export_writes_the_wheel_controller(tmp_path: Path, capsys: pytest.Captu
         compile=False,
     )
     assert direct.content_hash == printed["content_hash"]
+
+
+def test_sweep_tumble_says_which_runs_the_wheels_cannot_hold(capsys: pytest.CaptureFixture[str]) -> None:
+    # The default tumble (0.5-1.2 rad/s) carries up to 0.3 N m s; the cubesat's wheels hold 0.02 N m s per axis.
+    argv = ["sweep", "tumble", "--scenario", "cubesat_wheels", "--count", "3", "--t-final", "2"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "3 of 3 runs start with more angular momentum than the wheels hold at rest" in out
+    states = tumbling_states(3, seed=0, angle_deg=(160.0, 179.0), body_rate=(0.5, 1.2), cross_rate=0.05)
+    scenario = load_scenario("cubesat_wheels")
+    # independent of the linear program: three orthogonal wheels hold at most Js Ω_max about each body axis
+    from mrpctl.mrp import to_dcm
+
+    loads = []
+    for x0 in states:
+        h_n = to_dcm(x0[:3]).T @ (scenario.spacecraft.inertia @ (4.0 * x0[3:]))
+        loads.append(np.max(np.abs(h_n) / scenario.wheels.momentum_capacity))
+    assert f"up to {max(loads):.3g}x their capacity" in out
+    argv = ["sweep", "tumble", "--scenario", "cubesat_wheels", "--count", "3", "--t-final", "2", "--json"]
+    argv += ["--rate-range", "0.01", "0.05", "--cross-rate", "0.01"]
+    assert main(argv) == 0
+    document = json.loads(capsys.readouterr().out)
+    assert all(0.0 < v < 1.0 for v in document["wheel_momentum_load"])

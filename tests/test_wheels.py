@@ -526,3 +526,26 @@ def test_one_step_from_rest_is_the_closed_form_of_the_wheel_equations(substeps: 
     acceleration = np.linalg.norm(motor / hub)
     sigma = np.tan(acceleration * period**2 / 8.0) * expected_omega / np.linalg.norm(expected_omega)
     assert np.abs(x_next[0:3] - sigma).max() <= 1e-10 * np.abs(sigma).max()
+
+
+def test_momentum_load_against_the_closed_forms() -> None:
+    from mrpctl.wheels import WheelCluster, rest_momentum_load
+
+    speed_limit = 6000.0 * 2.0 * np.pi / 60.0
+    orthogonal = WheelCluster.orthogonal([3e-5, 4e-5, 5e-5], 5e-3, speed_limit)
+    capacity = np.array([3e-5, 4e-5, 5e-5]) * speed_limit
+    rng = np.random.default_rng(3)
+    for h in rng.normal(scale=0.02, size=(5, 3)):
+        # three wheels along the axes: each axis' momentum is its own wheel's, so the load is the largest ratio
+        assert orthogonal.momentum_load(h) == pytest.approx(np.max(np.abs(h) / capacity), rel=1e-7)
+    pyramid = WheelCluster.pyramid(3e-5, 5e-3, speed_limit)
+    beta = np.arctan(1.0 / np.sqrt(2.0))
+    # along the pyramid's axis the four wheels share the momentum equally: h = 4 sin(beta) Js Omega
+    assert pyramid.momentum_load([0.0, 0.0, 0.01]) == pytest.approx(0.01 / (4 * np.sin(beta) * 3e-5 * speed_limit))
+    planar = WheelCluster(np.eye(3)[:, :2], [3e-5, 3e-5], 5e-3, speed_limit, control_axes=np.eye(3)[:2])
+    assert planar.momentum_load([0.0, 0.0, 1e-3]) == np.inf  # no wheel spins about z
+    # at rest at the origin: H_N = [BN]^T (J omega) with the body turned 90 deg about z
+    sigma = np.array([0.0, 0.0, np.tan(np.pi / 8)])
+    load = rest_momentum_load(orthogonal, np.diag([0.2, 0.25, 0.15]), sigma, [0.05, 0.0, 0.0])
+    # the body's x axis is N's y axis: the x-momentum 0.01 N m s lands on the y wheel
+    assert load == pytest.approx(0.2 * 0.05 / capacity[1], rel=1e-7)

@@ -47,6 +47,7 @@ from mrpctl.rules import DEFAULT_DELTA
 from mrpctl.scenario import Scenario, rule_name, shipped_scenarios, tumbling_states
 from mrpctl.simulation import BatchResult, SimulationResult, simulate_batch
 from mrpctl.switching import BoundaryLayer
+from mrpctl.wheels import rest_momentum_load
 
 __all__ = ["add_simulate", "add_sweep"]
 
@@ -280,6 +281,18 @@ def _sweep_runs(args: argparse.Namespace, base: Scenario) -> tuple[np.ndarray, s
     return np.arange(count, dtype=float), "tumbling initial state (run index)", [{"x0": x} for x in states]
 
 
+def _wheel_loads(base: Scenario, runs: list[dict[str, Any]]) -> np.ndarray | None:
+    """Each run's wheel momentum load at rest at the origin (`rest_momentum_load`), or None.
+
+    Only where the total momentum is conserved and the target is the origin: a wheel scenario
+    without a reference, a disturbance or the gravity gradient.
+    """
+    if base.wheels is None or base.reference is not None or base.disturbance is not None or base.gravity_gradient:
+        return None
+    sigma, omega = state_parts(np.array([r.get("x0", base.x0) for r in runs]))
+    return rest_momentum_load(base.wheels, base.spacecraft.inertia, sigma, omega)
+
+
 def _sweep(args: argparse.Namespace) -> int:
     base = scenario_from_args(args, file=args.scenario or None)
     if base.estimated_loop is not None:
@@ -307,6 +320,7 @@ def _sweep(args: argparse.Namespace) -> int:
     check_wheel_scenario(base.wheels, runs[0].get("rule", base.rule), actuator=base.actuator, reference=base.reference)
     check_steering_scenario(base.law, runs[0].get("rule", base.rule), base.K, reference=base.reference)
     check_sweep_fits(base, len(runs), [r.get("tau", base.tau) for r in runs], chunk)
+    loads = _wheel_loads(base, runs)
     rows: list[tuple[Any, ...]] = []
     batches: list[Any] = []
     with progress(len(runs), f"sweep {args.parameter}") as bar:
@@ -391,6 +405,7 @@ def _sweep(args: argparse.Namespace) -> int:
                 "runs": [dict(zip(_SWEEP_HEADER, row, strict=True)) for row in rows],
                 "converged": converged,
                 "diverged": diverged,
+                **({} if loads is None else {"wheel_momentum_load": [float(v) for v in loads]}),
                 "files": files,
             }
         )
@@ -403,6 +418,13 @@ def _sweep(args: argparse.Namespace) -> int:
             print("  ".join(f"{v:>13.6g}" if isinstance(v, float) else f"{v!s:>13}" for v in cells))
         median = np.median([r[column["switches"]] for r in rows])
         print(f"{converged}/{len(rows)} runs converged, {diverged} diverged; switches: median {median:g}")
+        if loads is not None and np.any(loads > 1.0):
+            beyond = int(np.sum(loads > 1.0))
+            print(
+                f"{beyond} of {len(rows)} runs start with more angular momentum than the wheels hold at rest "
+                f"(up to {np.max(loads):.3g}x their capacity): without an external torque they cannot settle "
+                "at the target, whatever the law"
+            )
         if "plot" in files:
             print(f"plot written to {files['plot']}")
         if "csv" in files:
