@@ -203,26 +203,44 @@ class WheelCluster:
         omega = finite_array("speeds", speeds, (None, self.count))
         return (omega * self.spin_inertia) @ self.spin_axes.T
 
-    def momentum_load(self, momentum: Any) -> float:
-        """How full the wheels must be to hold ``momentum`` (N m s, body components) with the body at rest.
+    def momentum_load(self, momentum: Any) -> np.ndarray | float:
+        """How full the wheels must be to hold ``momentum`` (N m s, body components, (..., 3)) with the body at rest.
 
-        The smallest max_i |Ω_i| / Ω_max,i over the wheel speeds Ω with Gs diag(Js) Ω = ``momentum``
-        (a linear program, scipy's HiGHS); ``inf`` where no wheel speeds give it (a direction the
-        spin axes do not span). Without an external torque the total angular momentum is conserved,
-        so a loop that starts with a total momentum H_N can come to rest at the attitude R only if
-        the load of [RN] H_N is at most 1: above 1 it cannot settle on the wheels, whatever the law.
+        The smallest max_i |Ω_i| / Ω_max,i over the wheel speeds Ω with Gs diag(Js) Ω = ``momentum``;
+        ``inf`` where no wheel speeds give it (a direction the spin axes do not span). Without an
+        external torque the total angular momentum is conserved, so a loop that starts with a total
+        momentum H_N can come to rest at the attitude R only if the load of [RN] H_N is at most 1:
+        above 1 it cannot settle on the wheels, whatever the law.
+
+        It is the gauge of the zonotope Z = {Gs diag(Js) Ω : |Ω_i| <= Ω_max,i} spanned by the columns
+        c_i = Js,i Ω_max,i g_i: where they span R³, Z is the intersection of the slabs |n·h| <= Σ_k |n·c_k|
+        over the facet normals n = c_i × c_j, so the load is max_n |n·h| / Σ_k |n·c_k|. Where they do
+        not, a linear program (scipy's HiGHS) per momentum.
         """
-        h = finite_array("momentum", momentum, (3,))
+        h = finite_array("momentum", momentum, (None, 3))
+        columns = self.spin_axes * (self.spin_inertia * self.speed_limit)  # c_i as columns, 3 × N
+        if np.linalg.matrix_rank(columns) == 3:
+            i, j = np.triu_indices(self.count, k=1)
+            normals = np.cross(columns[:, i].T, columns[:, j].T)  # (pairs, 3)
+            keep = np.linalg.norm(normals, axis=1) > 1e-12 * np.max(np.linalg.norm(columns, axis=0)) ** 2
+            normals = normals[keep]
+            support = np.sum(np.abs(normals @ columns), axis=1)  # Σ_k |n·c_k|
+            loads = np.max(np.abs(h @ normals.T) / support, axis=-1)
+        else:
+            loads = np.array([self._load_by_program(row) for row in h.reshape(-1, 3)]).reshape(h.shape[:-1])
+        return float(loads) if loads.ndim == 0 else readonly(loads)
+
+    def _load_by_program(self, h: np.ndarray) -> float:
+        """[`momentum_load`][mrpctl.wheels.WheelCluster.momentum_load] of one momentum by a linear program."""
         count = self.count
-        columns = self.spin_axes * self.spin_inertia  # Gs diag(Js)
         # variables (Ω_1 … Ω_N, t): minimise t subject to Gs diag(Js) Ω = h and |Ω_i| <= t Ω_max,i
         cost = np.zeros(count + 1)
         cost[-1] = 1.0
         eye = np.eye(count)
         limits = self.speed_limit.reshape(count, 1)
         upper = np.vstack((np.hstack((eye, -limits)), np.hstack((-eye, -limits))))
-        equality = np.hstack((columns, np.zeros((3, 1))))
-        # deferred: scipy.optimize, only for this check
+        equality = np.hstack((self.spin_axes * self.spin_inertia, np.zeros((3, 1))))
+        # deferred: scipy.optimize, only for a cluster whose axes do not span R³
         from scipy.optimize import linprog
 
         bounds = [(None, None)] * count + [(0.0, None)]
@@ -272,18 +290,14 @@ def rest_momentum_load(wheels: WheelCluster, inertia: Any, sigma: Any, omega: An
     """The wheels' [`momentum_load`][mrpctl.wheels.WheelCluster.momentum_load] at rest at the origin, per run.
 
     ``sigma`` (..., 3) and ``omega`` (..., 3, rad/s) are initial states of the body, ``inertia`` the
-    whole spacecraft's J (3 × 3, wheels included) and the wheels start at ``wheels.speeds``. The total
-    momentum H_B = J ω + Gs diag(Js) Ω is conserved in N without an external torque, so the body can
-    come to rest at σ = 0 (B = N) only where the returned load of H_N = [BN]ᵀ H_B is at most 1.
+    whole spacecraft's J ((..., 3, 3), one per run or shared; wheels included) and the wheels start at
+    ``wheels.speeds``. The total momentum H_B = J ω + Gs diag(Js) Ω is conserved in N without an
+    external torque, so the body can come to rest at σ = 0 (B = N) only where the returned load of
+    H_N = [BN]ᵀ H_B is at most 1.
     """
-    J = finite_array("inertia", inertia, (3, 3))
+    J = finite_array("inertia", inertia, (None, 3, 3))
     sigma = finite_array("sigma", sigma, (None, 3))
     omega = finite_array("omega", omega, (None, 3))
-    sigma, omega = np.broadcast_arrays(sigma, omega)
-    flat_sigma, flat_omega = sigma.reshape(-1, 3), omega.reshape(-1, 3)
-    wheel_part = wheels.momentum(wheels.speeds)
-    loads = np.empty(len(flat_sigma))
-    for i, (s, w) in enumerate(zip(flat_sigma, flat_omega, strict=True)):
-        body = J @ w + wheel_part
-        loads[i] = wheels.momentum_load(to_dcm(s).T @ body)
-    return loads.reshape(sigma.shape[:-1])
+    body = np.einsum("...ij,...j->...i", J, omega) + wheels.momentum(wheels.speeds)
+    inertial = np.einsum("...ji,...j->...i", to_dcm(sigma), body)  # [BN]ᵀ H_B
+    return np.asarray(wheels.momentum_load(inertial), dtype=float)

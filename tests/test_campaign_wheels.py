@@ -119,6 +119,18 @@ def test_the_report_summarises_the_wheels(stored) -> None:
     assert summary.summary()["wheels"]["momentum_capacity_Nms"] == pytest.approx([3.1831e-5 * 200 * math.pi] * 3)
     text = str(summary)
     assert "wheels        3; peak stored momentum" in text and "runs_at_speed_lim" in text
+    # each run's momentum load at rest, independent of the zonotope gauge: three orthogonal wheels hold Js Omega_max
+    # per body axis, so the load of H_N = [BN]^T J omega is the largest |H_N,i| / (Js Omega_max)
+    from mrpctl.mrp import to_dcm
+
+    h_n = [
+        to_dcm(dataset["sigma0"].values[i]).T @ (dataset["inertia"].values[i] @ dataset["omega0"].values[i])
+        for i in range(SPEC["count"])
+    ]
+    loads = np.max(np.abs(h_n), axis=1) / (3.1831e-5 * 200 * math.pi)
+    assert summary.wheels["initial_momentum_load"]["max"] == pytest.approx(float(np.max(loads)), rel=1e-12)
+    assert summary.wheels["runs_beyond_capacity"] == int(np.sum(loads > 1.0)) == 0  # |omega0| <= 0.05 rad/s
+    assert "cannot settle" not in text
 
 
 def test_a_stored_trajectory_holds_the_wheels(stored, tmp_path) -> None:
@@ -199,3 +211,20 @@ def test_what_a_campaign_on_wheels_does_not_run(changes: dict, needles: list[str
         parse_campaign(spec)
     for needle in needles:
         assert needle in str(caught.value), str(caught.value)
+
+
+def test_the_report_says_which_runs_the_wheels_cannot_hold() -> None:
+    from mrpctl.campaign.wheels import wheel_summary, wheel_summary_lines
+
+    runs = {
+        "wheel_peak_speed": np.zeros((3, 3)),
+        "wheel_torque_limited_time": np.zeros((3, 3)),
+        "wheel_speed_limited_time": np.zeros((3, 3)),
+        "worst_wheel": np.zeros(3, dtype=np.int64),
+        "wheel_peak_momentum": np.zeros(3),
+    }
+    summary = wheel_summary(runs, None, None, loads=np.array([0.5, 2.5, np.nan]))
+    assert summary is not None and summary["runs_beyond_capacity"] == 1
+    assert summary["initial_momentum_load"]["max"] == 2.5
+    lines = wheel_summary_lines(summary)
+    assert "1 of 3 runs start with more angular momentum than the wheels hold at rest (load up to 2.5)" in lines[1]

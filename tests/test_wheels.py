@@ -542,8 +542,25 @@ def test_momentum_load_against_the_closed_forms() -> None:
     beta = np.arctan(1.0 / np.sqrt(2.0))
     # along the pyramid's axis the four wheels share the momentum equally: h = 4 sin(beta) Js Omega
     assert pyramid.momentum_load([0.0, 0.0, 0.01]) == pytest.approx(0.01 / (4 * np.sin(beta) * 3e-5 * speed_limit))
+    # any cluster against a linear program written here: minimise t with Gs diag(Js) Omega = h, |Omega_i| <= t Omega_max
+    from scipy.optimize import linprog
+
+    axes = rng.normal(size=(3, 5))
+    skewed = WheelCluster(
+        axes / np.linalg.norm(axes, axis=0), rng.uniform(2e-5, 6e-5, 5), 5e-3, rng.uniform(300.0, 700.0, 5)
+    )
+    h = rng.normal(scale=0.01, size=(6, 3))
+    n = skewed.count
+    limits = skewed.speed_limit[:, None]
+    bound = np.vstack((np.hstack((np.eye(n), -limits)), np.hstack((-np.eye(n), -limits))))
+    columns = np.hstack((skewed.spin_axes * skewed.spin_inertia, np.zeros((3, 1))))
+    cost = np.r_[np.zeros(n), 1.0]
+    free = [(None, None)] * n + [(0.0, None)]
+    expected = [linprog(cost, bound, np.zeros(2 * n), columns, row, bounds=free).fun for row in h]
+    np.testing.assert_allclose(skewed.momentum_load(h), expected, rtol=1e-7)
     planar = WheelCluster(np.eye(3)[:, :2], [3e-5, 3e-5], 5e-3, speed_limit, control_axes=np.eye(3)[:2])
     assert planar.momentum_load([0.0, 0.0, 1e-3]) == np.inf  # no wheel spins about z
+    assert planar.momentum_load([1e-3, 0.0, 0.0]) == pytest.approx(1e-3 / (3e-5 * speed_limit), rel=1e-7)
     # at rest at the origin: H_N = [BN]^T (J omega) with the body turned 90 deg about z
     sigma = np.array([0.0, 0.0, np.tan(np.pi / 8)])
     load = rest_momentum_load(orthogonal, np.diag([0.2, 0.25, 0.15]), sigma, [0.05, 0.0, 0.0])

@@ -30,6 +30,7 @@ from mrpctl.flight import NOISE_REVISION
 from mrpctl.flight.tracking import DEFAULT_POINTING_TOLERANCE
 from mrpctl.simulation import simulate
 from mrpctl.spacecraft import Spacecraft
+from mrpctl.wheels import rest_momentum_load
 
 if TYPE_CHECKING:
     # deferred: matplotlib, only when a figure is made
@@ -415,9 +416,22 @@ def _wheels(dataset: xr.Dataset) -> dict[str, Any] | None:
     """The wheel summary of a campaign on wheels (its cluster's limits from the stored campaign), or None."""
     if "wheel_peak_speed" not in dataset:
         return None
-    cluster = spec_of(dataset).base.wheels
+    base = spec_of(dataset).base
+    cluster = base.wheels
     limits = None if cluster is None else (np.asarray(cluster.speed_limit), np.asarray(cluster.momentum_capacity))
-    return wheel_summary(dataset, *(limits or (None, None)))
+    loads = None
+    external = base.reference is not None or base.gravity_gradient or "flight_disturbance_rows" in dataset
+    if "disturbance" in dataset:
+        external = external or bool(np.any(np.asarray(dataset["disturbance"], dtype=float) != 0.0))
+    if cluster is not None and not external:  # the total momentum is conserved and the target is the origin
+        sigma0, omega0 = np.asarray(dataset["sigma0"], dtype=float), np.asarray(dataset["omega0"], dtype=float)
+        inertia = np.asarray(dataset["inertia"], dtype=float)
+        known = np.all(np.isfinite(sigma0), axis=1) & np.all(np.isfinite(omega0), axis=1)
+        known &= np.all(np.isfinite(inertia), axis=(1, 2))
+        loads = np.full(len(sigma0), np.nan)
+        if np.any(known):
+            loads[known] = rest_momentum_load(cluster, inertia[known], sigma0[known], omega0[known])
+    return wheel_summary(dataset, *(limits or (None, None)), loads=loads)
 
 
 def _rule_labels(dataset: xr.Dataset) -> list[str]:

@@ -113,10 +113,14 @@ def _quantiles(values: np.ndarray) -> dict[str, float | None]:
     }
 
 
-def wheel_summary(dataset: Any, speed_limit: np.ndarray | None, capacity: np.ndarray | None) -> dict[str, Any] | None:
+def wheel_summary(
+    dataset: Any, speed_limit: np.ndarray | None, capacity: np.ndarray | None, *, loads: np.ndarray | None = None
+) -> dict[str, Any] | None:
     """The wheel metrics of a campaign's runs per wheel (None without wheels): the peak speed (rpm), the runs
     that reached the speed limit or the torque limit, the time at each limit, the peak stored momentum and how
-    often each wheel was the worst one."""
+    often each wheel was the worst one; with ``loads`` (each run's
+    [`rest_momentum_load`][mrpctl.wheels.rest_momentum_load]) the runs that start with more angular momentum than
+    the wheels hold at rest."""
     if "wheel_peak_speed" not in dataset:
         return None
     peak = np.asarray(dataset["wheel_peak_speed"], dtype=float)
@@ -143,6 +147,11 @@ def wheel_summary(dataset: Any, speed_limit: np.ndarray | None, capacity: np.nda
         "runs": int(peak.shape[0]),
         "peak_momentum_Nms": _quantiles(np.asarray(dataset["wheel_peak_momentum"], dtype=float)),
         "momentum_capacity_Nms": None if capacity is None else [float(c) for c in capacity],
+        **(
+            {}
+            if loads is None
+            else {"runs_beyond_capacity": int(np.sum(loads > 1.0)), "initial_momentum_load": _quantiles(loads)}
+        ),
         "wheels": per_wheel,
     }
 
@@ -163,6 +172,13 @@ def wheel_summary_lines(summary: dict[str, Any] | None) -> list[str]:
         f"    {'wheel':>5} {'peak_rpm_med':>12} {'peak_rpm_max':>12} {'limit_rpm':>9} {'runs_at_speed_lim':>17} "
         f"{'runs_at_torque_lim':>18} {'speed_lim_s_max':>15} {'torque_lim_s_max':>16} {'worst_in':>8}",
     ]
+    if summary.get("runs_beyond_capacity"):
+        lines.insert(
+            1,
+            f"    {summary['runs_beyond_capacity']} of {summary['runs']} runs start with more angular momentum than "
+            f"the wheels hold at rest (load up to {g(summary['initial_momentum_load']['max'])}): without an external "
+            "torque they cannot settle",
+        )
     for w in summary["wheels"]:
         lines.append(
             f"    {w['wheel']:>5} {g(w['peak_speed_rpm']['median']):>12} {g(w['peak_speed_rpm']['max']):>12} "
