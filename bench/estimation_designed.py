@@ -340,6 +340,25 @@ def main(seeds: int) -> None:
             radii = worst_flown(law, k)
             print(f"| {label} | {gain_label} | " + " | ".join(f"{radii[e]:.5f}" for e in ERRORS) + " |")
     print()
+    print("factors, designed gain of (b) and (c): radius per sample (decay rate -ln(radius)/h, 1/s):")
+    print("| loop | e = -10% | e = +0% | e = +10% |")
+    print("|---|---|---|---|")
+    factors = (
+        ("(b) as flown (mean-rate reading carried over the age 0.5-0.9 s)", "predictor", True),
+        ("(b) with a point-rate reading omega_j (no half-period lag)", "predictor", False),
+        ("(c) = (d') law on sigma_k and the mean rate", "now", True),
+        ("(d) law on sigma_k and omega_k", "now", False),
+    )
+    for label, law, mean in factors:
+        cells = []
+        for e in (-TOLERANCE, 0.0, TOLERANCE):
+            radius = max(
+                flown_radius(law, ks, kw, (1 + e) * j, j, mean_rate=mean)
+                for (ks, kw), j in zip(axis_gains(gains["estimator"]), paper.INERTIA, strict=True)
+            )
+            cells.append(f"{radius:.4f} ({-np.log(radius) / H:.2f})")
+        print(f"| {label} | " + " | ".join(cells) + " |")
+    print()
     table(
         f"same gain (the paper's K in every loop; {seeds} seeds):",
         {mode: paper_gain for _, mode, _ in LOOPS},
