@@ -81,19 +81,19 @@ def metrics(
     return run.pointing_rms(150.0), run.settling_time(SETTLED)
 
 
-def true_state_loop(scale: float, *, at: str = "now") -> tuple[float, float]:
+def true_state_loop(scale: float, *, at: str = "now", gain: np.ndarray | None = None) -> tuple[float, float]:
     """The same plant, gain and rule under u_k = K [σ; ω/4] of the true state: no sensor, no delay, no noise
     (perfect knowledge). ``at``: ``"now"``, the state at t_k; ``"mean"``, the attitude at t_k and the body's mean
     rate over [t_{k-1}, t_k] (what the noise-free gyro reads, and the estimator's ω̂ = ω̃ − β̂ carries);
     ``"mid"``, the state predicted to the middle of the hold period t_k + h/2 by the nominal model under the last
     torque (a compensation of the zero-order hold's h/2). The plant is ``mrpctl.loop.step_function``'s RK4 (the
-    estimated loop's); the loop runs in Python."""
+    estimated loop's); the loop runs in Python. ``gain``: the paper's by default."""
     inertia, model = np.array(paper.INERTIA) * scale, np.array(paper.INERTIA)
     step = step_function(paper.SPACECRAFT, 1 / RATE, SUBSTEPS, inertia=InertiaInput.DIAGONAL)
     half = step_function(paper.SPACECRAFT, 0.5 / RATE, SUBSTEPS // 2, inertia=InertiaInput.DIAGONAL)
     a, b = ca.SX.sym("a", 3), ca.SX.sym("b", 3)
     rotation = ca.Function("rotation", [a, b], [relative_rotation_expr(a, b)])
-    gain = np.asarray(paper.GAIN)
+    gain = np.asarray(paper.GAIN if gain is None else gain)
     x = np.array(paper.INITIAL_STATE, dtype=float)
     mean, u = 4 * x[3:6], np.zeros(3)  # before t = 0 the body turned at its initial rate
     n = round(T_FINAL * RATE) + 1
