@@ -43,12 +43,31 @@ static inline __m512i mrpctl_mix13_x8(__m512i z) {
   return _mm512_xor_si512(z, _mm512_srli_epi64(z, 31));
 }
 
+/* Positions listed at most (then decided): a fixed size (about 60 of a block's 64 x 6 x 8 numbers are listed). */
+#define MRPCTL_ODD 512
+
+/* The listed positions of the block (see mrpctl_lane_noise) decided exactly, as mrpctl_normal_rows does: accepted
+ * by the first attempt (x < X[i + 1]) as the signed scale times x, else scale times mrpctl_stream_normal_slow. */
+static void mrpctl_lane_noise_odd(const unsigned long long* keys, const double* sigmas, long long k, double* block,
+                                  const long long* odd, long long n_odd) {
+  long long f;
+  for (f = 0; f < n_odd; ++f) {
+    const long long at = odd[f], l = at % MRPCTL_W, row = at / MRPCTL_W, j = row % 6, s = j / 3;
+    const uint64_t key = (uint64_t)keys[s * MRPCTL_W + l], n = (uint64_t)(3 * (k + row / 6) + j % 3);
+    const double scale = sigmas[s * MRPCTL_W + l];
+    const uint64_t h = mrpctl_stream_value(key, n << 12);
+    const int i = (int)(h & 255u);
+    const double x = (double)(int64_t)(h >> 11) * mrpctl_zig_xs[i];
+    block[at] = x < mrpctl_zig_x[i + 1] ? mrpctl_signed(scale * x, h) : scale * mrpctl_stream_normal_slow(key, n);
+  }
+}
+
 /* mrpctl_lane_noise 8 lanes at a time: per number, the 8 lanes' values h (counter z = key + ((n << 12) + 1) C,
  * C = 0x9E3779B97F4A7C15, as mrpctl_stream_value), x = (h >> 11) X[i] 2^-53 (the conversion is exact: < 2^53; one
  * gather of the table), the sign of bit 8 as a sign-bit flip of scale x (= (-scale) x bit for bit), zeros where
  * !(scale > 0). A lane whose number is not surely accepted (mrpctl_zig_sure) has its position appended (branch free) to
- * a list; after the block each of those is decided exactly: accepted (x < X[i + 1]) as above, else scale times
- * mrpctl_stream_normal_slow (the whole loop from attempt 0), so every number is mrpctl_normal_rows'. */
+ * a list of at most MRPCTL_ODD, decided exactly (mrpctl_lane_noise_odd) when it is nearly full and after the block, so
+ * every number is mrpctl_normal_rows'. */
 static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigmas, long long k, long long count,
                               double* block) {
   const uint64_t step = UINT64_C(0x9E3779B97F4A7C15) << 12;
@@ -57,8 +76,8 @@ static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigm
   const __m512i upper_half = _mm512_set1_epi64(16), iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
   const __m512d sure0 = _mm512_load_pd(mrpctl_zig_sure), sure1 = _mm512_load_pd(mrpctl_zig_sure + 8);
   const __m512d sure2 = _mm512_load_pd(mrpctl_zig_sure + 16), sure3 = _mm512_load_pd(mrpctl_zig_sure + 24);
-  long long odd[MRPCTL_NOISE_BLOCK * 6 * MRPCTL_W + 8]; /* positions to decide exactly (+ 8: a full store) */
-  long long n_odd = 0, f;
+  long long odd[MRPCTL_ODD + 8]; /* + 8: room for a full 8-lane store */
+  long long n_odd = 0;
   int g;
   for (g = 0; g < MRPCTL_W; g += 8) {
     __m512i key[2];
@@ -72,7 +91,11 @@ static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigm
       scale[s] = _mm512_loadu_pd(sigmas + s * MRPCTL_W + g);
       keep[s] = _mm512_cmp_pd_mask(scale[s], _mm512_setzero_pd(), _CMP_GT_OQ);
     }
-    for (r = 0; r < count; ++r)
+    for (r = 0; r < count; ++r) {
+      if (n_odd > MRPCTL_ODD - 6 * 8) { /* room for a row's 6 x 8 */
+        mrpctl_lane_noise_odd(keys, sigmas, k, block, odd, n_odd);
+        n_odd = 0;
+      }
       for (c = 0; c < 3; ++c, offset += step)
         for (s = 0; s < 2; ++s) {
           const long long at = (r * 6 + 3 * s + c) * MRPCTL_W + g;
@@ -93,16 +116,9 @@ static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigm
                               _mm512_maskz_compress_epi64(unsure, _mm512_add_epi64(iota, _mm512_set1_epi64(at))));
           n_odd += __builtin_popcount((unsigned)unsure);
         }
+    }
   }
-  for (f = 0; f < n_odd; ++f) { /* each one exactly, as mrpctl_normal_rows */
-    const long long at = odd[f], l = at % MRPCTL_W, row = at / MRPCTL_W, j = row % 6, s = j / 3;
-    const uint64_t key = (uint64_t)keys[s * MRPCTL_W + l], n = (uint64_t)(3 * (k + row / 6) + j % 3);
-    const double scale = sigmas[s * MRPCTL_W + l];
-    const uint64_t h = mrpctl_stream_value(key, n << 12);
-    const int i = (int)(h & 255u);
-    const double x = (double)(int64_t)(h >> 11) * mrpctl_zig_xs[i];
-    block[at] = x < mrpctl_zig_x[i + 1] ? mrpctl_signed(scale * x, h) : scale * mrpctl_stream_normal_slow(key, n);
-  }
+  mrpctl_lane_noise_odd(keys, sigmas, k, block, odd, n_odd);
 }
 #else
 static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigmas, long long k, long long count,
