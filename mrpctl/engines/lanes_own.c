@@ -150,6 +150,37 @@ static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigm
 }
 #endif
 
+/* The newest arrived measurement j*(k + r) of every lane l for r < count into chosen[r * W + l], advancing each lane's
+ * arrival ring (latest, slot of k = `slot`) and j* (newest) as the per-sample loop of mrpctl_lanes_run_own did: the
+ * jitter does not depend on the run's state, so a block of samples is scheduled at once, lane by lane (first the
+ * lane's delays, mrpctl_stream_integer's numbers, in a loop of their own, then its ring in order). */
+static void mrpctl_lane_schedule(const long long* keys, const long long* d_min, long long* newest, long long* latest,
+                                 long long d, long long k, long long count, long long slot, long long* chosen) {
+  long long delays[MRPCTL_NOISE_BLOCK];
+  long long r;
+  int l;
+  for (l = 0; l < MRPCTL_W; ++l) {
+    const uint64_t key = (uint64_t)keys[l], span = (uint64_t)(d - d_min[l] + 1);
+    long long j = newest[l], at = slot;
+    for (r = 0; r < count; ++r) { /* mrpctl_stream_integer(key, k + r, d_min, d) - d_min */
+      const uint64_t h = mrpctl_mix13(key + ((((uint64_t)(k + r)) << 12) + 1u) * UINT64_C(0x9E3779B97F4A7C15));
+      delays[r] = (long long)(((h >> 32) * span) >> 32);
+    }
+    for (r = 0; r < count; ++r) {
+      long long* entry = latest + at * MRPCTL_W + l;
+      long long arrival = at + d_min[l] + delays[r];
+      if (arrival > d) arrival -= d + 1;
+      if (*entry > j) j = *entry;
+      if (k + r - d > j) j = k + r - d; /* the history sample k + r - d arrives at k + r */
+      chosen[r * MRPCTL_W + l] = j;
+      *entry = LLONG_MIN;
+      latest[arrival * MRPCTL_W + l] = k + r; /* every measurement registered before is older than k + r */
+      if (++at > d) at = 0;
+    }
+    newest[l] = j;
+  }
+}
+
 /* As mrpctl_lanes_run, each lane with its own sensor noise and its own jitter, drawn and scheduled here as the
  * scalar driver (mrpctl/engines/scalar_driver.c) does for its one run, with the generator of noise.c (included in
  * front of this file by mrpctl.engines.lanes for an engine with own streams).
@@ -177,7 +208,8 @@ __attribute__((visibility("default"))) int mrpctl_lanes_run_own(double* carried,
   const double* arg[MRPCTL_N_IN];
   double* res[MRPCTL_N_OUT];
   long long k, slot = k0 % (d + 1), delayed_slot = k0 >= d ? (k0 - d) % (d + 1) : 0;
-  long long noise_k0 = k0, noise_k1 = k0;
+  long long noise_k0 = k0, noise_k1 = k0, schedule_k0 = k0, schedule_k1 = k0;
+  long long schedule[MRPCTL_NOISE_BLOCK * MRPCTL_W];
   long long *keys = 0, *d_min = 0, *newest = 0, *latest = 0;
   int i, l, m, now_index = 0;
   memcpy(buffers[0], carried, sizeof(buffers[0]));
@@ -201,25 +233,14 @@ __attribute__((visibility("default"))) int mrpctl_lanes_run_own(double* carried,
     const double* delayed = d == 0 ? history : k < d ? history + MRPCTL_COLUMN * k : ring + MRPCTL_COLUMN * delayed_slot;
     if (jitter || used) { /* each lane its own j*(k): its values gathered from its column */
       long long chosen[MRPCTL_W];
-      if (jitter) {
-        /* the lanes' delays of measurement k (mrpctl_stream_integer's numbers, side by side: vectorised), then
-           each lane's arrival ring */
-        const uint64_t base = (((uint64_t)k << 12) + 1u) * UINT64_C(0x9E3779B97F4A7C15);
-        long long arrivals[MRPCTL_W];
-        for (l = 0; l < MRPCTL_W; ++l) {
-          const uint64_t h = mrpctl_mix13((uint64_t)keys[l] + base);
-          arrivals[l] = slot + d_min[l] + (long long)(((h >> 32) * (uint64_t)(d - d_min[l] + 1)) >> 32);
+      if (jitter) { /* the block's schedule (mrpctl_lane_schedule) */
+        if (k == schedule_k1) {
+          const long long count = k1 - k < MRPCTL_NOISE_BLOCK ? k1 - k : MRPCTL_NOISE_BLOCK;
+          mrpctl_lane_schedule(keys, d_min, newest, latest, d, k, count, slot, schedule);
+          schedule_k0 = k;
+          schedule_k1 = k + count;
         }
-        for (l = 0; l < MRPCTL_W; ++l) {
-          long long* entry = latest + slot * MRPCTL_W + l;
-          const long long arrival = arrivals[l] > d ? arrivals[l] - (d + 1) : arrivals[l];
-          long long j = newest[l];
-          if (*entry > j) j = *entry;
-          if (k - d > j) j = k - d; /* the history sample k - d arrives at k */
-          newest[l] = chosen[l] = j;
-          *entry = LLONG_MIN;
-          latest[arrival * MRPCTL_W + l] = k; /* every measurement registered before is older than k */
-        }
+        for (l = 0; l < MRPCTL_W; ++l) chosen[l] = schedule[(k - schedule_k0) * MRPCTL_W + l];
       } else {
         for (l = 0; l < MRPCTL_W; ++l) chosen[l] = used[(k - k0) * MRPCTL_W + l];
       }
