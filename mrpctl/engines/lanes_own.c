@@ -64,7 +64,8 @@ static void mrpctl_lane_noise_odd(const unsigned long long* keys, const double* 
 
 /* mrpctl_lane_noise 8 lanes at a time: per number, the 8 lanes' values h (counter z = key + ((n << 12) + 1) C,
  * C = 0x9E3779B97F4A7C15, as mrpctl_stream_value), x = (h >> 11) X[i] 2^-53 (the conversion is exact: < 2^53; one
- * gather of the table), the sign of bit 8 as a sign-bit flip of scale x (= (-scale) x bit for bit), zeros where
+ * gather of the table), the sign of bit 8 as a sign-bit flip of scale x (= (-scale) x bit for bit: the scales are
+ * finite, the sensors' validated 1 sigma, so scale x is never a NaN), zeros where
  * !(scale > 0). A lane whose number is not surely accepted (mrpctl_zig_sure) has its position appended (branch free) to
  * a list of at most MRPCTL_ODD, decided exactly (mrpctl_lane_noise_odd) when it is nearly full and after the block, so
  * every number is mrpctl_normal_rows'. */
