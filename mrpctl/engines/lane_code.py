@@ -72,7 +72,9 @@ _CALL_OPS: dict[int, str] = {
     ca.OP_CONSTPOW: "pow({0},{1})",
     ca.OP_SIN: "sin({0})",
     ca.OP_COS: "cos({0})",
-    ca.OP_TAN: "tan({0})",
+    # tan(±0) is ±0, its argument (C99 Annex F): no call for a zero argument, the main path of the sensor's
+    # rotation vector to MRP (both branches of an if_else are computed in every lane; tan(0) on that path)
+    ca.OP_TAN: "({0} == 0.0 ? {0} : tan({0}))",
     ca.OP_ASIN: "asin({0})",
     ca.OP_ACOS: "acos({0})",
     ca.OP_ATAN: "atan({0})",

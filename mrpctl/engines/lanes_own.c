@@ -11,8 +11,117 @@
 /* The noise rows of samples k .. k + count - 1 of every lane into block[(r * 6 + j) * W + l] (row r, number j, lane
  * l): number 3 s + c of row r is scale_s n_s(3 (k + r) + c) of lane l's stream s (0 attitude, 1 rate), the value of
  * mrpctl_normal_rows for that lane (scale > 0: the ziggurat's accepted first attempt times the signed scale, a
- * rejected one scale times mrpctl_stream_normal_slow; else exact zeros), computed for the W lanes side by side so
- * that the compiler vectorises the first attempt across lanes (the same operations, lane by lane). */
+ * rejected one scale times mrpctl_stream_normal_slow; else exact zeros). With AVX-512 (F and DQ) the first attempt
+ * is computed 8 lanes at a time (below); else lane by lane in mrpctl_normal_rows' loop. */
+#if defined(__AVX512F__) && defined(__AVX512DQ__) && MRPCTL_W % 8 == 0
+#include <immintrin.h>
+
+/* A lower bound on the first attempt's acceptance, per group of 8 layers (i >> 3): the uniform's integer
+ * m = h >> 11 < mrpctl_zig_sure[i >> 3] (an integer below 2^53, exact in a double) implies x = m X[i] 2^-53 < X[i + 1]
+ * (as the ziggurat computes x: one rounded product, monotone in m) for every layer i of the group except 255 (whose
+ * X[256] = 0 accepts nothing). Each entry is the least, over its layers, of the least m with m X[i] 2^-53 >= X[i + 1]
+ * (bisection in float64 on the tables above; tests/test_lane_noise.py checks every entry against the tables). About
+ * 2 % of the numbers are below no bound: they are decided exactly afterwards, with mrpctl_stream_normal_slow for the
+ * rejected ones. */
+static const double mrpctl_zig_sure[32] __attribute__((aligned(64))) = {
+    0x1.de67b004bdec9p+52, 0x1.f86565e3c45dap+52, 0x1.fb30bc36574e9p+52, 0x1.fc4000732aaadp+52,
+    0x1.fccfb416d57b1p+52, 0x1.fd27e8e3a8e51p+52, 0x1.fd62760165a95p+52, 0x1.fd8afea1e63fbp+52,
+    0x1.fda7883bd4844p+52, 0x1.fdbb7c84408fap+52, 0x1.fdc8e94000d9dp+52, 0x1.fdd115c6d38f3p+52,
+    0x1.fdd4cd1f85ae1p+52, 0x1.fdd14c16cc686p+52, 0x1.fdca24e3b610dp+52, 0x1.fdbf43c1fa828p+52,
+    0x1.fdb06afc95303p+52, 0x1.fd9d2e9119166p+52, 0x1.fd84ea562b428p+52, 0x1.fd66b0bfc5496p+52,
+    0x1.fd412e757ccf6p+52, 0x1.fd127b90810c9p+52, 0x1.fcd7ccc3c2355p+52, 0x1.fc8ce8da8ee69p+52,
+    0x1.fc2b278517098p+52, 0x1.fba770230e53ap+52, 0x1.faedd5391d063p+52, 0x1.f9d6a9b1fd933p+52,
+    0x1.f8060c1fed8afp+52, 0x1.f46c1eb03f4e3p+52, 0x1.e9e8d2ac24ab0p+52, 0x1.8117d31f78cc2p+52
+};
+
+/* Mix13 of 8 lanes (vpmullq: the same 64-bit products as the scalar's). */
+static inline __m512i mrpctl_mix13_x8(__m512i z) {
+  z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64(z, 30)),
+                         _mm512_set1_epi64((long long)UINT64_C(0xBF58476D1CE4E5B9)));
+  z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64(z, 27)),
+                         _mm512_set1_epi64((long long)UINT64_C(0x94D049BB133111EB)));
+  return _mm512_xor_si512(z, _mm512_srli_epi64(z, 31));
+}
+
+/* Positions listed at most (then decided): a fixed size (about 60 of a block's 64 x 6 x 8 numbers are listed). */
+#define MRPCTL_ODD 512
+
+/* The listed positions of the block (see mrpctl_lane_noise) decided exactly, as mrpctl_normal_rows does: accepted
+ * by the first attempt (x < X[i + 1]) as the signed scale times x, else scale times mrpctl_stream_normal_slow. */
+static void mrpctl_lane_noise_odd(const unsigned long long* keys, const double* sigmas, long long k, double* block,
+                                  const long long* odd, long long n_odd) {
+  long long f;
+  for (f = 0; f < n_odd; ++f) {
+    const long long at = odd[f], l = at % MRPCTL_W, row = at / MRPCTL_W, j = row % 6, s = j / 3;
+    const uint64_t key = (uint64_t)keys[s * MRPCTL_W + l], n = (uint64_t)(3 * (k + row / 6) + j % 3);
+    const double scale = sigmas[s * MRPCTL_W + l];
+    const uint64_t h = mrpctl_stream_value(key, n << 12);
+    const int i = (int)(h & 255u);
+    const double x = (double)(int64_t)(h >> 11) * mrpctl_zig_xs[i];
+    block[at] = x < mrpctl_zig_x[i + 1] ? mrpctl_signed(scale * x, h) : scale * mrpctl_stream_normal_slow(key, n);
+  }
+}
+
+/* mrpctl_lane_noise 8 lanes at a time: per number, the 8 lanes' values h (counter z = key + ((n << 12) + 1) C,
+ * C = 0x9E3779B97F4A7C15, as mrpctl_stream_value), x = (h >> 11) X[i] 2^-53 (the conversion is exact: < 2^53; one
+ * gather of the table), the sign of bit 8 as a sign-bit flip of scale x (= (-scale) x bit for bit: the scales are
+ * finite, the sensors' validated 1 sigma, so scale x is never a NaN), zeros where
+ * !(scale > 0). A lane whose number is not surely accepted (mrpctl_zig_sure) has its position appended (branch free) to
+ * a list of at most MRPCTL_ODD, decided exactly (mrpctl_lane_noise_odd) when it is nearly full and after the block, so
+ * every number is mrpctl_normal_rows'. */
+static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigmas, long long k, long long count,
+                              double* block) {
+  const uint64_t step = UINT64_C(0x9E3779B97F4A7C15) << 12;
+  const uint64_t first = (((uint64_t)(3 * k) << 12) + 1u) * UINT64_C(0x9E3779B97F4A7C15);
+  const __m512i layer_mask = _mm512_set1_epi64(255), sign = _mm512_set1_epi64((long long)(UINT64_C(1) << 63));
+  const __m512i upper_half = _mm512_set1_epi64(16), iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
+  const __m512d sure0 = _mm512_load_pd(mrpctl_zig_sure), sure1 = _mm512_load_pd(mrpctl_zig_sure + 8);
+  const __m512d sure2 = _mm512_load_pd(mrpctl_zig_sure + 16), sure3 = _mm512_load_pd(mrpctl_zig_sure + 24);
+  long long odd[MRPCTL_ODD + 8]; /* + 8: room for a full 8-lane store */
+  long long n_odd = 0;
+  int g;
+  for (g = 0; g < MRPCTL_W; g += 8) {
+    __m512i key[2];
+    __m512d scale[2];
+    __mmask8 keep[2];
+    uint64_t offset = first;
+    long long r;
+    int s, c;
+    for (s = 0; s < 2; ++s) {
+      key[s] = _mm512_loadu_si512((const void*)(keys + s * MRPCTL_W + g));
+      scale[s] = _mm512_loadu_pd(sigmas + s * MRPCTL_W + g);
+      keep[s] = _mm512_cmp_pd_mask(scale[s], _mm512_setzero_pd(), _CMP_GT_OQ);
+    }
+    for (r = 0; r < count; ++r) {
+      if (n_odd > MRPCTL_ODD - 6 * 8) { /* room for a row's 6 x 8 */
+        mrpctl_lane_noise_odd(keys, sigmas, k, block, odd, n_odd);
+        n_odd = 0;
+      }
+      for (c = 0; c < 3; ++c, offset += step)
+        for (s = 0; s < 2; ++s) {
+          const long long at = (r * 6 + 3 * s + c) * MRPCTL_W + g;
+          const __m512i h = mrpctl_mix13_x8(_mm512_add_epi64(key[s], _mm512_set1_epi64((long long)offset)));
+          const __m512i layer = _mm512_and_si512(h, layer_mask), group = _mm512_srli_epi64(layer, 3);
+          const __m512d m = _mm512_cvtepi64_pd(_mm512_srli_epi64(h, 11));
+          const __m512d x = _mm512_mul_pd(m, _mm512_i64gather_pd(layer, mrpctl_zig_xs, 8));
+          const __m512d sure = _mm512_mask_blend_pd(_mm512_test_epi64_mask(group, upper_half),
+                                                    _mm512_permutex2var_pd(sure0, group, sure1),
+                                                    _mm512_permutex2var_pd(sure2, group, sure3));
+          const __mmask8 unsure =
+              keep[s] & (__mmask8)~(_mm512_cmp_pd_mask(m, sure, _CMP_LT_OQ) & _mm512_cmpneq_epi64_mask(layer, layer_mask));
+          /* scale x with its sign flipped by bit 8 of h: a ^ (b & c), b = h << 55, c = the sign bit */
+          const __m512i bits = _mm512_ternarylogic_epi64(_mm512_castpd_si512(_mm512_mul_pd(scale[s], x)),
+                                                         _mm512_slli_epi64(h, 55), sign, 0x78);
+          _mm512_storeu_pd(block + at, _mm512_castsi512_pd(_mm512_maskz_mov_epi64(keep[s], bits)));
+          _mm512_storeu_si512((void*)(odd + n_odd),
+                              _mm512_maskz_compress_epi64(unsure, _mm512_add_epi64(iota, _mm512_set1_epi64(at))));
+          n_odd += __builtin_popcount((unsigned)unsure);
+        }
+    }
+  }
+  mrpctl_lane_noise_odd(keys, sigmas, k, block, odd, n_odd);
+}
+#else
 static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigmas, long long k, long long count,
                               double* block) {
   const uint64_t step = UINT64_C(0x9E3779B97F4A7C15) << 12;
@@ -39,6 +148,38 @@ static void mrpctl_lane_noise(const unsigned long long* keys, const double* sigm
           else out[c * MRPCTL_W] = scale * mrpctl_stream_normal_slow(key, n);
         }
     }
+}
+#endif
+
+/* The newest arrived measurement j*(k + r) of every lane l for r < count into chosen[r * W + l], advancing each lane's
+ * arrival ring (latest, slot of k = `slot`) and j* (newest) as the per-sample loop of mrpctl_lanes_run_own did: the
+ * jitter does not depend on the run's state, so a block of samples is scheduled at once, lane by lane (first the
+ * lane's delays, mrpctl_stream_integer's numbers, in a loop of their own, then its ring in order). */
+static void mrpctl_lane_schedule(const long long* keys, const long long* d_min, long long* newest, long long* latest,
+                                 long long d, long long k, long long count, long long slot, long long* chosen) {
+  long long delays[MRPCTL_NOISE_BLOCK];
+  long long r;
+  int l;
+  for (l = 0; l < MRPCTL_W; ++l) {
+    const uint64_t key = (uint64_t)keys[l], span = (uint64_t)(d - d_min[l] + 1);
+    long long j = newest[l], at = slot;
+    for (r = 0; r < count; ++r) { /* mrpctl_stream_integer(key, k + r, d_min, d) - d_min */
+      const uint64_t h = mrpctl_mix13(key + ((((uint64_t)(k + r)) << 12) + 1u) * UINT64_C(0x9E3779B97F4A7C15));
+      delays[r] = (long long)(((h >> 32) * span) >> 32);
+    }
+    for (r = 0; r < count; ++r) {
+      long long* entry = latest + at * MRPCTL_W + l;
+      long long arrival = at + d_min[l] + delays[r];
+      if (arrival > d) arrival -= d + 1;
+      if (*entry > j) j = *entry;
+      if (k + r - d > j) j = k + r - d; /* the history sample k + r - d arrives at k + r */
+      chosen[r * MRPCTL_W + l] = j;
+      *entry = LLONG_MIN;
+      latest[arrival * MRPCTL_W + l] = k + r; /* every measurement registered before is older than k + r */
+      if (++at > d) at = 0;
+    }
+    newest[l] = j;
+  }
 }
 
 /* As mrpctl_lanes_run, each lane with its own sensor noise and its own jitter, drawn and scheduled here as the
@@ -68,7 +209,8 @@ __attribute__((visibility("default"))) int mrpctl_lanes_run_own(double* carried,
   const double* arg[MRPCTL_N_IN];
   double* res[MRPCTL_N_OUT];
   long long k, slot = k0 % (d + 1), delayed_slot = k0 >= d ? (k0 - d) % (d + 1) : 0;
-  long long noise_k0 = k0, noise_k1 = k0;
+  long long noise_k0 = k0, noise_k1 = k0, schedule_k0 = k0, schedule_k1 = k0;
+  long long schedule[MRPCTL_NOISE_BLOCK * MRPCTL_W];
   long long *keys = 0, *d_min = 0, *newest = 0, *latest = 0;
   int i, l, m, now_index = 0;
   memcpy(buffers[0], carried, sizeof(buffers[0]));
@@ -92,25 +234,14 @@ __attribute__((visibility("default"))) int mrpctl_lanes_run_own(double* carried,
     const double* delayed = d == 0 ? history : k < d ? history + MRPCTL_COLUMN * k : ring + MRPCTL_COLUMN * delayed_slot;
     if (jitter || used) { /* each lane its own j*(k): its values gathered from its column */
       long long chosen[MRPCTL_W];
-      if (jitter) {
-        /* the lanes' delays of measurement k (mrpctl_stream_integer's numbers, side by side: vectorised), then
-           each lane's arrival ring */
-        const uint64_t base = (((uint64_t)k << 12) + 1u) * UINT64_C(0x9E3779B97F4A7C15);
-        long long arrivals[MRPCTL_W];
-        for (l = 0; l < MRPCTL_W; ++l) {
-          const uint64_t h = mrpctl_mix13((uint64_t)keys[l] + base);
-          arrivals[l] = slot + d_min[l] + (long long)(((h >> 32) * (uint64_t)(d - d_min[l] + 1)) >> 32);
+      if (jitter) { /* the block's schedule (mrpctl_lane_schedule) */
+        if (k == schedule_k1) {
+          const long long count = k1 - k < MRPCTL_NOISE_BLOCK ? k1 - k : MRPCTL_NOISE_BLOCK;
+          mrpctl_lane_schedule(keys, d_min, newest, latest, d, k, count, slot, schedule);
+          schedule_k0 = k;
+          schedule_k1 = k + count;
         }
-        for (l = 0; l < MRPCTL_W; ++l) {
-          long long* entry = latest + slot * MRPCTL_W + l;
-          const long long arrival = arrivals[l] > d ? arrivals[l] - (d + 1) : arrivals[l];
-          long long j = newest[l];
-          if (*entry > j) j = *entry;
-          if (k - d > j) j = k - d; /* the history sample k - d arrives at k */
-          newest[l] = chosen[l] = j;
-          *entry = LLONG_MIN;
-          latest[arrival * MRPCTL_W + l] = k; /* every measurement registered before is older than k */
-        }
+        for (l = 0; l < MRPCTL_W; ++l) chosen[l] = schedule[(k - schedule_k0) * MRPCTL_W + l];
       } else {
         for (l = 0; l < MRPCTL_W; ++l) chosen[l] = used[(k - k0) * MRPCTL_W + l];
       }
