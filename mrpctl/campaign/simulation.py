@@ -137,15 +137,14 @@ def _model_keys(models: dict[str, Any]) -> tuple[Any, Any, Any]:
     )
 
 
-def _flight_key(models: dict[str, Any] | None, per_run: bool) -> Any:
+def _flight_key(models: dict[str, Any] | None) -> Any:
     """Runs with the same key share one simulate_batch call.
 
-    With ``per_run`` the key is the models' structure only (whether there is an actuator and its saturation
-    mode, the shared rows of a ``disturbance_file``): simulate_batch takes each run's actuator, sensor (its noise
-    seed, levels and gyro bias) and delay model (its jitter seed), and the lanes stream each run its own noise
-    rows and newest-arrived schedule, so a fully dispersed chunk is one call that fills every lane (the predictor's
-    lanes too: each run's actuator, sensor and torque). Without it (the wheel loop, whose lanes share one noise
-    stream and one schedule per call) runs with equal models share a call.
+    The key is the models' structure only (whether there is an actuator and its saturation mode, the shared rows
+    of a ``disturbance_file``): simulate_batch takes each run's actuator, sensor (its noise seed, levels and gyro
+    bias) and delay model (its jitter seed), and the lanes stream each run its own noise rows and newest-arrived
+    schedule, so a fully dispersed chunk is one call that fills every lane (the predictor's lanes and the wheel
+    lanes too: each run's sensor, jitter and torque; the predictor's actuator).
 
     A constant torque w is not part of the key: runs that differ only in w (``[dispersions.disturbance]``)
     share one call with one w per run (simulate_batch's per-run constants, on the lanes; with a
@@ -156,10 +155,7 @@ def _flight_key(models: dict[str, Any] | None, per_run: bool) -> Any:
         return None
     rows = models.get("disturbance_rows")  # shared by the runs (one array): its identity names it
     actuator = models["actuator"]
-    if per_run:
-        return ("per run", None if actuator is None else actuator.mode, None if rows is None else id(rows))
-    keys = _model_keys(models)
-    return (keys[0], None if rows is None else id(rows), *keys[1:])
+    return ("per run", None if actuator is None else actuator.mode, None if rows is None else id(rows))
 
 
 def _rows_plus(rows: np.ndarray, constant: np.ndarray, rate: float, times: np.ndarray) -> np.ndarray:
@@ -212,8 +208,7 @@ def simulate_runs(
         of [`mrpctl.simulate_batch`][mrpctl.simulate_batch], and ``disturbance_rows``: see
         [`flight_keywords`][mrpctl.campaign.simulation.flight_keywords]).
         Runs whose models share their structure share one call, each with its own actuator, sensor and delay
-        model (on the wheel and the predictor loops: runs with equal models); the calls
-        run on ``threads`` threads (one each), and every run's result is the same either way.
+        model; the calls run on ``threads`` threads (one each), and every run's result is the same either way.
     predictor : Predictor or None, optional
         The predictor controller shared by every run (every rule an
         [`OnPredicted`][mrpctl.predictor.OnPredicted]): each call to [`mrpctl.simulate_batch`][mrpctl.simulate_batch]
@@ -263,9 +258,8 @@ def simulate_runs(
     models = [None] * n if flight is None else list(flight)
     crafts = _spacecraft(inertia)
     groups: dict[Any, list[int]] = {}
-    per_run = wheels is None  # the loops whose lanes take per-run models (the plain and flight laws, the predictor)
-    for i in range(n):
-        groups.setdefault(_flight_key(models[i], per_run), []).append(i)
+    for i in range(n):  # every loop's lanes take per-run models (the flight laws, the predictor, the wheels)
+        groups.setdefault(_flight_key(models[i]), []).append(i)
     out = {name: np.full(n, missing, dtype=dtype) for name, (dtype, missing) in names.items()}
     if wheels is not None:
         out.update(wheel_metrics(None, n, wheels.count))

@@ -627,12 +627,15 @@ def wheel_lane_engine(
     torque_input: bool = False,
     torque_per_lane: bool = False,
     law: SteeringLaw | None = None,
+    own_streams: bool = False,
 ) -> LaneEngine:
     """The (cached) lane engine of the flight sample on a wheel cluster
     ([`wheel_core_function`][mrpctl.loop.wheels.wheel_core_function]; J and the cluster are constants of the
     library), the ports as the flight sample's in `lane_engine` (structure ``limited=False``: the limits are the
     wheels'). Its runs' memories start with `mrpctl.loop.wheels.wheel_memory`. ``law``: the steering law's body
-    torque request, as `mrpctl.engines.scalar.wheel_engine`'s (one library per law); None: the PD law.
+    torque request, as `mrpctl.engines.scalar.wheel_engine`'s (one library per law); None: the PD law. With
+    ``own_streams`` each lane has its own sensor noise and seeded jitter, drawn and scheduled by the driver, as
+    `lane_engine`'s (`LaneEngine`'s ``own_streams``; one more library per structure).
 
     Raises
     ------
@@ -654,6 +657,8 @@ def wheel_lane_engine(
         torque_per_lane and torque_input,
     )
     key += () if law is None else (law,)  # without a law the key of before
+    own = bool(own_streams)
+    key += ("own streams",) if own else ()  # without own streams the key of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -666,7 +671,8 @@ def wheel_lane_engine(
             label += ("" if structure["sensor"] else "_ideal") + ("" if disturbed else "_free")
             label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
             label += "" if law is None else "_" + law.label()
-            noise = ("noise",) if structure["sensor"] else ()
+            label += "_own" if own else ""
+            noise = ("noise",) if structure["sensor"] and not own else ()
             found = LaneEngine(
                 engine_sample(core, d, f"mrpctl_lanes_{label}"),
                 d,
@@ -675,6 +681,7 @@ def wheel_lane_engine(
                 streamed=(*noise, "torque") if torque_input and not torque_per_lane else noise,
                 lane_streamed=("torque",) if torque_input and torque_per_lane else (),
                 structure=structure,
+                own_streams=own,
             )
             _ENGINES[key] = found
         return found

@@ -732,13 +732,9 @@ def _run_lanes(
         if any(varying[i] is not delay for i in members):  # each run its own jitter (or sequence)
             delay = [varying[i] for i in members]
         # each lane's own noise and seeded jitter, drawn and scheduled by the lane driver
-        own = is_flight and wheels is None and (own_noise or isinstance(delay, list))
+        own = is_flight and (own_noise or isinstance(delay, list))  # the wheel sample's too
         if own and own_sensors is None:
             own_sensors = [sensor] * len(members)
-        if wheels is not None and (own_noise or isinstance(delay, list)):  # the wheel lanes share their streams
-            _LOGGER.info("the scalar engine runs %d wheel runs with their own noise or jitter", len(members))
-            left.extend(members)
-            continue
         # the group's structure: the union over its runs (flight_structure of their rows), as the scalar engine's
         structure = flight_structure(options, sensor) if is_flight else {}
         try:
@@ -754,6 +750,7 @@ def _run_lanes(
                     torque_input=torque is not None,
                     torque_per_lane=own_torque,
                     law=law,
+                    own_streams=own,
                 )
             else:
                 lanes = lane_engines.lane_engine(
