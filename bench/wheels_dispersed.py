@@ -93,9 +93,16 @@ def main() -> None:
     def alone(workers: int = 1) -> dict[str, np.ndarray]:
         found = [
             simulate_runs(
-                inputs.inertia[j : j + 1], K[j : j + 1], inputs.x0[j : j + 1], inputs.tau[j : j + 1], [per_run[j][0]],
-                flight=[per_run[j][1]], threads=workers, peak_torque=spec.peak_torque, **options,
-            )  # fmt: skip
+                inputs.inertia[j : j + 1],
+                K[j : j + 1],
+                inputs.x0[j : j + 1],
+                inputs.tau[j : j + 1],
+                [per_run[j][0]],
+                flight=[per_run[j][1]],
+                threads=workers,
+                peak_torque=spec.peak_torque,
+                **options,
+            )
             for j in range(few)
         ]
         return {name: np.concatenate([one[name] for one in found]) for name in NAMES}
@@ -106,7 +113,7 @@ def main() -> None:
     same_scalar = all(dispersed[name].tobytes() == on_scalar[name].tobytes() for name in NAMES)
     same_alone = all(dispersed[name][:few].tobytes() == before[name].tobytes() for name in NAMES)
     print(f"{cpu_model()}; {vector_isa()}")
-    print(f"chunk bit for bit the scalar engine's: {same_scalar}; the one-call-per-run results ({few} runs): {same_alone}")
+    print(f"chunk bit for bit the scalar engine's: {same_scalar}; one call per run's ({few} runs): {same_alone}")
 
     cases: dict[str, tuple[int, Callable[[], Any]]] = {
         "lanes, own streams": (runs, chunk),

@@ -56,7 +56,10 @@ def _case() -> dict:
     rng = np.random.default_rng(17)
     crafts = [CRAFTS[i % 2] for i in range(COUNT)]
     gains = np.array(
-        [gain_from_pd(craft, -rng.uniform(0.03, 0.05) * np.ones(3), -rng.uniform(0.3, 0.5) * np.ones(3)) for craft in crafts]
+        [
+            gain_from_pd(craft, -rng.uniform(0.03, 0.05) * np.ones(3), -rng.uniform(0.3, 0.5) * np.ones(3))
+            for craft in crafts
+        ]
     )
     direction = rng.normal(size=(COUNT, 3))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
@@ -158,6 +161,40 @@ def test_a_sliced_horizon_changes_no_bit(monkeypatch):
     whole = simulate_batch(**case, **COMMON)
     monkeypatch.setattr(_batch, "slice_samples", lambda substeps: 97)
     _assert_same_bits(simulate_batch(**case, **COMMON), whole)
+
+
+def test_per_run_delay_sequences_and_own_noise_on_the_wheel_lanes_equal_simulate(monkeypatch):
+    """Given delay sequences per run (each lane's schedule from its own sequence, computed per slice) beside own
+    noise and a run with the constant delay: on the wheel lanes with own streams, each run simulate's bit for bit."""
+    case = _case()
+    n = 401  # 40 s at 10 Hz
+    rng = np.random.default_rng(2)
+    sequences: list[DelayModel | None] = [
+        DelayModel.sequence(rng.integers(1, 4, n) / 10.0, tau_min=0.1, tau_max=0.3) for _ in range(COUNT)
+    ]
+    sequences[7] = None
+    picked = [0, 1, 4, 7, 9, 12]  # one inertia and the other, the constant delay, an ideal sensor
+    given = {name: [value[i] for i in picked] for name, value in case.items()}
+    given["delay"] = [sequences[i] for i in picked]
+    packed: list[bool] = []
+    pack = lane_engines.closed_loop_batches
+
+    def spy(engine, x0, *args, **kwargs):
+        packed.append(engine.own_streams)
+        return pack(engine, x0, *args, **kwargs)
+
+    monkeypatch.setattr(lane_engines, "closed_loop_batches", spy)
+    batch = simulate_batch(**given, **COMMON, threads=2)
+    assert packed == [True, True]
+    assert batch.wheels is not None
+    for row in range(len(picked)):
+        run = simulate(**_one(given, row), **COMMON)
+        assert run.wheels is not None and run.delay_used is not None
+        for name in _WHEEL_FIELDS:
+            assert _bits(getattr(batch.wheels[row], name)) == _bits(getattr(run.wheels, name)), (row, name)
+        assert _bits(batch.max_sigma[row]) == _bits(run.max_sigma)
+        assert _bits(batch.saturated_fraction[row]) == _bits(run.saturated_fraction)
+    assert len(set(np.asarray(batch.max_sigma).tolist())) == len(picked)
 
 
 def test_a_wheel_campaign_chunk_with_own_noise_seeds_is_one_call_equal_to_each_run_alone(monkeypatch):

@@ -206,8 +206,9 @@ def simulate_batch(
         (shared or per run), each run streaming its own rows.
     wheels : mrpctl.wheels.WheelCluster, keyword-only
         Every run on this wheel cluster (as in [`simulate`][mrpctl.simulation.simulate]; ``rule=Hysteretic(...)``,
-        no ``actuator``, no ``predictor``; ``law`` taken): metrics-only runs take the wheel lane engine, with
-        ``trajectories`` the scalar engine on the thread pool, and the result's ``wheels`` holds each run's wheel
+        no ``actuator``, no ``predictor``; ``law`` taken): metrics-only runs take the wheel lane engine (per-run
+        sensors and delays as above, each lane its own noise and jitter), with ``trajectories`` the scalar engine
+        on the thread pool, and the result's ``wheels`` holds each run's wheel
         metrics (and, with ``trajectories``, its wheel speeds and torques).
     reference : keyword-only
         Track a reference (as in [`simulate`][mrpctl.simulation.simulate]; every rule a
