@@ -13,6 +13,8 @@ speeds are carried in the sample's memory after the flight sample's ten entries
 
 from __future__ import annotations
 
+from typing import Any
+
 import casadi as ca
 import numpy as np
 
@@ -27,7 +29,14 @@ from mrpctl.flight import (
     short_expr,
 )
 from mrpctl.flight.steering import SteeringLaw, steering_command_expr
-from mrpctl.model import INPUT_SIZE, STATE_SIZE, wheel_dynamics_expr
+from mrpctl.model import (
+    INPUT_SIZE,
+    STATE_SIZE,
+    wheel_body_rate_expr,
+    wheel_momenta_expr,
+    wheel_momentum_dynamics_expr,
+    wheel_speeds_expr,
+)
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent
 from mrpctl.wheels import WheelCluster, allocation_matrix, null_space_projector, wheel_memory_size
@@ -43,25 +52,91 @@ __all__ = [
 
 def wheel_step_function(spacecraft: Spacecraft, wheels: WheelCluster, period: float, substeps: int) -> ca.Function:
     """``step(x, speeds, motor, w) -> (x_next, speeds_next)``: RK4 over one period h of the spacecraft and its
-    wheels with the motor torques and the external torque held, ``substeps`` equal substeps."""
+    wheels with the motor torques and the external torque held, ``substeps`` equal substeps.
+
+    RK4 steps the momentum coordinates (σ, H, h_s) of
+    [`wheel_momentum_dynamics_expr`][mrpctl.model.wheel_momentum_dynamics_expr], mapped from (σ, ω, Ω) at the
+    start and back at the end ([`wheel_momenta_expr`][mrpctl.model.wheel_momenta_expr],
+    [`wheel_body_rate_expr`][mrpctl.model.wheel_body_rate_expr], [`wheel_speeds_expr`][mrpctl.model.wheel_speeds_expr]):
+    a linear change of coordinates, under which RK4's steps are the same up to rounding. Without friction
+    ḣ_s = u_s does not depend on the state: h_s at a stage's time t is h_s(0) + t u_s (RK4's weighted sum of
+    four equal slopes is that value too), and the body rate, linear in (H, h_s), is ω = f(H, 0) + r(t) with
+    r(t) = r(0) + t f(0, u_s) and r(0) = ω(0) − f(H(0), 0) (f = `wheel_body_rate_expr`): one M⁻¹ H a stage and
+    nothing per wheel; Ω(h) = Ω(0) + g(ω(h) − ω(0), h u_s) (g = `wheel_speeds_expr`, linear, with
+    g(ω(0), h_s(0)) = Ω(0))."""
     count = wheels.count
     x = ca.SX.sym("x", STATE_SIZE)
     speeds = ca.SX.sym("speeds", count)
     motor = ca.SX.sym("motor", count)
     w = ca.SX.sym("w", INPUT_SIZE)
-    xdot, speeds_dot = wheel_dynamics_expr(spacecraft, wheels, x, speeds, motor, w)
-    dynamics = ca.Function("wheel_dynamics", [x, speeds, motor, w], [xdot, speeds_dot])
+    attitude, spin = ca.SX.sym("attitude", 6), ca.SX.sym("spin", count)  # (σ, H) and h_s
+    sigma_dot, momentum_dot, spin_dot = wheel_momentum_dynamics_expr(
+        spacecraft, wheels, attitude[0:3], attitude[3:6], spin, motor, w
+    )
     dt = period / substeps
-    z, s = x, speeds
-    for _ in range(substeps):
-        k1, l1 = dynamics(z, s, motor, w)
-        k2, l2 = dynamics(z + (dt / 2) * k1, s + (dt / 2) * l1, motor, w)
-        k3, l3 = dynamics(z + (dt / 2) * k2, s + (dt / 2) * l2, motor, w)
-        k4, l4 = dynamics(z + dt * k3, s + dt * l3, motor, w)
-        z = z + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
-        s = s + (dt / 6) * (l1 + 2 * l2 + 2 * l3 + l4)
+    omega = 4 * x[3:6]
+    total, s = wheel_momenta_expr(spacecraft, wheels, omega, speeds)
+    z = ca.vertcat(x[0:3], total)
+    change = ca.DM.zeros(3)  # H − H(0), the sum of the substeps' increments
+    if ca.depends_on(spin_dot, ca.vertcat(attitude, spin)):  # friction: h_s is a state of the stages
+        dynamics = ca.Function(
+            "wheel_momentum_dynamics", [attitude, spin, motor, w], [ca.vertcat(sigma_dot, momentum_dot), spin_dot]
+        )
+        spun = ca.DM.zeros(count)  # h_s − h_s(0)
+        for _ in range(substeps):
+            k1, l1 = dynamics(z, s, motor, w)
+            k2, l2 = dynamics(z + (dt / 2) * k1, s + (dt / 2) * l1, motor, w)
+            k3, l3 = dynamics(z + (dt / 2) * k2, s + (dt / 2) * l2, motor, w)
+            k4, l4 = dynamics(z + dt * k3, s + dt * l3, motor, w)
+            step_z = (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+            step_s = (dt / 6) * (l1 + 2 * l2 + 2 * l3 + l4)
+            z, s = z + step_z, s + step_s
+            change, spun = change + step_z[3:6], spun + step_s
+        turned = wheel_body_rate_expr(spacecraft, wheels, change, spun)  # ω(h) − ω(0)
+        x_next = ca.vertcat(z[0:3], (omega + turned) / 4)
+        return _step(x, speeds, motor, w, x_next, speeds + wheel_speeds_expr(wheels, turned, spun))
+    # no friction: ḣ_s = u_s held; the stages' body rates from the linearity of ω in (H, h_s)
+    rate = ca.SX.sym("omega", 3)
+    held = wheel_momentum_dynamics_expr(spacecraft, wheels, attitude[0:3], attitude[3:6], spin, motor, w, omega=rate)
+    dynamics = ca.Function("wheel_momentum_dynamics", [attitude, rate, w], [ca.vertcat(held[0], held[1])])
+    zero = ca.DM.zeros(count)
+
+    def free(momentum: Any) -> Any:  # f(H, 0) = M⁻¹ H
+        return wheel_body_rate_expr(spacecraft, wheels, momentum, zero)
+
+    slope = wheel_body_rate_expr(spacecraft, wheels, ca.DM.zeros(3), spin_dot)  # f(0, u_s): dr/dt
+    offset = omega - free(total)  # r(0)
+    offsets: dict[int, Any] = {0: offset}
+
+    def at(half_steps: int) -> Any:  # r at t = half_steps dt/2, one expression per time
+        if half_steps not in offsets:
+            offsets[half_steps] = offset + (half_steps * dt / 2) * slope
+        return offsets[half_steps]
+
+    for j in range(substeps):
+        first = omega if j == 0 else free(z[3:6]) + at(2 * j)
+        k1 = dynamics(z, first, w)
+        y = z + (dt / 2) * k1
+        k2 = dynamics(y, free(y[3:6]) + at(2 * j + 1), w)
+        y = z + (dt / 2) * k2
+        k3 = dynamics(y, free(y[3:6]) + at(2 * j + 1), w)
+        y = z + dt * k3
+        k4 = dynamics(y, free(y[3:6]) + at(2 * j + 2), w)
+        step_z = (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+        z, change = z + step_z, change + step_z[3:6]
+    # ω(h) − ω(0) = f(H(h) − H(0), h u_s), from the increments (no cancellation against the stored momenta)
+    turned = free(change) + period * slope
+    x_next = ca.vertcat(z[0:3], (omega + turned) / 4)
+    return _step(x, speeds, motor, w, x_next, speeds + wheel_speeds_expr(wheels, turned, period * spin_dot))
+
+
+def _step(x: Any, speeds: Any, motor: Any, w: Any, x_next: Any, speeds_next: Any) -> ca.Function:
     return ca.Function(
-        "wheel_step", [x, speeds, motor, w], [z, s], ["x", "speeds", "motor", "w"], ["x_next", "speeds_next"]
+        "wheel_step",
+        [x, speeds, motor, w],
+        [x_next, speeds_next],
+        ["x", "speeds", "motor", "w"],
+        ["x_next", "speeds_next"],
     )
 
 
@@ -95,15 +170,15 @@ def wheel_allocation_function(spacecraft: Spacecraft, wheels: WheelCluster) -> c
         drive = ca.DM(-wheels.null_gain * null_space_projector(wheels))
         motor = motor + drive @ (js * (speeds - ca.DM(wheels.bias_speeds)))
     limit = ca.DM(wheels.torque_limit)
-    torque_limited = ca.fabs(motor) > limit
-    motor = ca.if_else(motor > limit, limit, ca.if_else(motor < -limit, -limit, motor))
+    torque_limited = ca.fabs(motor) > limit  # a comparison: 1.0 or 0.0
+    motor = ca.fmin(ca.fmax(motor, -limit), limit)
     speed_limited = ca.logic_and(ca.fabs(speeds) >= ca.DM(wheels.speed_limit), speeds * motor >= 0)
     motor = ca.if_else(speed_limited, 0.0, motor)
     body = -(axes @ motor)
     return ca.Function(
         "allocation",
         [command, omega, speeds],
-        [motor, body, ca.if_else(torque_limited, 1.0, 0.0), ca.if_else(speed_limited, 1.0, 0.0)],
+        [motor, body, torque_limited, speed_limited],
         ["command", "omega", "speeds"],
         ["motor", "body", "torque_limited", "speed_limited"],
     )
