@@ -160,8 +160,9 @@ def wheel_body_rate_expr(spacecraft: Spacecraft, wheels: WheelCluster, momentum:
 
 
 def wheel_speeds_expr(wheels: WheelCluster, omega: Any, spin: Any) -> Any:
-    """Ω_i = h_s,i / Js,i − g_iᵀ ω (rad/s, relative to the body) of the spin momenta h_s and the body rate ω."""
-    return spin / ca.DM(wheels.spin_inertia) - ca.DM(wheels.spin_axes).T @ omega
+    """Ω_i = h_s,i / Js,i − g_iᵀ ω (rad/s, relative to the body) of the spin momenta h_s and the body rate ω
+    (h_s,i times the constant 1/Js,i: a multiplication, not a division, per wheel)."""
+    return spin * ca.DM(1.0 / wheels.spin_inertia) - ca.DM(wheels.spin_axes).T @ omega
 
 
 def wheel_momentum_dynamics_expr(

@@ -86,7 +86,7 @@ from mrpctl.loop import (
     predictor_core_function,
 )
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, predictor_memory
-from mrpctl.loop.wheels import wheel_core_function, wheel_memory
+from mrpctl.loop.wheels import wheel_core_function, wheel_memory, wheel_memory_roots
 from mrpctl.model import INPUT_SIZE, ORBIT_SIZE, STATE_SIZE
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import (
@@ -675,6 +675,8 @@ class Engine:
         memory = state[STATE_SIZE:memory_end].copy()
         if self._squared_peak:  # the sample kept the peak |u_c|²
             memory[FLIGHT_MEMORY_SIZE - 1] = np.sqrt(memory[FLIGHT_MEMORY_SIZE - 1])
+        elif self.wheels is not None:  # the wheel sample kept the peaks |u_c|² and |Gs diag(Js) Ω|²
+            memory = wheel_memory_roots(memory)
         return RunOutput(
             stats=state[memory_end:].copy(),
             samples=k,

@@ -42,10 +42,12 @@ from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent
 from mrpctl.wheels import WheelCluster, allocation_matrix, null_space_projector, wheel_memory_size
 
 __all__ = [
+    "SQUARED_PEAKS",
     "wheel_allocation_function",
     "wheel_controller_function",
     "wheel_core_function",
     "wheel_memory",
+    "wheel_memory_roots",
     "wheel_step_function",
 ]
 
@@ -223,6 +225,22 @@ def wheel_controller_function(
     )
 
 
+#: The entries of the wheel sample's memory kept squared: the peak |u_c|² (N² m²) and the peak |Gs diag(Js) Ω|²
+#: (N² m² s²), the last entries of the flight part and of the wheel part (the index from the end of the memory for
+#: the second). The correctly rounded square root is monotone, so the root of the peak square is the peak of the
+#: roots bit for bit: one root at the end of a run (`wheel_memory_roots`) instead of two a sample.
+SQUARED_PEAKS = (FLIGHT_MEMORY_SIZE - 1, -1)
+
+
+def wheel_memory_roots(memory: np.ndarray) -> np.ndarray:
+    """The wheel sample's memory after a run (one row, or one row per run) with its `SQUARED_PEAKS` entries
+    replaced by their square roots (a copy): the peak |u_c| (N m) and the peak |Gs diag(Js) Ω| (N m s)."""
+    rows = np.array(memory, dtype=float)
+    for index in SQUARED_PEAKS:
+        rows[..., index] = np.sqrt(rows[..., index])
+    return rows
+
+
 def wheel_memory(flight_memory: np.ndarray, wheels: WheelCluster) -> np.ndarray:
     """The wheel sample's memory at k = 0: the flight sample's ``flight_memory`` (10), then Ω(0) and the
     wheel accumulators at 0 (`WHEEL_MEMORY_FIELDS`)."""
@@ -254,8 +272,9 @@ def wheel_core_function(
     and the allocation are constants of the sample). ``memory`` is the flight sample's ten entries
     (h, c, σ̃_prev, the samples with a wheel clipped to its torque limit, peak |u_c,i|, peak |u_c|) and
     the wheel part (Ω, peak |Ω_i|, samples at the torque limit and at the speed limit per wheel, peak
-    |Gs diag(Js) Ω|); ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) whose u_max, u_norm must
-    be inf (the limits are the wheels'). ``u`` is the body torque of the motors −Gs u_s (N m);
+    |Gs diag(Js) Ω|), the two peak norms kept squared (`SQUARED_PEAKS`, `wheel_memory_roots` after a run);
+    ``flight`` = (u_max (3), u_norm, w (3), gyro bias (3)) whose u_max, u_norm must be inf (the limits are
+    the wheels'). ``u`` is the body torque of the motors −Gs u_s (N m);
     ``record`` (with ``records``) = (h_{k+1}, σ_c,k, u_c,k, Ω_k (N), u_s,k (N)). The wheel speeds the
     controller reads are those of the sample instant (tachometers, no delay); the attitude and the
     rate are the delayed measurement, as in the flight sample. ``law``: the body torque request u_c is the
@@ -295,16 +314,18 @@ def wheel_core_function(
     speeds = memory[start : start + count]
     motor, body, torque_limited, speed_limited = allocation(command, 4 * seen[3:6], speeds)
     x_next, speeds_next = step(x_meas, speeds, motor, w if disturbed else ca.DM.zeros(INPUT_SIZE))
-    clipped = ca.if_else(ca.sum1(torque_limited) > 0, 1.0, 0.0)
+    clipped = torque_limited[0]  # 1.0 when a wheel is at its torque limit: a comparison or their disjunction
+    for i in range(1, count):
+        clipped = ca.logic_or(clipped, torque_limited[i])
     peak_speed = memory[start + count : start + 2 * count]
-    momentum = ca.norm_2(ca.DM(wheels.spin_axes) @ (ca.DM(wheels.spin_inertia) * speeds))
+    momentum = ca.sumsqr(ca.DM(wheels.spin_axes) @ (ca.DM(wheels.spin_inertia) * speeds))  # squared (SQUARED_PEAKS)
     memory_next = ca.vertcat(
         h_next,
         c_next,
         sigma_seen,
         memory[5] + clipped,
         ca.fmax(memory[6:9], ca.fabs(command)),
-        ca.fmax(memory[9], ca.norm_2(command)),
+        ca.fmax(memory[9], ca.sumsqr(command)),
         speeds_next,
         ca.fmax(peak_speed, ca.fabs(speeds)),
         memory[start + 2 * count : start + 3 * count] + torque_limited,
@@ -323,4 +344,6 @@ def wheel_core_function(
         output_names.append("record")
         # (h, σ_c, u_c, σ̃, ω̃) as the flight sample's record, then the wheel speeds and motor torques
         outputs.append(ca.vertcat(h_next, sigma_c, command, sigma_seen, 4 * seen[3:6], speeds, motor))
-    return ca.Function("core", inputs, outputs, names, output_names)
+    # one node per repeated expression (the wheel momenta of the allocation, the step and the peaks, |Ω|, 4 ω̃):
+    # the same operations on the same operands, the same numbers; the lanes' loops do not merge them themselves
+    return ca.Function("core", inputs, ca.cse(outputs), names, output_names)
