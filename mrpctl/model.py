@@ -119,22 +119,23 @@ def _has_friction(wheels: WheelCluster) -> bool:
 
 
 def _wheel_friction_expr(wheels: WheelCluster, speeds: Any) -> Any:
-    """τ_f (N, N m) of the wheels at the speeds Ω: −(f_c,i sgn Ω_i + c_i Ω_i), linear through zero below the
-    limit-cycle speed; None when every c_i and f_c,i is 0 (no friction terms in the expressions)."""
+    """−τ_f (N, N m), the friction torque's opposite, of the wheels at the speeds Ω: f_c,i sgn Ω_i + c_i Ω_i,
+    linear through zero below the limit-cycle speed; None when every c_i and f_c,i is 0 (no friction terms in
+    the expressions)."""
     if not _has_friction(wheels):
         return None
     viscous, coulomb, cycle = (ca.DM(a) for a in (wheels.viscous, wheels.coulomb, wheels.limit_cycle_speed))
     outside = coulomb * ca.sign(speeds) + viscous * speeds
     inside = (coulomb + viscous * cycle) / cycle * speeds
-    return -ca.if_else(ca.fabs(speeds) < cycle, inside, outside)
+    return ca.if_else(ca.fabs(speeds) < cycle, inside, outside)
 
 
 def _wheel_balance_expr(wheels: WheelCluster, omega: Any, momentum: Any, speeds: Any, motor: Any, w: Any) -> Any:
     """(Ḣ, ḣ_s): the balance of the total angular momentum H (body frame, N m) and of the wheels' spin momenta
     (N, N m): Ḣ = −ω × H + w (the motor torques and the friction are internal), ḣ_s,i = u_s,i + τ_f,i(Ω_i)."""
     friction = _wheel_friction_expr(wheels, speeds)
-    spin_dot = motor if friction is None else motor + friction
-    momentum_dot = -ca.cross(omega, momentum)
+    spin_dot = motor if friction is None else motor - friction
+    momentum_dot = ca.cross(momentum, omega)  # −ω × H
     if w is not None:
         momentum_dot = momentum_dot + w
     return momentum_dot, spin_dot

@@ -319,18 +319,28 @@ def wheel_core_function(
         clipped = ca.logic_or(clipped, torque_limited[i])
     peak_speed = memory[start + count : start + 2 * count]
     momentum = ca.sumsqr(ca.DM(wheels.spin_axes) @ (ca.DM(wheels.spin_inertia) * speeds))  # squared (SQUARED_PEAKS)
+    # a sample that does not count leaves the memory as it was: the carried entries by a selection (the engines'
+    # guard), the accumulators by adding 0 or taking the peak with 0 (each >= +0: the same bits, fewer operations)
+    counted = ca.SX.sym("counted")
+
+    def kept(new: Any, old: Any) -> Any:
+        return ca.if_else(counted, new, old)
+
+    def added(value: Any) -> Any:
+        return ca.if_else(counted, value, 0.0)
+
     memory_next = ca.vertcat(
-        h_next,
-        c_next,
-        sigma_seen,
-        memory[5] + clipped,
-        ca.fmax(memory[6:9], ca.fabs(command)),
-        ca.fmax(memory[9], ca.sumsqr(command)),
-        speeds_next,
-        ca.fmax(peak_speed, ca.fabs(speeds)),
-        memory[start + 2 * count : start + 3 * count] + torque_limited,
-        memory[start + 3 * count : start + 4 * count] + speed_limited,
-        ca.fmax(memory[start + 4 * count], momentum),
+        kept(h_next, memory[0]),
+        kept(c_next, memory[1]),
+        kept(sigma_seen, memory[2:5]),
+        memory[5] + added(clipped),
+        ca.fmax(memory[6:9], added(ca.fabs(command))),
+        ca.fmax(memory[9], added(ca.sumsqr(command))),
+        kept(speeds_next, speeds),
+        ca.fmax(peak_speed, added(ca.fabs(speeds))),
+        memory[start + 2 * count : start + 3 * count] + added(torque_limited),
+        memory[start + 3 * count : start + 4 * count] + added(speed_limited),
+        ca.fmax(memory[start + 4 * count], added(momentum)),
     )
     names = ["x", "memory", "x_delayed", "K", "parameters", "flight"]
     inputs = [x, memory, x_delayed, gain, parameters, flight] + ([noise] if sensor else [])
@@ -338,6 +348,8 @@ def wheel_core_function(
     if torque_input:
         inputs.append(torque)
         names.append("torque")
+    inputs.append(counted)
+    names.append("counted")
     output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
     outputs = [x_next, memory_next, x_meas, body, switched] + ([measured] if sensor else [])
     if records:
