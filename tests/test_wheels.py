@@ -566,3 +566,53 @@ def test_momentum_load_against_the_closed_forms() -> None:
     load = rest_momentum_load(orthogonal, np.diag([0.2, 0.25, 0.15]), sigma, [0.05, 0.0, 0.0])
     # the body's x axis is N's y axis: the x-momentum 0.01 N m s lands on the y wheel
     assert load == pytest.approx(0.2 * 0.05 / capacity[1], rel=1e-7)
+
+
+@pytest.mark.parametrize("cluster", ["orthogonal", "pyramid"])
+def test_a_sample_that_does_not_count_leaves_the_wheel_memory_as_it_was(cluster: str) -> None:
+    """The lanes' wheel sample freezes its memory itself (the core's ``counted`` input): past the horizon and after
+    a divergence the memory comes back bit for bit; a counted sample's memory is the unguarded sample's (the
+    scalar engine's form, ``frozen_memory=False``) bit for bit."""
+    from mrpctl.engines.scalar import engine_sample
+    from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
+    from mrpctl.loop.wheels import wheel_core_function
+
+    if cluster == "orthogonal":
+        wheels = WheelCluster.orthogonal(3e-5, 5e-3, 600.0)
+    else:
+        wheels = WheelCluster.pyramid(2e-4, 5e-3, 300.0, viscous=1e-7, coulomb=1e-5, null_gain=0.05, gyroscopic=True)
+    d = 2
+    core = wheel_core_function(CUBESAT, wheels, d, 0.1, 1, sensor=False, disturbed=True)
+    frozen, free = engine_sample(core, d, "frozen"), engine_sample(core, d, "free", frozen_memory=False)
+    rng = np.random.default_rng(3)
+    count = wheels.count
+    memory = np.concatenate(
+        (
+            [1.0, 0.0],
+            rng.uniform(-0.3, 0.3, 3),
+            [4.0],
+            rng.uniform(0.0, 1e-2, 4),  # the flight accumulators: a count, the peaks (the last one squared)
+            rng.uniform(-500.0, 500.0, count),  # Ω, some past their speed limit
+            rng.uniform(0.0, 600.0, count),
+            rng.integers(0, 50, 2 * count).astype(float),
+            [rng.uniform(0.0, 1e-3)],
+        )
+    )
+    x = np.concatenate((rng.uniform(-0.3, 0.3, 3), rng.uniform(-0.01, 0.01, 3)))
+    K = gain_from_pd(CUBESAT, -0.04 * np.ones(3), -0.4 * np.ones(3))
+    flight = np.concatenate((np.full(4, np.inf), [1e-4, 0.0, -2e-4], np.zeros(3)))
+    arguments = dict(x_delayed=np.concatenate((x[:3] * 1.01, x[3:])), K=K, parameters=[0.1], flight=flight)
+    counted = initial_stats(100)
+    counted[S_K] = 7.0
+    past_horizon = counted.copy()
+    past_horizon[S_K] = 100.0
+    diverged = counted.copy()
+    diverged[S_DIVERGED] = 5.0
+    expected = np.asarray(free(x=x, memory=memory, stats=counted, **arguments)["memory_next"]).ravel()
+    got = np.asarray(frozen(x=x, memory=memory, stats=counted, **arguments)["memory_next"]).ravel()
+    np.testing.assert_array_equal(got, expected)
+    assert np.any(got != memory)
+    for stats in (past_horizon, diverged):
+        still = np.asarray(frozen(x=x, memory=memory, stats=stats, **arguments)["memory_next"]).ravel()
+        np.testing.assert_array_equal(still, memory)
+        assert np.all(np.signbit(still) == np.signbit(memory))
