@@ -125,7 +125,8 @@ def _wheel_friction_expr(wheels: WheelCluster, speeds: Any) -> Any:
     if not _has_friction(wheels):
         return None
     viscous, coulomb, cycle = (ca.DM(a) for a in (wheels.viscous, wheels.coulomb, wheels.limit_cycle_speed))
-    outside = coulomb * ca.sign(speeds) + viscous * speeds
+    # f_c sgn Ω as copysign(f_c, Ω): the same value wherever it is used (|Ω| >= ω_lc > 0), one operation
+    outside = ca.copysign(coulomb, speeds) + viscous * speeds
     inside = (coulomb + viscous * cycle) / cycle * speeds
     return ca.if_else(ca.fabs(speeds) < cycle, inside, outside)
 
