@@ -26,13 +26,13 @@ Run: ``.venv/bin/python bench/wheels_sample.py [rounds] [lane rounds]`` (default
 from __future__ import annotations
 
 import os
-import platform
 import statistics
 import sys
 import time
 from collections.abc import Callable
 
 import numpy as np
+from _host import cpu_model, vector_isa
 
 from mrpctl import simulate, simulate_batch
 from mrpctl.engines.isa import host_isa_flags, native_isa_flags
@@ -67,17 +67,6 @@ WHEELS = {
         gyroscopic=True,
     ),
 }
-
-
-def _cpu() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as info:
-            for line in info:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 _SPREAD = "round ratios x 5 mN m: min / median / max"
@@ -131,7 +120,8 @@ def main() -> int:
             times[label].append(time.process_time() - start)
     base = min(times["ideal torque, 5 mN m"])
     free = min(times["ideal torque"])
-    print(f"CPU: {_cpu()}; {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} (1, 5, 15 min: {_load()})")
+    print(f"CPU: {cpu_model()}; {os.cpu_count()} CPUs, load average (1, 5, 15 min) {_load()}")
+    print(vector_isa())
     host = [flag for flag in host_isa_flags() if flag.startswith(("-march", "-mtune", "-mavx2", "-mfma"))]
     native = [flag for flag in native_isa_flags() if flag.startswith(("-march", "-mtune"))]
     print(f"ISA flags of the compile: host {' '.join(host) or '(none)'}; native {' '.join(native) or '(none)'}")
