@@ -33,6 +33,7 @@ from mrpctl.model import (
     INPUT_SIZE,
     STATE_SIZE,
     wheel_body_rate_expr,
+    wheel_hub_inertia,
     wheel_momenta_expr,
     wheel_momentum_dynamics_expr,
     wheel_speeds_expr,
@@ -165,8 +166,10 @@ def wheel_allocation_function(spacecraft: Spacecraft, wheels: WheelCluster) -> c
     js = ca.DM(wheels.spin_inertia)
     request = command
     if wheels.gyroscopic:
-        spin = js * (axes.T @ omega + speeds)
-        request = command + ca.cross(omega, ca.DM(spacecraft.inertia) @ omega + axes @ spin)
+        # J ω + Gs h_s with h_s = diag(Js) (Gsᵀ ω + Ω): (J + Gs diag(Js) Gsᵀ) ω + Gs diag(Js) Ω, the constant
+        # 2 J − M (M = J − Gs diag(Js) Gsᵀ) times ω and the wheels' momentum, which the sample computes anyway
+        twice = ca.DM(2.0 * spacecraft.inertia - wheel_hub_inertia(spacecraft, wheels))
+        request = command + ca.cross(omega, twice @ omega + axes @ (js * speeds))
     motor = ca.DM(allocation_matrix(wheels)) @ request
     if wheels.null_gain > 0.0:
         drive = ca.DM(-wheels.null_gain * null_space_projector(wheels))
