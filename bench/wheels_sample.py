@@ -14,23 +14,25 @@ tens of seconds) through :func:`mrpctl.simulate`:
 
 All in this process, interleaved round by round, each timed by the process's CPU time; each entry
 is the minimum and the median over the rounds (ns per sample), the ratio to the 5 mN m ideal-torque
-sample's minimum. The engines are compiled (or loaded from the cache) before the rounds. A second table:
-the same samples on the lane engine (``simulate_batch`` of 32 runs, metrics only, one thread: W = 8 runs
-per C call), ns per sample and run.
+sample's minimum, and the minimum, median and maximum over the rounds of the ratio to that sample's
+time in the same round (the two were timed next to each other, so a round's ratio sees the same load).
+The engines are compiled (or loaded from the cache) before the rounds. A second table: the same samples
+on the lane engine (``simulate_batch`` of 32 runs, metrics only, one thread: W = 8 runs per C call), ns
+per sample and run.
 
-Run: ``.venv/bin/python bench/wheels_sample.py [rounds]`` (default 9).
+Run: ``.venv/bin/python bench/wheels_sample.py [rounds] [lane rounds]`` (default 9 and rounds // 3).
 """
 
 from __future__ import annotations
 
 import os
-import platform
 import statistics
 import sys
 import time
 from collections.abc import Callable
 
 import numpy as np
+from _host import cpu_model, vector_isa
 
 from mrpctl import simulate, simulate_batch
 from mrpctl.engines.isa import host_isa_flags, native_isa_flags
@@ -67,15 +69,17 @@ WHEELS = {
 }
 
 
-def _cpu() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as info:
-            for line in info:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+_SPREAD = "round ratios x 5 mN m: min / median / max"
+
+
+def _spread(values: list[float], reference: list[float]) -> str:
+    """The minimum, median and maximum over the rounds of each round's time over the reference's in that round."""
+    ratios = [value / base for value, base in zip(values, reference, strict=True)]
+    return f"{min(ratios):.2f} / {statistics.median(ratios):.2f} / {max(ratios):.2f}"
+
+
+def _load() -> str:
+    return ", ".join(f"{value:.1f}" for value in os.getloadavg())
 
 
 def _case(**options: object) -> Callable[[], object]:
@@ -116,17 +120,18 @@ def main() -> int:
             times[label].append(time.process_time() - start)
     base = min(times["ideal torque, 5 mN m"])
     free = min(times["ideal torque"])
-    print(f"CPU: {_cpu()}; {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
+    print(f"CPU: {cpu_model()}; {os.cpu_count()} CPUs, load average (1, 5, 15 min) {_load()}")
+    print(vector_isa())
     host = [flag for flag in host_isa_flags() if flag.startswith(("-march", "-mtune", "-mavx2", "-mfma"))]
     native = [flag for flag in native_isa_flags() if flag.startswith(("-march", "-mtune"))]
     print(f"ISA flags of the compile: host {' '.join(host) or '(none)'}; native {' '.join(native) or '(none)'}")
     print(f"cubesat, tau = {TAU} s, {RATE:g} Hz, {N} samples, Hysteretic(0.1), best of {rounds} interleaved rounds")
-    print(f"{'sample':34s} {'min ns':>8s} {'median ns':>10s} {'x 5 mN m':>9s} {'x ideal':>8s}")
+    print(f"{'sample':34s} {'min ns':>8s} {'median ns':>10s} {'x 5 mN m':>9s} {'x ideal':>8s}  {_SPREAD}")
     for label, values in times.items():
         low = min(values)
         print(
             f"{label:34s} {low / N * 1e9:8.1f} {statistics.median(values) / N * 1e9:10.1f} "
-            f"{low / base:9.2f} {low / free:8.2f}"
+            f"{low / base:9.2f} {low / free:8.2f}  {_spread(values, times['ideal torque, 5 mN m'])}"
         )
     batches: dict[str, Callable[[], object]] = {
         "ideal torque": _batch(),
@@ -137,18 +142,23 @@ def main() -> int:
     for call in batches.values():
         call()
     lane_times: dict[str, list[float]] = {label: [] for label in batches}
-    for _ in range(max(1, rounds // 3)):
+    lane_rounds = max(1, rounds // 3) if len(sys.argv) <= 2 else int(sys.argv[2])
+    for _ in range(lane_rounds):
         for label, call in batches.items():
             start = time.process_time()
             call()
             lane_times[label].append(time.process_time() - start)
     base = min(lane_times["ideal torque, 5 mN m"])
     free = min(lane_times["ideal torque"])
-    print(f"lane engine: simulate_batch of {LANE_RUNS} runs, metrics only, one thread, best of {max(1, rounds // 3)}")
-    print(f"{'sample':34s} {'ns/run-sample':>13s} {'x 5 mN m':>9s} {'x ideal':>8s}")
+    print(f"lane engine: simulate_batch of {LANE_RUNS} runs, metrics only, one thread, best of {lane_rounds}")
+    print(f"{'sample':34s} {'ns/run-sample':>13s} {'x 5 mN m':>9s} {'x ideal':>8s}  {_SPREAD}")
     for label, values in lane_times.items():
         low = min(values)
-        print(f"{label:34s} {low / (N * LANE_RUNS) * 1e9:13.1f} {low / base:9.2f} {low / free:8.2f}")
+        print(
+            f"{label:34s} {low / (N * LANE_RUNS) * 1e9:13.1f} {low / base:9.2f} {low / free:8.2f}  "
+            f"{_spread(values, lane_times['ideal torque, 5 mN m'])}"
+        )
+    print(f"load average after the rounds: {_load()}")
     return 0
 
 

@@ -66,6 +66,27 @@ CASES = {
         delta=0.1,
         disturbance=[1e-5, 0.0, -2e-5],
     ),
+    # the same pyramid without friction (its RK4 stages take h_s at the stage times, three substeps, a full J)
+    "pyramid_frictionless": dict(
+        inertia=J_FULL,
+        wheels=WheelCluster.pyramid(
+            2e-4,
+            5e-3,
+            300.0,
+            speeds=[10.0, -20.0, 30.0, 5.0],
+            null_gain=0.05,
+            bias_speeds=[50.0, -50.0, 50.0, -50.0],
+            gyroscopic=True,
+        ),
+        pd=(-0.04, -0.4),
+        x0=([0.5, -0.6, 0.4], [0.03, 0.02, -0.04]),
+        tau=0.3,
+        rate=10.0,
+        t_final=80.0,
+        substeps=3,
+        delta=0.1,
+        disturbance=[1e-5, 0.0, -2e-5],
+    ),
     # three orthogonal wheels that reach their speed limit, a slew through 180 degrees (a shadow switch), d = 0
     "speed_limit": dict(
         inertia=np.diag([0.2, 0.25, 0.15]),
@@ -156,7 +177,7 @@ def test_compiled_wheel_loop_matches_the_numpy_reference_at_every_sample(name: s
     # each case exercises what it is there for
     if name == "speed_limit":
         assert np.any(reference.speed_limited) and result.switch_count > 0
-    if name == "pyramid":
+    if name.startswith("pyramid"):
         assert np.any(reference.torque_limited)
     if name == "one_wheel":
         assert np.any(np.abs(reference.speeds) < wheels.limit_cycle_speed)
@@ -566,3 +587,53 @@ def test_momentum_load_against_the_closed_forms() -> None:
     load = rest_momentum_load(orthogonal, np.diag([0.2, 0.25, 0.15]), sigma, [0.05, 0.0, 0.0])
     # the body's x axis is N's y axis: the x-momentum 0.01 N m s lands on the y wheel
     assert load == pytest.approx(0.2 * 0.05 / capacity[1], rel=1e-7)
+
+
+@pytest.mark.parametrize("cluster", ["orthogonal", "pyramid"])
+def test_a_sample_that_does_not_count_leaves_the_wheel_memory_as_it_was(cluster: str) -> None:
+    """The lanes' wheel sample freezes its memory itself (the core's ``counted`` input): past the horizon and after
+    a divergence the memory comes back bit for bit; a counted sample's memory is the unguarded sample's (the
+    scalar engine's form, ``frozen_memory=False``) bit for bit."""
+    from mrpctl.engines.scalar import engine_sample
+    from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
+    from mrpctl.loop.wheels import wheel_core_function
+
+    if cluster == "orthogonal":
+        wheels = WheelCluster.orthogonal(3e-5, 5e-3, 600.0)
+    else:
+        wheels = WheelCluster.pyramid(2e-4, 5e-3, 300.0, viscous=1e-7, coulomb=1e-5, null_gain=0.05, gyroscopic=True)
+    d = 2
+    core = wheel_core_function(CUBESAT, wheels, d, 0.1, 1, sensor=False, disturbed=True)
+    frozen, free = engine_sample(core, d, "frozen"), engine_sample(core, d, "free", frozen_memory=False)
+    rng = np.random.default_rng(3)
+    count = wheels.count
+    memory = np.concatenate(
+        (
+            [1.0, 0.0],
+            rng.uniform(-0.3, 0.3, 3),
+            [4.0],
+            rng.uniform(0.0, 1e-2, 4),  # the flight accumulators: a count, the peaks (the last one squared)
+            rng.uniform(-500.0, 500.0, count),  # Ω, some past their speed limit
+            rng.uniform(0.0, 600.0, count),
+            rng.integers(0, 50, 2 * count).astype(float),
+            [rng.uniform(0.0, 1e-3)],
+        )
+    )
+    x = np.concatenate((rng.uniform(-0.3, 0.3, 3), rng.uniform(-0.01, 0.01, 3)))
+    K = gain_from_pd(CUBESAT, -0.04 * np.ones(3), -0.4 * np.ones(3))
+    flight = np.concatenate((np.full(4, np.inf), [1e-4, 0.0, -2e-4], np.zeros(3)))
+    arguments = dict(x_delayed=np.concatenate((x[:3] * 1.01, x[3:])), K=K, parameters=[0.1], flight=flight)
+    counted = initial_stats(100)
+    counted[S_K] = 7.0
+    past_horizon = counted.copy()
+    past_horizon[S_K] = 100.0
+    diverged = counted.copy()
+    diverged[S_DIVERGED] = 5.0
+    expected = np.asarray(free(x=x, memory=memory, stats=counted, **arguments)["memory_next"]).ravel()
+    got = np.asarray(frozen(x=x, memory=memory, stats=counted, **arguments)["memory_next"]).ravel()
+    np.testing.assert_array_equal(got, expected)
+    assert np.any(got != memory)
+    for stats in (past_horizon, diverged):
+        still = np.asarray(frozen(x=x, memory=memory, stats=stats, **arguments)["memory_next"]).ravel()
+        np.testing.assert_array_equal(still, memory)
+        assert np.all(np.signbit(still) == np.signbit(memory))

@@ -86,7 +86,7 @@ from mrpctl.loop import (
     predictor_core_function,
 )
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, predictor_memory
-from mrpctl.loop.wheels import wheel_core_function, wheel_memory
+from mrpctl.loop.wheels import wheel_core_function, wheel_memory, wheel_memory_roots
 from mrpctl.model import INPUT_SIZE, ORBIT_SIZE, STATE_SIZE
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import (
@@ -182,7 +182,9 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     ``frozen_memory``: the memory stays as it was once a sample is not counted (past the horizon, after
     the divergence), as the lanes and the virtual machine's padded chunks need; the scalar driver never
     runs such a sample, so its flight samples (ten memory entries) leave the guard out: the same memory
-    on every sample it runs.
+    on every sample it runs. A core with an input ``counted`` (the wheel sample) freezes its memory itself: it is
+    fed 1.0 when the sample counts, else 0.0 (with ``frozen_memory``; 1.0 without, a constant that CasADi folds
+    away), and its ``memory_next`` is taken as it is.
     """
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", core.size1_in(1))  # MEMORY_SIZE; FLIGHT_MEMORY_SIZE for the flight sample
@@ -191,10 +193,14 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     gain = ca.SX.sym("K", INPUT_SIZE, STATE_SIZE)
     parameters = ca.SX.sym("parameters", PARAMETER_SIZE)
     # the core's inputs after the parameters are the sample's, but for the sample index (a gravity-gradient
-    # sample's time t_k = k h), which is the statistics' sample counter k
-    ports = [i for i in range(5, core.n_in()) if core.name_in(i) != "sample_index"]
+    # sample's time t_k = k h), which is the statistics' sample counter k, and the wheel sample's ``counted``
+    ports = [i for i in range(5, core.n_in()) if core.name_in(i) not in ("sample_index", "counted")]
     extra = [ca.SX.sym(core.name_in(i), core.sparsity_in(i)) for i in ports]
-    fed = dict(zip(ports, extra, strict=True))
+    fed: dict[int, Any] = dict(zip(ports, extra, strict=True))
+    self_frozen = "counted" in core.name_in()
+    if self_frozen:
+        counting = ca.logic_and(stats[S_K] < stats[S_N], stats[S_DIVERGED] < 0) if frozen_memory else ca.DM(1.0)
+        fed[core.name_in().index("counted")] = counting
     outs = core(x, memory, x_delayed, gain, parameters, *(fed.get(i, stats[S_K]) for i in range(5, core.n_in())))
     x_raw, memory_rule, x_meas, u, switched = outs[0:5]
     more, more_names = list(outs[5:]), [core.name_out(i) for i in range(5, core.n_out())]  # the flight measurement
@@ -204,13 +210,13 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
         more_names.remove("tracking_error")
 
     k = stats[S_K]
-    counted = ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
+    counted = counting if self_frozen and frozen_memory else ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
     sigma_raw, omega_raw = x_raw[0:3], 4 * x_raw[3:6]
     bound = DIVERGENCE_BOUND**2
     # NaN compares false, so a NaN or inf state is "not ok".
     ok = ca.logic_and(ca.dot(sigma_raw, sigma_raw) <= bound, ca.dot(omega_raw, omega_raw) <= bound)
     x_next = ca.if_else(ca.logic_and(counted, ok), x_raw, x_meas)
-    memory_next = ca.if_else(counted, memory_rule, memory) if frozen_memory else memory_rule
+    memory_next = ca.if_else(counted, memory_rule, memory) if frozen_memory and not self_frozen else memory_rule
     switch_counted = ca.logic_and(counted, switched > 0)
 
     sigma, omega = settling_state[0:3], 4 * settling_state[3:6]
@@ -675,6 +681,8 @@ class Engine:
         memory = state[STATE_SIZE:memory_end].copy()
         if self._squared_peak:  # the sample kept the peak |u_c|²
             memory[FLIGHT_MEMORY_SIZE - 1] = np.sqrt(memory[FLIGHT_MEMORY_SIZE - 1])
+        elif self.wheels is not None:  # the wheel sample kept the peaks |u_c|² and |Gs diag(Js) Ω|²
+            memory = wheel_memory_roots(memory)
         return RunOutput(
             stats=state[memory_end:].copy(),
             samples=k,

@@ -48,7 +48,7 @@ from mrpctl.loop.options import (
     predictor_memory,
     varying_delay,
 )
-from mrpctl.loop.wheels import wheel_memory
+from mrpctl.loop.wheels import wheel_memory, wheel_memory_roots
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
 from mrpctl.predictor import Predictor
 from mrpctl.simulation._batch_inputs import (
@@ -853,7 +853,7 @@ def _run_lanes(
     for members, packed in packs:
         stats[members] = lane_engines.lane_stats(packed)
         if wheels is not None:  # the wheel sample's memory: the flight sample's ten entries, then the wheels'
-            memory = lane_engines.lane_memory(packed)
+            memory = wheel_memory_roots(lane_engines.lane_memory(packed))  # the peaks kept squared: their roots
             wheels[1][members] = memory
             if flight_rows is not None:
                 flight_rows[members] = memory[:, :FLIGHT_MEMORY_SIZE]
