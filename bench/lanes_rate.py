@@ -83,7 +83,7 @@ def main() -> None:
             print(f"built {label}: bit-identical to the scalar engine: {bits[label]}", flush=True)
     default = next(label for label in engines if label.endswith("(default)"))
     with tempfile.TemporaryDirectory(prefix="mrpctl-bench-") as folder:
-        hand = vector.HandLoop(8, (*_vectorize.LANE_FLAGS, *default_isa), Path(folder))
+        hand = vector.HandLoop(8, (*vector.hand_flags(), *default_isa), Path(folder))
 
         def measures(threads: int) -> dict[str, Callable[[], object]]:
             vector.THREADS = threads
@@ -98,26 +98,40 @@ def main() -> None:
             return table
 
         counts = dict.fromkeys(measures(1), runs)
-        serial = vector.best_rates(measures(1), counts, rounds, time.process_time)
+        serial_rounds = vector.round_rates(measures(1), counts, rounds, time.process_time)
+        serial = {label: max(rates) for label, rates in serial_rounds.items()}
         every = measures(vector.THREAD_COUNT)
         fastest = max(engines, key=lambda label: serial[label])
         pooled = {label: every[label] for label in dict.fromkeys((default, fastest, "hand-written SoA C, W=8"))}
-        wall = vector.best_rates(pooled, counts, rounds, time.perf_counter)
-    hand_rate = serial["hand-written SoA C, W=8"]
+        wall_rounds = vector.round_rates(pooled, counts, rounds, time.perf_counter)
+        wall = {label: max(rates) for label, rates in wall_rounds.items()}
+    hand = "hand-written SoA C, W=8"
+    hand_rate = serial[hand]
     print()
     print(f"{cpu_model()}; {vector_isa()}")
     print(
-        f"60 s DelayAware tumbling batch, {runs} runs, best of {rounds} interleaved rounds; load average "
-        f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+        f"60 s DelayAware tumbling batch, {runs} runs, best of {rounds} interleaved rounds (and the spread of the "
+        f"ratio to the hand loop in the same round); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
     )
-    print(f"{'CPU-time runs/s, one thread':34s} {'runs/s':>8s} {'x default':>10s} {'x hand':>7s}  bits")
+    print(
+        f"{'CPU-time runs/s, one thread':34s} {'runs/s':>8s} {'x default':>10s} {'x hand':>7s}  "
+        "x hand per round: min median max  bits"
+    )
     for label, rate in serial.items():
         mark = bits.get(label)
         flag = "" if mark is None else ("identical" if mark else "DIFFERENT")
-        print(f"{label:34s} {rate:8.1f} {rate / serial[default]:10.2f} {rate / hand_rate:7.2f}  {flag}")
+        low, middle, high = vector.ratio_spread(serial_rounds, label, hand)
+        print(
+            f"{label:34s} {rate:8.1f} {rate / serial[default]:10.2f} {rate / hand_rate:7.2f}  "
+            f"{low:17.2f} {middle:6.2f} {high:4.2f}  {flag}"
+        )
     print(f"{'wall-clock runs/s, ' + str(vector.THREAD_COUNT) + ' threads':34s}")
     for label, rate in wall.items():
-        print(f"{label:34s} {rate:8.1f} {rate / wall[default]:10.2f}")
+        low, middle, high = vector.ratio_spread(wall_rounds, label, hand)
+        print(
+            f"{label:34s} {rate:8.1f} {rate / wall[default]:10.2f} {rate / wall[hand]:7.2f}  "
+            f"{low:17.2f} {middle:6.2f} {high:4.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -118,8 +118,11 @@ class LaneProgram:
     Attributes
     ----------
     code : str
-        C source defining ``<name>(in0, ..., out0, ...)`` (``static``, restrict pointers to
-        (nnz, W) structure-of-arrays buffers) and ``<name>_call(arg, res)``.
+        C source defining ``<name>(in0, ..., out0, ...)`` (``static inline``, restrict pointers to
+        (nnz, W) structure-of-arrays buffers) and ``<name>_call(arg, res)``. Inline: in a driver's
+        horizon loop, which calls it once a sample, the sample is part of the loop (measured 1.07x on the
+        AVX-512 host against a call per sample: no call, no stack realignment, the loop's invariants
+        out of the loop).
     name : str
         The C function name.
     width : int
@@ -435,7 +438,7 @@ def emit_lanes(
         f"/* {name}: {function.name()} on W = {width} lanes, emitted by mrpctl.engines.lanes from "
         f"{count} CasADi {_CASADI_VERSION} instructions */\n"
         "#include <math.h>\n" + _LANE_HELPERS + f"#undef W\n#define W {width}\n"
-        f"static void __attribute__((noinline)) {name}({signature}) {{\n"
+        f"static inline void {name}({signature}) {{\n"
         "  int l;\n" + declarations + "\n".join(lines) + "\n}\n"
         f"static inline void {name}_call(const double** arg, double** res) {{\n"
         f"  {name}({', '.join(call_args)});\n}}\n#undef W\n"
