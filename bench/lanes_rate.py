@@ -1,4 +1,4 @@
-"""The lane engine's rate against its build choices: lane width W and vector ISA (issue 12's 2 000 runs/s goal).
+"""The lane engine's rate against its build choices: lane width W and vector ISA (the 2 000 runs/s goal).
 
 The 60 s DelayAware tumbling batch of ``bench/vector.py`` (the paper's spacecraft and gain,
 tau = 0.5 s, 1 kHz, attitudes uniform on SO(3), |omega| <= 5 rad/s). For W in (4, 8, 16) and the
@@ -6,9 +6,11 @@ ISA flags ``-mavx2`` (explicit) or ``-march=native`` resolved by the compiler
 (:func:`mrpctl.engines.isa.native_isa_flags`: the flags that key the compile cache), the lane
 engine alone (``simulate_lanes``), each variant checked bit for bit against the scalar engine on
 16 runs; the hand-written structure-of-arrays loop of ``bench/vector.py`` (W = 8, the same
-flags) as the yardstick. Table 1: CPU time on one thread (the least disturbed by other jobs);
-table 2: wall clock on every core for the default and the hand loop. Rounds interleaved, best of
-the rounds; read the ratios, measured in this process, rather than the absolute numbers.
+flags but loop splitting: ``vector.hand_flags``) as the yardstick. Table 1: CPU time on one thread
+(the least disturbed by other jobs); table 2: wall clock on every core for the default and the hand
+loop. Rounds interleaved, best of the rounds and the min / median / max over the rounds of the ratio
+to the hand loop in the same round; read the ratios, measured in this process, rather than the
+absolute numbers.
 
 Run: ``.venv/bin/python bench/lanes_rate.py [runs] [rounds]`` (defaults 64 runs, 3 rounds).
 """

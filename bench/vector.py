@@ -174,7 +174,7 @@ def tumbling_batch(count: int, seed: int = 2026) -> np.ndarray:
 
 
 class HandLoop:
-    """The hand-written W-lane loop, compiled with the lane engine's flags, on the thread pool."""
+    """The hand-written W-lane loop, compiled with the lane engine's flags (`hand_flags`), on the thread pool."""
 
     def __init__(self, width: int, flags: tuple[str, ...], folder: Path) -> None:
         self.width = width
@@ -270,7 +270,7 @@ def main() -> None:
     )  # fmt: skip
 
     isa = _vectorize.host_isa_flags()
-    isa_label = " ".join(isa) or "sse2"
+    isa_label = "native" if any(flag.startswith("-march=") for flag in isa) else (" ".join(isa) or "sse2")
     plain = (*_compile.SIMULATION_FLAGS, "-fno-math-errno")
     variants: list[tuple[str, dict[str, Any]]] = [
         (f"lanes W={w} fused {isa_label}", dict(width=w)) for w in (4, 8, 16, 32)
