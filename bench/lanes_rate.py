@@ -1,4 +1,4 @@
-"""The lane engine's rate against its build choices: lane width W and vector ISA (issue 12's 2 000 runs/s goal).
+"""The lane engine's rate against its build choices: lane width W and vector ISA (the 2 000 runs/s goal).
 
 The 60 s DelayAware tumbling batch of ``bench/vector.py`` (the paper's spacecraft and gain,
 tau = 0.5 s, 1 kHz, attitudes uniform on SO(3), |omega| <= 5 rad/s). For W in (4, 8, 16) and the
@@ -6,9 +6,11 @@ ISA flags ``-mavx2`` (explicit) or ``-march=native`` resolved by the compiler
 (:func:`mrpctl.engines.isa.native_isa_flags`: the flags that key the compile cache), the lane
 engine alone (``simulate_lanes``), each variant checked bit for bit against the scalar engine on
 16 runs; the hand-written structure-of-arrays loop of ``bench/vector.py`` (W = 8, the same
-flags) as the yardstick. Table 1: CPU time on one thread (the least disturbed by other jobs);
-table 2: wall clock on every core for the default and the hand loop. Rounds interleaved, best of
-the rounds; read the ratios, measured in this process, rather than the absolute numbers.
+flags but loop splitting: ``vector.hand_flags``) as the yardstick. Table 1: CPU time on one thread
+(the least disturbed by other jobs); table 2: wall clock on every core for the default and the hand
+loop. Rounds interleaved, best of the rounds and the min / median / max over the rounds of the ratio
+to the hand loop in the same round; read the ratios, measured in this process, rather than the
+absolute numbers.
 
 Run: ``.venv/bin/python bench/lanes_rate.py [runs] [rounds]`` (defaults 64 runs, 3 rounds).
 """
@@ -83,7 +85,7 @@ def main() -> None:
             print(f"built {label}: bit-identical to the scalar engine: {bits[label]}", flush=True)
     default = next(label for label in engines if label.endswith("(default)"))
     with tempfile.TemporaryDirectory(prefix="mrpctl-bench-") as folder:
-        hand = vector.HandLoop(8, (*_vectorize.LANE_FLAGS, *default_isa), Path(folder))
+        hand = vector.HandLoop(8, (*vector.hand_flags(), *default_isa), Path(folder))
 
         def measures(threads: int) -> dict[str, Callable[[], object]]:
             vector.THREADS = threads
@@ -98,26 +100,40 @@ def main() -> None:
             return table
 
         counts = dict.fromkeys(measures(1), runs)
-        serial = vector.best_rates(measures(1), counts, rounds, time.process_time)
+        serial_rounds = vector.round_rates(measures(1), counts, rounds, time.process_time)
+        serial = {label: max(rates) for label, rates in serial_rounds.items()}
         every = measures(vector.THREAD_COUNT)
         fastest = max(engines, key=lambda label: serial[label])
         pooled = {label: every[label] for label in dict.fromkeys((default, fastest, "hand-written SoA C, W=8"))}
-        wall = vector.best_rates(pooled, counts, rounds, time.perf_counter)
-    hand_rate = serial["hand-written SoA C, W=8"]
+        wall_rounds = vector.round_rates(pooled, counts, rounds, time.perf_counter)
+        wall = {label: max(rates) for label, rates in wall_rounds.items()}
+    hand = "hand-written SoA C, W=8"
+    hand_rate = serial[hand]
     print()
     print(f"{cpu_model()}; {vector_isa()}")
     print(
-        f"60 s DelayAware tumbling batch, {runs} runs, best of {rounds} interleaved rounds; load average "
-        f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+        f"60 s DelayAware tumbling batch, {runs} runs, best of {rounds} interleaved rounds (and the spread of the "
+        f"ratio to the hand loop in the same round); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
     )
-    print(f"{'CPU-time runs/s, one thread':34s} {'runs/s':>8s} {'x default':>10s} {'x hand':>7s}  bits")
+    print(
+        f"{'CPU-time runs/s, one thread':34s} {'runs/s':>8s} {'x default':>10s} {'x hand':>7s}  "
+        "x hand per round: min median max  bits"
+    )
     for label, rate in serial.items():
         mark = bits.get(label)
         flag = "" if mark is None else ("identical" if mark else "DIFFERENT")
-        print(f"{label:34s} {rate:8.1f} {rate / serial[default]:10.2f} {rate / hand_rate:7.2f}  {flag}")
+        low, middle, high = vector.ratio_spread(serial_rounds, label, hand)
+        print(
+            f"{label:34s} {rate:8.1f} {rate / serial[default]:10.2f} {rate / hand_rate:7.2f}  "
+            f"{low:17.2f} {middle:6.2f} {high:4.2f}  {flag}"
+        )
     print(f"{'wall-clock runs/s, ' + str(vector.THREAD_COUNT) + ' threads':34s}")
     for label, rate in wall.items():
-        print(f"{label:34s} {rate:8.1f} {rate / wall[default]:10.2f}")
+        low, middle, high = vector.ratio_spread(wall_rounds, label, hand)
+        print(
+            f"{label:34s} {rate:8.1f} {rate / wall[default]:10.2f} {rate / wall[hand]:7.2f}  "
+            f"{low:17.2f} {middle:6.2f} {high:4.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -160,6 +160,45 @@ def test_emitter_bit_identical_to_casadi_c_on_special_values(rng: np.random.Gene
     assert np.isnan(expected[0]).any() and np.isinf(expected[0]).any()  # the special values were exercised
 
 
+def selection_function() -> ca.Function:
+    """if_else (CasADi's SX: (c?a:0) + (!c?b:0), which adds +0.0 to the chosen value) between values that may be
+    -0.0 or a signaling NaN (inputs, products, negations, quotients, |x| of an input) and values that never are
+    (sums with a constant, squares, |x| of a result, square roots of those, their sums and differences)."""
+    x = ca.SX.sym("x", 3)
+    c = x[0] > x[1]
+    e = [
+        ca.if_else(c, x[1], x[2]), ca.if_else(c, x[0] * x[1], -x[2]), ca.if_else(c, x[0] / x[1], x[2] + 0.0),
+        ca.if_else(c, ca.fabs(x[2]), x[1]), ca.if_else(c, x[2] + 1.0, x[0] ** 2),  # the clean ones from here
+        ca.if_else(c, ca.fabs(x[0] - x[1]), x[1] ** 2 - x[2]), ca.if_else(c, ca.sqrt(x[0] ** 2 + 1), 2 * (x[1] + 1.0)),
+        ca.if_else(x[2] < 0, ca.if_else(c, x[0] ** 2, 1.0), x[1] * x[1] + x[2] ** 2),
+    ]  # fmt: skip
+    return ca.Function("selections", [x], [ca.vertcat(*e)], ["x"], ["r"])
+
+
+def test_emitter_selections_keep_signed_zeros_bit_identical_to_casadi_c(rng: np.random.Generator) -> None:
+    """A selection adds the +0.0 of CasADi's zero arm unless both values are provably neither -0.0 nor a
+    signaling NaN (then x + 0.0 is x): bit for bit CasADi's C on inputs full of -0.0, +0.0 and NaNs."""
+    function = selection_function()
+    width = 64
+    values = special_values(rng, (width, 3))
+    values[rng.uniform(size=values.shape) < 0.3] = -0.0
+    # signaling NaNs, each in a row without another NaN: where two NaNs meet in a sum or a product, which payload
+    # survives is the compiler's choice of operand order (in CasADi's C as in the lanes)
+    signaling = np.array([0x7FF0000000000001, 0xFFF0000000000123], dtype=np.uint64).view(float)
+    for column, start in ((0, 0), (1, 3), (2, 5)):
+        values[start::7] = np.where(np.isnan(values[start::7]), -0.0, values[start::7])
+        values[start::7, column] = signaling[column % 2]
+    got = lanes_eval(function, [values], fuse=True)
+    expected = casadi_c_eval(function, [values])
+    np.testing.assert_array_equal(bits(got[0]), bits(expected[0]))
+    plain = np.where(values[:, 0] > values[:, 1], values[:, 1], values[:, 2])  # the choice without the + 0.
+    assert (bits(plain) != bits(expected[0][:, 0])).any()  # a -0.0 or a signaling NaN was chosen: the + 0. showed
+    code = _vectorize.emit_lanes(function, 4).code
+    selections = [line for line in code.splitlines() if "L_SELECT(L_MASK(" in line]
+    assert sum(line.endswith("+0.);") for line in selections) == 4  # the four selections that may meet -0.0/sNaN
+    assert len(selections) == 9  # and five without the + 0. (the nested one is two)
+
+
 def minmax_function() -> ca.Function:
     x = ca.SX.sym("x", 2)
     e = [ca.fmin(x[0], x[1]), ca.fmax(x[0], x[1]), ca.fmax(x[1], x[0]), ca.fmin(ca.sqrt(x[0]), 2 * x[1])]

@@ -82,9 +82,3 @@ def native_isa_flags(compiler: str | None = None) -> tuple[str, ...]:
                 flags += [word, words[i + 1]]
         return tuple(flags) if any(flag.startswith("-march=") for flag in flags) else ()
     return ()
-
-
-#: IEEE-exact flags of the lane engine: the simulator's, plus -fno-math-errno (sqrt then
-#: vectorises: sqrtpd is correctly rounded like sqrtsd; only errno is not set) and pressure-aware
-#: scheduling before register allocation (fewer spills of the long lane loop: measured 1.1x;
-#: it reorders instructions, never changes one).

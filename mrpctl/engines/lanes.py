@@ -116,7 +116,9 @@ __all__ = [
 #: Lanes per batch: measured on the 60 s DelayAware tumbling batch (bench/vector.py, AVX2 host,
 #: CPU time of one core, 256 runs, best of 5): W = 4, 8, 16, 32 gave 777, 731, 751, 745 runs/s
 #: (an earlier run with 64 runs: 738, 709, 731, 730), within the noise of a shared machine;
-#: 8 lanes are two 4-wide vectors per operation.
+#: 8 lanes are two 4-wide vectors per operation. On the AVX-512 host (one 8-wide vector) W = 8 is the fastest
+#: too, with the sample inlined into the horizon loop: W = 4, 8, 16 gave 0.68, 0.90, 0.83x the hand-written
+#: loop (bench/lanes_rate.py, median round).
 DEFAULT_WIDTH = 8
 
 #: Samples per C call of a lane batch (the scalar engine's slice; a slice of W = 8 lanes of
@@ -130,7 +132,19 @@ _ROLE_MEASUREMENT, _ROLE_DROPPED = 1, 2
 #: The keywords of the flight sample's structure (`mrpctl.loop.options.flight_structure`).
 _STRUCTURE = ("sensor", "limited", "disturbed")
 
-LANE_FLAGS: tuple[str, ...] = (*_compile.SIMULATION_FLAGS, "-fno-math-errno", "-fschedule-insns", "-fsched-pressure")
+#: IEEE-exact flags of the lane engine: the simulator's, plus -fno-math-errno (sqrt then
+#: vectorises: sqrtpd is correctly rounded like sqrtsd; only errno is not set), pressure-aware
+#: scheduling before register allocation (fewer spills of the long lane loop: measured 1.1x;
+#: it reorders instructions, never changes one) and no loop splitting: the driver's horizon loop,
+#: with the sample inlined, is not copied once for the samples before d and once for those after
+#: (one copy: the same speed, half the compile time).
+LANE_FLAGS: tuple[str, ...] = (
+    *_compile.SIMULATION_FLAGS,
+    "-fno-math-errno",
+    "-fschedule-insns",
+    "-fsched-pressure",
+    "-fno-split-loops",
+)
 
 
 def _build_library(code: str, name: str, flags: tuple[str, ...]) -> Path:
