@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.optimize import linprog
 
 from mrpctl._validation import finite_array, finite_scalar, readonly
 from mrpctl.errors import DimensionError, SpecificationError
@@ -240,8 +241,6 @@ class WheelCluster:
         limits = self.speed_limit.reshape(count, 1)
         upper = np.vstack((np.hstack((eye, -limits)), np.hstack((-eye, -limits))))
         equality = np.hstack((self.spin_axes * self.spin_inertia, np.zeros((3, 1))))
-        # deferred: scipy.optimize, only for a cluster whose axes do not span R³
-        from scipy.optimize import linprog
 
         bounds = [(None, None)] * count + [(0.0, None)]
         solution = linprog(cost, A_ub=upper, b_ub=np.zeros(2 * count), A_eq=equality, b_eq=h, bounds=bounds)
