@@ -13,6 +13,9 @@ Measured, interleaved (in-process, cluster, in-process, cluster, ...):
   an empty compile cache of their own (``BENCH_WORKER_CACHE=shared`` to give them this process's), so
   their first chunk imports mrpctl and compiles the engine, as on a node that never ran mrpctl;
 * rounds 1.., ``warm``: the same cluster again (an operator's cluster after its first campaign);
+* the cluster's programs are in this process's session (``BENCH_SESSIONS=own``: a session each, as from
+  separate terminals; with the kernel's autogroup scheduling each session then gets its own share of a
+  loaded machine, and the cluster more CPU than the in-process run);
 * ``fresh worker``: after the rounds, the workers are restarted (new processes, engine in the cache)
   and each runs an 8-run chunk: the import and the engine load a replaced worker pays.
 
@@ -82,14 +85,23 @@ def _warm(source: dict[str, Any]) -> tuple[float, str]:
 class Cluster:
     """``dask scheduler`` and ``workers`` single-threaded ``dask worker`` processes, each in its own session."""
 
-    def __init__(self, folder: Path, workers: int, cache: Path | None) -> None:
+    def __init__(self, folder: Path, workers: int, cache: Path | None, own_sessions: bool) -> None:
         self.address = f"tcp://127.0.0.1:{_port()}"
         self.log = open(folder / "cluster.log", "w")  # noqa: SIM115 (closed in stop)
         self.processes: list[subprocess.Popen[bytes]] = []
         env = dict(os.environ)
         if cache is not None:
             env["MRPCTL_CACHE_DIR"] = str(cache)
-        common: dict[str, Any] = {"stdout": self.log, "stderr": subprocess.STDOUT, "start_new_session": True}
+        # Each program its own process group (stopped as a group). In this session by default: with the kernel's
+        # autogroup scheduling (/proc/sys/kernel/sched_autogroup_enabled) every session gets an equal share of a
+        # loaded machine, so programs in sessions of their own would get more CPU than the in-process run.
+        place = {"start_new_session": True} if own_sessions else {"process_group": 0}
+        common: dict[str, Any] = {
+            "stdout": self.log,
+            "stderr": subprocess.STDOUT,
+            "preexec_fn": _die_with_parent,
+            **place,
+        }
         port = self.address.rsplit(":", 1)[1]
         start = time.perf_counter()
         self.processes.append(
@@ -145,7 +157,7 @@ class Cluster:
         """Close the client, SIGTERM each process group, SIGKILL after 20 s; the pids left (none expected)."""
         if self.client is not None:
             self.client.close()
-        groups = [process.pid for process in self.processes]  # start_new_session: pid == process group
+        groups = [process.pid for process in self.processes]  # each leads its own group: pid == process group
         for group in groups:
             _signal_group(group, signal.SIGTERM)
         deadline = time.monotonic() + 20
@@ -168,6 +180,14 @@ class Cluster:
 
 def _members(groups: list[int]) -> list[int]:
     return [p.pid for p in psutil.process_iter(["pid"]) if _group(p.pid) in groups]
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when this bench dies, even by SIGKILL (Linux; elsewhere the finally only)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
 
 def _signal_group(group: int, number: int) -> None:
@@ -211,6 +231,7 @@ def main() -> None:
     chunk = int(os.environ.get("BENCH_CHUNK", "2500"))
     workers = int(os.environ.get("BENCH_WORKERS", "2"))
     shared_cache = os.environ.get("BENCH_WORKER_CACHE", "empty") == "shared"
+    own_sessions = os.environ.get("BENCH_SESSIONS", "one") == "own"
     if not DASK.exists():
         raise SystemExit(f"no dask command next to {sys.executable}")
     signal.signal(signal.SIGTERM, _terminate)
@@ -232,10 +253,13 @@ def main() -> None:
     reference = None
     try:
         cache = None if shared_cache else work / "worker-cache"
-        cluster = Cluster(work, workers, cache)
+        cluster = Cluster(work, workers, cache, own_sessions)
+        autogroup = Path("/proc/sys/kernel/sched_autogroup_enabled")
         print(
             f"cluster start (Popen to {workers} workers listed) {cluster.started:.2f} s; worker cache: "
-            f"{'this process' if shared_cache else 'empty, their own'}; load {_load()}"
+            f"{'this process' if shared_cache else 'empty, their own'}; cluster programs in "
+            f"{'sessions of their own' if own_sessions else 'this session'} (autogroup scheduling "
+            f"{autogroup.read_text().strip() if autogroup.exists() else 'absent'}); load {_load()}"
         )
         for r in range(rounds + 1):
             for path in ("in-process", "cluster"):
