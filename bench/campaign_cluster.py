@@ -3,8 +3,10 @@
 The cluster is ``dask scheduler`` and ``workers`` ``dask worker ADDRESS --nthreads 1`` processes (the
 commands of this environment, each its own program and process group) on loopback, as
 ``docs/how-to/cluster.md`` says; the campaign reaches it through ``run_campaign(spec, out,
-scheduler="tcp://127.0.0.1:PORT")``, which is what ``mrpctl campaign run --scheduler`` calls. The campaign is
-``examples/campaigns/tumble_fixed_inertia.toml`` (10 s at 1 kHz, ``count`` runs, chunk ``BENCH_CHUNK``).
+scheduler="tcp://127.0.0.1:PORT")``, which is what ``mrpctl campaign run --scheduler`` calls (``BENCH_CLI=1``:
+each campaign, in-process and cluster alike, is ``mrpctl campaign run ... --chunk C [--scheduler ADDRESS]`` as
+a process of its own). The campaign is ``examples/campaigns/tumble_fixed_inertia.toml`` (10 s at 1 kHz,
+``count`` runs, chunk ``BENCH_CHUNK``, default 2500).
 
 Measured, interleaved (in-process, cluster, in-process, cluster, ...):
 
@@ -16,14 +18,19 @@ Measured, interleaved (in-process, cluster, in-process, cluster, ...):
 * the cluster's programs are in this process's session (``BENCH_SESSIONS=own``: a session each, as from
   separate terminals; with the kernel's autogroup scheduling each session then gets its own share of a
   loaded machine, and the cluster more CPU than the in-process run);
-* ``fresh worker``: after the rounds, the workers are restarted (new processes, engine in the cache)
-  and each runs an 8-run chunk: the import and the engine load a replaced worker pays.
+* ``first compile``: after the rounds, the workers' cache is emptied and the workers restarted (new
+  processes); each runs an 8-run chunk: the import and the compile of a node that never ran mrpctl (the two
+  workers of this host share the cache: one compiles, the other waits for it and loads it);
+* ``fresh worker``: restarted again (new processes, engine in the cache), each runs an 8-run chunk: the
+  import and the engine load a replaced worker pays.
 
 Every store is checked bit for bit (each variable's bytes, and ``xarray.Dataset.identical``) against the
-first in-process store. The CPU seconds of all processes (this one, the scheduler, the nannies and the
-workers) are summed for each campaign. The cluster is shut down on every exit (an exception, Ctrl-C,
-SIGTERM): SIGTERM to each process group, SIGKILL after 20 s, and the bench checks that no process of
-those groups is left.
+first in-process store. The CPU seconds are counted apart for the campaign's process (this one, or the
+command line's) and for the cluster's (scheduler, nannies, workers; idle during the in-process runs); the
+CPU ratio is the cluster path's whole (its campaign process and the cluster) over the in-process run's own.
+The cluster is shut down on every exit (an exception, Ctrl-C, SIGTERM): SIGTERM to each process group,
+SIGKILL after 20 s, and the bench checks that no process of those groups is left; if the bench itself is
+killed (SIGKILL), the kernel sends each program SIGTERM (``PR_SET_PDEATHSIG``).
 
 Run: ``.venv/bin/python bench/campaign_cluster.py [count] [rounds]`` (defaults 100000 runs, 2 warm rounds).
 """
@@ -32,6 +39,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
+import resource
 import shutil
 import signal
 import socket
@@ -75,11 +84,36 @@ def _load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def _warm(source: dict[str, Any]) -> tuple[float, str]:
-    """On a worker: import, rebuild the spec, load (or compile) the engine, run 8 runs."""
+def _warm(source: dict[str, Any]) -> tuple[float, float, str]:
+    """On a worker: import mrpctl's chunk task, then rebuild the spec, load (or compile) the engine and run 8 runs.
+
+    The imports are in the body (this function travels by value), so the first is timed here."""
     start = time.perf_counter()
+    import mrpctl
+    from mrpctl.campaign import parse_campaign
+    from mrpctl.campaign._task import simulate_chunk
+
+    imported = time.perf_counter()
     simulate_chunk(parse_campaign(source, name="bench"), 0, 8, threads=1)
-    return time.perf_counter() - start, mrpctl.__file__
+    return imported - start, time.perf_counter() - imported, mrpctl.__file__
+
+
+def _first_chunks(client: Any, source: dict[str, Any], workers: int, what: str) -> list[str]:
+    """An 8-run chunk on each of the (restarted) workers; prints the import, the engine and the end-to-end times."""
+    load = _load()
+    start = time.perf_counter()
+    done = client.gather([client.submit(_warm, source, pure=False, workers=[w]) for w in _names(client)])
+    total = time.perf_counter() - start
+    print(
+        f"{what}: import {', '.join(f'{i:.2f}' for i, _, _ in done)} s, then spec + engine + 8 runs "
+        f"{', '.join(f'{e:.2f}' for _, e, _ in done)} s; {total:.2f} s from submit to both results; load {load}"
+    )
+    assert len(done) == workers, done
+    return sorted({where for _, _, where in done})
+
+
+def _names(client: Any) -> list[str]:
+    return sorted(client.scheduler_info()["workers"])
 
 
 class Cluster:
@@ -221,6 +255,18 @@ def _same(reference: xr.Dataset, dataset: xr.Dataset, label: str) -> None:
     assert reference.identical(dataset), label
 
 
+def _cli(spec_file: Path, out: Path, chunk: int, scheduler: str | None, log: Path) -> None:
+    """``mrpctl campaign run SPEC --out OUT --chunk C [--scheduler ADDRESS]`` as its own process."""
+    command = [sys.executable, "-m", "mrpctl", "campaign", "run", str(spec_file), "--out", str(out)]
+    command += ["--chunk", str(chunk), *(["--scheduler", scheduler] if scheduler else [])]
+    with log.open("a") as handle:
+        subprocess.run(command, stdout=handle, stderr=subprocess.STDOUT, check=True)
+
+
+def _spent(before: dict[int, float], after: dict[int, float]) -> float:
+    return sum(after[pid] - before[pid] for pid in before if pid in after)
+
+
 def _terminate(number: int, frame: FrameType | None) -> None:
     raise SystemExit(128 + number)  # SIGTERM: unwind, so the finally shuts the cluster down
 
@@ -232,6 +278,7 @@ def main() -> None:
     workers = int(os.environ.get("BENCH_WORKERS", "2"))
     shared_cache = os.environ.get("BENCH_WORKER_CACHE", "empty") == "shared"
     own_sessions = os.environ.get("BENCH_SESSIONS", "one") == "own"
+    cli = os.environ.get("BENCH_CLI", "0") == "1"
     if not DASK.exists():
         raise SystemExit(f"no dask command next to {sys.executable}")
     signal.signal(signal.SIGTERM, _terminate)
@@ -241,14 +288,20 @@ def main() -> None:
     print(
         f"campaign: {SPEC_FILE.name}, {count} runs of 10 s, chunk {chunk}; cluster: dask scheduler + {workers} "
         f"dask worker --nthreads 1 on loopback; in-process: {len(os.sched_getaffinity(0))} threads; "
-        f"{rounds} warm rounds"
+        f"{rounds} warm rounds; each campaign by "
+        f"{'mrpctl campaign run, a process of its own' if cli else 'run_campaign in this process'}"
     )
     t = time.perf_counter()
     simulate_chunk(spec, 0, 8)  # compile or load the engine in this process (not timed with the runs)
     print(f"this process: engine ready in {time.perf_counter() - t:.2f} s; load {_load()}")
 
     work = Path(tempfile.mkdtemp(prefix="campaign_cluster_"))
-    rows: list[tuple[str, int, float, float, str]] = []  # (path, round, wall, CPU, load before)
+    spec_file = SPEC_FILE
+    if cli and count != tomllib.loads(SPEC_FILE.read_text())["count"]:
+        spec_file = work / SPEC_FILE.name
+        text = re.sub(r"(?m)^count = .*$", f"count = {count}", SPEC_FILE.read_text())
+        spec_file.write_text(text)
+    rows: list[tuple[str, int, float, float, float, str]] = []  # path, round, wall, CPU driver, CPU cluster, load
     cluster = None
     reference = None
     try:
@@ -266,14 +319,20 @@ def main() -> None:
                 out = work / f"{path}{r}"
                 scheduler = cluster.address if path == "cluster" else None
                 load = _load()
-                tree = [psutil.Process(), *cluster.tree()]
-                before = _cpu(tree)
+                here, tree = [psutil.Process()], cluster.tree()
+                before, before_cluster = _cpu(here), _cpu(tree)
+                children = resource.getrusage(resource.RUSAGE_CHILDREN)
                 start = time.perf_counter()
-                result = run_campaign(spec, out, chunk=chunk, scheduler=scheduler)
+                if cli:
+                    _cli(spec_file, out, chunk, scheduler, work / "cli.log")
+                else:
+                    result = run_campaign(spec, out, chunk=chunk, scheduler=scheduler)
+                    assert result.complete and result.runs == count, result
                 wall = time.perf_counter() - start
-                after = _cpu(tree)
-                cpu = sum(after[pid] - before[pid] for pid in before if pid in after)
-                assert result.complete and result.runs == count, result
+                ended = resource.getrusage(resource.RUSAGE_CHILDREN)  # the command line's process, once waited for
+                driver = _spent(before, _cpu(here)) + ended.ru_utime + ended.ru_stime
+                driver -= children.ru_utime + children.ru_stime
+                on_cluster = _spent(before_cluster, _cpu(tree))
                 dataset = open_campaign(out)
                 if reference is None:
                     reference = dataset
@@ -281,15 +340,19 @@ def main() -> None:
                     _same(reference, dataset, f"{path} round {r}")
                     shutil.rmtree(out)
                 label = path if path == "in-process" else ("cluster, cold" if r == 0 else "cluster, warm")
-                rows.append((label, r, wall, cpu, load))
-                print(f"  round {r} {label}: {wall:.2f} s, {count / wall:.0f} runs/s, CPU {cpu:.1f} s, load {load}")
-        # a replaced worker: a new process, the engine in the cache
+                rows.append((label, r, wall, driver, on_cluster, load))
+                print(
+                    f"  round {r} {label}: {wall:.2f} s, {count / wall:.0f} runs/s, CPU s: campaign's process "
+                    f"{driver:.1f}, cluster {on_cluster:.1f}; load {load}",
+                    flush=True,
+                )
         client = cluster.connect()
-        client.restart()
-        load = _load()
-        fresh = client.gather(client.map(_warm, [spec.source] * workers, pure=False))
-        paths = sorted({where for _, where in fresh})
-        print(f"fresh worker processes: first 8-run chunk {', '.join(f'{t:.2f}' for t, _ in fresh)} s; load {load}")
+        if cache is not None:  # the workers' first compile: new processes, their cache emptied
+            shutil.rmtree(cache)
+            client.restart()
+            _first_chunks(client, spec.source, workers, "first compile (fresh workers, empty cache)")
+        client.restart()  # a replaced worker: a new process, the engine in the cache
+        paths = _first_chunks(client, spec.source, workers, "fresh workers, engine in the cache")
         print(f"mrpctl on the workers: {', '.join(paths)}; here: {mrpctl.__file__}")
         assert paths == [mrpctl.__file__], paths
     finally:
@@ -297,28 +360,28 @@ def main() -> None:
         shutil.rmtree(work, ignore_errors=True)
         print(f"cluster shut down; processes left: {left or 'none'}")
 
-    print("\n| round | path | wall (s) | runs/s | CPU s, all processes | load average (1, 5, 15 min) before |")
-    print("|---|---|---|---|---|---|")
-    for label, r, wall, cpu, load in rows:
-        print(f"| {r} | {label} | {wall:.2f} | {count / wall:.0f} | {cpu:.1f} | {load} |")
-    local = [wall for label, _, wall, _, _ in rows if label == "in-process"]
-    remote = [wall for label, _, wall, _, _ in rows if label != "in-process"]
-    cpu_local = [c for label, _, _, c, _ in rows if label == "in-process"]
-    cpu_remote = [c for label, _, _, c, _ in rows if label != "in-process"]
-    ratios = [b / a for a, b in zip(local, remote, strict=True)]
-    warm = ratios[1:]
-    print(f"\ncold (round 0) cluster / in-process wall: {ratios[0]:.3f}")
-    if warm:
-        print(
-            f"warm cluster / in-process wall, rounds 1-{rounds}: min {min(warm):.3f}, median "
-            f"{float(np.median(warm)):.3f}, max {max(warm):.3f}"
-        )
-        cpu_ratios = [b / a for a, b in zip(cpu_local[1:], cpu_remote[1:], strict=True)]
-        print(
-            f"warm cluster / in-process CPU s: min {min(cpu_ratios):.3f}, median {float(np.median(cpu_ratios)):.3f}, "
-            f"max {max(cpu_ratios):.3f}"
-        )
-        print(f"cold campaign minus the median warm one: {remote[0] - float(np.median(remote[1:])):.2f} s")
+    print(
+        "\n| round | path | wall (s) | runs/s | CPU s, the campaign's process | CPU s, cluster processes "
+        "| load average (1, 5, 15 min) before |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for label, r, wall, driver, on_cluster, load in rows:
+        idle = " (idle)" if label == "in-process" else ""
+        print(f"| {r} | {label} | {wall:.2f} | {count / wall:.0f} | {driver:.1f} | {on_cluster:.1f}{idle} | {load} |")
+    local = [row for row in rows if row[0] == "in-process"]
+    remote = [row for row in rows if row[0] != "in-process"]
+    ratios = [b[2] / a[2] for a, b in zip(local, remote, strict=True)]
+    # CPU: everything the cluster path spent (its driver, scheduler, nannies, workers) over the in-process run's own
+    cpu_ratios = [(b[3] + b[4]) / a[3] for a, b in zip(local, remote, strict=True)]
+    print(f"\ncold (round 0) cluster / in-process: wall {ratios[0]:.3f}, CPU s {cpu_ratios[0]:.3f}")
+    if rounds:
+        for what, values in (("wall", ratios[1:]), ("CPU s", cpu_ratios[1:])):
+            print(
+                f"warm cluster / in-process {what}, rounds 1-{rounds}: min {min(values):.3f}, "
+                f"median {float(np.median(values)):.3f}, max {max(values):.3f}"
+            )
+        idle = [a[4] / a[2] for a in local]
+        print(f"the idle cluster during the in-process runs: {min(idle):.3f}-{max(idle):.3f} cores")
     print(f"every cluster store equals the in-process store bit for bit: yes ({len(rows) - 1} compared)")
 
 
