@@ -18,7 +18,7 @@ from mrpctl._validation import available_memory, finite_scalar, integer, positiv
 from mrpctl.clock import delay_samples
 from mrpctl.design import delay_margin, pd_gains
 from mrpctl.errors import InertiaWarning, SpecificationError
-from mrpctl.model import STATE_SIZE, gain_matrix, pd_from_gain, plant_model
+from mrpctl.model import STATE_SIZE, gain_matrix, linear_matrices, pd_from_gain
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = [
@@ -281,9 +281,8 @@ def predictor_loop_matrices(
     """
 
     model, gain, tau_value, true_plant = _inputs(spacecraft, K, tau, plant)
-    a = plant_model(model).A
-    b_m = plant_model(model).B
-    b = plant_model(true_plant).B
+    a, b_m = linear_matrices(model)
+    b = linear_matrices(true_plant)[1]
     a0 = a + b_m @ gain
     a1 = scipy.linalg.expm(a * tau_value) @ (b - b_m) @ gain
     return readonly(a0), readonly(a1)
@@ -305,8 +304,8 @@ def sampled_predictor_matrices(
     model, gain, tau_value, true_plant = _inputs(spacecraft, K, tau, plant)
     d = delay_samples(tau_value, rate)
     h = 1.0 / positive_scalar("rate", rate)
-    phi, gamma_m = _zoh(plant_model(model).A, plant_model(model).B, h)
-    _, gamma = _zoh(plant_model(true_plant).A, plant_model(true_plant).B, h)
+    phi, gamma_m = _zoh(*linear_matrices(model), h)
+    _, gamma = _zoh(*linear_matrices(true_plant), h)
     f0 = phi + gamma_m @ gain
     f1 = np.linalg.matrix_power(phi, d) @ (gamma - gamma_m) @ gain
     return readonly(f0), readonly(f1), d
