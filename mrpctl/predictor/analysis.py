@@ -548,20 +548,34 @@ def _count_inside(a: np.ndarray, c: np.ndarray, d: int, rho: float) -> int | Non
 
     theta = np.linspace(0.0, 2.0 * np.pi, 16 * (d + 2) + 1)
     f = values(theta)
+    if not np.all(np.isfinite(np.abs(f))):
+        return None
+    # Only the halves of the arcs that failed are tested again (an accepted arc keeps its ends and its
+    # |f_i|, so it stays accepted); the open arcs are kept in the order of the circle, and the grid is
+    # put together once at the end from the left ends of the accepted arcs and θ = 2π.
+    points = theta.size
+    kept_theta, kept_f = [theta[-1:]], [f[-1:]]
+    left, right, f_left, f_right = theta[:-1], theta[1:], f[:-1], f[1:]
     while True:
-        modulus = np.abs(f)
-        if not np.all(np.isfinite(modulus)):
-            return None
-        bad = lipschitz * np.diff(theta) >= modulus[:-1] - eps
+        bad = lipschitz * (right - left) >= np.abs(f_left) - eps
+        kept_theta.append(left[~bad])
+        kept_f.append(f_left[~bad])
         if not np.any(bad):
             break
-        if theta.size + int(bad.sum()) > _MAX_WINDING_POINTS:
+        count = int(bad.sum())
+        if points + count > _MAX_WINDING_POINTS:
             return None
-        middle = 0.5 * (theta[:-1][bad] + theta[1:][bad])
+        points += count
+        left, right, f_left, f_right = left[bad], right[bad], f_left[bad], f_right[bad]
+        middle = 0.5 * (left + right)
         new = values(middle)
-        order = np.argsort(np.concatenate((theta, middle)), kind="stable")
-        theta = np.concatenate((theta, middle))[order]
-        f = np.concatenate((f, new))[order]
+        if not np.all(np.isfinite(np.abs(new))):
+            return None
+        left, right = np.column_stack((left, middle)).ravel(), np.column_stack((middle, right)).ravel()
+        f_left, f_right = np.column_stack((f_left, new)).ravel(), np.column_stack((new, f_right)).ravel()
+    theta = np.concatenate(kept_theta)
+    order = np.argsort(theta, kind="stable")
+    f = np.concatenate(kept_f)[order]
     modulus = np.abs(f)
     phase_error = float(np.sum(2.0 * np.arcsin(np.minimum(1.0, eps / (modulus - eps)))))
     if phase_error >= 0.5 * np.pi:
