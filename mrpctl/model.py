@@ -40,6 +40,7 @@ __all__ = [
     "gain_from_pd",
     "gain_matrix",
     "gravity_gradient_expr",
+    "linear_matrices",
     "orbit_phase_expr",
     "orbit_position_expr",
     "orbit_turn_expr",
@@ -378,21 +379,33 @@ class PlantModel:
         return self.A, readonly(self.B @ gain_matrix(K))
 
 
+def linear_matrices(spacecraft: Spacecraft) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) of [`PlantModel`][mrpctl.model.PlantModel] without building its CasADi functions.
+
+    The same arrays, bit for bit, as ``plant_model(spacecraft).A`` and ``.B``: for loops that only need
+    the linear part (the predictor's margins evaluate it hundreds of times; the CasADi plant costs about
+    a thousand times more than these two arrays).
+    """
+    spacecraft = check_spacecraft(spacecraft)
+    a_matrix = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
+    b_matrix = np.vstack((np.zeros((3, 3)), spacecraft.inertia_inverse / 4.0))
+    return readonly(a_matrix), readonly(b_matrix)
+
+
 def plant_model(spacecraft: Spacecraft) -> PlantModel:
     """Build the CasADi plant of ``spacecraft`` (cheap: a few SX nodes)."""
     spacecraft = check_spacecraft(spacecraft)
     x = ca.SX.sym("x", STATE_SIZE)
     u = ca.SX.sym("u", INPUT_SIZE)
     xdot = dynamics_expr(spacecraft, x, u)
-    a_matrix = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
-    b_matrix = np.vstack((np.zeros((3, 3)), spacecraft.inertia_inverse / 4.0))
+    a_matrix, b_matrix = linear_matrices(spacecraft)
     drift = ca.substitute(xdot, u, ca.DM.zeros(INPUT_SIZE)) - ca.DM(a_matrix) @ x
     return PlantModel(
         spacecraft=spacecraft,
         dynamics=ca.Function("dynamics", [x, u], [xdot], ["x", "u"], ["xdot"]),
         nonlinearity=ca.Function("f", [x], [ca.simplify(drift)], ["x"], ["f"]),
-        A=readonly(a_matrix),
-        B=readonly(b_matrix),
+        A=a_matrix,
+        B=b_matrix,
     )
 
 

@@ -431,8 +431,18 @@ def test_a_predictor_campaign_tracks_each_runs_orbit_as_simulate_does() -> None:
 @pytest.mark.slow
 def test_dask_workers_fly_the_stored_reference_rows_and_the_drawn_slews(tmp_path: Path) -> None:
     """A LocalCluster stores what the local runner stores: the file reference's rows are shipped with the task (the
-    file deleted before the run) and the drawn slews come from (seed, case) on the worker."""
+    file deleted before the run) and the drawn slews come from (seed, case) on the worker.
+
+    One cluster (one worker process, the settings of ``scheduler="local"``) serves both campaigns, as a
+    cluster given by its address does: starting its worker is most of the test's time, and what is
+    checked is what the task carries to a worker. ``scheduler="local"`` itself is run in test_campaign
+    and test_campaign_files."""
     pytest.importorskip("distributed")
+    import dask
+    from dask.distributed import LocalCluster
+
+    from mrpctl.campaign.run import LOCAL_CLUSTER_CONFIG
+
     n = math.floor(T_FINAL * RATE + 1e-9) + 1
     profile = EigenaxisSlew(
         start=[0.0, 0.0, 0.0], rate_limit=0.2, acceleration_limit=0.05, axis=[0.6, 0.0, 0.8], angle=math.radians(60.0)
@@ -448,13 +458,19 @@ def test_dask_workers_fly_the_stored_reference_rows_and_the_drawn_slews(tmp_path
     )
     specs = [load_campaign(tmp_path / "file.toml"), load_campaign(tmp_path / "slew.toml")]
     (tmp_path / "rows.csv").unlink()
-    for k, spec in enumerate(specs):
-        run_campaign(spec, tmp_path / f"local{k}", chunk=3, threads=1)
-        assert run_campaign(spec, tmp_path / f"dask{k}", chunk=3, scheduler="local", workers=1).complete
-        local, dask = open_campaign(tmp_path / f"local{k}"), open_campaign(tmp_path / f"dask{k}")
-        assert set(local.data_vars) == set(dask.data_vars) >= {"pointing_max", "slew_time", "slew_angle"}
+    with dask.config.set(LOCAL_CLUSTER_CONFIG):
+        cluster = LocalCluster(
+            n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None, memory_limit=0
+        )
+    with cluster:
+        for k, spec in enumerate(specs):
+            run_campaign(spec, tmp_path / f"local{k}", chunk=3, threads=1)
+            assert run_campaign(spec, tmp_path / f"dask{k}", chunk=3, scheduler=cluster.scheduler_address).complete
+    for k in range(len(specs)):
+        local, worker = open_campaign(tmp_path / f"local{k}"), open_campaign(tmp_path / f"dask{k}")
+        assert set(local.data_vars) == set(worker.data_vars) >= {"pointing_max", "slew_time", "slew_angle"}
         for name in local.data_vars:
-            assert local[name].values.tobytes() == dask[name].values.tobytes(), name
+            assert local[name].values.tobytes() == worker[name].values.tobytes(), name
 
 
 def test_the_how_to_section_runs_as_written(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -48,6 +48,13 @@ def _h2_integral(gains, structure: str = "pd") -> float:
     return math.sqrt(value / math.pi)
 
 
+@pytest.fixture(scope="module")
+def h2_pd():
+    """The H2-optimal PD of the paper case: test_h2_pd checks it against the frequency integral, and the PID's
+    H2 design is compared with it (the same call, once per module)."""
+    return synthesize_fixed_order(paper.SPACECRAFT, 0.5, structure="pd", objective="h2", starts=1, order=None)
+
+
 def test_hinf_pd_is_a_local_minimum_of_the_swept_norm_and_scales_to_the_loop() -> None:
     result = synthesize_fixed_order(paper.SPACECRAFT, 0.5, structure="pd", objective="hinf", starts=1, order=None)
     p, d = result.normalised
@@ -62,8 +69,8 @@ def test_hinf_pd_is_a_local_minimum_of_the_swept_norm_and_scales_to_the_loop() -
     assert d / (2.0 * math.sqrt(p)) == pytest.approx(0.90422, rel=2e-4)
 
 
-def test_h2_pd_is_a_local_minimum_of_the_frequency_integral() -> None:
-    result = synthesize_fixed_order(paper.SPACECRAFT, 0.5, structure="pd", objective="h2", starts=1, order=None)
+def test_h2_pd_is_a_local_minimum_of_the_frequency_integral(h2_pd) -> None:
+    result = h2_pd
     p, d = result.normalised
     centre = _h2_integral((p, d))
     assert centre == pytest.approx(result.normalised_value, rel=1e-6)
@@ -105,9 +112,9 @@ def test_pid_decay_optimum_is_the_quadruple_root_of_the_closed_form() -> None:
     assert -(2.0 - math.sqrt(2.0)) < lam0
 
 
-def test_integral_action_does_not_lower_the_h2_norm() -> None:
+def test_integral_action_does_not_lower_the_h2_norm(h2_pd) -> None:
     pid = synthesize_fixed_order(paper.SPACECRAFT, 0.5, structure="pid", objective="h2", starts=1, order=None)
-    pd = synthesize_fixed_order(paper.SPACECRAFT, 0.5, structure="pd", objective="h2", starts=1, order=None)
+    pd = h2_pd
     assert pid.normalised[2] < 1e-6  # the integral gain is driven to zero
     assert pid.normalised_value == pytest.approx(pd.normalised_value, rel=1e-5)
     assert pid.K_i is not None and pid.gain.shape == (3, 9)

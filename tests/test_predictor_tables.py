@@ -40,11 +40,31 @@ def test_the_page_holds_the_three_blocks_and_no_old_margin() -> None:
         assert old not in text
 
 
-@pytest.mark.slow
-def test_the_page_tables_equal_what_the_code_gives() -> None:
+def test_the_blocks_written_are_the_study_blocks_and_the_predictor_table(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``blocks()`` (what ``--write`` puts in the page) is the two study blocks and the predictor table, each
+    computed below on its own (two tests, so that xdist runs them side by side)."""
     script = _script()
-    text = script.PAGE.read_text(encoding="utf-8")
-    computed = script.blocks()
-    assert script.page_blocks(text) == computed
+    monkeypatch.setattr(script, "study_blocks", lambda: ("the sweep", "the study"))
+    monkeypatch.setattr(script, "predictor_block", lambda: "the predictor table")
+    assert script.blocks() == {"pd-sweep": "the sweep", "predictor": "the predictor table", "study": "the study"}
+
+
+@pytest.mark.slow
+def test_the_page_predictor_table_equals_what_the_code_gives() -> None:
+    script = _script()
+    page = script.page_blocks(script.PAGE.read_text(encoding="utf-8"))
+    computed = script.predictor_block()
+    assert set(page) == {"pd-sweep", "predictor", "study"}
+    assert page["predictor"] == computed
     # the bracketed boundary of the fast gains at 1 kHz, found independently in test_predictor_unresolved
-    assert "| (−19.92 %, +30.73 %) |" in computed["predictor"]
+    assert "| (−19.92 %, +30.73 %) |" in computed
+
+
+@pytest.mark.slow
+def test_the_page_study_tables_equal_what_the_code_gives() -> None:
+    script = _script()
+    page = script.page_blocks(script.PAGE.read_text(encoding="utf-8"))
+    sweep, study = script.study_blocks()
+    assert set(page) == {"pd-sweep", "predictor", "study"}
+    assert page["pd-sweep"] == sweep
+    assert page["study"] == study

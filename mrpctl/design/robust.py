@@ -335,7 +335,8 @@ def exact_check_of_set(
     """
     if model is DelayModel.SAMPLED and period is not None:
         worst = 0.0
-        for scale in (1.0 - poly.tolerance, 1.0 + poly.tolerance):
+        # one end when the tolerance is 0: the box is the nominal inertia (its lifted loops once, not twice)
+        for scale in dict.fromkeys((1.0 - poly.tolerance, 1.0 + poly.tolerance)):
             sc = Spacecraft(scale * poly.nominal.inertia)
             for a, b, k in spacecraft_axes(sc, K):
                 if a.shape[0] * (d + 1) > 4000:

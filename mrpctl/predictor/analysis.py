@@ -18,7 +18,7 @@ from mrpctl._validation import available_memory, finite_scalar, integer, positiv
 from mrpctl.clock import delay_samples
 from mrpctl.design import delay_margin, pd_gains
 from mrpctl.errors import InertiaWarning, SpecificationError
-from mrpctl.model import STATE_SIZE, gain_matrix, pd_from_gain, plant_model
+from mrpctl.model import STATE_SIZE, gain_matrix, linear_matrices, pd_from_gain
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 
 __all__ = [
@@ -281,9 +281,8 @@ def predictor_loop_matrices(
     """
 
     model, gain, tau_value, true_plant = _inputs(spacecraft, K, tau, plant)
-    a = plant_model(model).A
-    b_m = plant_model(model).B
-    b = plant_model(true_plant).B
+    a, b_m = linear_matrices(model)
+    b = linear_matrices(true_plant)[1]
     a0 = a + b_m @ gain
     a1 = scipy.linalg.expm(a * tau_value) @ (b - b_m) @ gain
     return readonly(a0), readonly(a1)
@@ -305,8 +304,8 @@ def sampled_predictor_matrices(
     model, gain, tau_value, true_plant = _inputs(spacecraft, K, tau, plant)
     d = delay_samples(tau_value, rate)
     h = 1.0 / positive_scalar("rate", rate)
-    phi, gamma_m = _zoh(plant_model(model).A, plant_model(model).B, h)
-    _, gamma = _zoh(plant_model(true_plant).A, plant_model(true_plant).B, h)
+    phi, gamma_m = _zoh(*linear_matrices(model), h)
+    _, gamma = _zoh(*linear_matrices(true_plant), h)
     f0 = phi + gamma_m @ gain
     f1 = np.linalg.matrix_power(phi, d) @ (gamma - gamma_m) @ gain
     return readonly(f0), readonly(f1), d
@@ -549,20 +548,34 @@ def _count_inside(a: np.ndarray, c: np.ndarray, d: int, rho: float) -> int | Non
 
     theta = np.linspace(0.0, 2.0 * np.pi, 16 * (d + 2) + 1)
     f = values(theta)
+    if not np.all(np.isfinite(np.abs(f))):
+        return None
+    # Only the halves of the arcs that failed are tested again (an accepted arc keeps its ends and its
+    # |f_i|, so it stays accepted); the open arcs are kept in the order of the circle, and the grid is
+    # put together once at the end from the left ends of the accepted arcs and θ = 2π.
+    points = theta.size
+    kept_theta, kept_f = [theta[-1:]], [f[-1:]]
+    left, right, f_left, f_right = theta[:-1], theta[1:], f[:-1], f[1:]
     while True:
-        modulus = np.abs(f)
-        if not np.all(np.isfinite(modulus)):
-            return None
-        bad = lipschitz * np.diff(theta) >= modulus[:-1] - eps
+        bad = lipschitz * (right - left) >= np.abs(f_left) - eps
+        kept_theta.append(left[~bad])
+        kept_f.append(f_left[~bad])
         if not np.any(bad):
             break
-        if theta.size + int(bad.sum()) > _MAX_WINDING_POINTS:
+        count = int(bad.sum())
+        if points + count > _MAX_WINDING_POINTS:
             return None
-        middle = 0.5 * (theta[:-1][bad] + theta[1:][bad])
+        points += count
+        left, right, f_left, f_right = left[bad], right[bad], f_left[bad], f_right[bad]
+        middle = 0.5 * (left + right)
         new = values(middle)
-        order = np.argsort(np.concatenate((theta, middle)), kind="stable")
-        theta = np.concatenate((theta, middle))[order]
-        f = np.concatenate((f, new))[order]
+        if not np.all(np.isfinite(np.abs(new))):
+            return None
+        left, right = np.column_stack((left, middle)).ravel(), np.column_stack((middle, right)).ravel()
+        f_left, f_right = np.column_stack((f_left, new)).ravel(), np.column_stack((new, f_right)).ravel()
+    theta = np.concatenate(kept_theta)
+    order = np.argsort(theta, kind="stable")
+    f = np.concatenate(kept_f)[order]
     modulus = np.abs(f)
     phase_error = float(np.sum(2.0 * np.arcsin(np.minimum(1.0, eps / (modulus - eps)))))
     if phase_error >= 0.5 * np.pi:
