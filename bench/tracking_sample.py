@@ -10,8 +10,10 @@ The paper case (the paper's spacecraft, gain and initial state, τ = 0.5 s, 1 kH
 * ``tracking, current time``: the same with ``ErrorTime.CURRENT`` (the same sample; only the rows differ);
 
 the variants interleaved round by round, each timed by the process's CPU time (``time.process_time``), min and
-median over the rounds; the ratio is to the regulation run's minimum. The reference rows are built once, before
-the timing (a (60 001, 9) array read through views, sliced per C call).
+median over the rounds; the ratio is to the regulation run's minimum, and the per-round ratios (each variant's
+time over the regulation run's of the same round) are given as min / median / max, with the load average before
+and after the rounds (the host is shared: the per-round ratios show how much of a spread is the host's). The
+reference rows are built once, before the timing (a (60 001, 9) array read through views, sliced per C call).
 
 Run: ``PYTHONPATH=. .venv/bin/python bench/tracking_sample.py [rounds]`` (default 9).
 """
@@ -19,15 +21,16 @@ Run: ``PYTHONPATH=. .venv/bin/python bench/tracking_sample.py [rounds]`` (defaul
 from __future__ import annotations
 
 import os
-import platform
 import statistics
 import sys
 import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _host
+
 from mrpctl import paper, simulate
-from mrpctl.engines import isa
 from mrpctl.flight import ErrorTime, Hysteretic
 
 T_FINAL = 60.0
@@ -46,17 +49,6 @@ def nadir_rows(n: int, rate: float, orbit_rate: float) -> np.ndarray:
     return rows
 
 
-def _cpu_name() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as info:
-            for line in info:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
 def main(rounds: int = 9) -> dict[str, float]:
     rows = nadir_rows(N, RATE, ORBIT_RATE)
     common = dict(tau=TAU, rule=Hysteretic(0.0), t_final=T_FINAL, rate=RATE, keep_every=None)
@@ -69,26 +61,32 @@ def main(rounds: int = 9) -> dict[str, float]:
     for options in variants.values():  # compile and load every engine before the timing
         simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **common, **options)
     times: dict[str, list[float]] = {name: [] for name in variants}
+    load_before = os.getloadavg()[0]
     for _ in range(rounds):
         for name, options in variants.items():
             start = time.process_time()
             simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, **common, **options)
             times[name].append(time.process_time() - start)
-    flags = isa.host_isa_flags()
-    vector = [f for f in flags if f.startswith(("-march", "-mavx", "-msse", "-mfma")) and "-mno-" not in f]
-    print(f"CPU: {_cpu_name()}; vector ISA of the compile cache: {' '.join(vector) or 'none'}")
+    load_after = os.getloadavg()[0]
+    print(f"CPU: {_host.cpu_model()}; {_host.vector_isa()}")
     print(
         f"paper case, {T_FINAL:g} s at {RATE:g} Hz ({N} samples), keep_every=None, Hysteretic(0.0); process CPU "
-        f"time, {rounds} interleaved rounds; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+        f"time, {rounds} interleaved rounds; load average {load_before:.1f} before, {load_after:.1f} after, on "
+        f"{os.cpu_count()} CPUs"
     )
     base = min(times["regulation"])
-    print(f"{'variant':26s} {'min (ms)':>9s} {'median (ms)':>12s} {'x regulation':>13s} {'ns/sample':>10s}")
+    print(
+        f"{'variant':26s} {'min (ms)':>9s} {'median (ms)':>12s} {'ns/sample':>10s} {'x regulation':>13s} "
+        f"{'per round min / median / max':>29s}"
+    )
     ratios = {}
     for name, values in times.items():
         ratios[name] = min(values) / base
+        per_round = [value / reference for value, reference in zip(values, times["regulation"], strict=True)]
+        spread = f"{min(per_round):.3f} / {statistics.median(per_round):.3f} / {max(per_round):.3f}"
         print(
-            f"{name:26s} {1e3 * min(values):9.2f} {1e3 * statistics.median(values):12.2f} {ratios[name]:13.3f} "
-            f"{1e9 * min(values) / N:10.1f}"
+            f"{name:26s} {1e3 * min(values):9.2f} {1e3 * statistics.median(values):12.2f} "
+            f"{1e9 * min(values) / N:10.1f} {ratios[name]:13.3f} {spread:>29s}"
         )
     verdict = "met" if ratios["tracking + feedforward"] <= 1.3 else "NOT met"
     print(f"goal: tracking + feedforward <= 1.3 x regulation: {verdict} ({ratios['tracking + feedforward']:.3f})")

@@ -600,6 +600,7 @@ def lane_engine(
                     disturbed=structure["disturbed"],
                     reference_input=tracking,
                     feedforward=tracking and feedforward,
+                    settling_output=tracking,  # the scalar engine's statistics of the true error (its bits)
                     gravity_gradient=gravity,
                 )
                 label += f"_{saturation.value}" + ("" if structure["sensor"] else "_ideal")

@@ -85,6 +85,7 @@ from mrpctl.loop import (
     inertia_values,
     predictor_core_function,
 )
+from mrpctl.loop.functions import true_error_function
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, predictor_memory
 from mrpctl.loop.wheels import wheel_core_function, wheel_memory, wheel_memory_roots
 from mrpctl.model import INPUT_SIZE, ORBIT_SIZE, STATE_SIZE
@@ -174,7 +175,9 @@ def slice_samples(substeps: int) -> int:
     return max(1, SLICE_SAMPLES // substeps)
 
 
-def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, frozen_memory: bool = True) -> ca.Function:
+def engine_sample(
+    core: ca.Function, d: int, name: str = "engine_sample", *, frozen_memory: bool = True, stats_first: bool = False
+) -> ca.Function:
     """The core sample plus the divergence guard and the metric accumulators (pure SX).
 
     ``sample(x, memory, stats, x_delayed, K, parameters[, J, J_inv]) ->
@@ -185,6 +188,11 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     on every sample it runs. A core with an input ``counted`` (the wheel sample) freezes its memory itself: it is
     fed 1.0 when the sample counts, else 0.0 (with ``frozen_memory``; 1.0 without, a constant that CasADi folds
     away), and its ``memory_next`` is taken as it is.
+    ``stats_first``: the outputs start with stats_next (then x_next, memory_next, ...),
+    which orders the generated code (CasADi sorts it depth first from the outputs in turn): the controller
+    (the switch count and the torque), then the statistics' true error, then RK4 (the divergence test), so
+    that the work off the plant's serial path comes before the integration that waits for the torque; the same
+    operations, the same bits (the scalar driver's tracking samples: ``MRPCTL_STATS_FIRST``).
     """
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", core.size1_in(1))  # MEMORY_SIZE; FLIGHT_MEMORY_SIZE for the flight sample
@@ -205,9 +213,13 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     x_raw, memory_rule, x_meas, u, switched = outs[0:5]
     more, more_names = list(outs[5:]), [core.name_out(i) for i in range(5, core.n_out())]  # the flight measurement
     settling_state = x_meas  # tracking: the true error [σ_B/R; ω_B/R/4] at t_k, for the settling statistics
+    settling = None  # or what the statistics take of it: (|σ_B/R|², ω_B/R in rad/s)
     if "tracking_error" in more_names:
         settling_state = more.pop(more_names.index("tracking_error"))
         more_names.remove("tracking_error")
+    elif "tracking_settling" in more_names:
+        settling = more.pop(more_names.index("tracking_settling"))
+        more_names.remove("tracking_settling")
 
     k = stats[S_K]
     counted = counting if self_frozen and frozen_memory else ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
@@ -219,8 +231,11 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
     memory_next = ca.if_else(counted, memory_rule, memory) if frozen_memory and not self_frozen else memory_rule
     switch_counted = ca.logic_and(counted, switched > 0)
 
-    sigma, omega = settling_state[0:3], 4 * settling_state[3:6]
-    sigma_squared = ca.dot(sigma, sigma)
+    if settling is None:
+        sigma, omega = settling_state[0:3], 4 * settling_state[3:6]
+        sigma_squared = ca.dot(sigma, sigma)
+    else:
+        sigma_squared, omega = settling[0], settling[1:4]
     # the tolerances are run-time constants carried in the statistics (default SETTLING_SIGMA², SETTLING_OMEGA²)
     unsettled = ca.logic_or(sigma_squared >= stats[S_SETTLE_SIGMA], ca.dot(omega, omega) >= stats[S_SETTLE_OMEGA])
     # the plant's σ replaced by its shadow at this sample (by the rule, or by the flight loop's bookkeeping)
@@ -248,19 +263,25 @@ def engine_sample(core: ca.Function, d: int, name: str = "engine_sample", *, fro
         stats[S_SETTLE_OMEGA],
         stats[S_SET_CHANGES] + ca.if_else(ca.logic_and(counted, set_changed), 1.0, 0.0),
     )
+    first = [stats_next, x_next, memory_next] if stats_first else [x_next, memory_next, stats_next]
+    first_names = ["stats_next", "x_next", "memory_next"] if stats_first else ["x_next", "memory_next", "stats_next"]
     return ca.Function(
         name,
         [x, memory, stats, x_delayed, gain, parameters, *extra],
-        [x_next, memory_next, stats_next, x_meas, u, switched, *more],
+        [*first, x_meas, u, switched, *more],
         ["x", "memory", "stats", "x_delayed", "K", "parameters"] + [core.name_in(i) for i in ports],
-        ["x_next", "memory_next", "stats_next", "x_meas", "u", "switched", *more_names],
+        [*first_names, "x_meas", "u", "switched", *more_names],
     )
 
 
-def _driver_source(sample: ca.Function, rotation: ca.Function | None = None) -> str:
+def _driver_source(
+    sample: ca.Function, rotation: ca.Function | None = None, true_error: ca.Function | None = None
+) -> str:
     """``scalar_driver.c`` with the #defines that bind it to ``sample`` (and to ``rotation``, the attitude noise's
-    θ -> σ(θ) for a sample of `MRP`)."""
+    θ -> σ(θ) for a sample of `MRP`; to ``true_error``, the true σ_B/R that closes a kept tracking record, for a
+    tracking sample of ``settling_output``)."""
     memory_size = sample.size1_in(1)
+    record_width = sample.size1_out("record") if "record" in sample.name_out() else 1
     defines: dict[str, Any] = {
         "MRPCTL_SAMPLE": sample.name(),
         "MRPCTL_RUN": sample.name() + "_run",
@@ -279,10 +300,18 @@ def _driver_source(sample: ca.Function, rotation: ca.Function | None = None) -> 
         "MRPCTL_RECORD_OUTPUT": sample.name_out().index("record") if "record" in sample.name_out() else 0,
         "MRPCTL_TORQUE_INPUT": sample.name_in().index("torque") if "torque" in sample.name_in() else 0,
         "MRPCTL_REFERENCE_INPUT": sample.name_in().index("reference") if "reference" in sample.name_in() else 0,
-        "MRPCTL_RECORD_WIDTH": sample.size1_out("record") if "record" in sample.name_out() else 1,
+        "MRPCTL_RECORD_WIDTH": record_width + (0 if true_error is None else true_error.size1_out(0)),
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
         "MRPCTL_ROTATION_INPUT": int(rotation is not None),
+        "MRPCTL_TRUE_ERROR_INPUT": int(true_error is not None),
+        # the sample's outputs begin with stats_next (engine_sample's stats_first)
+        "MRPCTL_STATS_FIRST": int(sample.name_out(0) == "stats_next"),
     }
+    if true_error is not None:
+        defines["MRPCTL_TRUE_ERROR"] = true_error.name()
+        defines["MRPCTL_TRUE_ERROR_OFFSET"] = record_width  # the true σ_B/R after the sample's own record
+        defines["MRPCTL_TRUE_ERROR_SZ_IW"] = max(true_error.sz_iw(), 1)
+        defines["MRPCTL_TRUE_ERROR_SZ_W"] = max(true_error.sz_w(), 1)
     if rotation is not None:
         defines["MRPCTL_ROTATION"] = rotation.name()
         defines["MRPCTL_ROTATION_SZ_IW"] = max(rotation.sz_iw(), 1)
@@ -392,7 +421,11 @@ class Engine:
                 # run() takes the square root of the peak |u_c|² at the end; with limits only, where the
                 # actuator's |u_c| is a root too (measured: 15 instructions fewer with limits, 5-10 more without)
                 squared_peak=limited,
-                **({"reference_input": True, "feedforward": feedforward} if reference_input else {}),
+                **(
+                    {"reference_input": True, "feedforward": feedforward, "settling_output": True}
+                    if reference_input
+                    else {}
+                ),
                 law=law,
                 gravity_gradient=gravity_gradient,
             )
@@ -419,17 +452,30 @@ class Engine:
             label += "" if law is None else "_" + law.label()
             label += "_gravity" if gravity_gradient else ""
         # the scalar driver runs counted samples only: the flight samples drop the memory guard
-        self.sample = engine_sample(core, d, f"mrpctl_sample_{label}", frozen_memory=not self.flight)
+        # the flight tracking sample: the statistics take (|σ_B/R|², ω_B/R) of the true error, the driver forms the
+        # true σ_B/R of the kept records only, and the code is ordered controller, statistics, RK4 (stats_first)
+        tracked = reference_input and self.flight and not self.predictor and wheels is None
+        self.sample = engine_sample(
+            core, d, f"mrpctl_sample_{label}", frozen_memory=not self.flight, stats_first=tracked
+        )
         min_max_flags, min_max_source = inline_min_max()  # fmax/fmin inlined, the libm's results
         rotation = None
         if self.flight and not self.predictor and sensor and _ROTATION_IN_DRIVER:
             theta = ca.SX.sym("rotation_noise", 3)
             rotation = ca.Function(self.sample.name() + "_rotation", [theta], [rotation_mrp_function()(theta)])
+        true_error = None
+        if tracked:
+            true_error = true_error_function(self.sample.name() + "_true_error")
+        self.record_width = (
+            (self.sample.size1_out("record") + (0 if true_error is None else true_error.size1_out(0)))
+            if "record" in self.sample.name_out()
+            else 0
+        )
         self.compiled: CompiledFunction = compile_function(
             self.sample,
             flags=(*SIMULATION_FLAGS, *min_max_flags),
-            appendix=_driver_source(self.sample, rotation) + min_max_source,
-            others=() if rotation is None else (rotation,),
+            appendix=_driver_source(self.sample, rotation, true_error) + min_max_source,
+            others=tuple(f for f in (rotation, true_error) if f is not None),
         )
         self._run_c: Any = None
         if self.compiled.compiled:
@@ -596,7 +642,7 @@ class Engine:
             keep = keep_every
         records = delay_used = None
         if "record" in self.sample.name_out() and keep:
-            records = np.empty((kept, self.sample.size1_out("record")))
+            records = np.empty((kept, self.record_width))
             delay_used = np.full(kept, self.d, dtype=np.int64)
         switched = workspace.switched
         indices: list[np.ndarray] = []

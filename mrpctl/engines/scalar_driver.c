@@ -15,7 +15,11 @@
  * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept); with
  * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque, and with
  * MRPCTL_REFERENCE_INPUT (its input index; the next input is the reference at the error time) a tracked
- * reference, row k - k0 of reference and of reference_error.
+ * reference, row k - k0 of reference and of reference_error. With MRPCTL_TRUE_ERROR_INPUT the kept records are
+ * MRPCTL_RECORD_WIDTH wide and end with the true sigma_B/R at t_k, computed here for the kept samples only by the
+ * generated MRPCTL_TRUE_ERROR(x_meas, reference) from the kept x_meas and the row of t_k (the sample's record fills
+ * the first MRPCTL_TRUE_ERROR_OFFSET numbers). With MRPCTL_STATS_FIRST the sample's first three outputs are
+ * stats_next, x_next, memory_next (the order of its generated code), else x_next, memory_next, stats_next.
  *
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
  * stats alternate between two buffers; the sample writes m_k into a ring of ring_size
@@ -36,6 +40,16 @@
  * one done is the diverging sample, whose measurement is still a good state); -1 when the
  * sample function failed. state (x, memory, stats) holds the state after the last sample.
  */
+#if MRPCTL_STATS_FIRST
+#define MRPCTL_OUT_X 1
+#define MRPCTL_OUT_MEMORY 2
+#define MRPCTL_OUT_STATS 0
+#else
+#define MRPCTL_OUT_X 0
+#define MRPCTL_OUT_MEMORY 1
+#define MRPCTL_OUT_STATS 2
+#endif
+
 /* samples of noise drawn at a time (6 doubles each: 3 KB on the stack) */
 #define MRPCTL_NOISE_BLOCK 64
 
@@ -173,9 +187,9 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
       }
       if (kept && kept_delays) kept_delays[kept_column] = k - j_used;
     }
-    res[0] = next;
-    res[1] = next + MRPCTL_X;
-    res[2] = next + MRPCTL_X_MEMORY;
+    res[MRPCTL_OUT_X] = next;
+    res[MRPCTL_OUT_MEMORY] = next + MRPCTL_X;
+    res[MRPCTL_OUT_STATS] = next + MRPCTL_X_MEMORY;
 #if MRPCTL_SENSOR
     if (k == noise_k1) {
       const long long rows = k1 - k < MRPCTL_NOISE_BLOCK ? k1 - k : MRPCTL_NOISE_BLOCK;
@@ -215,6 +229,20 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     res[MRPCTL_RECORD_OUTPUT] = kept && kept_records ? kept_records + MRPCTL_RECORD_WIDTH * kept_column : 0;
 #endif
     if (MRPCTL_SAMPLE(arg, res, iw, w, 0)) return -1;
+#if MRPCTL_TRUE_ERROR_INPUT
+    if (kept && kept_records) {
+      /* the true sigma_B/R closing the kept record: from x_meas (the kept column with a ring output, else the ring
+         entry the sample just wrote) and the reference row of t_k */
+      const casadi_real* error_arg[2];
+      casadi_real* error_res[1];
+      casadi_int error_iw[MRPCTL_TRUE_ERROR_SZ_IW];
+      casadi_real error_w[MRPCTL_TRUE_ERROR_SZ_W];
+      error_arg[0] = MRPCTL_RING_OUTPUT ? kept_measurements + 6 * kept_column : ring + 6 * slot;
+      error_arg[1] = reference + 9 * (k - k0);
+      error_res[0] = kept_records + MRPCTL_RECORD_WIDTH * kept_column + MRPCTL_TRUE_ERROR_OFFSET;
+      if (MRPCTL_TRUE_ERROR(error_arg, error_res, error_iw, error_w, 0)) return -1;
+    }
+#endif
     if (kept) {
       if (!MRPCTL_RING_OUTPUT && kept_measurements != ring)
         for (i = 0; i < 6; ++i) kept_measurements[6 * kept_column + i] = ring[6 * slot + i];

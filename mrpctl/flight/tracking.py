@@ -40,6 +40,7 @@ __all__ = [
     "reference_stream",
     "rotate_expr",
     "rotation_scale",
+    "settling_error_expr",
     "tracking_error_expr",
 ]
 
@@ -68,21 +69,27 @@ class ErrorTime(enum.Enum):
 def rotate_expr(sigma: Any, v: Any, scale: Any = None) -> Any:
     """[BN](σ) v (SX): N components of v into B components, [BN] = I + (8[σ×]² − 4(1 − |σ|²)[σ×])/(1 + |σ|²)².
 
-    Written with two cross products (no matrix): v + (8 σ × (σ × v) − 4 (1 − |σ|²) σ × v)/(1 + |σ|²)².
-    ``scale`` = (1 − |σ|², 1/(1 + |σ|²)²) when the caller has them (`rotation_scale`: one division for
-    several vectors). With v = 0 it returns v's values (up to the sign of a zero).
+    Written with two cross products (no matrix): v + a σ × (σ × v) − b σ × v with the coefficients
+    a = 8/(1 + |σ|²)², b = 4 (1 − |σ|²)/(1 + |σ|²)² of [`rotation_scale`][mrpctl.flight.tracking.rotation_scale]
+    (``scale`` when the caller has them: one division for several vectors). With v = 0 it returns v's values
+    (up to the sign of a zero).
     """
-    one_minus, inverse = rotation_scale(sigma) if scale is None else scale
+    eight, four = rotation_scale(sigma) if scale is None else scale
     once = skew_expr(sigma) @ v
     twice = skew_expr(sigma) @ once
-    return v + (8 * twice - 4 * one_minus * once) * inverse
+    return v + (eight * twice - four * once)
 
 
 def rotation_scale(sigma: Any, squared: Any = None) -> tuple[Any, Any]:
-    """(1 − |σ|², 1/(1 + |σ|²)²) of [`rotate_expr`][mrpctl.flight.tracking.rotate_expr] (SX; ``squared`` = |σ|²
-    when known)."""
+    """(a, b) = (8/(1 + |σ|²)², 4 (1 − |σ|²)/(1 + |σ|²)²) of [`rotate_expr`][mrpctl.flight.tracking.rotate_expr]
+    (SX; ``squared`` = |σ|² when known), at one division.
+
+    a is 8/((1 + |σ|²)²), not 8 (1/(1 + |σ|²)²): CasADi rewrites a product with 1/x into a division, which
+    would put one division in every component of every rotation; b = (1 − |σ|²)(a/2).
+    """
     squared = ca.dot(sigma, sigma) if squared is None else squared
-    return 1 - squared, 1 / ((1 + squared) * (1 + squared))
+    eight = 8 / ((1 + squared) * (1 + squared))
+    return eight, (1 - squared) * (0.5 * eight)
 
 
 def tracking_error_expr(sigma_bn: Any, omega_scaled: Any, sigma_rn: Any, omega_rn: Any) -> tuple[Any, Any, Any, Any]:
@@ -108,6 +115,28 @@ def tracking_error_expr(sigma_bn: Any, omega_scaled: Any, sigma_rn: Any, omega_r
     scale = rotation_scale(sigma_bn, s_body)
     omega_r_body = rotate_expr(sigma_bn, omega_rn, scale)
     return sigma_br, omega_scaled - 0.25 * omega_r_body, omega_r_body, scale
+
+
+def settling_error_expr(sigma_bn: Any, omega_scaled: Any, sigma_rn: Any, omega_rn: Any) -> tuple[Any, Any]:
+    """(|σ_B/R|² of the short set, ω_B/R in rad/s) from σ_B/N, ω_B/N/4 (body), σ_R/N and ω_R/N (N components)
+    (SX): what the engines' settling statistic and max |σ| take of the true error, without forming σ_B/R.
+
+    With Δ = σ_B − σ_R and D = 1 + |σ_R|²|σ_B|² + 2 σ_R·σ_B (the denominator of
+    [`tracking_error_expr`][mrpctl.flight.tracking.tracking_error_expr]), its numerator n has |n|² = D |Δ|²
+    (the quaternion form: cos(Φ/2)-wise, (1 + |σ_B|²)(1 + |σ_R|²) β_B·β_R = D − |Δ|² and the sum with the product
+    is D + |Δ|²), so |σ_B/R|² = |Δ|²/D in the short set (|Δ|² <= D, i.e. |n|² <= D² for D > 0) and D/|Δ|² for
+    the shadow, at one division and without n; near σ_B = σ_R it is more accurate than |n/D|² (no cancellation
+    in n). ω_B/R = 4 (ω_B/N/4) − [BN] ω_R/N (4 x is exact: the same bits as 4 (ω/4 − ([BN] ω_R/N)/4)). With
+    σ_R/N = 0 and ω_R/N = 0: |σ_B|² and ω bit for bit (Δ = σ_B, D = 1), the regulation sample's statistics.
+    """
+    delta = sigma_bn - sigma_rn
+    distance = ca.dot(delta, delta)
+    s_body = ca.dot(sigma_bn, sigma_bn)
+    denominator = 1 + ca.dot(sigma_rn, sigma_rn) * s_body + 2 * ca.dot(sigma_rn, sigma_bn)
+    long_set = distance > denominator
+    squared = ca.if_else(long_set, denominator, distance) / ca.if_else(long_set, distance, denominator)
+    omega_br = 4 * omega_scaled - rotate_expr(sigma_bn, omega_rn, rotation_scale(sigma_bn, s_body))
+    return squared, omega_br
 
 
 def feedforward_expr(

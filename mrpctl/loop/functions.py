@@ -30,7 +30,7 @@ from mrpctl.flight import (
     short_expr,
 )
 from mrpctl.flight.steering import SteeringLaw, steering_command_expr
-from mrpctl.flight.tracking import REFERENCE_WIDTH, feedforward_expr, tracking_error_expr
+from mrpctl.flight.tracking import REFERENCE_WIDTH, feedforward_expr, settling_error_expr, tracking_error_expr
 from mrpctl.model import (
     INPUT_SIZE,
     ORBIT_SIZE,
@@ -61,6 +61,7 @@ __all__ = [
     "predictor_constants_size",
     "predictor_core_function",
     "step_function",
+    "true_error_function",
 ]
 
 
@@ -218,6 +219,7 @@ def flight_core_function(
     feedforward: bool = False,
     law: SteeringLaw | None = None,
     gravity_gradient: bool = False,
+    settling_output: bool = False,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
@@ -279,7 +281,11 @@ def flight_core_function(
     hysteresis) acts on σ_B/R, u_c = K [σ_c; ω_B/R/4] (+ with ``feedforward``
     [`feedforward_expr`][mrpctl.flight.tracking.feedforward_expr] of the measured delayed ω̃), and a last output
     ``tracking_error`` (6) is the true error [σ_B/R; ω_B/R/4] at t_k (from x_meas and the first row), which
-    the records (10: (h, σ_c, u_c, σ_B/R)) and the engine's settling statistics use.
+    the records (10: (h, σ_c, u_c, σ_B/R)) and the engine's settling statistics use. With ``settling_output``
+    (the engines') that last output is ``tracking_settling`` (4) = (|σ_B/R|², ω_B/R in rad/s) of the true error
+    ([`settling_error_expr`][mrpctl.flight.tracking.settling_error_expr]: what the statistics take, without
+    forming σ_B/R) and the records leave the true σ_B/R out: the scalar engine's driver computes it for the kept
+    samples only (``true_error_function``, the same expressions as ``tracking_error``'s σ_B/R: its bits).
 
     With ``gravity_gradient`` the plant flies the gravity-gradient torque 3 n² r̂_B × (J r̂_B) of a circular orbit
     inside its RK4 stages ([`step_function`][mrpctl.loop.step_function]): ``flight`` grows by the orbit's
@@ -289,6 +295,8 @@ def flight_core_function(
     """
     if feedforward and not reference_input:
         raise SpecificationError("feedforward: the feedforward terms need a reference (reference_input)")
+    if settling_output and not reference_input:
+        raise SpecificationError("settling_output: the true error's statistics need a reference (reference_input)")
     if short_measurements and sensor:
         raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
     step = step_function(spacecraft, period, substeps, inertia=inertia, gravity_gradient=gravity_gradient)
@@ -369,17 +377,30 @@ def flight_core_function(
         names.append("sample_index")
     output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
     outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
-    if reference_input:  # the true pointing error at t_k: the metrics' state
+    recorded = []
+    if reference_input and settling_output:  # what the statistics take of the true error at t_k
+        settling = ca.vertcat(*settling_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6]))
+    elif reference_input:  # the true pointing error at t_k: the metrics' state
         true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
+        recorded = [true_sigma]
     if records:
         output_names.append("record")
-        outputs.append(
-            ca.vertcat(h_next, sigma_c, command, sigma_seen, 4 * seen[3:6], *([true_sigma] if reference_input else []))
-        )
+        outputs.append(ca.vertcat(h_next, sigma_c, command, sigma_seen, 4 * seen[3:6], *recorded))
     if reference_input:
-        output_names.append("tracking_error")
-        outputs.append(ca.vertcat(true_sigma, true_rate))
+        output_names.append("tracking_settling" if settling_output else "tracking_error")
+        outputs.append(settling if settling_output else ca.vertcat(true_sigma, true_rate))
     return ca.Function("core", inputs, outputs, names, output_names)
+
+
+def true_error_function(name: str = "true_error") -> ca.Function:
+    """``true_error(x_meas, reference) -> sigma_br``: the true σ_B/R at t_k of the tracking sample's records
+    (x_meas = [σ_B/N; ω_B/N/4], the row of t_k), the expressions of its ``tracking_error`` output (the same bits),
+    for a driver that computes it for the kept samples only (``settling_output`` of
+    [`flight_core_function`][mrpctl.loop.flight_core_function])."""
+    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
+    reference = ca.SX.sym("reference", REFERENCE_WIDTH)
+    sigma = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0]
+    return ca.Function(name, [x_meas, reference], [sigma], ["x_meas", "reference"], ["sigma_br"])
 
 
 #: The predictor sample's memory: (1, 1, σ̂_prev (3), the actuator accumulators of the flight sample (5),
