@@ -108,3 +108,32 @@ def test_record_function_is_the_sample_true_error_bit_for_bit() -> None:
         exact = _exact_short_squared(sigma_b, sigma_r)
         value = np.asarray(record(state, ref)).ravel()
         assert np.isclose(value @ value, exact, rtol=2e-4)  # |n/D|²: cancellation near σ_B = σ_R
+
+
+def _nadir_rows(n: int, rate: float, orbit_rate: float) -> np.ndarray:
+    angle = orbit_rate * np.arange(n) / rate
+    rows = np.zeros((n, 9))
+    rows[:, 2] = np.tan(angle / 4.0)
+    rows[:, 5] = orbit_rate
+    return rows
+
+
+def test_lagged_statistics_equal_the_in_sample_statistics_of_the_lanes() -> None:
+    """With an ideal sensor at the measurement time the scalar engine folds sample k − d's statistics at sample k
+    and the last d samples' at the end; the lanes fold each sample's own: the same max |σ_B/R| and settling time,
+    also when the settling time falls in the last d samples and when the run is shorter than the delay."""
+    import mrpctl
+    from mrpctl import paper
+    from mrpctl.flight import Hysteretic
+
+    rate, tau = 1000.0, 0.5  # d = 500
+    rows = _nadir_rows(60_001, rate, 0.0011)
+    for t_final in (0.3, 51.6, 53.0):
+        kw = dict(tau=tau, rule=Hysteretic(0.0), t_final=t_final, rate=rate, reference=rows, feedforward=True)
+        alone = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, paper.INITIAL_STATE, keep_every=None, **kw)
+        batch = mrpctl.simulate_batch(paper.SPACECRAFT, paper.GAIN, np.array([paper.INITIAL_STATE] * 2), **kw)
+        assert batch.max_sigma[0] == alone.max_sigma
+        assert np.nan_to_num(batch.settling_time[0], nan=-1.0) == (alone.settling_time or -1.0)
+        if t_final > 51.0:  # settled in the last τ of the 51.6 s run (the folded tail), before it in the 53 s run
+            assert alone.settling_time is not None
+            assert (t_final - tau < alone.settling_time) == (t_final < 52.0)

@@ -76,7 +76,7 @@ from mrpctl.flight import (
     stream_key,
 )
 from mrpctl.flight.steering import SteeringLaw
-from mrpctl.flight.tracking import ReferenceStream, tracking_error_expr
+from mrpctl.flight.tracking import ErrorTime, ReferenceStream, settling_error_expr, tracking_error_expr
 from mrpctl.loop import (
     InertiaInput,
     core_function,
@@ -135,6 +135,22 @@ def _error_function() -> ca.Function:
     sigma_r = ca.SX.sym("sigma_r", 3)
     error = tracking_error_expr(sigma, ca.DM.zeros(3), sigma_r, ca.DM.zeros(3))[0]
     return ca.Function("error", [sigma, sigma_r], [error])
+
+
+def settling_tail_function(name: str) -> ca.Function:
+    """``tail(stats, x_meas, reference, j) -> stats_next``: the settling statistic and max |σ|² of sample j from
+    its x_meas and its row (t_j), as `engine_sample` folds them for a counted sample: the last samples of a run
+    whose sample folds those of k − d (``lagged_settling``), from the ring at the end of the run."""
+    stats = ca.SX.sym("stats", STATS_SIZE)
+    x_meas = ca.SX.sym("x_meas", STATE_SIZE)
+    reference = ca.SX.sym("reference", 9)
+    j = ca.SX.sym("j")
+    sigma_squared, omega = settling_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])
+    unsettled = ca.logic_or(sigma_squared >= stats[S_SETTLE_SIGMA], ca.dot(omega, omega) >= stats[S_SETTLE_OMEGA])
+    entries = [stats[i] for i in range(STATS_SIZE)]
+    entries[S_UNSETTLED] = ca.if_else(unsettled, j, stats[S_UNSETTLED])
+    entries[S_MAX_SIGMA] = ca.fmax(stats[S_MAX_SIGMA], sigma_squared)
+    return ca.Function(name, [stats, x_meas, reference, j], [ca.vertcat(*entries)])
 
 
 def tracking_memory(sigma_seen: np.ndarray, reference: ReferenceStream) -> np.ndarray:
@@ -217,12 +233,17 @@ def engine_sample(
     if "tracking_error" in more_names:
         settling_state = more.pop(more_names.index("tracking_error"))
         more_names.remove("tracking_error")
-    elif "tracking_settling" in more_names:
-        settling = more.pop(more_names.index("tracking_settling"))
-        more_names.remove("tracking_settling")
+    lagged = False  # the statistics are those of sample k − d (the controller's error is its true error)
+    for output in ("tracking_settling", "tracking_settling_lagged"):
+        if output in more_names:
+            settling = more.pop(more_names.index(output))
+            more_names.remove(output)
+            lagged = output == "tracking_settling_lagged"
 
     k = stats[S_K]
     counted = counting if self_frozen and frozen_memory else ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
+    # the sample whose true error the statistics take: k, or k − d (from k = d on; the last d at the run's end)
+    settled_index, settled_counted = (k - d, ca.logic_and(counted, k >= d)) if lagged else (k, counted)
     sigma_raw, omega_raw = x_raw[0:3], 4 * x_raw[3:6]
     bound = DIVERGENCE_BOUND**2
     # NaN compares false, so a NaN or inf state is "not ok".
@@ -255,8 +276,8 @@ def engine_sample(
         ca.if_else(switch_counted, k, stats[S_LAST]),
         flips,
         ca.if_else(counted, u, u_prev),
-        ca.if_else(ca.logic_and(counted, unsettled), k, stats[S_UNSETTLED]),
-        ca.if_else(counted, ca.fmax(stats[S_MAX_SIGMA], sigma_squared), stats[S_MAX_SIGMA]),  # max |σ|²
+        ca.if_else(ca.logic_and(settled_counted, unsettled), settled_index, stats[S_UNSETTLED]),
+        ca.if_else(settled_counted, ca.fmax(stats[S_MAX_SIGMA], sigma_squared), stats[S_MAX_SIGMA]),  # max |σ|²
         ca.if_else(ca.logic_and(counted, ca.logic_not(ok)), k, stats[S_DIVERGED]),
         ca.if_else(ca.logic_and(counted, torque > peak), torque, peak),  # max |u|_inf
         stats[S_SETTLE_SIGMA],
@@ -275,7 +296,10 @@ def engine_sample(
 
 
 def _driver_source(
-    sample: ca.Function, rotation: ca.Function | None = None, true_error: ca.Function | None = None
+    sample: ca.Function,
+    rotation: ca.Function | None = None,
+    true_error: ca.Function | None = None,
+    tail: ca.Function | None = None,
 ) -> str:
     """``scalar_driver.c`` with the #defines that bind it to ``sample`` (and to ``rotation``, the attitude noise's
     θ -> σ(θ) for a sample of `MRP`; to ``true_error``, the true σ_B/R that closes a kept tracking record, for a
@@ -304,9 +328,16 @@ def _driver_source(
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
         "MRPCTL_ROTATION_INPUT": int(rotation is not None),
         "MRPCTL_TRUE_ERROR_INPUT": int(true_error is not None),
+        "MRPCTL_LAGGED_SETTLING": int(tail is not None),
         # the sample's outputs begin with stats_next (engine_sample's stats_first)
         "MRPCTL_STATS_FIRST": int(sample.name_out(0) == "stats_next"),
     }
+    if tail is not None:
+        defines["MRPCTL_TAIL"] = tail.name()
+        defines["MRPCTL_TAIL_RUN"] = tail.name() + "_run"
+        defines["MRPCTL_TAIL_SZ_IW"] = max(tail.sz_iw(), 1)
+        defines["MRPCTL_TAIL_SZ_W"] = max(tail.sz_w(), 1)
+        defines["MRPCTL_STATS_SIZE"] = STATS_SIZE
     if true_error is not None:
         defines["MRPCTL_TRUE_ERROR"] = true_error.name()
         defines["MRPCTL_TRUE_ERROR_OFFSET"] = record_width  # the true σ_B/R after the sample's own record
@@ -349,8 +380,10 @@ class Engine:
         wheels: WheelCluster | None = None,
         law: SteeringLaw | None = None,
         gravity_gradient: bool = False,
+        lagged_settling: bool = False,
     ) -> None:
         self.d = d
+        self.lagged_settling = lagged_settling
         self.wheels = wheels
         self.reference_input = reference_input
         self.substeps = substeps
@@ -422,7 +455,12 @@ class Engine:
                 # actuator's |u_c| is a root too (measured: 15 instructions fewer with limits, 5-10 more without)
                 squared_peak=limited,
                 **(
-                    {"reference_input": True, "feedforward": feedforward, "settling_output": True}
+                    {
+                        "reference_input": True,
+                        "feedforward": feedforward,
+                        "settling_output": True,
+                        "lagged_settling": lagged_settling,
+                    }
                     if reference_input
                     else {}
                 ),
@@ -451,6 +489,7 @@ class Engine:
             label += ("_tracking" + ("_ff" if feedforward else "")) if reference_input else ""
             label += "" if law is None else "_" + law.label()
             label += "_gravity" if gravity_gradient else ""
+            label += "_lagged" if lagged_settling else ""
         # the scalar driver runs counted samples only: the flight samples drop the memory guard
         # the flight tracking sample: the statistics take (|σ_B/R|², ω_B/R) of the true error, the driver forms the
         # true σ_B/R of the kept records only, and the code is ordered controller, statistics, RK4 (stats_first)
@@ -466,6 +505,7 @@ class Engine:
         true_error = None
         if tracked:
             true_error = true_error_function(self.sample.name() + "_true_error")
+        tail = settling_tail_function(self.sample.name() + "_tail") if lagged_settling else None
         self.record_width = (
             (self.sample.size1_out("record") + (0 if true_error is None else true_error.size1_out(0)))
             if "record" in self.sample.name_out()
@@ -474,8 +514,8 @@ class Engine:
         self.compiled: CompiledFunction = compile_function(
             self.sample,
             flags=(*SIMULATION_FLAGS, *min_max_flags),
-            appendix=_driver_source(self.sample, rotation, true_error) + min_max_source,
-            others=tuple(f for f in (rotation, true_error) if f is not None),
+            appendix=_driver_source(self.sample, rotation, true_error, tail) + min_max_source,
+            others=tuple(f for f in (rotation, true_error, tail) if f is not None),
         )
         self._run_c: Any = None
         if self.compiled.compiled:
@@ -491,6 +531,11 @@ class Engine:
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 4
             )
+            if tail is not None:
+                self._tail_c: Any = getattr(self._library, tail.name() + "_run")
+                self._tail_c.restype = ctypes.c_longlong
+                self._tail_c.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong, ctypes.c_void_p]
+                self._tail_c.argtypes += [ctypes.c_longlong] * 2
 
     def virtual_machine_sample(self) -> ca.Function:
         """The sample for the virtual machine: the flight sample with the sensor ports of this structure,
@@ -595,6 +640,14 @@ class Engine:
         """
         if self.reference_input != (reference is not None):
             raise ValueError("a reference needs an engine with a reference input, and only it")
+        # (the engine's structure is an ideal sensor's: m_k = x_meas whatever sensor model the run names)
+        if self.lagged_settling and (
+            delay is not None or reference is None or reference.error_time is not ErrorTime.MEASUREMENT
+        ):
+            raise ValueError(
+                "this engine folds the controller's error as the true error of t_{k-d}: a fixed delay and the "
+                "measurement-time error only"
+            )
         if self.torque_input != (disturbance is not None and not disturbance.constant):
             raise ValueError("a per-sample disturbance needs an engine with a torque input, and only it")
         state = workspace.state
@@ -676,9 +729,10 @@ class Engine:
             if self.torque_input:
                 assert disturbance is not None
                 torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1, rate)), INPUT_SIZE
-            reference_rows = None if reference is None else reference.rows(k, k1)
             if reference is not None and k < reference.lag:  # the held rows before t = 0 in slices of their own
                 k1 = min(k1, reference.lag)
+            # (after the slice is cut: the held rows are a copy, of this slice only)
+            reference_rows = None if reference is None else reference.rows(k, k1)
             if delay is not None and jitter is None:  # a given sequence: j*(k) of the slice from NumPy
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])
@@ -723,6 +777,12 @@ class Engine:
                 break
             if state[diverged] >= 0:
                 break  # the driver stopped after the diverging sample
+        if self.lagged_settling and reference is not None:  # the last d samples' statistics, from the ring
+            low = max(k - self.d, 0)
+            rows = np.ascontiguousarray(reference.rows(low, k)[0]) if k > low else np.zeros((1, 9))
+            stats = state[memory_end:]
+            if self._tail_c(address(stats), address(ring), len(ring), address(rows), low, k) < 0:
+                raise CodegenError(f"evaluation of the compiled engine {self.compiled.library} failed")
         switch_indices = np.concatenate(indices) if indices else np.zeros(0, np.int64)
         memory = state[STATE_SIZE:memory_end].copy()
         if self._squared_peak:  # the sample kept the peak |u_c|²
@@ -796,6 +856,7 @@ def engine(
     feedforward: bool = False,
     law: SteeringLaw | None = None,
     gravity_gradient: bool = False,
+    lagged_settling: bool = False,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
@@ -811,6 +872,9 @@ def engine(
     one library per law); None: the PD law. ``gravity_gradient``: the flight sample's plant flies the
     gravity-gradient torque of an orbit whose constants follow the flight constants
     ([`flight_core_function`][mrpctl.loop.flight_core_function]); without it the library of before.
+    ``lagged_settling``: a tracking flight sample with an ideal sensor, d >= 1, the measurement-time error and a
+    fixed delay takes the statistics of sample k − d from the controller's own error (no true error formed at
+    t_k; the last d samples' at the end of the run); its runs refuse anything else.
     """
     model = None if predictor is None else inertia_input(predictor)
     flight = isinstance(rule, Hysteretic)
@@ -831,6 +895,8 @@ def engine(
         key += (("tracking", feedforward),) if flight and reference_input else ()  # else the key of before
         key += () if law is None or not flight else (law,)  # without a law the key of before
         key += ("gravity",) if gravity_gradient and flight else ()  # without it the key of before
+        lagged_settling = bool(lagged_settling and flight and reference_input and not sensor and d >= 1)
+        key += ("lagged",) if lagged_settling else ()
     else:
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
         key += ("torque",) if torque_input else ()  # without it the key (and the library) of before
@@ -854,6 +920,7 @@ def engine(
                 feedforward=bool(feedforward and reference_input and (flight or model is not None)),
                 law=law if flight else None,
                 gravity_gradient=bool(gravity_gradient),
+                lagged_settling=lagged_settling and model is None,
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)

@@ -18,7 +18,9 @@
  * reference, row k - k0 of reference and of reference_error. With MRPCTL_TRUE_ERROR_INPUT the kept records are
  * MRPCTL_RECORD_WIDTH wide and end with the true sigma_B/R at t_k, computed here for the kept samples only by the
  * generated MRPCTL_TRUE_ERROR(x_meas, reference) from the kept x_meas and the row of t_k (the sample's record fills
- * the first MRPCTL_TRUE_ERROR_OFFSET numbers). With MRPCTL_STATS_FIRST the sample's first three outputs are
+ * the first MRPCTL_TRUE_ERROR_OFFSET numbers). With MRPCTL_LAGGED_SETTLING the sample folds the statistics of
+ * sample k - d (its controller's error is that sample's true error) and MRPCTL_TAIL_RUN folds those of the last
+ * samples j0 .. j1-1 of a run from their ring entries (slot j mod ring_size) and rows (t_j) by MRPCTL_TAIL. With MRPCTL_STATS_FIRST the sample's first three outputs are
  * stats_next, x_next, memory_next (the order of its generated code), else x_next, memory_next, stats_next.
  *
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
@@ -73,6 +75,31 @@ static int mrpctl_rotation_rows(casadi_real* rows_data, long long rows) {
     row[2] = out[2];
   }
   return 0;
+}
+#endif
+
+#if MRPCTL_LAGGED_SETTLING
+CASADI_SYMBOL_EXPORT long long MRPCTL_TAIL_RUN(casadi_real* stats, const casadi_real* ring, long long ring_size,
+    const casadi_real* rows, long long j0, long long j1) {
+  const casadi_real* arg[4];
+  casadi_real* res[1];
+  casadi_int iw[MRPCTL_TAIL_SZ_IW];
+  casadi_real w[MRPCTL_TAIL_SZ_W];
+  casadi_real out[MRPCTL_STATS_SIZE];
+  casadi_real index;
+  long long j;
+  int i;
+  res[0] = out;
+  for (j = j0; j < j1; ++j) {
+    index = (casadi_real)j;
+    arg[0] = stats;
+    arg[1] = ring + MRPCTL_RING_WIDTH * (j % ring_size);
+    arg[2] = rows + 9 * (j - j0);
+    arg[3] = &index;
+    if (MRPCTL_TAIL(arg, res, iw, w, 0)) return -1;
+    for (i = 0; i < MRPCTL_STATS_SIZE; ++i) stats[i] = out[i];
+  }
+  return j1 - j0;
 }
 #endif
 

@@ -220,6 +220,7 @@ def flight_core_function(
     law: SteeringLaw | None = None,
     gravity_gradient: bool = False,
     settling_output: bool = False,
+    lagged_settling: bool = False,
 ) -> ca.Function:
     """One sample of the flight loop with the controller-side rule [`Hysteretic`][mrpctl.flight.Hysteretic] (pure SX).
 
@@ -286,6 +287,12 @@ def flight_core_function(
     ([`settling_error_expr`][mrpctl.flight.tracking.settling_error_expr]: what the statistics take, without
     forming σ_B/R) and the records leave the true σ_B/R out: the scalar engine's driver computes it for the kept
     samples only (``true_error_function``, the same expressions as ``tracking_error``'s σ_B/R: its bits).
+    With ``lagged_settling`` (also ``settling_output``; an ideal sensor, d >= 1, the caller feeding the row of
+    t_{k−d} as ``reference_error`` and a fixed delay) the output is ``tracking_settling_lagged``: the same
+    numbers for the true error of t_{k−d}, which is the controller's own error then (m_{k−d} is x_meas of
+    t_{k−d}: the same inputs, the same expressions, 4 (ω̃/4 − [BN] ω_R/4) = 4 (ω̃/4) − [BN] ω_R exactly), so
+    the true error at t_k is not formed; the engine folds sample k − d's statistics at sample k and the last
+    d samples' from the ring at the end of the run.
 
     With ``gravity_gradient`` the plant flies the gravity-gradient torque 3 n² r̂_B × (J r̂_B) of a circular orbit
     inside its RK4 stages ([`step_function`][mrpctl.loop.step_function]): ``flight`` grows by the orbit's
@@ -297,6 +304,11 @@ def flight_core_function(
         raise SpecificationError("feedforward: the feedforward terms need a reference (reference_input)")
     if settling_output and not reference_input:
         raise SpecificationError("settling_output: the true error's statistics need a reference (reference_input)")
+    if lagged_settling and (not settling_output or sensor or d < 1):
+        raise SpecificationError(
+            "lagged_settling: the controller's error is the true error of t_{k-d} with settling_output, an ideal "
+            "sensor (sensor=False) and d >= 1 only"
+        )
     if short_measurements and sensor:
         raise SpecificationError("short_measurements: only without a sensor (its measurements are not bookkept)")
     step = step_function(spacecraft, period, substeps, inertia=inertia, gravity_gradient=gravity_gradient)
@@ -328,7 +340,8 @@ def flight_core_function(
         # the tracking error of the delayed measurement against the controller's reference row (its error time)
         sigma_bn = sigma_seen
         row = reference_error
-        sigma_seen, rate_seen, omega_r_body, scale = tracking_error_expr(sigma_bn, seen[3:6], row[0:3], row[3:6])
+        formed = tracking_error_expr(sigma_bn, seen[3:6], row[0:3], row[3:6], settling=lagged_settling)
+        sigma_seen, rate_seen, omega_r_body, scale = formed[0:4]
     h_next, c_next, sigma_c, switched = selection_function()(
         memory[0], memory[1], sigma_seen, memory[2:5], parameters[0]
     )
@@ -378,7 +391,9 @@ def flight_core_function(
     output_names = ["x_next", "memory_next", "x_meas", "u", "switched"] + (["measurement"] if sensor else [])
     outputs = [x_next, memory_next, x_meas, u, switched] + ([measured] if sensor else [])
     recorded = []
-    if reference_input and settling_output:  # what the statistics take of the true error at t_k
+    if lagged_settling:  # the statistics of the true error of t_{k-d}: the controller's error
+        settling = ca.vertcat(formed[4], 4 * rate_seen)
+    elif reference_input and settling_output:  # what the statistics take of the true error at t_k
         settling = ca.vertcat(*settling_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6]))
     elif reference_input:  # the true pointing error at t_k: the metrics' state
         true_sigma, true_rate = tracking_error_expr(x_meas[0:3], x_meas[3:6], reference[0:3], reference[3:6])[0:2]
@@ -387,7 +402,8 @@ def flight_core_function(
         output_names.append("record")
         outputs.append(ca.vertcat(h_next, sigma_c, command, sigma_seen, 4 * seen[3:6], *recorded))
     if reference_input:
-        output_names.append("tracking_settling" if settling_output else "tracking_error")
+        settled = "tracking_settling_lagged" if lagged_settling else "tracking_settling"
+        output_names.append(settled if settling_output else "tracking_error")
         outputs.append(settling if settling_output else ca.vertcat(true_sigma, true_rate))
     return ca.Function("core", inputs, outputs, names, output_names)
 

@@ -476,8 +476,19 @@ def simulate_batch(
             checked, options_by_run[i], sensors[i], actuators[i], gravity_gradient=gravity_gradient is not None
         )
         torque_input = streamed_by_run[i] is not None
-        tracking = tracked_by_run[i] is not None
-        key = (id(crafts[i]), id(rules[i]), samples_by_run[i], tuple(sorted(structure.items())), torque_input, tracking)
+        tracked = tracked_by_run[i]
+        tracking = tracked is not None
+        # a fixed delay at the measurement time: the controller's error is the true error of t_{k-d}
+        lagged = tracked is not None and varying[i] is None and tracked.error_time is ErrorTime.MEASUREMENT
+        key = (
+            id(crafts[i]),
+            id(rules[i]),
+            samples_by_run[i],
+            tuple(sorted(structure.items())),
+            torque_input,
+            tracking,
+            lagged,
+        )
         if key not in by_structure and wheels is not None:
             by_structure[key] = wheel_engine(
                 crafts[i],
@@ -503,6 +514,7 @@ def simulate_batch(
                 **structure,
                 **({"torque_input": True} if torque_input else {}),
                 **({} if tracked_by_run[i] is None else {"reference_input": True, "feedforward": feedforward}),
+                lagged_settling=lagged,
                 law=law,
             )
         engines[i] = by_structure[key]

@@ -456,6 +456,8 @@ def simulate(
         **engine_structure(checked, options, sensor, actuator, gravity_gradient=gravity_gradient is not None),
         **({} if streamed is None else {"torque_input": True}),
         **({} if tracked is None else {"reference_input": True, "feedforward": feedforward}),
+        # a fixed delay at the measurement time: the controller's error is the true error of t_{k-d}
+        lagged_settling=tracked is not None and varying is None and tracked.error_time is ErrorTime.MEASUREMENT,
         law=law,
     )
     if tracked is not None and not found.compiled_code:
