@@ -18,6 +18,8 @@ Measured, interleaved (in-process, cluster, in-process, cluster, ...):
 * the cluster's programs are in this process's session (``BENCH_SESSIONS=own``: a session each, as from
   separate terminals; with the kernel's autogroup scheduling each session then gets its own share of a
   loaded machine, and the cluster more CPU than the in-process run);
+* ``BENCH_QUIET=1``: the scheduler and workers get the Dask settings of the ``LocalCluster`` that
+  ``scheduler="local"`` starts (``LOCAL_CLUSTER_CONFIG`` as ``DASK_...`` variables, ``--memory-limit 0``);
 * ``first compile``: after the rounds, the workers' cache is emptied and the workers restarted (new
   processes); each runs an 8-run chunk: the import and the compile of a node that never ran mrpctl (the two
   workers of this host share the cache: one compiles, the other waits for it and loads it);
@@ -61,6 +63,7 @@ from _host import cpu_model, vector_isa
 import mrpctl
 from mrpctl.campaign import open_campaign, parse_campaign, run_campaign
 from mrpctl.campaign._task import simulate_chunk
+from mrpctl.campaign.run import LOCAL_CLUSTER_CONFIG
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEC_FILE = ROOT / "examples" / "campaigns" / "tumble_fixed_inertia.toml"
@@ -119,11 +122,13 @@ def _names(client: Any) -> list[str]:
 class Cluster:
     """``dask scheduler`` and ``workers`` single-threaded ``dask worker`` processes, each in its own session."""
 
-    def __init__(self, folder: Path, workers: int, cache: Path | None, own_sessions: bool) -> None:
+    def __init__(self, folder: Path, workers: int, cache: Path | None, own_sessions: bool, quiet: bool = False) -> None:
         self.address = f"tcp://127.0.0.1:{_port()}"
         self.log = open(folder / "cluster.log", "w")  # noqa: SIM115 (closed in stop)
         self.processes: list[subprocess.Popen[bytes]] = []
         env = dict(os.environ)
+        if quiet:  # the settings of the LocalCluster that scheduler="local" starts, as the programs' environment
+            env.update({_variable(key): str(value) for key, value in LOCAL_CLUSTER_CONFIG.items()})
         if cache is not None:
             env["MRPCTL_CACHE_DIR"] = str(cache)
         # Each program its own process group (stopped as a group). In this session by default: with the kernel's
@@ -147,6 +152,7 @@ class Cluster:
         )
         for i in range(workers):
             command = [str(DASK), "worker", self.address, "--nthreads", "1", "--name", f"w{i}"]
+            command += ["--memory-limit", "0"] if quiet else []
             self.processes.append(subprocess.Popen(command, env=env, **common))
         from dask.distributed import Client
 
@@ -216,6 +222,11 @@ def _members(groups: list[int]) -> list[int]:
     return [p.pid for p in psutil.process_iter(["pid"]) if _group(p.pid) in groups]
 
 
+def _variable(key: str) -> str:
+    """Dask's environment variable of a configuration key: ``a.b-c.d`` -> ``DASK_A__B_C__D``."""
+    return "DASK_" + key.upper().replace(".", "__").replace("-", "_")
+
+
 def _die_with_parent() -> None:
     """In the child before exec: SIGTERM when this bench dies, even by SIGKILL (Linux; elsewhere the finally only)."""
     if sys.platform.startswith("linux"):
@@ -278,6 +289,7 @@ def main() -> None:
     workers = int(os.environ.get("BENCH_WORKERS", "2"))
     shared_cache = os.environ.get("BENCH_WORKER_CACHE", "empty") == "shared"
     own_sessions = os.environ.get("BENCH_SESSIONS", "one") == "own"
+    quiet = os.environ.get("BENCH_QUIET", "0") == "1"
     cli = os.environ.get("BENCH_CLI", "0") == "1"
     if not DASK.exists():
         raise SystemExit(f"no dask command next to {sys.executable}")
@@ -306,12 +318,13 @@ def main() -> None:
     reference = None
     try:
         cache = None if shared_cache else work / "worker-cache"
-        cluster = Cluster(work, workers, cache, own_sessions)
+        cluster = Cluster(work, workers, cache, own_sessions, quiet)
         autogroup = Path("/proc/sys/kernel/sched_autogroup_enabled")
         print(
             f"cluster start (Popen to {workers} workers listed) {cluster.started:.2f} s; worker cache: "
             f"{'this process' if shared_cache else 'empty, their own'}; cluster programs in "
-            f"{'sessions of their own' if own_sessions else 'this session'} (autogroup scheduling "
+            f"{'sessions of their own' if own_sessions else 'this session'}; Dask settings "
+            f"{'of scheduler=local (BENCH_QUIET=1)' if quiet else 'the defaults'} (autogroup scheduling "
             f"{autogroup.read_text().strip() if autogroup.exists() else 'absent'}); load {_load()}"
         )
         for r in range(rounds + 1):
