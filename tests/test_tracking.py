@@ -423,3 +423,42 @@ def test_a_reference_through_its_shadow_set() -> None:
     )
     _compare(result, run)
     assert result.switch_count == 0 and result.pointing_error.max() < 1.0  # on the reference all along
+
+
+@pytest.mark.parametrize("slice_samples", [3, 7])
+@pytest.mark.parametrize("error_time", list(ErrorTime))
+def test_runs_cut_into_slices_track_as_one_call(
+    monkeypatch: pytest.MonkeyPatch, slice_samples: int, error_time: ErrorTime
+) -> None:
+    """The compiled engine in slices shorter and longer than the delay (d = 5): the error-time rows held at row 0
+    across slices, the statistics of the last d samples folded by the driver (its last slice covers them) or by
+    the caller (it does not): the NumPy loop's numbers, and those of one call bit for bit."""
+    from mrpctl.engines import scalar
+
+    rows = REFERENCES["slew"]
+    kw = dict(tau=TAU, rule=Hysteretic(0.1), t_final=T_FINAL, rate=RATE, reference=rows, error_time=error_time)
+    one = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, feedforward=True, **kw)
+    metrics = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, feedforward=True, keep_every=None, **kw)
+    monkeypatch.setattr(scalar, "SLICE_SAMPLES", slice_samples)
+    assert scalar.slice_samples(1) == slice_samples and (N % slice_samples < 5) == (slice_samples == 3)
+    sliced = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, feedforward=True, **kw)
+    run = tracking_loop(
+        paper.INERTIA, paper.GAIN, X0, rows, rate=RATE, t_final=T_FINAL, d=5, delta=0.1,
+        measurement_time=error_time is ErrorTime.MEASUREMENT, feedforward=True,
+    )  # fmt: skip
+    _compare(sliced, run)
+    for name in ("sigma", "omega", "u", "sigma_c", "logic", "pointing_error", "switch_indices"):
+        assert np.array_equal(getattr(sliced, name), getattr(one, name)), name
+    thin = mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, feedforward=True, keep_every=None, **kw)
+    for name in ("switch_count", "max_sigma", "peak_torque", "settling_time", "first_switch_time"):
+        assert getattr(sliced, name) == getattr(one, name) == getattr(thin, name) == getattr(metrics, name), name
+    # a diverging loop (the gain's sign turned): the run stops at the diverging sample in either cut, with the
+    # same statistics (the last d samples folded at the stop)
+    monkeypatch.setattr(scalar, "SLICE_SAMPLES", 2**16)
+    unstable = dict(kw, t_final=60.0, reference=slew_rows(3001, RATE, math.radians(200.0), 6.0))
+    whole = mrpctl.simulate(paper.SPACECRAFT, -4.0 * paper.GAIN, X0, keep_every=None, **unstable)
+    monkeypatch.setattr(scalar, "SLICE_SAMPLES", slice_samples)
+    cut = mrpctl.simulate(paper.SPACECRAFT, -4.0 * paper.GAIN, X0, keep_every=None, **unstable)
+    assert whole.diverged and cut.diverged and whole.samples == cut.samples < 3001
+    for name in ("max_sigma", "settling_time", "switch_count", "peak_torque"):
+        assert getattr(whole, name) == getattr(cut, name), name

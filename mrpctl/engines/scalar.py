@@ -340,6 +340,7 @@ def _driver_source(
         defines["MRPCTL_STATS_SIZE"] = STATS_SIZE
     if true_error is not None:
         defines["MRPCTL_TRUE_ERROR"] = true_error.name()
+        defines["MRPCTL_TRUE_ERROR_ONE"] = true_error.name() + "_one"
         defines["MRPCTL_TRUE_ERROR_OFFSET"] = record_width  # the true σ_B/R after the sample's own record
         defines["MRPCTL_TRUE_ERROR_SZ_IW"] = max(true_error.sz_iw(), 1)
         defines["MRPCTL_TRUE_ERROR_SZ_W"] = max(true_error.sz_w(), 1)
@@ -518,6 +519,7 @@ class Engine:
             others=tuple(f for f in (rotation, true_error, tail) if f is not None),
         )
         self._run_c: Any = None
+        self._true_error_c: Any = None
         if self.compiled.compiled:
             self._library = ctypes.CDLL(str(self.compiled.library))
             self._run_c = getattr(self._library, self.sample.name() + "_run")
@@ -526,11 +528,15 @@ class Engine:
                 [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 8
                 + [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
-                + [ctypes.c_void_p] * 3
+                + [ctypes.c_void_p] * 4
                 + [ctypes.c_longlong] * 3
                 + [ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong]
                 + [ctypes.c_void_p] * 4
             )
+            if true_error is not None:  # the controller's memory at k = 0 (tracking_memory, compiled)
+                self._true_error_c = getattr(self._library, true_error.name() + "_one")
+                self._true_error_c.restype = ctypes.c_int
+                self._true_error_c.argtypes = [ctypes.c_void_p] * 3
             if tail is not None:
                 self._tail_c: Any = getattr(self._library, tail.name() + "_run")
                 self._tail_c.restype = ctypes.c_longlong
@@ -566,6 +572,19 @@ class Engine:
     def compiled_code(self) -> bool:
         """True when runs call the compiled library."""
         return self._run_c is not None
+
+    def _tracking_memory(self, sigma_seen: np.ndarray, reference: ReferenceStream) -> np.ndarray:
+        """[`tracking_memory`][mrpctl.engines.scalar.tracking_memory] by this library's true error (the same SX
+        compiled: its bits, without a call into CasADi's virtual machine); the predictor's through CasADi."""
+        if self._true_error_c is None:
+            return tracking_memory(sigma_seen, reference)
+        x_meas = np.zeros(STATE_SIZE)
+        x_meas[0:3] = sigma_seen
+        row = reference.first()
+        out = np.empty(3)
+        if self._true_error_c(address(x_meas), address(row), address(out)):
+            raise CodegenError(f"evaluation of the compiled engine {self.compiled.library} failed")
+        return out
 
     def ring_size(self, n: int) -> int:
         """Columns of the measurement ring: m_{k−d} is read back for k >= d only."""
@@ -667,7 +686,7 @@ class Engine:
             else:
                 state[STATE_SIZE:memory_end] = flight_memory(x0, history, self.d) if self.flight else memory0
             if reference is not None:  # the controller's previous MRP is the error σ_B/R it sees at k = 0
-                state[STATE_SIZE + 2 : STATE_SIZE + 5] = tracking_memory(
+                state[STATE_SIZE + 2 : STATE_SIZE + 5] = self._tracking_memory(
                     state[STATE_SIZE + 2 : STATE_SIZE + 5], reference
                 )
             if self.flight and not self._sensor:  # the sample reads m_{k-d} as it is: a history row must be short
@@ -721,7 +740,9 @@ class Engine:
         newest = -1 - self.d
         schedule: np.ndarray | None = None
         k = 0
-        reference_rows: tuple[np.ndarray, np.ndarray] | None = None
+        reference_rows: tuple[np.ndarray, np.ndarray, int] | None = None
+        # (held, the run's n when the driver folds the last d samples' statistics (lagged), set to 1 when it did)
+        control = np.array([0, n if self.lagged_settling else -1, 0], dtype=np.int64)
         diverged = memory_end + S_DIVERGED
         while k < n:
             k1 = min(k + step, n)
@@ -729,10 +750,10 @@ class Engine:
             if self.torque_input:
                 assert disturbance is not None
                 torque, torque_stride = np.ascontiguousarray(disturbance.samples(k, k1, rate)), INPUT_SIZE
-            if reference is not None and k < reference.lag:  # the held rows before t = 0 in slices of their own
-                k1 = min(k1, reference.lag)
-            # (after the slice is cut: the held rows are a copy, of this slice only)
-            reference_rows = None if reference is None else reference.rows(k, k1)
+            # the error-time rows in place: the driver holds row 0 for the samples whose error time is before t = 0
+            reference_rows = None if reference is None else reference.held_rows(k, k1)
+            if reference_rows is not None:
+                control[0] = reference_rows[2]
             if delay is not None and jitter is None:  # a given sequence: j*(k) of the slice from NumPy
                 schedule = newest_arrived_slice(delay, rate, self.d, k, k1, newest)
                 newest = int(schedule[-1])
@@ -751,6 +772,7 @@ class Engine:
                 torque_stride,
                 None if reference_rows is None else address(reference_rows[0]),
                 None if reference_rows is None else address(reference_rows[1]),
+                None if reference_rows is None else control.ctypes.data,
                 None if schedule is None else schedule.ctypes.data,
                 None if jitter is None else jitter.ctypes.data,
                 None if delay_used is None else delay_used.ctypes.data,
@@ -777,7 +799,8 @@ class Engine:
                 break
             if state[diverged] >= 0:
                 break  # the driver stopped after the diverging sample
-        if self.lagged_settling and reference is not None:  # the last d samples' statistics, from the ring
+        if self.lagged_settling and reference is not None and not control[2]:  # the last d samples' statistics
+            # (the driver folded them when the run ended in its last call with their rows in its slice)
             low = max(k - self.d, 0)
             rows = np.ascontiguousarray(reference.rows(low, k)[0]) if k > low else np.zeros((1, 9))
             stats = state[memory_end:]

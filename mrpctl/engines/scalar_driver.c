@@ -15,12 +15,18 @@
  * MRPCTL_RECORD_WIDTH numbers per sample is copied to kept_records like u (NULL: not kept); with
  * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque, and with
  * MRPCTL_REFERENCE_INPUT (its input index; the next input is the reference at the error time) a tracked
- * reference, row k - k0 of reference and of reference_error. With MRPCTL_TRUE_ERROR_INPUT the kept records are
+ * reference, row k - k0 of reference and row max(k - k0 - held, 0) of reference_error, held =
+ * reference_control[0] (the first samples of a run whose error time is before t = 0 take row 0, read in place). With
+ * MRPCTL_TRUE_ERROR_INPUT the kept records are
  * MRPCTL_RECORD_WIDTH wide and end with the true sigma_B/R at t_k, computed here for the kept samples only by the
  * generated MRPCTL_TRUE_ERROR(x_meas, reference) from the kept x_meas and the row of t_k (the sample's record fills
  * the first MRPCTL_TRUE_ERROR_OFFSET numbers). With MRPCTL_LAGGED_SETTLING the sample folds the statistics of
  * sample k - d (its controller's error is that sample's true error) and MRPCTL_TAIL_RUN folds those of the last
- * samples j0 .. j1-1 of a run from their ring entries (slot j mod ring_size) and rows (t_j) by MRPCTL_TAIL. With MRPCTL_STATS_FIRST the sample's first three outputs are
+ * samples j0 .. j1-1 of a run from their ring entries (slot j mod ring_size) and rows (t_j) by MRPCTL_TAIL; MRPCTL_RUN
+ * folds them itself when the run ends in its call (at sample reference_control[1], the run's n, or by diverging) and
+ * the rows of the last d samples are in the slice's reference, and then sets reference_control[2] to 1 (else the
+ * caller folds them by MRPCTL_TAIL_RUN). With MRPCTL_TRUE_ERROR_INPUT, MRPCTL_TRUE_ERROR_ONE(x_meas, row, out) is
+ * MRPCTL_TRUE_ERROR of one sample (the controller's memory at k = 0). With MRPCTL_STATS_FIRST the sample's first three outputs are
  * stats_next, x_next, memory_next (the order of its generated code), else x_next, memory_next, stats_next.
  *
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
@@ -103,11 +109,24 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_TAIL_RUN(casadi_real* stats, const casadi_
 }
 #endif
 
+#if MRPCTL_TRUE_ERROR_INPUT
+CASADI_SYMBOL_EXPORT int MRPCTL_TRUE_ERROR_ONE(const casadi_real* x_meas, const casadi_real* row, casadi_real* out) {
+  const casadi_real* arg[2];
+  casadi_real* res[1];
+  casadi_int iw[MRPCTL_TRUE_ERROR_SZ_IW];
+  casadi_real w[MRPCTL_TRUE_ERROR_SZ_W];
+  arg[0] = x_meas;
+  arg[1] = row;
+  res[0] = out;
+  return MRPCTL_TRUE_ERROR(arg, res, iw, w, 0);
+}
+#endif
+
 CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real* history,
     long long history_stride, const casadi_real* gain, const casadi_real* parameters,
     const casadi_real* inertia, const casadi_real* inertia_inverse, const casadi_real* flight,
     const casadi_real* noise, const unsigned long long* noise_key, const casadi_real* torque,
-    long long torque_stride, const casadi_real* reference, const casadi_real* reference_error, const long long* used, long long* jitter, long long* kept_delays, long long k0, long long k1,
+    long long torque_stride, const casadi_real* reference, const casadi_real* reference_error, long long* reference_control, const long long* used, long long* jitter, long long* kept_delays, long long k0, long long k1,
     long long d, casadi_real* ring, long long ring_size, long long keep_every,
     casadi_real* kept_measurements, casadi_real* kept_u, casadi_real* switched, casadi_real* kept_records) {
   const casadi_real* arg[MRPCTL_SZ_ARG];
@@ -171,9 +190,12 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #if !MRPCTL_RECORD_OUTPUT
   (void)kept_records;
 #endif
-#if !MRPCTL_REFERENCE_INPUT
+#if MRPCTL_REFERENCE_INPUT
+  const long long held = reference_control ? reference_control[0] : 0;
+#else
   (void)reference;
   (void)reference_error;
+  (void)reference_control;
 #endif
   for (k = k0; k < k1; ++k) {
     casadi_real* now = buffers[now_index];
@@ -237,9 +259,10 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     arg[MRPCTL_TORQUE_INPUT] = torque + torque_stride * (k - k0);
 #endif
 #if MRPCTL_REFERENCE_INPUT
-    /* a tracked reference: row k - k0 of the slice's reference at t_k and at the controller's error time (9 each) */
+    /* a tracked reference: row k - k0 of the slice's reference at t_k and the row of the controller's error time
+       (9 each): row 0 for the first `held` samples, then one row further a sample */
     arg[MRPCTL_REFERENCE_INPUT] = reference + 9 * (k - k0);
-    arg[MRPCTL_REFERENCE_INPUT + 1] = reference_error + 9 * (k - k0);
+    arg[MRPCTL_REFERENCE_INPUT + 1] = reference_error + 9 * (k - k0 > held ? k - k0 - held : 0);
 #endif
 #if MRPCTL_RING_OUTPUT
     /* the flight and predictor samples: the sensor's measurement (and the model state) go to the ring,
@@ -286,5 +309,17 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
   }
   for (i = 0; i < MRPCTL_STATE; ++i) state[i] = buffers[now_index][i];
   if (jitter) jitter[2] = newest;
+#if MRPCTL_LAGGED_SETTLING
+  /* the run ended here (its last sample, or the diverging one): the statistics of its last d samples, whose rows
+     t_j are in this slice's reference when j0 >= k0 */
+  if (reference_control && reference_control[1] >= 0 &&
+      (k == reference_control[1] || state[MRPCTL_X_MEMORY + MRPCTL_S_DIVERGED] >= 0)) {
+    const long long j0 = k - d > 0 ? k - d : 0;
+    if (j0 >= k0) {
+      if (MRPCTL_TAIL_RUN(state + MRPCTL_X_MEMORY, ring, ring_size, reference + 9 * (j0 - k0), j0, k) < 0) return -1;
+      reference_control[2] = 1;
+    }
+  }
+#endif
   return k - k0;
 }

@@ -201,6 +201,16 @@ class ReferenceStream:
         error = np.concatenate((np.repeat(block[0:1], held, axis=0), block[0 : k1 - k0 - held]))
         return now, error
 
+    def held_rows(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, int]:
+        """[`rows`][mrpctl.flight.tracking.ReferenceStream.rows] without the copy of the held rows: ((k1 − k0, 9)
+        reference at t_k, the error-time rows from the one of sample k0 + held on, held), C-contiguous views of an
+        array reference. Sample k of the slice takes error row max(k − k0 − held, 0): the first ``held`` samples
+        (error time before t = 0) row 0 of the reference, as does sample k0 + held."""
+        low = max(k0 - self.lag, 0)
+        block = np.ascontiguousarray(self.samples(low, k1))
+        held = max(min(self.lag - k0, k1 - k0), 0)
+        return block[k0 - low :], block[0 : max(k1 - k0 - held, 1)], held
+
     def first(self) -> np.ndarray:
         """The controller's reference row at k = 0 (row 0 in both conventions)."""
         return np.array(self.samples(0, 1)[0])
