@@ -212,10 +212,10 @@ def test_slew_time_and_pointing_metrics() -> None:
     assert result.pointing_rms == pytest.approx(math.sqrt(np.mean(settled**2)))
 
 
-def _simulate(**kw):
+def _simulate(K=paper.GAIN, **kw):
     base = dict(tau=TAU, rule=Hysteretic(0.0), t_final=T_FINAL, rate=RATE, reference=REFERENCES["slew"])
     base.update(kw)
-    return mrpctl.simulate(paper.SPACECRAFT, paper.GAIN, X0, **base)
+    return mrpctl.simulate(paper.SPACECRAFT, K, X0, **base)
 
 
 def test_bad_references() -> None:
@@ -234,6 +234,41 @@ def test_bad_references() -> None:
         _simulate(reference=long)
     with pytest.raises(SpecificationError, match="reference must be an"):
         _simulate(reference="nadir")
+    # the compiled engine checks an array's rows as it reads them: the same error, whichever row is bad (before
+    # t = 0's held row, inside the run, in the last d rows, past the run's n rows, after the loop diverged), for
+    # the flight sample (measurement time with the folded statistics, current time, a sensor) and the predictor
+    cases = {
+        "held row 0 NaN": (0, 5, np.nan),
+        "inside inf": (300, 1, -np.inf),
+        "last d rows": (N - 2, 8, np.inf),
+        "long sigma": (N - 4, 0, 1.0 + 1e-8),
+        "past the run": (N + 3, 7, np.nan),
+    }
+    runs = {
+        "measurement": {},
+        "current": {"error_time": ErrorTime.CURRENT},
+        "sensor": {"sensor": SensorModel(attitude_noise=1e-4, seed=2)},
+        "predictor": {"rule": mrpctl.OnPredicted(1.0), "predictor": mrpctl.Predictor(model=paper.SPACECRAFT)},
+        "diverging": {"t_final": 60.0},
+    }
+    for case, (row, column, value) in cases.items():
+        for label, options in runs.items():
+            bad = slew_rows(3005 if label == "diverging" else N + 5, RATE, math.radians(200.0), 6.0)
+            if case == "long sigma":
+                bad[row, 0:3] = (value, 0.0, 0.0)
+            else:
+                bad[row, column] = value
+            with pytest.raises(SpecificationError) as eager:
+                mrpctl.flight.tracking.reference_stream(bad, N, RATE, 5, ErrorTime.MEASUREMENT)
+            gain = -4.0 * paper.GAIN if label == "diverging" else paper.GAIN
+            with pytest.raises(SpecificationError) as deferred:
+                _simulate(reference=bad, feedforward=True, keep_every=None, K=gain, **options)
+            assert str(deferred.value) == str(eager.value), (case, label)
+    priority = rows.copy()
+    priority[3, 0:3] = (2.0, 0.0, 0.0)
+    priority[9, 6] = np.nan  # a later non-finite row is named first, as the eager check does
+    with pytest.raises(SpecificationError, match=r"reference: the rows must be finite; row 9 is not"):
+        _simulate(reference=priority)
 
     class Wrong:
         def samples(self, t):

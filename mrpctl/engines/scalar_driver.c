@@ -16,7 +16,10 @@
  * MRPCTL_TORQUE_INPUT (its input index) the sample reads a per-sample torque, row k - k0 of torque, and with
  * MRPCTL_REFERENCE_INPUT (its input index; the next input is the reference at the error time) a tracked
  * reference, row k - k0 of reference and row max(k - k0 - held, 0) of reference_error, held =
- * reference_control[0] (the first samples of a run whose error time is before t = 0 take row 0, read in place). With
+ * reference_control[0] (the first samples of a run whose error time is before t = 0 take row 0, read in place); with
+ * reference_control[3] nonzero the driver checks row k - k0 of reference before sample k (every entry finite,
+ * |sigma_RN|^2 <= MRPCTL_REFERENCE_BOUND: the rows of an array reference, checked as they are read instead of in a
+ * pass of their own) and stops before the first bad one, k in reference_control[4] (else -1). With
  * MRPCTL_TRUE_ERROR_INPUT the kept records are
  * MRPCTL_RECORD_WIDTH wide and end with the true sigma_B/R at t_k, computed here for the kept samples only by the
  * generated MRPCTL_TRUE_ERROR(x_meas, reference) from the kept x_meas and the row of t_k (the sample's record fills
@@ -192,6 +195,8 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #endif
 #if MRPCTL_REFERENCE_INPUT
   const long long held = reference_control ? reference_control[0] : 0;
+  const int check_rows = reference_control && reference_control[3];
+  if (check_rows) reference_control[4] = -1;
 #else
   (void)reference;
   (void)reference_error;
@@ -263,6 +268,17 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
        (9 each): row 0 for the first `held` samples, then one row further a sample */
     arg[MRPCTL_REFERENCE_INPUT] = reference + 9 * (k - k0);
     arg[MRPCTL_REFERENCE_INPUT + 1] = reference_error + 9 * (k - k0 > held ? k - k0 - held : 0);
+    if (check_rows) {
+      /* row k: x - x is 0 for a finite x and NaN otherwise, and NaN fails the comparison (so does a NaN sigma) */
+      const casadi_real* r = reference + 9 * (k - k0);
+      const casadi_real size = (r[0] * r[0] + r[1] * r[1]) + r[2] * r[2];
+      const casadi_real finite = (((r[3] - r[3]) + (r[4] - r[4])) + ((r[5] - r[5]) + (r[6] - r[6]))) +
+                                 ((r[7] - r[7]) + (r[8] - r[8]));
+      if (!(size + finite <= MRPCTL_REFERENCE_BOUND)) {
+        reference_control[4] = k;
+        break;
+      }
+    }
 #endif
 #if MRPCTL_RING_OUTPUT
     /* the flight and predictor samples: the sensor's measurement (and the model state) go to the ring,
@@ -312,7 +328,7 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #if MRPCTL_LAGGED_SETTLING
   /* the run ended here (its last sample, or the diverging one): the statistics of its last d samples, whose rows
      t_j are in this slice's reference when j0 >= k0 */
-  if (reference_control && reference_control[1] >= 0 &&
+  if (reference_control && reference_control[1] >= 0 && !(check_rows && reference_control[4] >= 0) &&
       (k == reference_control[1] || state[MRPCTL_X_MEMORY + MRPCTL_S_DIVERGED] >= 0)) {
     const long long j0 = k - d > 0 ? k - d : 0;
     if (j0 >= k0) {

@@ -31,6 +31,7 @@ from mrpctl.mrp import skew_expr
 
 __all__ = [
     "DEFAULT_POINTING_TOLERANCE",
+    "REFERENCE_BOUND",
     "REFERENCE_TOLERANCE",
     "REFERENCE_WIDTH",
     "ErrorTime",
@@ -48,6 +49,8 @@ __all__ = [
 REFERENCE_WIDTH = 9
 #: |σ_R/N| may exceed 1 by this much (a reference written in the short set, with rounding).
 REFERENCE_TOLERANCE = 1e-9
+#: The bound on |σ_R/N|² = (σ₁² + σ₂²) + σ₃² (in this order: the compiled engine's check of its rows is the same).
+REFERENCE_BOUND = (1.0 + REFERENCE_TOLERANCE) ** 2
 #: The slew time's default tolerance on the pointing error Φ_B/R (degrees).
 DEFAULT_POINTING_TOLERANCE = 0.1
 
@@ -172,10 +175,24 @@ class ReferenceStream:
     the constant history holds x0) and 0 for ``CURRENT``.
     """
 
-    def __init__(self, source: Any, n: int, rate: float, lag: int, error_time: ErrorTime, name: str) -> None:
+    def __init__(
+        self, source: Any, n: int, rate: float, lag: int, error_time: ErrorTime, name: str, unchecked: bool = False
+    ) -> None:
         self._array = source if isinstance(source, np.ndarray) else None
         self._source = source
         self.n, self.rate, self.lag, self.error_time, self.name = n, rate, lag, error_time, name
+        #: An array whose values are not checked yet: its consumer checks them (`check_rows`; the compiled scalar
+        #: engine as it reads them). False for a ``samples(t)`` source (each slice is checked when evaluated).
+        self.unchecked = unchecked and self._array is not None
+
+    def check_rows(self, k0: int = 0) -> None:
+        """Check the values of rows k0, k0 + 1, … of an unchecked array (the rows before k0 are good): raises the
+        [`SpecificationError`][mrpctl.errors.SpecificationError] of
+        [`reference_stream`][mrpctl.flight.tracking.reference_stream] (naming the first bad row of the whole array)."""
+        if self._array is None or not self.unchecked:
+            return
+        if not _rows_good(self._array[k0:]):
+            _check_values(self.name, self._array, "the rows")
 
     def samples(self, k0: int, k1: int) -> np.ndarray:
         """(k1 − k0, 9) reference rows of samples k0..k1 − 1 (k >= 0), checked."""
@@ -216,9 +233,10 @@ class ReferenceStream:
         return np.array(self.samples(0, 1)[0])
 
 
-def _check_rows(name: str, value: Any, rows: int | None, what: str) -> np.ndarray:
+def _array_rows(name: str, value: Any, what: str) -> np.ndarray:
+    """``value`` as a C-contiguous (samples, 9) float array (its values not checked)."""
     try:
-        array = np.asarray(value, dtype=float)
+        array = np.ascontiguousarray(value, dtype=float)
     except (TypeError, ValueError) as error:
         raise SpecificationError(f"{name}: {what} must be numbers, got {type(value).__name__}") from error
     if array.ndim != 2 or array.shape[1] != REFERENCE_WIDTH:
@@ -226,20 +244,43 @@ def _check_rows(name: str, value: Any, rows: int | None, what: str) -> np.ndarra
             f"{name}: {what} must have shape (samples, {REFERENCE_WIDTH}) "
             "(sigma_RN, omega_RN_N, domega_RN_N per row) but found " + str(array.shape)
         )
+    return array
+
+
+def _check_rows(name: str, value: Any, rows: int | None, what: str) -> np.ndarray:
+    array = _array_rows(name, value, what)
     if rows is not None and array.shape[0] != rows:
         raise DimensionError(f"{name}: {what} returned {array.shape[0]} rows for {rows} sample times")
-    # two contiguous passes when the rows are good (a reference is checked on every call): the largest and the
-    # smallest entry are finite only when every entry is (a NaN or an inf reaches them), and entries within ±0.5
-    # give |σ|² <= 0.75, far inside the bound whatever the rounding; else the row by row tests
+    return array if _rows_good(array) else _check_values(name, array, what)
+
+
+def _rows_good(array: np.ndarray) -> bool:
+    """True when every entry is finite and every |σ_R/N|² <= `REFERENCE_BOUND` (False: look row by row).
+
+    Two contiguous passes when the rows are good (a reference is checked on every call): the largest and the smallest
+    entry are finite only when every entry is (a NaN or an inf reaches them), and entries within ±0.5 give
+    |σ|² <= 0.75, far inside the bound whatever the rounding; else the row by row tests.
+    """
     high, low = (float(array.max()), float(array.min())) if array.size else (0.0, 0.0)
     if not (np.isfinite(high) and np.isfinite(low)):
-        bad = int(np.flatnonzero(~np.all(np.isfinite(array), axis=1))[0])
-        raise SpecificationError(f"{name}: {what} must be finite; row {bad} is not")
-    if max(high, -low) <= 0.5:
-        return array
-    norms = np.einsum("ij,ij->i", array[:, 0:3], array[:, 0:3])
-    if np.any(norms > (1.0 + REFERENCE_TOLERANCE) ** 2):
-        bad = int(np.flatnonzero(norms > (1.0 + REFERENCE_TOLERANCE) ** 2)[0])
+        return False
+    return max(high, -low) <= 0.5 or not np.any(_sigma_squared(array) > REFERENCE_BOUND)
+
+
+def _sigma_squared(array: np.ndarray) -> np.ndarray:
+    """|σ_R/N|² of each row as (σ₁² + σ₂²) + σ₃², the operations of the compiled engine's check."""
+    return (array[:, 0] * array[:, 0] + array[:, 1] * array[:, 1]) + array[:, 2] * array[:, 2]
+
+
+def _check_values(name: str, array: np.ndarray, what: str) -> np.ndarray:
+    """``array`` when its rows are good, else the error naming the first non-finite row, or the first row with
+    |σ_R/N| > 1 (+ `REFERENCE_TOLERANCE`)."""
+    finite = np.all(np.isfinite(array), axis=1)
+    if not np.all(finite):
+        raise SpecificationError(f"{name}: {what} must be finite; row {int(np.flatnonzero(~finite)[0])} is not")
+    norms = _sigma_squared(array)
+    if np.any(norms > REFERENCE_BOUND):
+        bad = int(np.flatnonzero(norms > REFERENCE_BOUND)[0])
         raise SpecificationError(
             f"{name}: sigma_RN must be a short-set MRP (|sigma_RN| <= 1); row {bad} has |sigma_RN| = "
             f"{np.sqrt(norms[bad]):.6g}"
@@ -248,13 +289,23 @@ def _check_rows(name: str, value: Any, rows: int | None, what: str) -> np.ndarra
 
 
 def reference_stream(
-    reference: Any, n: int, rate: float, delay_samples: int, error_time: Any, name: str = "reference"
+    reference: Any,
+    n: int,
+    rate: float,
+    delay_samples: int,
+    error_time: Any,
+    name: str = "reference",
+    *,
+    defer_values: bool = False,
 ) -> ReferenceStream:
     """The checked reference of a run of n samples at ``rate`` (Hz) with a delay of d samples.
 
     ``reference``: an (m, 9) array with m >= n rows (row k at t_k = k/rate; checked once, read through a
     view), or an object with a method ``samples(t) -> (len(t), 9)`` (evaluated slice by slice, each slice
     checked). ``error_time`` an [`ErrorTime`][mrpctl.flight.tracking.ErrorTime] (or its value, a string).
+    ``defer_values``: an array's shape and rows are checked here, its values by the consumer
+    ([`ReferenceStream.check_rows`][mrpctl.flight.tracking.ReferenceStream.check_rows]; the compiled scalar engine
+    checks each row as it reads it, which saves the passes over the array), with the same errors.
 
     Raises
     ------
@@ -279,10 +330,13 @@ def reference_stream(
             f"{name} must be an (n, 9) array of (sigma_RN, omega_RN_N, domega_RN_N) rows or an object with a "
             f"method samples(t), got {reference!r}"
         )
-    array = np.ascontiguousarray(_check_rows(name, reference, None, "the rows"))
+    if defer_values:
+        array = _array_rows(name, reference, "the rows")
+    else:
+        array = np.ascontiguousarray(_check_rows(name, reference, None, "the rows"))
     if array.shape[0] < n:
         raise DimensionError(f"{name}: the run has {n} samples but the reference has {array.shape[0]} rows")
-    return ReferenceStream(array, n, rate, lag, error_time, name)
+    return ReferenceStream(array, n, rate, lag, error_time, name, unchecked=defer_values)
 
 
 def pointing_metrics(

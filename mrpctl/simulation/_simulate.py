@@ -386,9 +386,11 @@ def simulate(
     history_rows, history_value = measurement_history(history, x0, d)
     limit = memory_limit_bytes(memory_limit)
     checked = check_predictor(predictor, rule, history, delay)
+    # the compiled engine checks an array reference's values as it reads them (the same errors)
     tracked, feedforward, pointing_tolerance = tracking_options(
-        reference, error_time, feedforward, pointing_tolerance, rule=rule, predictor=checked, n=n, rate=rate, d=d
-    )
+        reference, error_time, feedforward, pointing_tolerance, rule=rule, predictor=checked, n=n, rate=rate, d=d,
+        defer_values=True,
+    )  # fmt: skip
     law = check_law(law, (rule,), gain, predictor=checked)
     if checked is None:
         options, saturation = flight_options(rule, actuator, disturbance, sensor)
@@ -461,6 +463,7 @@ def simulate(
         law=law,
     )
     if tracked is not None and not found.compiled_code:
+        tracked.check_rows()  # a bad reference is named first, as when it was checked before the engine
         raise CodegenError("reference: tracking needs the compiled engine (install a C compiler: gcc or cc, or set CC)")
     if streamed is not None and not found.compiled_code:
         raise CodegenError(

@@ -30,8 +30,10 @@ def tracking_options(
     rate: float,
     d: int,
     name: str = "reference",
+    defer_values: bool = False,
 ) -> tuple[ReferenceStream | None, bool, float]:
-    """(the checked reference stream or None, feedforward, the pointing tolerance in degrees)."""
+    """(the checked reference stream or None, feedforward, the pointing tolerance in degrees); ``defer_values``: an
+    array's values are checked by the run (`ReferenceStream.check_rows`, the compiled engine as it reads them)."""
     if not isinstance(feedforward, bool):
         raise SpecificationError(f"feedforward must be True or False, got {feedforward!r}")
     tolerance = positive_scalar("pointing_tolerance", pointing_tolerance)
@@ -43,5 +45,5 @@ def tracking_options(
         raise SpecificationError(_PLANT_SIDE.format(rule=rule))
     if error_time is None:  # the prediction is of now: its error is against the reference of now
         error_time = ErrorTime.MEASUREMENT if predictor is None else ErrorTime.CURRENT
-    stream = reference_stream(reference, n, rate, d, error_time, name)
+    stream = reference_stream(reference, n, rate, d, error_time, name, defer_values=defer_values)
     return stream, feedforward, tolerance
