@@ -61,6 +61,9 @@
 #define MRPCTL_OUT_STATS 2
 #endif
 
+/* two doubles, for the reference rows' check (SSE2's pairs; the same IEEE subtractions and additions) */
+typedef double mrpctl_pair __attribute__((vector_size(16)));
+
 /* samples of noise drawn at a time (6 doubles each: 3 KB on the stack) */
 #define MRPCTL_NOISE_BLOCK 64
 
@@ -271,10 +274,12 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
     if (check_rows) {
       /* row k: x - x is 0 for a finite x and NaN otherwise, and NaN fails the comparison (so does a NaN sigma) */
       const casadi_real* r = reference + 9 * (k - k0);
-      const casadi_real size = (r[0] * r[0] + r[1] * r[1]) + r[2] * r[2];
-      const casadi_real finite = (((r[3] - r[3]) + (r[4] - r[4])) + ((r[5] - r[5]) + (r[6] - r[6]))) +
-                                 ((r[7] - r[7]) + (r[8] - r[8]));
-      if (!(size + finite <= MRPCTL_REFERENCE_BOUND)) {
+      mrpctl_pair a, b, c, z;
+      memcpy(&a, r + 3, sizeof a);
+      memcpy(&b, r + 5, sizeof b);
+      memcpy(&c, r + 7, sizeof c);
+      z = ((a - a) + (b - b)) + (c - c); /* two lanes at a time */
+      if (!(((r[0] * r[0] + r[1] * r[1]) + r[2] * r[2]) + (z[0] + z[1]) <= MRPCTL_REFERENCE_BOUND)) {
         reference_control[4] = k;
         break;
       }
