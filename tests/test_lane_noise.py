@@ -16,12 +16,12 @@ from importlib import resources
 
 import noise_reference as reference
 import pytest
-from test_lanes_per_run_models import COMMON, _assert_same_bits, _case
+from lane_assertions import assert_same_bits, scalar_batch
+from test_lanes_per_run_models import COMMON, _case
 
 from mrpctl import simulate_batch
 from mrpctl._compile import find_compiler
 from mrpctl.engines import lanes as lane_engines
-from mrpctl.simulation import _batch
 
 GROUP = 8  # layers per entry of mrpctl_zig_sure (the entry of layer i is i >> 3)
 
@@ -66,11 +66,7 @@ def test_the_bound_of_sure_acceptance_is_sound_and_the_least_over_each_group():
 @pytest.mark.parametrize("width", [16, 4])
 def test_own_noise_on_other_widths_equals_the_scalar_engine_bit_for_bit(width, monkeypatch):
     case = _case()
-    _batch._LANES = False
-    try:
-        scalar = simulate_batch(**case, **COMMON, threads=1)
-    finally:
-        _batch._LANES = True
+    scalar = scalar_batch(**case, **COMMON, threads=1)
     built: list[tuple[int, bool]] = []
     build = lane_engines.lane_engine
 
@@ -82,4 +78,4 @@ def test_own_noise_on_other_widths_equals_the_scalar_engine_bit_for_bit(width, m
     monkeypatch.setattr(lane_engines, "lane_engine", at_width)
     lanes = simulate_batch(**case, **COMMON, threads=2)
     assert built == [(width, True)]  # one lane group, on the lanes at that width, each lane its own streams
-    _assert_same_bits(lanes, scalar)
+    assert_same_bits(lanes, scalar)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from flight_reference import reference_loop
+from lane_assertions import BATCH_FIELDS, assert_same_bits, scalar_batch
 from lane_cases import dispersed
 
 from mrpctl import OnCurrent, paper, simulate, simulate_batch
@@ -19,19 +20,9 @@ from mrpctl.simulation import BatchResult, _batch
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="the lane engine needs a C compiler")
 
-_FIELDS = (
-    "switch_count",
-    "first_switch_time",
-    "last_switch_time",
-    "sign_flips",
-    "settling_time",
-    "converged",
-    "diverged",
-    "max_sigma",
-    "peak_torque",
-    "saturated_fraction",
-    "peak_command",
-)
+#: The metrics compared here: every batch metric but the plant-set changes (tests/test_lanes_structure.py
+#: compares every array a batch keeps).
+_FIELDS = tuple(name for name in BATCH_FIELDS if name != "plant_set_changes")
 SENSOR = SensorModel(attitude_noise=0.02, rate_noise=1e-3, gyro_bias=[2e-3, 0.0, -1e-3], seed=3)
 
 
@@ -40,20 +31,11 @@ def _dispersed(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _both(*args, **kwargs) -> tuple[BatchResult, BatchResult]:
-    lanes = simulate_batch(*args, **kwargs)
-    _batch._LANES = False
-    try:
-        scalar = simulate_batch(*args, **kwargs)
-    finally:
-        _batch._LANES = True
-    return lanes, scalar
+    return simulate_batch(*args, **kwargs), scalar_batch(*args, **kwargs)
 
 
 def _assert_same_bits(lanes: BatchResult, scalar: BatchResult) -> None:
-    for name in _FIELDS:
-        got, want = np.asarray(getattr(lanes, name)), np.asarray(getattr(scalar, name))
-        assert got.shape == want.shape, name
-        assert np.array_equal(got.view(np.uint8), want.view(np.uint8)), name
+    assert_same_bits(lanes, scalar, fields=_FIELDS)
 
 
 @pytest.mark.parametrize("mode", [None, Saturation.SCALE, Saturation.CLIP])

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from lane_assertions import assert_row_is_the_run, assert_same_bits, one_run, scalar_batch
 from lane_cases import dispersed
 
 from mrpctl import simulate, simulate_batch
@@ -18,27 +19,11 @@ from mrpctl.engines import lanes as lane_engines
 from mrpctl.engines.lane_streams import lane_newest_arrived
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, SensorModel, newest_arrived
-from mrpctl.simulation import BatchResult, _batch
+from mrpctl.simulation import _batch
 from mrpctl.spacecraft import Spacecraft
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="the lane engine needs a C compiler")
 
-_FIELDS = (
-    "switch_count",
-    "plant_set_changes",
-    "first_switch_time",
-    "last_switch_time",
-    "sign_flips",
-    "settling_time",
-    "converged",
-    "diverged",
-    "max_sigma",
-    "peak_torque",
-    "saturated_fraction",
-    "peak_command",
-)
-#: The SimulationResult attributes that are the batch metrics of one run.
-_RUN_FIELDS = ("switch_count", "settling_time", "converged", "diverged", "peak_torque")
 COUNT = 19  # three batches of W = 8, the last one padded
 
 
@@ -78,18 +63,6 @@ def _case(mode: Saturation | None = Saturation.SCALE) -> dict:
     )
 
 
-def _one(case: dict, i: int) -> dict:
-    """Run i's arguments: its item of every per-run list (a shared value as it is)."""
-    return {name: value[i] if isinstance(value, list | np.ndarray) else value for name, value in case.items()}
-
-
-def _assert_same_bits(got: BatchResult, want: BatchResult, rows: slice | list[int] = slice(None)) -> None:
-    for name in _FIELDS:
-        a, b = np.asarray(getattr(got, name))[rows], np.asarray(getattr(want, name))
-        assert a.shape == b.shape, name
-        assert np.array_equal(a.view(np.uint8), b.view(np.uint8)), name
-
-
 COMMON = dict(tau=0.05, rate=100.0, t_final=12.0)
 
 
@@ -107,20 +80,14 @@ def test_a_fully_dispersed_batch_equals_each_run_alone_bit_for_bit(mode, monkeyp
     on_two = simulate_batch(**case, **COMMON, threads=2)
     assert packed == [(COUNT, True, True)]  # one lane group: every run on the lanes, each lane its own streams
     in_series = simulate_batch(**case, **COMMON, threads=1)
-    _assert_same_bits(on_two, in_series)
-    _batch._LANES = False
-    try:
-        scalar = simulate_batch(**case, **COMMON, threads=2)
-    finally:
-        _batch._LANES = True
-    _assert_same_bits(on_two, scalar)
+    assert_same_bits(on_two, in_series)
+    scalar = scalar_batch(**case, **COMMON, threads=2)
+    assert_same_bits(on_two, scalar)
     for i in range(COUNT):  # each run as a call of its own (what a campaign made) and as simulate
-        alone = simulate_batch(**_one(case, i), **COMMON, threads=1)
-        _assert_same_bits(on_two, alone, [i])
-        run = simulate(**_one(case, i), **COMMON)
-        for name in _RUN_FIELDS:
-            mine, value = np.asarray(getattr(on_two, name))[i], getattr(run, name)
-            assert mine.tobytes() == np.asarray(np.nan if value is None else value, mine.dtype).tobytes(), (i, name)
+        alone = simulate_batch(**one_run(case, i), **COMMON, threads=1)
+        assert_same_bits(on_two, alone, [i])
+        run = simulate(**one_run(case, i), **COMMON)
+        assert_row_is_the_run(on_two, i, run)
     # the batch covers what it must: switching, diverging and (with limits) saturated runs; the streams matter
     assert (on_two.switch_count[~on_two.diverged] >= 2).sum() >= 5
     if mode is None:
@@ -137,12 +104,12 @@ def test_per_run_models_on_a_sliced_horizon_and_a_shared_model_list_change_no_bi
     whole = simulate_batch(**case, **COMMON)
     monkeypatch.setattr(_batch, "slice_samples", lambda substeps: 97)  # noise rows and schedules slice by slice
     sliced = simulate_batch(**case, **COMMON)
-    _assert_same_bits(whole, sliced)
+    assert_same_bits(whole, sliced)
     # a list of one model is that model shared (the lanes stream it once per batch)
     shared = dict(case, sensor=[case["sensor"][0]], delay=[case["delay"][0]])
     listed = simulate_batch(**shared, **COMMON)
     given = simulate_batch(**dict(shared, sensor=case["sensor"][0], delay=case["delay"][0]), **COMMON)
-    _assert_same_bits(listed, given)
+    assert_same_bits(listed, given)
 
 
 def test_per_lane_schedules_are_each_runs_newest_arrived_measurements():
@@ -167,7 +134,7 @@ def test_per_run_models_alone_give_the_number_of_runs():
     assert len(batch.max_sigma) == COUNT
     for i in (0, 7):
         own = {name: case[name][i] for name in ("sensor", "delay", "actuator", "disturbance")}
-        _assert_same_bits(batch, simulate_batch(**dict(given, **own), **COMMON), [i])
+        assert_same_bits(batch, simulate_batch(**dict(given, **own), **COMMON), [i])
     assert not np.array_equal(batch.max_sigma[0], batch.max_sigma[7])
 
 
@@ -250,8 +217,8 @@ def test_per_run_sequences_and_tracking_with_own_noise_equal_each_run_alone(per_
         assert packed.pop() == (COUNT, True) and not packed  # every run on one own-streams lane group
         for i in range(COUNT):
             one = {"reference": references[i] if per_run_reference else references} if extra else {}  # type: ignore[index]
-            alone = simulate_batch(**_one(given, i), **one, **COMMON, threads=1)
-            _assert_same_bits(batch, alone, [i])
+            alone = simulate_batch(**one_run(given, i), **one, **COMMON, threads=1)
+            assert_same_bits(batch, alone, [i])
 
 
 def test_per_run_jitter_without_a_sensor_equals_each_run_alone():
@@ -259,6 +226,6 @@ def test_per_run_jitter_without_a_sensor_equals_each_run_alone():
     case = dict(_case(), sensor=None)
     batch = simulate_batch(**case, **COMMON, threads=2)
     for i in range(COUNT):
-        _assert_same_bits(batch, simulate_batch(**_one(case, i), **COMMON, threads=1), [i])
+        assert_same_bits(batch, simulate_batch(**one_run(case, i), **COMMON, threads=1), [i])
     engines = [engine for key, engine in lane_engines._ENGINES.items() if "own streams" in key]
     assert any(engine.own_noise is None for engine in engines)

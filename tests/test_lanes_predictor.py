@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from lane_assertions import assert_row_is_the_run, assert_same_bits, one_run, scalar_batch
 
 from mrpctl import paper, simulate, simulate_batch
 from mrpctl._compile import find_compiler
@@ -13,26 +14,11 @@ from mrpctl.design import pd_gains
 from mrpctl.engines import lanes as lane_engines
 from mrpctl.flight import ActuatorModel, Disturbance, SensorModel
 from mrpctl.predictor import OnPredicted, Predictor, perturbed_spacecraft
-from mrpctl.simulation import BatchResult, _batch
+from mrpctl.simulation import _batch
 from mrpctl.spacecraft import Spacecraft
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="the lane engine needs a C compiler")
 
-_FIELDS = (
-    "switch_count",
-    "plant_set_changes",
-    "first_switch_time",
-    "last_switch_time",
-    "sign_flips",
-    "settling_time",
-    "converged",
-    "diverged",
-    "max_sigma",
-    "peak_torque",
-    "saturated_fraction",
-    "peak_command",
-)
-_RUN_FIELDS = ("switch_count", "settling_time", "converged", "diverged", "peak_torque")
 COUNT = 19  # W = 8: full and padded batches in each lane group
 SC = paper.SPACECRAFT
 FAST = pd_gains(SC, zeta=1.0, omega_n=12.85).K
@@ -77,25 +63,6 @@ def _case() -> dict:
     )
 
 
-def _one(case: dict, i: int) -> dict:
-    return {name: value[i] if isinstance(value, list | np.ndarray) else value for name, value in case.items()}
-
-
-def _assert_same_bits(got: BatchResult, want: BatchResult, rows: slice | list[int] = slice(None)) -> None:
-    for name in _FIELDS:
-        a, b = np.asarray(getattr(got, name))[rows], np.asarray(getattr(want, name))
-        assert a.shape == b.shape, name
-        assert np.array_equal(a.view(np.uint8), b.view(np.uint8)), name
-
-
-def _scalar(**arguments: object) -> BatchResult:
-    _batch._LANES = False
-    try:
-        return simulate_batch(**arguments)  # type: ignore[arg-type]
-    finally:
-        _batch._LANES = True
-
-
 @pytest.mark.parametrize("model", [SC, Spacecraft(np.array([[95.0, 2.0, -1.0], [2.0, 105.0, 1.5], [-1.0, 1.5, 98.0]]))])
 def test_dispersed_predictor_runs_on_the_lanes_equal_the_scalar_engine_bit_for_bit(model, monkeypatch):
     case = dict(_case(), predictor=Predictor(model=model))
@@ -111,13 +78,11 @@ def test_dispersed_predictor_runs_on_the_lanes_equal_the_scalar_engine_bit_for_b
     on_two = simulate_batch(**case, **COMMON, threads=2)
     assert sum(packed) == COUNT  # every run on the lanes, in groups of delay and structure
     in_series = simulate_batch(**case, **COMMON, threads=1)
-    _assert_same_bits(on_two, in_series)
-    _assert_same_bits(on_two, _scalar(**case, **COMMON, threads=2))
+    assert_same_bits(on_two, in_series)
+    assert_same_bits(on_two, scalar_batch(**case, **COMMON, threads=2))
     for i in range(COUNT):  # each run alone: the scalar engine's simulate
-        run = simulate(**_one(case, i), **COMMON)
-        for name in _RUN_FIELDS:
-            mine, value = np.asarray(getattr(on_two, name))[i], getattr(run, name)
-            assert mine.tobytes() == np.asarray(np.nan if value is None else value, mine.dtype).tobytes(), (i, name)
+        run = simulate(**one_run(case, i), **COMMON)
+        assert_row_is_the_run(on_two, i, run)
     # the batch covers what it must: switching, a diverging run, saturated runs, the noise matters
     assert (on_two.switch_count[~on_two.diverged] >= 1).sum() >= 3
     assert on_two.diverged[9] and on_two.diverged.sum() < COUNT // 2
@@ -141,7 +106,7 @@ def test_shared_models_and_a_shared_torque_function_on_the_lanes_equal_the_scala
         disturbance=Disturbance(function=lambda t: np.stack([np.sin(t), 0.0 * t, np.cos(t)], axis=-1)),
     )
     lanes = simulate_batch(**case, **COMMON, threads=2)
-    _assert_same_bits(lanes, _scalar(**case, **COMMON, threads=1))
+    assert_same_bits(lanes, scalar_batch(**case, **COMMON, threads=1))
     run = simulate(**dict(case, x0=states[4]), **COMMON)
     assert np.asarray(lanes.max_sigma)[4].tobytes() == np.asarray(run.max_sigma).tobytes()
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from lane_assertions import assert_row_is_the_run, assert_same_bits, one_run, scalar_batch
 
 from mrpctl import simulate, simulate_batch
 from mrpctl._compile import find_compiler
@@ -32,20 +33,8 @@ WHEELS = WheelCluster.pyramid(
 CRAFTS = (Spacecraft(np.diag([0.2, 0.25, 0.15])), Spacecraft(np.diag([0.21, 0.24, 0.16])))
 COUNT = 19  # 10 runs on the first inertia (two batches of W = 8), 9 on the second
 COMMON = dict(tau=0.3, rate=10.0, t_final=40.0, wheels=WHEELS)
-_FIELDS = (
-    "switch_count",
-    "plant_set_changes",
-    "first_switch_time",
-    "last_switch_time",
-    "sign_flips",
-    "settling_time",
-    "converged",
-    "diverged",
-    "max_sigma",
-    "peak_torque",
-    "saturated_fraction",
-    "peak_command",
-)
+#: The batch metrics of a wheel run that its SimulationResult keeps too.
+_SUMMARIES = ("switch_count", "settling_time", "diverged", "max_sigma", "saturated_fraction")
 _WHEEL_FIELDS = ("peak_speed", "final_speeds", "torque_limited_time", "speed_limited_time", "peak_momentum")
 
 
@@ -91,20 +80,12 @@ def _case() -> dict:
     )
 
 
-def _one(case: dict, i: int) -> dict:
-    """Run i's arguments: its item of every per-run list."""
-    return {name: value[i] if isinstance(value, list | np.ndarray) else value for name, value in case.items()}
-
-
 def _bits(value: object) -> bytes:
     return np.ascontiguousarray(np.asarray(value, dtype=float)).tobytes()
 
 
 def _assert_same_bits(got: BatchResult, want: BatchResult, rows: slice | list[int] = slice(None)) -> None:
-    for name in _FIELDS:
-        a, b = np.asarray(getattr(got, name))[rows], np.asarray(getattr(want, name))
-        assert a.shape == b.shape, name
-        assert np.array_equal(a.view(np.uint8), b.view(np.uint8)), name
+    assert_same_bits(got, want, rows)
     assert got.wheels is not None and want.wheels is not None
     picked = list(range(len(got.wheels)))[rows] if isinstance(rows, slice) else rows
     assert len(picked) == len(want.wheels)
@@ -130,22 +111,16 @@ def test_a_dispersed_wheel_batch_is_on_the_lanes_and_equals_each_run_alone_bit_f
     assert sorted(packed) == [(9, True, True, True), (10, True, True, True)]
     in_series = simulate_batch(**case, **COMMON, threads=1)
     _assert_same_bits(on_two, in_series)
-    _batch._LANES = False
-    try:
-        scalar = simulate_batch(**case, **COMMON, threads=2)
-    finally:
-        _batch._LANES = True
+    scalar = scalar_batch(**case, **COMMON, threads=2)
     _assert_same_bits(on_two, scalar)
     for i in range(COUNT):  # each run as simulate, its wheel metrics and its summaries
-        run = simulate(**_one(case, i), **COMMON)
+        run = simulate(**one_run(case, i), **COMMON)
         assert run.wheels is not None and on_two.wheels is not None
         for name in _WHEEL_FIELDS:
             assert _bits(getattr(on_two.wheels[i], name)) == _bits(getattr(run.wheels, name)), (i, name)
-        for name in ("switch_count", "settling_time", "diverged", "max_sigma", "saturated_fraction"):
-            mine, value = np.asarray(getattr(on_two, name))[i], getattr(run, name)
-            assert mine.tobytes() == np.asarray(np.nan if value is None else value, mine.dtype).tobytes(), (i, name)
+        assert_row_is_the_run(on_two, i, run, _SUMMARIES)
     for i in (3, 5, 12):  # the noiseless, the constant-delay and the ideal-sensor runs as one-run batches
-        _assert_same_bits(on_two, simulate_batch(**_one(case, i), **COMMON, threads=1), [i])
+        _assert_same_bits(on_two, simulate_batch(**one_run(case, i), **COMMON, threads=1), [i])
     # the batch covers what it must: switching runs, the wheels' limits acting; the streams matter
     assert (on_two.switch_count >= 1).sum() >= 5
     assert sum(float(np.max(record.torque_limited_time)) > 0.0 for record in on_two.wheels or ()) >= 10
@@ -188,7 +163,7 @@ def test_per_run_delay_sequences_and_own_noise_on_the_wheel_lanes_equal_simulate
     assert packed == [True, True]
     assert batch.wheels is not None
     for row in range(len(picked)):
-        run = simulate(**_one(given, row), **COMMON)
+        run = simulate(**one_run(given, row), **COMMON)
         assert run.wheels is not None and run.delay_used is not None
         for name in _WHEEL_FIELDS:
             assert _bits(getattr(batch.wheels[row], name)) == _bits(getattr(run.wheels, name)), (row, name)
