@@ -11,6 +11,8 @@ a process of its own). The campaign is ``examples/campaigns/tumble_fixed_inertia
 Measured, interleaved (in-process, cluster, in-process, cluster, ...):
 
 * ``cluster start``: from the first ``Popen`` until the scheduler lists every worker;
+* ``first chunk stored after``: from the ``run_campaign`` call until its first chunk is in the store (the
+  store's creation, and on a cold cluster the imports and the compile before the first chunk can run);
 * round 0, ``cold``: the cluster's first campaign. The workers are fresh processes; by default they have
   an empty compile cache of their own (``BENCH_WORKER_CACHE=shared`` to give them this process's), so
   their first chunk imports mrpctl and compiles the engine, as on a node that never ran mrpctl;
@@ -339,7 +341,13 @@ def main() -> None:
                 if cli:
                     _cli(spec_file, out, chunk, scheduler, work / "cli.log")
                 else:
-                    result = run_campaign(spec, out, chunk=chunk, scheduler=scheduler)
+                    stored: list[float] = []  # when the first chunk was stored (s from the call)
+
+                    def first(index: int, a: int, b: int, stored: list[float] = stored, start: float = start) -> None:
+                        if not stored:
+                            stored.append(time.perf_counter() - start)
+
+                    result = run_campaign(spec, out, chunk=chunk, scheduler=scheduler, on_chunk=first)
                     assert result.complete and result.runs == count, result
                 wall = time.perf_counter() - start
                 ended = resource.getrusage(resource.RUSAGE_CHILDREN)  # the command line's process, once waited for
@@ -354,9 +362,10 @@ def main() -> None:
                     shutil.rmtree(out)
                 label = path if path == "in-process" else ("cluster, cold" if r == 0 else "cluster, warm")
                 rows.append((label, r, wall, driver, on_cluster, load))
+                first_chunk = f", first chunk stored after {stored[0]:.2f} s" if not cli and stored else ""
                 print(
                     f"  round {r} {label}: {wall:.2f} s, {count / wall:.0f} runs/s, CPU s: campaign's process "
-                    f"{driver:.1f}, cluster {on_cluster:.1f}; load {load}",
+                    f"{driver:.1f}, cluster {on_cluster:.1f}{first_chunk}; load {load}",
                     flush=True,
                 )
         client = cluster.connect()

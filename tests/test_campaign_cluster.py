@@ -223,3 +223,83 @@ def test_an_object_store_url_is_refused_on_the_command_line(tmp_path, capsys):
     assert stop.value.code == 2
     err = capsys.readouterr().err
     assert "s3://bucket/x is a URL" in err and err.count("\n") == 1, err
+
+
+def _warm_up_states(client) -> list[str]:
+    """The scheduler's states of the campaigns' warm-up tasks (one per worker)."""
+    return client.run_on_scheduler(
+        lambda dask_scheduler: sorted(ts.state for key, ts in dask_scheduler.tasks.items() if "warm-up-" in str(key))
+    )
+
+
+def test_a_fresh_cluster_warms_its_workers_while_the_store_is_created_and_its_scheduler_never_imports_mrpctl(
+    cluster, tmp_path, monkeypatch
+):
+    """On a cluster that never ran mrpctl, each worker imports mrpctl and loads the engine (a warm-up task) while
+    the caller writes the new store's template, and the scheduler hands out the tasks without importing mrpctl."""
+    from dask.distributed import Client
+
+    from mrpctl.campaign import store as store_module
+
+    spec = _spec("cold", 4)
+    original = store_module.CampaignStore._create
+    seen: dict[str, object] = {}
+    with Client(cluster.address, set_as_default=False) as watcher:
+
+        def create(self) -> None:  # the store's template is written only once every warm-up has finished
+            _wait(lambda: _warm_up_states(watcher) == ["memory", "memory"], "both warm-ups done", timeout=120)
+            seen["workers"] = watcher.run(lambda: "mrpctl.campaign._task" in sys.modules)
+            assert not (tmp_path / "cold" / "campaign.zarr").exists()
+            original(self)
+
+        monkeypatch.setattr(store_module.CampaignStore, "_create", create)
+        result = run_campaign(spec, tmp_path / "cold", chunk=4, scheduler=cluster.address)
+        on_scheduler = watcher.run_on_scheduler(lambda: sorted(m for m in sys.modules if m.split(".")[0] == "mrpctl"))
+        assert _warm_up_states(watcher) == []  # released with the campaign's client
+    assert result.complete and result.simulated == 4, result
+    assert list(seen["workers"].values()) == [True, True], seen  # type: ignore[union-attr]
+    assert on_scheduler == [], on_scheduler
+    monkeypatch.undo()
+    assert run_campaign(spec, tmp_path / "here", chunk=4, threads=1).complete
+    _identical(open_campaign(tmp_path / "cold"), open_campaign(tmp_path / "here"))
+
+
+def test_a_chunk_task_unpickles_where_mrpctl_cannot_be_imported(tmp_path):
+    """What the scheduler unpickles of a chunk (Dask's own pickle): no mrpctl import; run where mrpctl is, the
+    unpickled task gives the chunk the campaign computes here, the per-sample files' numbers included."""
+    from distributed.protocol.pickle import dumps
+
+    from mrpctl.campaign._task import shipped_files, simulate_chunk
+    from mrpctl.campaign.run import _on_worker
+
+    delays = tmp_path / "delays.csv"
+    rows = int(3.0 * 100.0) + 1  # one delay per sample: 0.01 .. 0.05 s, whole periods of the 100 Hz loop
+    np.savetxt(delays, (1 + (np.arange(rows) * 3) % 5) / 100.0, fmt="%.17g")
+    data = {
+        **copy.deepcopy(SPEC),
+        "name": "pickled",
+        "seed": 5,
+        "flight": {**SPEC["flight"], "delay_file": str(delays)},
+    }
+    spec = parse_campaign(data)
+    assert spec.files, "the campaign has a per-sample file"
+    task = tmp_path / "task.pickle"
+    task.write_bytes(
+        dumps((_on_worker("chunk_on_worker"), spec.source, spec.base.name, 3, 9, shipped_files(spec.files)))
+    )
+    code = (
+        "import pickle, sys; sys.modules['mrpctl'] = None; from distributed.protocol.pickle import loads; "
+        f"task = loads(open({str(task)!r}, 'rb').read()); "
+        "print(sorted(m for m in sys.modules if m.startswith('mrpctl.'))); del sys.modules['mrpctl']; "
+        "function, *args, files = task; values = function(*args, files=files); "
+        f"pickle.dump(values, open({str(tmp_path / 'values.pickle')!r}, 'wb'))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path)
+    assert done.stdout.strip() == "[]", done.stdout
+    import pickle
+
+    values = pickle.loads((tmp_path / "values.pickle").read_bytes())
+    expected = simulate_chunk(spec, 3, 9)
+    assert sorted(values) == sorted(expected)
+    for name, array in expected.items():
+        assert np.asarray(values[name]).tobytes() == np.asarray(array).tobytes(), name

@@ -6,6 +6,7 @@ not import xarray, zarr or matplotlib: a worker imports what it computes with an
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -18,8 +19,27 @@ from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation, Sen
 from mrpctl.guidance import GuidanceProfile
 from mrpctl.switching import SwitchingRule
 
-__all__ = ["FLIGHT_INPUTS", "chunk_on_worker", "run_models", "run_tracking", "simulate_chunk", "tracking_keywords"]
+__all__ = [
+    "FLIGHT_INPUTS",
+    "WARM_UP_RUNS",
+    "ShippedFiles",
+    "chunk_on_worker",
+    "received_files",
+    "run_models",
+    "run_tracking",
+    "shipped_files",
+    "simulate_chunk",
+    "tracking_keywords",
+    "warm_up_worker",
+]
 
+
+#: A campaign's per-sample files as a task carries them: key -> (path, values), plain data that the Dask scheduler
+#: unpickles without importing mrpctl (see `shipped_files`).
+ShippedFiles = dict[str, tuple[str, np.ndarray]]
+
+#: Runs simulated (and discarded) by `warm_up_worker`: enough for the engine of a chunk, too few to cost time.
+WARM_UP_RUNS = 8
 
 #: The per-run inputs of the flight loop stored with each run (besides the rule index and case).
 FLIGHT_INPUTS = (
@@ -160,3 +180,32 @@ def chunk_on_worker(
     the task, so a worker never reads them (it may not see the campaign file's folder).
     """
     return simulate_chunk(parse_campaign(source, name=name, files=files), start, stop, threads=1)
+
+
+def warm_up_worker(source: dict[str, Any], name: str, files: dict[str, SampleFile] | None = None) -> int:
+    """The Dask task a campaign sends to each worker before its chunks: what a worker's first chunk pays once.
+
+    Receiving it imports this module on the worker; running it rebuilds the spec and simulates the first
+    `WARM_UP_RUNS` runs on one thread, which compiles (or loads from the compile cache) the engine of the
+    campaign and loads it in the worker process. The results are discarded: the chunks simulate those
+    runs again, with the same bits. Returns the number of runs simulated.
+    """
+    spec = parse_campaign(source, name=name, files=files)
+    stop = min(spec.count, WARM_UP_RUNS)
+    simulate_chunk(spec, 0, stop, threads=1)
+    return stop
+
+
+def shipped_files(files: Mapping[str, SampleFile]) -> ShippedFiles:
+    """The numbers of the per-sample files as plain data for a Dask task (undone by `received_files`).
+
+    The scheduler unpickles every task it is given; a [`SampleFile`][mrpctl.campaign.spec.SampleFile] would make it
+    import mrpctl to do so, a (path, values) pair only NumPy."""
+    return {key: (each.path, each.values) for key, each in files.items()}
+
+
+def received_files(files: ShippedFiles | None) -> dict[str, SampleFile] | None:
+    """The `SampleFile` objects of `shipped_files`'s data (the same numbers, the same SHA-256)."""
+    if files is None:
+        return None
+    return {key: SampleFile(key, path, values) for key, (path, values) in files.items()}

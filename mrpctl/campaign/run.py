@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from mrpctl._validation import integer
-from mrpctl.campaign._task import chunk_on_worker, simulate_chunk
+from mrpctl.campaign._task import shipped_files, simulate_chunk
 from mrpctl.campaign.integrity import writer_lock
 from mrpctl.campaign.spec import CampaignSpec
-from mrpctl.campaign.store import CampaignStore
+from mrpctl.campaign.store import STORE_NAME, CampaignStore
 from mrpctl.errors import MrpctlError, SpecificationError
 
 __all__ = ["CampaignProgress", "CampaignRun", "SchedulerLostError", "run_campaign", "simulate_chunk"]
@@ -198,46 +198,118 @@ def _local(spec: CampaignSpec, store: CampaignStore, todo: list[int], threads: i
         yield index, simulate_chunk(spec, start, stop, threads=threads)
 
 
-def _dask(
-    spec: CampaignSpec, store: CampaignStore, todo: list[int], scheduler: str, workers: int | None
-) -> Iterator[tuple[int, Any]]:
+def _on_worker(function: str) -> Callable[..., Any]:
+    """A Dask task's function that calls ``mrpctl.campaign._task.<function>`` on the worker.
+
+    It is a closure, so Dask pickles it by value (its code and the name ``function``), not as a reference to a
+    mrpctl module: the scheduler, which unpickles every task it is given, never imports mrpctl. (A reference
+    made a cold scheduler import mrpctl on its event loop before it could hand out the first task, and only
+    then did the workers start importing it.) The worker imports mrpctl in the task's thread, on the first call.
+    Its keyword ``files`` is `shipped_files`'s data (plain, for the same reason).
+    """
+
+    def call(*args: Any, files: Any = None) -> Any:
+        import importlib  # on the worker, when the task runs
+
+        task = importlib.import_module("mrpctl.campaign._task")
+        return getattr(task, function)(*args, task.received_files(files))
+
+    call.__name__ = function  # the Dask dashboard's name of the task's function
+    return call
+
+
+class _Session:
+    """A campaign's Dask connection: its Client (and the ``LocalCluster`` of ``scheduler="local"``).
+
+    `start` connects and sends each worker a warm-up task
+    ([`warm_up_worker`][mrpctl.campaign._task.warm_up_worker], through `_on_worker`); `_run_locked` starts a
+    session before it creates a new store, so that a fresh worker's import of mrpctl and its engine compile run
+    while this process writes the store's template, not after it. A scheduler that cannot be reached is remembered and
+    raised (as `_Lost`) when the chunks are submitted, after the store exists, as without a warm-up.
+    """
+
+    def __init__(self, spec: CampaignSpec, out: str | Path, scheduler: str, workers: int | None) -> None:
+        self.spec, self.scheduler, self.workers = spec, scheduler, workers
+        # one attempt per call: a resumed campaign never receives a result the cluster kept from an earlier call
+        self.token, self.attempt = campaign_token(spec, out), secrets.token_hex(4)
+        self.client: Any = None
+        self.cluster: Any = None
+        self.lost: str | None = None
+        self.warm_ups: list[Any] = []  # held until the session closes; never waited for (a chunk raises errors)
+
+    def start(self) -> None:
+        """Connect (or start the local cluster) and send each worker listed now its warm-up task."""
+        if self.client is not None or self.lost is not None:
+            return
+        # deferred: Dask, only for a Dask campaign or a store read lazily
+        from dask.distributed import Client, LocalCluster
+
+        if self.scheduler == "local":
+            # deferred: Dask, only for a Dask campaign or a store read lazily
+            import dask
+
+            # The cluster's own housekeeping competes with the workers for the same cores: no statistical
+            # profiler (a stack sample every 10 ms in each worker), event-loop and system monitors at 1 s
+            # rather than 20 ms / 500 ms, no memory monitor (a chunk's memory is bounded by the chunk).
+            with dask.config.set(LOCAL_CLUSTER_CONFIG):
+                self.cluster = LocalCluster(
+                    n_workers=self.workers or _cpus(),
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    memory_limit=0,
+                )
+            self.client = Client(self.cluster, set_as_default=False)
+        else:
+            try:
+                self.client = Client(self.scheduler, set_as_default=False)
+            except (OSError, TimeoutError) as exc:
+                self.lost = f"could not be reached ({type(exc).__name__})"
+                return
+        spec, warm_up = self.spec, _on_worker("warm_up_worker")
+        for i, worker in enumerate(sorted(self.client.scheduler_info().get("workers", {}))):
+            self.warm_ups.append(
+                self.client.submit(
+                    warm_up,
+                    spec.source,
+                    spec.base.name,
+                    files=shipped_files(spec.files),
+                    key=f"warm-up-{self.token}-{self.attempt}-{i}",
+                    workers=[worker],
+                    allow_other_workers=False,
+                    pure=False,
+                )
+            )
+
+    def close(self) -> None:
+        self.warm_ups.clear()
+        if self.client is not None:
+            self.client.close()
+            self.client = None
+        if self.cluster is not None:
+            self.cluster.close()
+            self.cluster = None
+
+
+def _dask(session: _Session, store: CampaignStore, todo: list[int]) -> Iterator[tuple[int, Any]]:
     if not todo:  # nothing to run: no connection to the cluster
         return
-    # one attempt per call: a resumed campaign never receives a result the cluster kept from an earlier call
-    token, attempt = campaign_token(spec, store.out), secrets.token_hex(4)
     # deferred: Dask, only for a Dask campaign or a store read lazily
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import as_completed
 
-    cluster = None
-    if scheduler == "local":
-        # deferred: Dask, only for a Dask campaign or a store read lazily
-        import dask
-
-        # The cluster's own housekeeping competes with the workers for the same cores: no statistical
-        # profiler (a stack sample every 10 ms in each worker), event-loop and system monitors at 1 s
-        # rather than 20 ms / 500 ms, no memory monitor (a chunk's memory is bounded by the chunk).
-        with dask.config.set(LOCAL_CLUSTER_CONFIG):
-            cluster = LocalCluster(
-                n_workers=workers or _cpus(),
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                memory_limit=0,
-            )
-        client = Client(cluster, set_as_default=False)
-    else:
-        try:
-            client = Client(scheduler, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
-            raise _Lost(f"could not be reached ({type(exc).__name__})") from None
+    spec, token, attempt = session.spec, session.token, session.attempt
+    session.start()  # a no-op if started before the store was created
+    if session.lost is not None:
+        raise _Lost(session.lost)
+    client, chunk_task, files = session.client, _on_worker("chunk_on_worker"), shipped_files(spec.files)
     try:
         slots = 2 * max(1, len(client.scheduler_info().get("workers", {})) or 1)
         pending = iter(todo)
 
         def submit(index: int) -> Any:  # the chunk's task: the spec's text and its files' numbers
             start, stop = store.bounds(index)
-            task = (spec.source, spec.base.name, start, stop, spec.files)
-            return client.submit(chunk_on_worker, *task, key=task_key(token, attempt, index), pure=False)
+            task = (spec.source, spec.base.name, start, stop)
+            return client.submit(chunk_task, *task, files=files, key=task_key(token, attempt, index), pure=False)
 
         # the client is not the process's default (set_as_default=False: a campaign leaves the caller's Dask
         # scheduler as it was), so as_completed is given its event loop
@@ -257,9 +329,7 @@ def _dask(
             if following is not None:
                 futures.add(submit(following))
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        session.close()
 
 
 def run_campaign(
@@ -344,6 +414,26 @@ def _run_locked(
     on_chunk: ChunkCallback | None,
     on_progress: ProgressCallback | None = None,
 ) -> CampaignRun:
+    session = None if scheduler is None else _Session(spec, out, scheduler, workers)
+    try:
+        if session is not None and not (Path(out) / STORE_NAME).exists():
+            session.start()  # a new store: the workers warm up while this process writes its template
+        return _run_chunks(spec, out, chunk, scheduler, threads, on_chunk, on_progress, session)
+    finally:
+        if session is not None:
+            session.close()
+
+
+def _run_chunks(
+    spec: CampaignSpec,
+    out: str | Path,
+    chunk: int | None,
+    scheduler: str | None,
+    threads: int | None,
+    on_chunk: ChunkCallback | None,
+    on_progress: ProgressCallback | None,
+    session: _Session | None,
+) -> CampaignRun:
     store = CampaignStore(out, spec, chunk)
     complete = store.complete()
     repaired = tuple(str(d) for d in store.damaged)
@@ -355,7 +445,7 @@ def _run_locked(
     runs = simulated = diverged = not_settled = 0
     stored = sum(store.bounds(i)[1] - store.bounds(i)[0] for i in range(store.chunks) if complete[i])
     started = time.monotonic()
-    source = _local(spec, store, todo, threads) if scheduler is None else _dask(spec, store, todo, scheduler, workers)
+    source = _local(spec, store, todo, threads) if session is None else _dask(session, store, todo)
     try:
         for index, values in source:
             store.write(index, values)
