@@ -191,6 +191,7 @@ def test_a_lost_scheduler_ends_with_one_line_naming_the_store_and_the_resume(clu
 
 def test_an_unreachable_scheduler_is_one_line_on_the_command_line(tmp_path, capsys):
     import dask
+    import distributed  # noqa: F401  its config defaults exist before the set below, which on exit removes what it added
 
     from mrpctl.cli import main
 

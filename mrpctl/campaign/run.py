@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import importlib
 import itertools
 import json
 import logging
@@ -209,8 +210,7 @@ def _on_worker(function: str) -> Callable[..., Any]:
     """
 
     def call(*args: Any, files: Any = None) -> Any:
-        import importlib  # on the worker, when the task runs
-
+        # on the worker, when the task runs (importlib itself is pickled by reference: standard library)
         task = importlib.import_module("mrpctl.campaign._task")
         return getattr(task, function)(*args, task.received_files(files))
 
