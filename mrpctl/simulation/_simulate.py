@@ -455,6 +455,7 @@ def simulate(
         substeps,
         saturation,
         predictor=None if checked is None else checked.model,
+        **({} if checked is None else {"predictor_form": checked.form}),
         **engine_structure(checked, options, sensor, actuator, gravity_gradient=gravity_gradient is not None),
         **({} if streamed is None else {"torque_input": True}),
         **({} if tracked is None else {"reference_input": True, "feedforward": feedforward}),
