@@ -635,8 +635,7 @@ def _prediction_tracking_expr(
     the prediction [σ̂_B/N; ω̂/4], [B̂N] ω_R/N, the rotation scale) against the reference ``row`` (9); with
     ``linear`` the prediction of [`linear_prediction_expr`][mrpctl.loop.functions.linear_prediction_expr]."""
     if linear:
-        q_hat = _linear_prediction_quaternion(y, z_old, z, tau)
-        predicted = ca.vertcat(_short_mrp_of_quaternion(q_hat), y[3:6] + (z[3:6] - z_old[3:6]))
+        predicted = ca.vertcat(_linear_prediction_mrp(y, z_old, z, tau), y[3:6] + (z[3:6] - z_old[3:6]))
     else:
         q_y = quaternion_from_mrp_expr(y[0:3])
         q_old = quaternion_from_mrp_expr(z_old[0:3])
@@ -692,25 +691,21 @@ def linear_model_step_expr(z: Any, u: Any, model_j_inv: Any, period: float) -> A
     return ca.vertcat(z[0:3] + h * z[3:6] + (h * h / 8.0) * acceleration, z[3:6] + (h / 4.0) * acceleration)
 
 
-def _quaternion_of_mrp(sigma: Any) -> Any:
-    """β = ((1 − |σ|²), 2σ) / (1 + |σ|²) by one reciprocal (the linear form's; β → (−1, 0) as |σ| → ∞)."""
-    squared = ca.dot(sigma, sigma)
-    scale = 1 / (1 + squared)
-    return ca.vertcat((1 - squared) * scale, (2 * scale) * sigma)
-
-
-def _short_mrp_of_quaternion(q: Any) -> Any:
-    """The short-set MRP of a unit quaternion of either sign by one reciprocal: sign(q₀) q_v / (1 + |q₀|)."""
-    return (ca.if_else(q[0] >= 0, 1.0, -1.0) / (1 + ca.fabs(q[0]))) * q[1:4]
-
-
-def _linear_prediction_quaternion(y: Any, z_old: Any, z: Any, tau: Any) -> Any:
-    """β of Ĉ = C(p) C(y): the FSA increment v = τ w_y + S_σ as the rotation 4v, by its [3/2] Padé MRP p."""
+def _linear_prediction_mrp(y: Any, z_old: Any, z: Any, tau: Any) -> Any:
+    """The short MRP of Ĉ = C(p) C(y): the FSA increment v = τ w_y + S_σ as the rotation 4v, by its [3/2] Padé
+    MRP p = v N/D (N = 15 − h, D = 15 − 6h, h = min(|v|², `PADE_HOLD`)), with one division. p's quaternion is
+    (D² − |v|² N², 2 N D v) / n_p and σ_y's (1 − |σ_y|², 2 σ_y) / n_y, with n_p = D² + |v|² N² and
+    n_y = 1 + |σ_y|² their norms; with Q the product of the unnormalised two, the short MRP of Ĉ is
+    sign(Q₀) Q_v / (n_p n_y + |Q₀|)."""
     increment = tau * y[3:6] + (z[0:3] - z_old[0:3] - tau * z_old[3:6])
     squared = ca.dot(increment, increment)
     held = ca.if_else(squared > PADE_HOLD, PADE_HOLD, squared)
-    mrp = ((15 - held) / (15 - 6 * held)) * increment
-    return _quaternion_product(_quaternion_of_mrp(mrp), _quaternion_of_mrp(y[0:3]))
+    numerator, denominator = 15 - held, 15 - 6 * held
+    d2, n2 = denominator * denominator, squared * (numerator * numerator)
+    measured = ca.dot(y[0:3], y[0:3])
+    q_p = ca.vertcat(d2 - n2, (2 * numerator * denominator) * increment)
+    q = _quaternion_product(q_p, ca.vertcat(1 - measured, 2 * y[0:3]))
+    return (ca.if_else(q[0] >= 0, 1.0, -1.0) / ((d2 + n2) * (1 + measured) + ca.fabs(q[0]))) * q[1:4]
 
 
 def linear_prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:
@@ -719,20 +714,22 @@ def linear_prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any
     The copy z is linear (`linear_model_step_expr`), so S = z_k − Φ^d z_{k−d} is its forced response over the
     last τ: S_σ = z_σ(k) − z_σ(k−d) − τ z_w(k−d), S_w = z_w(k) − z_w(k−d). The FSA prediction's σ increment
     v = τ w_y + S_σ is applied to the measured attitude as the rotation by 4v: Ĉ = C(p) C(y), with
-    p = v (15 − x²)/(15 − 6 x²), x² = min(|v|², `PADE_HOLD`), the [3/2] Padé form of tan(|v|) v/|v| (relative
-    error below 1e-3 up to a rotation of π over τ). ŵ = w_y + S_w. The rule as in
-    [`prediction_expr`][mrpctl.loop.prediction_expr] (continuity when |σ̂|² > 1e-8, on squared distances; the
-    shadow when |σ̂|² >= α²; the shadow of the shadow is σ̂ itself). No libm call, five divisions.
+    p = v (15 − h)/(15 − 6 h), h = min(|v|², `PADE_HOLD`), the [3/2] Padé form of tan(|v|) v/|v| (relative
+    error below 1e-3 up to a rotation of π over τ); ŵ = w_y + S_w. The rule of
+    [`prediction_expr`][mrpctl.loop.prediction_expr] without dividing first: with s = |σ̂|² and c = σ̂·σ̂_{k−1}, the
+    shadow −σ̂/s is nearer σ̂_{k−1} exactly when 1 + 2c < s (s − 2c) (continuity, when s > 1e-8), and the set
+    chosen has |σ̂|² >= α² exactly when s >= α² (σ̂ kept) or α² s <= 1 (the shadow taken). No libm call; two
+    divisions (the MRP of Ĉ, `_linear_prediction_mrp`, and the shadow).
     """
-    sigma = _short_mrp_of_quaternion(_linear_prediction_quaternion(y, z_old, z, tau))
+    sigma = _linear_prediction_mrp(y, z_old, z, tau)
     squared = ca.dot(sigma, sigma)
+    along = ca.dot(sigma, previous)
+    nearer = ca.logic_and(squared > _CONTINUITY_FLOOR, 1 + 2 * along < squared * (squared - 2 * along))
+    limit = alpha * alpha
+    switched = ca.if_else(nearer, limit * squared <= 1, squared >= limit)
     shadow = (-1 / ca.if_else(squared > 0, squared, 1.0)) * sigma
-    nearer = ca.logic_and(squared > _CONTINUITY_FLOOR, ca.sumsqr(shadow - previous) < ca.sumsqr(sigma - previous))
-    chosen = ca.if_else(nearer, shadow, sigma)
-    other = ca.if_else(nearer, sigma, shadow)
-    switched = ca.if_else(ca.dot(chosen, chosen) >= alpha * alpha, 1.0, 0.0)
-    sigma_hat = ca.if_else(switched, other, chosen)
-    return ca.vertcat(sigma_hat, y[3:6] + (z[3:6] - z_old[3:6])), switched
+    sigma_hat = ca.if_else(nearer, ca.if_else(switched, sigma, shadow), ca.if_else(switched, shadow, sigma))
+    return ca.vertcat(sigma_hat, y[3:6] + (z[3:6] - z_old[3:6])), ca.if_else(switched, 1.0, 0.0)
 
 
 def _safe_shadow(sigma: Any) -> Any:
