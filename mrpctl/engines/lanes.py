@@ -724,9 +724,9 @@ def predictor_lane_engine(
     per lane, in each run's ``flight`` constants: `mrpctl.loop.options.predictor_constants`), d, h, substeps,
     ``saturation``, ``sensor`` (a sensor given: a ``noise`` stream shared by the lanes, or each lane's own with
     ``own_streams``), ``limited`` (an actuator given) and ``torque_input`` (a per-sample torque, shared or with
-    ``torque_per_lane`` each lane's own); ``form``: the predictor's. Its delayed input is fed from the ``ring`` output, (m_k, z_k): the
-    history of the measurements and of the model copy's states; its `LaneEngine.structure` is (``sensor``,
-    ``limited``, disturbed), the constant w being always in the sample.
+    ``torque_per_lane`` each lane's own); ``form``: the predictor's. Its delayed input is fed from the ``ring``
+    output, (m_k, z_k): the history of the measurements and of the model copy's states; its
+    `LaneEngine.structure` is (``sensor``, ``limited``, disturbed), the constant w being always in the sample.
 
     Raises
     ------

@@ -50,7 +50,7 @@ from mrpctl.loop.options import (
 )
 from mrpctl.loop.wheels import wheel_memory, wheel_memory_roots
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
-from mrpctl.predictor import Predictor
+from mrpctl.predictor import Predictor, PredictorForm
 from mrpctl.simulation._batch_inputs import (
     SHARED_HINT,
     batch_gains,
@@ -511,7 +511,7 @@ def simulate_batch(
                 substeps,
                 saturation,
                 predictor=None if checked is None else checked.model,
-                **({} if checked is None else {"predictor_form": checked.form}),
+                predictor_form=PredictorForm.NONLINEAR if checked is None else checked.form,
                 **structure,
                 **({"torque_input": True} if torque_input else {}),
                 **({} if tracked_by_run[i] is None else {"reference_input": True, "feedforward": feedforward}),
