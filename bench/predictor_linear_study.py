@@ -18,14 +18,14 @@ Three parts, each printed:
 1. ``count``: the lane program of the sample as the lane engine emits it (`emit_lanes` of `engine_sample`, the
    outputs the engine does not read dropped, W = 8, d = 500, 1 kHz): lane values (``const double v`` lines),
    divisions (OP_DIV/OP_INV instructions; the slashes of the C text, as counted in ``design/campaigns.md``, are
-   8 more: the comments), libm calls and segments, for the plain ``OnDelayed`` sample, form (b) and the variant.
+   8 more: the comments), libm calls (sin, cos, ...) and segments, for the plain ``OnDelayed`` sample, form (b) and the variant.
 2. ``accuracy``: the paper case (J = diag(140, 100, 80), x0 = paper.INITIAL_STATE, τ = 0.5 s, 20 s) at 100 Hz and
    1 kHz, ζ = 1 gains ωₙ = 3 and 12.85 rad/s, OnPredicted(1), plant J = (1 + e) J_m for e = 0, +10 %, −10 %: a
    NumPy loop written here (DCMs, not the engine's quaternions) of form (b) and of the variant, giving the
    prediction error (the angle between Ĉ_k and the true C(σ_k) for t > τ, max and RMS; the rate error max |ω̂ − ω|),
    final |σ|, settling time (|σ| < 1e-2 and |ω| < 1e-3 rad/s from then on) and switches; each case checked against
    the compiled engine (form (b): `mrpctl.simulate`; the variant: the same engine with the copy's step replaced, see
-   `linear_copy`): the settling times must agree to 1e-9 s and the switch counts exactly.
+   `variant_engines`): the settling times must agree to 1e-9 s and the switch counts exactly.
 3. ``lanes``: runs/s of ``bench/predictor_lanes.py``'s 48 cases (full-inertia plants ± 15 %, fast gains, 1 kHz, 20 s)
    on the lanes, one thread, CPU time: plain ``OnDelayed`` (paper gain), form (b) and the variant, interleaved
    rounds in one process; min/median/max of the per-round ratios to plain.
@@ -80,11 +80,42 @@ def linear_model_step(period: float, kind: InertiaInput) -> ca.Function:
     return ca.Function("step", [x, u, j_in, j_inv_in], [ca.vertcat(sigma, rate)], ["x", "u", "J", "J_inv"], ["x_next"])
 
 
-def linear_predictor_core_function(*args: Any, **kwargs: Any) -> ca.Function:
-    """`predictor_core_function` with the model copy's RK4 step replaced by `linear_model_step` (the plant's RK4,
-    the correction, the rule and the ``short`` of z unchanged). predictor_core_function builds the plant's step
-    first and the model's second (``step_function(spacecraft, period, 1, inertia=model_inertia)``)."""
-    original = loop_functions.step_function
+def rotation_prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:
+    """`prediction_expr` with the group correction replaced by the linear FSA prediction on the group (variant
+    "rotation"): with a linear copy, S = z_k − Φ^d z_{k−d} is the forced response over the window (S_σ = z_σ(k) −
+    z_σ(k−d) − τ z_w(k−d), S_w = z_w(k) − z_w(k−d)), and Ĉ = exp(−[θ×]) C(y) with θ = τ ω_y + 4 S_σ, ω̂ = ω_y + 4 S_w
+    (x units: ŵ = w_y + S_w); the rule as in `prediction_expr`."""
+    forced = z[0:3] - z_old[0:3] - tau * z_old[3:6]
+    theta = 4 * (tau * y[3:6] + forced)
+    q_hat = loop_functions._quaternion_product(
+        loop_functions._rotation_quaternion(theta), loop_functions.quaternion_from_mrp_expr(y[0:3])
+    )
+    sigma_hat = loop_functions._short_mrp_from_quaternion(q_hat)
+    shadow = loop_functions._safe_shadow(sigma_hat)
+    nearer = ca.logic_and(
+        ca.dot(sigma_hat, sigma_hat) > loop_functions._CONTINUITY_FLOOR,
+        ca.norm_2(shadow - previous) < ca.norm_2(sigma_hat - previous),
+    )
+    sigma_hat = ca.if_else(nearer, shadow, sigma_hat)
+    switched = ca.if_else(ca.dot(sigma_hat, sigma_hat) >= alpha * alpha, 1.0, 0.0)
+    sigma_hat = ca.if_else(switched, loop_functions._safe_shadow(sigma_hat), sigma_hat)
+    return ca.vertcat(sigma_hat, y[3:6] + (z[3:6] - z_old[3:6])), switched
+
+
+#: The samples compared: the engine's form (b); "linear": the copy by the linear ZOH transition, then ``short``,
+#: the rest of form (b) unchanged (the brief's variant); "rotation": the linear copy without ``short`` (a linear
+#: state) and `rotation_prediction_expr` instead of the group correction.
+VARIANTS = ("b", "linear", "rotation")
+
+
+def variant_core_function(variant: str, *args: Any, **kwargs: Any) -> ca.Function:
+    """`predictor_core_function` of ``variant`` (`VARIANTS`). For "linear" and "rotation" the model copy's RK4 step
+    is replaced by `linear_model_step` (predictor_core_function builds the plant's step first and the model's
+    second, ``step_function(spacecraft, period, 1, inertia=model_inertia)``); for "rotation" also the ``short`` of
+    z (its only use in that function) and the correction."""
+    if variant == "b":
+        return predictor_core_function(*args, **kwargs)
+    original = (loop_functions.step_function, loop_functions.short_expr, loop_functions.prediction_expr)
     calls: list[int] = []
 
     def patched(spacecraft: Spacecraft, period: float, substeps: int, **options: Any) -> ca.Function:
@@ -93,36 +124,47 @@ def linear_predictor_core_function(*args: Any, **kwargs: Any) -> ca.Function:
             if substeps != 1:
                 raise AssertionError("the model copy's step is built second, with one substep")
             return linear_model_step(period, options["inertia"])
-        return original(spacecraft, period, substeps, **options)
+        return original[0](spacecraft, period, substeps, **options)
 
     loop_functions.step_function = patched  # type: ignore[assignment]
+    if variant == "rotation":
+        loop_functions.short_expr = lambda sigma: sigma
+        loop_functions.prediction_expr = rotation_prediction_expr
     try:
         core = predictor_core_function(*args, **kwargs)
     finally:
-        loop_functions.step_function = original
+        loop_functions.step_function, loop_functions.short_expr, loop_functions.prediction_expr = original
     if len(calls) != 2:
         raise AssertionError(f"predictor_core_function built {len(calls)} steps, expected the plant's and the model's")
     return core
 
 
-_VARIANT_CACHES: dict[str, dict[Any, Any]] = {"lanes": {}, "scalar": {}}
+LABELS = {"b": "predictor, form (b)", "linear": "linear copy, group corr.", "rotation": "linear copy, rotation"}
+_VARIANT_CACHES: dict[str, dict[str, dict[Any, Any]]] = {v: {"lanes": {}, "scalar": {}} for v in VARIANTS[1:]}
 
 
 @contextlib.contextmanager
-def linear_copy() -> Iterator[None]:
-    """The engines (lanes and scalar) built inside use the variant's sample; their in-process caches are the
+def variant_engines(variant: str) -> Iterator[None]:
+    """The engines (lanes and scalar) built inside use the sample of ``variant``; their in-process caches are the
     variant's own (the compile cache on disk is keyed by the code: no stale library)."""
-    saved = (lane_engines._ENGINES, scalar_engines._ENGINES, lane_engines.predictor_core_function)
-    saved_scalar_core = scalar_engines.predictor_core_function
-    lane_engines._ENGINES = _VARIANT_CACHES["lanes"]
-    scalar_engines._ENGINES = _VARIANT_CACHES["scalar"]
-    lane_engines.predictor_core_function = linear_predictor_core_function  # type: ignore[assignment]
-    scalar_engines.predictor_core_function = linear_predictor_core_function  # type: ignore[assignment]
+    if variant == "b":
+        yield
+        return
+    saved = (lane_engines._ENGINES, scalar_engines._ENGINES)
+    saved_cores = (lane_engines.predictor_core_function, scalar_engines.predictor_core_function)
+    lane_engines._ENGINES = _VARIANT_CACHES[variant]["lanes"]
+    scalar_engines._ENGINES = _VARIANT_CACHES[variant]["scalar"]
+
+    def core(*args: Any, **kwargs: Any) -> ca.Function:
+        return variant_core_function(variant, *args, **kwargs)
+
+    lane_engines.predictor_core_function = core  # type: ignore[assignment]
+    scalar_engines.predictor_core_function = core  # type: ignore[assignment]
     try:
         yield
     finally:
-        lane_engines._ENGINES, scalar_engines._ENGINES, lane_engines.predictor_core_function = saved
-        scalar_engines.predictor_core_function = saved_scalar_core
+        lane_engines._ENGINES, scalar_engines._ENGINES = saved
+        lane_engines.predictor_core_function, scalar_engines.predictor_core_function = saved_cores
 
 
 # ---------------------------------------------------------------- 1. counting the emitted lane program
@@ -136,7 +178,7 @@ def lane_counts(core: ca.Function, d: int, delayed_output: str) -> dict[str, int
     drop = [n for n in names_out if not (n.endswith("_next") and n[:-5] in names_in) and n != delayed_output]
     program = emit_lanes(sample, lane_engines.DEFAULT_WIDTH, drop=drop)
     ops = [sample.instruction_id(k) for k in range(sample.n_instructions())]
-    libm = (ca.OP_SIN, ca.OP_COS, ca.OP_TAN, ca.OP_ATAN, ca.OP_ATAN2, ca.OP_EXP, ca.OP_LOG, ca.OP_FMIN, ca.OP_FMAX)
+    libm = (ca.OP_SIN, ca.OP_COS, ca.OP_TAN, ca.OP_ATAN, ca.OP_ATAN2, ca.OP_EXP, ca.OP_LOG)  # fmax: a lane form
     return {
         "values": program.code.count("const double v"),
         "divisions": ops.count(ca.OP_DIV) + ops.count(ca.OP_INV),
@@ -153,13 +195,10 @@ def count() -> None:
         craft = plant if layout is InertiaInput.FULL else paper.SPACECRAFT
         rows = {
             "plain OnDelayed": lane_counts(core_function(craft, OnDelayed(), d, period, 1, inertia=layout), d, "x_meas"),
-            "predictor, form (b)": lane_counts(
-                predictor_core_function(craft, d, period, 1, inertia=layout, limited=False), d, "ring"
-            ),
-            "predictor, linear copy": lane_counts(
-                linear_predictor_core_function(craft, d, period, 1, inertia=layout, limited=False), d, "ring"
-            ),
         }
+        for variant in VARIANTS:
+            core = variant_core_function(variant, craft, d, period, 1, inertia=layout, limited=False)
+            rows[LABELS[variant]] = lane_counts(core, d, "ring")
         plain = rows["plain OnDelayed"]
         print(f"lane program, d = {d}, W = {lane_engines.DEFAULT_WIDTH}, plant {layout.value}, diagonal model, no actuator")
         print(f"{'sample':24s} {'values':>7s} {'x plain':>8s} {'div':>4s} {'slashes':>8s} {'libm':>5s} {'segments':>9s}")
@@ -236,13 +275,15 @@ def rk4(x: np.ndarray, u: np.ndarray, h: float, inertia: np.ndarray, inverse: np
 
 
 def principal_angle(c: np.ndarray) -> float:
-    return float(np.arccos(np.clip((np.trace(c) - 1.0) / 2.0, -1.0, 1.0)))
+    """The rotation angle of a DCM, atan2(sin, cos) (no arccos floor near 0)."""
+    axial = 0.5 * np.array([c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1]])
+    return float(np.arctan2(np.linalg.norm(axial), (np.trace(c) - 1.0) / 2.0))
 
 
 def reference_loop(
-    plant: np.ndarray, model: np.ndarray, gain: np.ndarray, x0: np.ndarray, rate: float, linear: bool
+    plant: np.ndarray, model: np.ndarray, gain: np.ndarray, x0: np.ndarray, rate: float, variant: str
 ) -> dict[str, float]:
-    """The predictor loop (OnPredicted(1)) with the copy by RK4 (form (b)) or by the linear ZOH transition."""
+    """The predictor loop (OnPredicted(1)) of ``variant`` (`VARIANTS`), written again with DCMs."""
     h = 1.0 / rate
     d = round(TAU * rate)
     n = round(T_FINAL * rate)
@@ -264,8 +305,12 @@ def reference_loop(
             y, z_old = entry[0:6], entry[6:12]
         else:
             y, z_old = x, z
-        delta = 4.0 * (y[3:6] - z_old[3:6])
-        c_hat = rotation(TAU * delta) @ dcm(z[0:3]) @ dcm(z_old[0:3]).T @ dcm(y[0:3])
+        if variant == "rotation":
+            forced = z[0:3] - z_old[0:3] - TAU * z_old[3:6]  # S_σ, the forced response over the window
+            c_hat = rotation(4.0 * (TAU * y[3:6] + forced)) @ dcm(y[0:3])
+        else:
+            delta = 4.0 * (y[3:6] - z_old[3:6])
+            c_hat = rotation(TAU * delta) @ dcm(z[0:3]) @ dcm(z_old[0:3]).T @ dcm(y[0:3])
         sigma_hat = short_mrp(c_hat)
         s2 = float(sigma_hat @ sigma_hat)
         if s2 > 1e-8:
@@ -276,17 +321,17 @@ def reference_loop(
             switches += 1
             sigma_hat = -sigma_hat / float(sigma_hat @ sigma_hat)
         previous = sigma_hat
-        x_hat = np.concatenate((sigma_hat, z[3:6] + (y[3:6] - z_old[3:6])))
+        x_hat = np.concatenate((sigma_hat, y[3:6] + (z[3:6] - z_old[3:6])))
         if k * h > TAU + 1e-12:
             errors.append(principal_angle(c_hat @ dcm(x[0:3]).T))
             rate_errors.append(float(np.linalg.norm(4.0 * (x_hat[3:6] - x[3:6]))))
         u = gain @ x_hat
-        if linear:
+        if variant == "b":
+            z_next = rk4(z, u, h, model, model_inverse)
+        else:
             a = model_inverse @ u
             z_next = np.concatenate((z[0:3] + h * z[3:6] + h * h / 8.0 * a, z[3:6] + h / 4.0 * a))
-        else:
-            z_next = rk4(z, u, h, model, model_inverse)
-        z = np.concatenate((shorten(z_next[0:3]), z_next[3:6]))
+        z = z_next if variant == "rotation" else np.concatenate((shorten(z_next[0:3]), z_next[3:6]))
         x = rk4(x, u, h, plant, plant_inverse)
     settled = [s < SETTLE_SIGMA and w < SETTLE_OMEGA for s, w in zip(sigmas, omegas, strict=True)]
     settling = float("nan")
@@ -297,6 +342,7 @@ def reference_loop(
     return {
         "error_max": max(errors),
         "error_rms": float(np.sqrt(np.mean(np.square(errors)))),
+        "error_end": float(np.max(errors[-round(rate) :])),  # over the last second
         "rate_error_max": max(rate_errors),
         "final_sigma": float(np.linalg.norm(final)),
         "settling": settling,
@@ -304,45 +350,56 @@ def reference_loop(
     }
 
 
-def engine_run(plant: Spacecraft, model: Spacecraft, gain: np.ndarray, rate: float, linear: bool) -> Any:
+def engine_run(plant: Spacecraft, model: Spacecraft, gain: np.ndarray, x0: np.ndarray, rate: float, variant: str) -> Any:
     call = dict(tau=TAU, rule=OnPredicted(1.0), t_final=T_FINAL, rate=rate, predictor=Predictor(model=model))
-    if linear:
-        with linear_copy():
-            return simulate(plant, gain, paper.INITIAL_STATE, **call)
-    return simulate(plant, gain, paper.INITIAL_STATE, **call)
+    with variant_engines(variant):
+        return simulate(plant, gain, x0, **call)
 
 
-def accuracy() -> None:
+#: The initial states: the paper's (a rotation about the x axis alone: every rotation of the loop commutes) and
+#: one about a skew axis (150° about (1, 2, 3)/√14, ω0 = (0.3, −0.2, 0.25) rad/s: the rotations do not commute).
+_SKEW_AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+STATES = {
+    "paper": np.asarray(paper.INITIAL_STATE, dtype=float),
+    "skew": np.concatenate((_SKEW_AXIS * np.tan(np.radians(150.0) / 4), np.array([0.3, -0.2, 0.25]) / 4)),
+}
+
+
+def accuracy(rates: tuple[float, ...] = (100.0, 1000.0)) -> None:
     model = paper.SPACECRAFT
     print(
-        "paper case, tau = 0.5 s, 20 s, OnPredicted(1), zeta = 1; prediction error = angle(C_hat, C_true) for t > tau; "
-        "rate error = max |omega_hat - omega| (rad/s); settling |sigma| < 1e-2, |omega| < 1e-3 rad/s"
+        "tau = 0.5 s, 20 s, OnPredicted(1), zeta = 1, model J_m = paper J, plant (1 + e) J_m; prediction error = "
+        "angle(C_hat, C_true) for t > tau (max, RMS, max over the last second); rate error = max |omega_hat - omega| "
+        "(rad/s); settling: |sigma| < 1e-2, |omega| < 1e-3 rad/s from then on; 'engine': the compiled engine with the "
+        "same sample gives the same settling time (1e-9 s) and switches"
     )
     header = (
-        f"{'rate':>6s} {'wn':>6s} {'e':>5s} {'copy':>7s} {'err max (rad)':>14s} {'err rms':>9s} {'rate err':>9s} "
-        f"{'final |s|':>10s} {'settling':>9s} {'sw':>3s} {'engine':>7s}"
+        f"{'x0':>5s} {'rate':>5s} {'wn':>6s} {'e':>5s} {'variant':>8s} {'err max':>9s} {'err rms':>9s} {'err end':>9s} "
+        f"{'rate err':>9s} {'final |s|':>10s} {'settling':>9s} {'sw':>3s} {'engine':>7s}"
     )
     print(header)
-    for rate in (100.0, 1000.0):
-        for omega_n in (3.0, 12.85):
-            gain = pd_gains(model, zeta=1.0, omega_n=omega_n).K
-            for e in (0.0, 0.1, -0.1):
-                plant = Spacecraft(model.inertia * (1.0 + e))
-                for linear in (False, True):
-                    row = reference_loop(plant.inertia, model.inertia, gain, paper.INITIAL_STATE, rate, linear)
-                    run = engine_run(plant, model, gain, rate, linear)
-                    engine_settling = float("nan") if run.settling_time is None else run.settling_time
-                    agrees = run.switch_count == row["switches"] and (
-                        (np.isnan(engine_settling) and np.isnan(row["settling"]))
-                        or abs(engine_settling - row["settling"]) < 1e-9
-                    )
-                    settling = "-" if np.isnan(row["settling"]) else f"{row['settling']:.3f}"
-                    print(
-                        f"{rate:6.0f} {omega_n:6.2f} {e:+5.0%} {'linear' if linear else 'RK4 (b)':>7s} "
-                        f"{row['error_max']:14.3e} {row['error_rms']:9.2e} {row['rate_error_max']:9.2e} "
-                        f"{row['final_sigma']:10.2e} {settling:>9s} {row['switches']:3d} "
-                        f"{'agrees' if agrees else 'DIFFERS (' + str(run.settling_time) + ')':>7s}"
-                    )
+    for name, x0 in STATES.items():
+        for rate in rates:
+            for omega_n in (3.0, 12.85):
+                gain = pd_gains(model, zeta=1.0, omega_n=omega_n).K
+                for e in (0.0, 0.1, -0.1):
+                    plant = Spacecraft(model.inertia * (1.0 + e))
+                    for variant in VARIANTS:
+                        row = reference_loop(plant.inertia, model.inertia, gain, x0, rate, variant)
+                        run = engine_run(plant, model, gain, x0, rate, variant)
+                        engine_settling = float("nan") if run.settling_time is None else run.settling_time
+                        agrees = run.switch_count == row["switches"] and (
+                            (np.isnan(engine_settling) and np.isnan(row["settling"]))
+                            or abs(engine_settling - row["settling"]) < 1e-9
+                        )
+                        settling = "-" if np.isnan(row["settling"]) else f"{row['settling']:.3f}"
+                        print(
+                            f"{name:>5s} {rate:5.0f} {omega_n:6.2f} {e:+5.0%} {variant:>8s} {row['error_max']:9.2e} "
+                            f"{row['error_rms']:9.2e} {row['error_end']:9.2e} {row['rate_error_max']:9.2e} "
+                            f"{row['final_sigma']:10.2e} {settling:>9s} {row['switches']:3d} "
+                            f"{'agrees' if agrees else 'DIFFERS (' + str(run.settling_time) + ')':>7s}",
+                            flush=True,
+                        )
 
 
 # ---------------------------------------------------------------- 3. the lanes, in one process
@@ -357,20 +414,21 @@ def lanes(rounds: int) -> None:
     predicted = dict(case, rule=[OnPredicted(1.0 if i % 2 == 0 else 1.2) for i in range(runs)])
     predictor = Predictor(model=predictor_lanes.NOMINAL)
 
-    def form_b() -> Any:
-        return simulate_batch(**predicted, predictor=predictor, threads=1)
+    def predictor_call(variant: str) -> Callable[[], Any]:
+        def call() -> Any:
+            with variant_engines(variant):
+                return simulate_batch(**predicted, predictor=predictor, threads=1)
 
-    def variant() -> Any:
-        with linear_copy():
-            return simulate_batch(**predicted, predictor=predictor, threads=1)
+        return call
 
     def plain() -> Any:
         return simulate_batch(**dict(case, K=paper.GAIN), rule=OnDelayed(), threads=1)
 
     if not _batch._LANES:
         raise SystemExit("the lanes are off")
-    checks = {name: call() for name, call in (("b", form_b), ("linear", variant), ("plain", plain))}
-    table: dict[str, Callable[[], Any]] = {"plain OnDelayed": plain, "predictor, form (b)": form_b, "linear copy": variant}
+    table: dict[str, Callable[[], Any]] = {"plain OnDelayed": plain}
+    table.update({LABELS[variant]: predictor_call(variant) for variant in VARIANTS})
+    checks = {label: call() for label, call in table.items()}  # builds (or loads) every library first
     seconds: dict[str, list[float]] = {label: [] for label in table}
     for _ in range(rounds):
         for label, call in table.items():
@@ -381,23 +439,23 @@ def lanes(rounds: int) -> None:
         f"lanes, one thread, CPU time, {runs} runs of bench/predictor_lanes.py's cases, {rounds} interleaved rounds, "
         f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}"
     )
-    diverged = {name: int(np.asarray(result.diverged).sum()) for name, result in checks.items()}
-    print(f"diverged runs: {diverged}")
-    settled_b = np.asarray(checks["b"].settling_time, dtype=float)
-    settled_l = np.asarray(checks["linear"].settling_time, dtype=float)
-    both = np.isfinite(settled_b) & np.isfinite(settled_l)
-    print(
-        f"settling (s), form (b) vs linear copy over the {int(both.sum())} runs settled in both: median "
-        f"{np.median(settled_b[both]):.3f} vs {np.median(settled_l[both]):.3f}, max |difference| "
-        f"{np.max(np.abs(settled_b[both] - settled_l[both])):.3f}; settled in (b) only "
-        f"{int((np.isfinite(settled_b) & ~np.isfinite(settled_l)).sum())}, in the variant only "
-        f"{int((~np.isfinite(settled_b) & np.isfinite(settled_l)).sum())}"
-    )
-    print(f"{'':24s} {'best runs/s':>12s} {'ratio to plain: min':>20s} {'median':>7s} {'max':>6s}")
+    print(f"diverged runs: { {label: int(np.asarray(r.diverged).sum()) for label, r in checks.items()} }")
+    reference = np.asarray(checks[LABELS["b"]].settling_time, dtype=float)
+    for variant in VARIANTS[1:]:
+        other = np.asarray(checks[LABELS[variant]].settling_time, dtype=float)
+        both = np.isfinite(reference) & np.isfinite(other)
+        print(
+            f"settling (s), form (b) vs {LABELS[variant]}, {int(both.sum())} runs settled in both: median "
+            f"{np.median(reference[both]):.3f} vs {np.median(other[both]):.3f}, max |difference| "
+            f"{np.max(np.abs(reference[both] - other[both])):.3f}; settled in (b) only "
+            f"{int((np.isfinite(reference) & ~np.isfinite(other)).sum())}, in the variant only "
+            f"{int((~np.isfinite(reference) & np.isfinite(other)).sum())}"
+        )
+    print(f"{'':26s} {'best runs/s':>12s} {'ratio to plain: min':>20s} {'median':>7s} {'max':>6s}")
     for label, values in seconds.items():
         ratios = np.array(seconds["plain OnDelayed"]) / np.array(values)
         print(
-            f"{label:24s} {runs / min(values):12.1f} {ratios.min():20.3f} {np.median(ratios):7.3f} {ratios.max():6.3f}"
+            f"{label:26s} {runs / min(values):12.1f} {ratios.min():20.3f} {np.median(ratios):7.3f} {ratios.max():6.3f}"
         )
 
 
@@ -414,6 +472,8 @@ def main() -> None:
             count()
         elif part == "accuracy":
             accuracy()
+        elif part == "accuracy100":  # 100 Hz only
+            accuracy((100.0,))
         elif part == "lanes":
             lanes(rounds)
         else:
