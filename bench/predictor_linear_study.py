@@ -90,6 +90,22 @@ def rotation_prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: A
     q_hat = loop_functions._quaternion_product(
         loop_functions._rotation_quaternion(theta), loop_functions.quaternion_from_mrp_expr(y[0:3])
     )
+    return _rule(q_hat, y, z_old, z, previous, alpha)
+
+
+def increment_prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:
+    """As `rotation_prediction_expr` with the rotation exp(−[θ×]) replaced by the rotation of the MRP θ/4 = τ w_y + S_σ
+    (variant "increment": the FSA's σ increment composed on the group, Ĉ = C(τ w_y + S_σ) C(y); tan(φ/4) against φ/4,
+    a third-order difference in the angle φ over τ; no sin/cos, no libm call in the sample)."""
+    increment = tau * y[3:6] + (z[0:3] - z_old[0:3] - tau * z_old[3:6])
+    q_hat = loop_functions._quaternion_product(
+        loop_functions.quaternion_from_mrp_expr(increment), loop_functions.quaternion_from_mrp_expr(y[0:3])
+    )
+    return _rule(q_hat, y, z_old, z, previous, alpha)
+
+
+def _rule(q_hat: Any, y: Any, z_old: Any, z: Any, previous: Any, alpha: Any) -> tuple[Any, Any]:
+    """The short MRP of q̂, continuity and the switch as in `prediction_expr`; ŵ = w_y + S_w."""
     sigma_hat = loop_functions._short_mrp_from_quaternion(q_hat)
     shadow = loop_functions._safe_shadow(sigma_hat)
     nearer = ca.logic_and(
@@ -104,14 +120,15 @@ def rotation_prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: A
 
 #: The samples compared: the engine's form (b); "linear": the copy by the linear ZOH transition, then ``short``,
 #: the rest of form (b) unchanged (the brief's variant); "rotation": the linear copy without ``short`` (a linear
-#: state) and `rotation_prediction_expr` instead of the group correction.
-VARIANTS = ("b", "linear", "rotation")
+#: state) and `rotation_prediction_expr` instead of the group correction; "increment": the same with
+#: `increment_prediction_expr`.
+VARIANTS = ("b", "linear", "rotation", "increment")
 
 
 def variant_core_function(variant: str, *args: Any, **kwargs: Any) -> ca.Function:
-    """`predictor_core_function` of ``variant`` (`VARIANTS`). For "linear" and "rotation" the model copy's RK4 step
+    """`predictor_core_function` of ``variant`` (`VARIANTS`). For the others the model copy's RK4 step
     is replaced by `linear_model_step` (predictor_core_function builds the plant's step first and the model's
-    second, ``step_function(spacecraft, period, 1, inertia=model_inertia)``); for "rotation" also the ``short`` of
+    second, ``step_function(spacecraft, period, 1, inertia=model_inertia)``); for "rotation" and "increment" also the ``short`` of
     z (its only use in that function) and the correction."""
     if variant == "b":
         return predictor_core_function(*args, **kwargs)
@@ -127,9 +144,11 @@ def variant_core_function(variant: str, *args: Any, **kwargs: Any) -> ca.Functio
         return original[0](spacecraft, period, substeps, **options)
 
     loop_functions.step_function = patched  # type: ignore[assignment]
-    if variant == "rotation":
+    if variant in ("rotation", "increment"):
         loop_functions.short_expr = lambda sigma: sigma
-        loop_functions.prediction_expr = rotation_prediction_expr
+        loop_functions.prediction_expr = (
+            rotation_prediction_expr if variant == "rotation" else increment_prediction_expr
+        )
     try:
         core = predictor_core_function(*args, **kwargs)
     finally:
@@ -139,7 +158,8 @@ def variant_core_function(variant: str, *args: Any, **kwargs: Any) -> ca.Functio
     return core
 
 
-LABELS = {"b": "predictor, form (b)", "linear": "linear copy, group corr.", "rotation": "linear copy, rotation"}
+LABELS = {"b": "predictor, form (b)", "linear": "linear copy, group corr.", "rotation": "linear copy, rotation",
+          "increment": "linear copy, MRP increment"}
 _VARIANT_CACHES: dict[str, dict[str, dict[Any, Any]]] = {v: {"lanes": {}, "scalar": {}} for v in VARIANTS[1:]}
 
 
@@ -305,9 +325,12 @@ def reference_loop(
             y, z_old = entry[0:6], entry[6:12]
         else:
             y, z_old = x, z
-        if variant == "rotation":
+        if variant in ("rotation", "increment"):
             forced = z[0:3] - z_old[0:3] - TAU * z_old[3:6]  # S_σ, the forced response over the window
-            c_hat = rotation(4.0 * (TAU * y[3:6] + forced)) @ dcm(y[0:3])
+            if variant == "rotation":
+                c_hat = rotation(4.0 * (TAU * y[3:6] + forced)) @ dcm(y[0:3])
+            else:
+                c_hat = dcm(TAU * y[3:6] + forced) @ dcm(y[0:3])
         else:
             delta = 4.0 * (y[3:6] - z_old[3:6])
             c_hat = rotation(TAU * delta) @ dcm(z[0:3]) @ dcm(z_old[0:3]).T @ dcm(y[0:3])
@@ -331,7 +354,7 @@ def reference_loop(
         else:
             a = model_inverse @ u
             z_next = np.concatenate((z[0:3] + h * z[3:6] + h * h / 8.0 * a, z[3:6] + h / 4.0 * a))
-        z = z_next if variant == "rotation" else np.concatenate((shorten(z_next[0:3]), z_next[3:6]))
+        z = z_next if variant in ("rotation", "increment") else np.concatenate((shorten(z_next[0:3]), z_next[3:6]))
         x = rk4(x, u, h, plant, plant_inverse)
     settled = [s < SETTLE_SIGMA and w < SETTLE_OMEGA for s, w in zip(sigmas, omegas, strict=True)]
     settling = float("nan")
