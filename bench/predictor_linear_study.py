@@ -1,33 +1,42 @@
-"""Study: the predictor sample with the model copy advanced by its linear ZOH transition (a bench, not a feature).
+"""Study: cheaper predictor samples built on a linear model copy (a bench, not a feature; the package is unchanged).
 
 Form (b) of ``design/predictor.md`` (the engine's predictor) advances its model copy z by one RK4 step of the
 nonlinear model J_m each sample (``mrpctl.loop.functions.predictor_core_function``: ``model_step =
-step_function(spacecraft, period, 1, inertia=model_inertia)``, then ``short``). The variant studied here replaces
-that one step by the exact zero-order-hold transition of the model linearised about the origin, x = [σ; ω/4]:
+step_function(spacecraft, period, 1, inertia=model_inertia)``, then ``short``). The variants (`VARIANTS`) replace
+that step by the exact zero-order-hold transition of the model linearised about the origin, x = [σ; ω/4]:
 
     ẋ = A x + B_m u,  A = [0 I; 0 0],  B_m = [0; ¼ J_m⁻¹]
     z_{k+1} = Φ z_k + Γ_m u_k,  Φ = [I hI; 0 I],  Γ_m = [h²/8 J_m⁻¹; h/4 J_m⁻¹]
 
-(per axis for a diagonal J_m: σ_z += h w_z + (h²/8) u/J_i, w_z += (h/4) u/J_i), followed by the same ``short``; the
-rest of form (b) (the group correction C(τ δω) C(z_k) C(z_{k−d})ᵀ C(y), ω̂ = ω_z(k) + δω, the rule) is unchanged.
-Its linearisation is still exactly the FSA prediction (the σ part: σ_y + z_σ(k) − z_σ(k−d) + τ δω/4 = σ_y + τ w_y
-+ Σ ... ), but away from the origin the copy's relative rotation over τ is no longer the model's.
+(per axis for a diagonal J_m: σ_z += h w_z + (h²/8) u/J_i, w_z += (h/4) u/J_i):
+
+* "linear": then the same ``short``, the rest of form (b) unchanged (the group correction C(τ δω) C(z_k)
+  C(z_{k−d})ᵀ C(y), ω̂ = ω_z(k) + δω, the rule). Its linearisation is still the FSA prediction, but away from the
+  origin the copy's relative rotation C(z_k) C(z_{k−d})ᵀ is no longer the model's.
+* "rotation": z is a linear state (no ``short``); S = z_k − Φ^d z_{k−d} is the forced response over the window
+  (S_σ = z_σ(k) − z_σ(k−d) − τ z_w(k−d), S_w = z_w(k) − z_w(k−d)), and Ĉ = exp(−[θ×]) C(y), θ = 4 (τ w_y + S_σ),
+  ŵ = w_y + S_w (`rotation_prediction_expr`): the FSA prediction with its σ increment applied as a rotation.
+* "increment": the same with the increment applied as an MRP, Ĉ = C(τ w_y + S_σ) C(y) (`increment_prediction_expr`):
+  no sin/cos, so no libm call in the sample and one lane segment.
 
 Three parts, each printed:
 
 1. ``count``: the lane program of the sample as the lane engine emits it (`emit_lanes` of `engine_sample`, the
    outputs the engine does not read dropped, W = 8, d = 500, 1 kHz): lane values (``const double v`` lines),
    divisions (OP_DIV/OP_INV instructions; the slashes of the C text, as counted in ``design/campaigns.md``, are
-   8 more: the comments), libm calls (sin, cos, ...) and segments, for the plain ``OnDelayed`` sample, form (b) and the variant.
-2. ``accuracy``: the paper case (J = diag(140, 100, 80), x0 = paper.INITIAL_STATE, τ = 0.5 s, 20 s) at 100 Hz and
+   8 more: the comments), libm calls (sin, cos, ...) and segments, for the plain ``OnDelayed`` sample, form (b)
+   and the variants.
+2. ``accuracy``: the paper case (J = diag(140, 100, 80), x0 = paper.INITIAL_STATE, τ = 0.5 s, 20 s; and a skew-axis
+   x0, `STATES`) at 100 Hz and
    1 kHz, ζ = 1 gains ωₙ = 3 and 12.85 rad/s, OnPredicted(1), plant J = (1 + e) J_m for e = 0, +10 %, −10 %: a
-   NumPy loop written here (DCMs, not the engine's quaternions) of form (b) and of the variant, giving the
+   NumPy loop written here (DCMs, not the engine's quaternions) of form (b) and of each variant, giving the
    prediction error (the angle between Ĉ_k and the true C(σ_k) for t > τ, max and RMS; the rate error max |ω̂ − ω|),
    final |σ|, settling time (|σ| < 1e-2 and |ω| < 1e-3 rad/s from then on) and switches; each case checked against
-   the compiled engine (form (b): `mrpctl.simulate`; the variant: the same engine with the copy's step replaced, see
-   `variant_engines`): the settling times must agree to 1e-9 s and the switch counts exactly.
+   the compiled engine (form (b): `mrpctl.simulate`; a variant: the same engine with its sample, see
+   `variant_engines`): the settling times must agree to 1e-9 s and the switch counts exactly (or the engine
+   reports the run diverged).
 3. ``lanes``: runs/s of ``bench/predictor_lanes.py``'s 48 cases (full-inertia plants ± 15 %, fast gains, 1 kHz, 20 s)
-   on the lanes, one thread, CPU time: plain ``OnDelayed`` (paper gain), form (b) and the variant, interleaved
+   on the lanes, one thread, CPU time: plain ``OnDelayed`` (paper gain), form (b) and the variants, interleaved
    rounds in one process; min/median/max of the per-round ratios to plain.
 
 Run: ``.venv/bin/python bench/predictor_linear_study.py [count|accuracy|lanes ...] [--rounds N]`` (default: all,
@@ -128,8 +137,8 @@ VARIANTS = ("b", "linear", "rotation", "increment")
 def variant_core_function(variant: str, *args: Any, **kwargs: Any) -> ca.Function:
     """`predictor_core_function` of ``variant`` (`VARIANTS`). For the others the model copy's RK4 step
     is replaced by `linear_model_step` (predictor_core_function builds the plant's step first and the model's
-    second, ``step_function(spacecraft, period, 1, inertia=model_inertia)``); for "rotation" and "increment" also the ``short`` of
-    z (its only use in that function) and the correction."""
+    second, ``step_function(spacecraft, period, 1, inertia=model_inertia)``); for "rotation" and "increment" also
+    the ``short`` of z (its only use in that function) and the correction."""
     if variant == "b":
         return predictor_core_function(*args, **kwargs)
     original = (loop_functions.step_function, loop_functions.short_expr, loop_functions.prediction_expr)
@@ -158,8 +167,12 @@ def variant_core_function(variant: str, *args: Any, **kwargs: Any) -> ca.Functio
     return core
 
 
-LABELS = {"b": "predictor, form (b)", "linear": "linear copy, group corr.", "rotation": "linear copy, rotation",
-          "increment": "linear copy, MRP increment"}
+LABELS = {
+    "b": "predictor, form (b)",
+    "linear": "linear copy, group corr.",
+    "rotation": "linear copy, rotation",
+    "increment": "linear copy, MRP increment",
+}
 _VARIANT_CACHES: dict[str, dict[str, dict[Any, Any]]] = {v: {"lanes": {}, "scalar": {}} for v in VARIANTS[1:]}
 
 
@@ -214,14 +227,21 @@ def count() -> None:
     for layout in (InertiaInput.FULL, InertiaInput.DIAGONAL):
         craft = plant if layout is InertiaInput.FULL else paper.SPACECRAFT
         rows = {
-            "plain OnDelayed": lane_counts(core_function(craft, OnDelayed(), d, period, 1, inertia=layout), d, "x_meas"),
+            "plain OnDelayed": lane_counts(
+                core_function(craft, OnDelayed(), d, period, 1, inertia=layout), d, "x_meas"
+            ),
         }
         for variant in VARIANTS:
             core = variant_core_function(variant, craft, d, period, 1, inertia=layout, limited=False)
             rows[LABELS[variant]] = lane_counts(core, d, "ring")
         plain = rows["plain OnDelayed"]
-        print(f"lane program, d = {d}, W = {lane_engines.DEFAULT_WIDTH}, plant {layout.value}, diagonal model, no actuator")
-        print(f"{'sample':24s} {'values':>7s} {'x plain':>8s} {'div':>4s} {'slashes':>8s} {'libm':>5s} {'segments':>9s}")
+        print(
+            f"lane program, d = {d}, W = {lane_engines.DEFAULT_WIDTH}, plant {layout.value}, diagonal model, "
+            "no actuator"
+        )
+        print(
+            f"{'sample':24s} {'values':>7s} {'x plain':>8s} {'div':>4s} {'slashes':>8s} {'libm':>5s} {'segments':>9s}"
+        )
         for label, row in rows.items():
             print(
                 f"{label:24s} {row['values']:7d} {row['values'] / plain['values']:8.2f} {row['divisions']:4d} "
@@ -259,7 +279,9 @@ def short_mrp(c: np.ndarray) -> np.ndarray:
     i = int(np.argmax(candidates))
     if i == 0:
         q0 = 0.5 * np.sqrt(1.0 + trace)
-        q = np.array([q0, (c[1, 2] - c[2, 1]) / (4 * q0), (c[2, 0] - c[0, 2]) / (4 * q0), (c[0, 1] - c[1, 0]) / (4 * q0)])
+        q = np.array(
+            [q0, (c[1, 2] - c[2, 1]) / (4 * q0), (c[2, 0] - c[0, 2]) / (4 * q0), (c[0, 1] - c[1, 0]) / (4 * q0)]
+        )
     else:
         a, b = [(1, 2), (2, 0), (0, 1)][i - 1]
         qi = 0.5 * np.sqrt(1.0 + 2 * c[i - 1, i - 1] - trace)
@@ -373,7 +395,9 @@ def reference_loop(
     }
 
 
-def engine_run(plant: Spacecraft, model: Spacecraft, gain: np.ndarray, x0: np.ndarray, rate: float, variant: str) -> Any:
+def engine_run(
+    plant: Spacecraft, model: Spacecraft, gain: np.ndarray, x0: np.ndarray, rate: float, variant: str
+) -> Any:
     call = dict(tau=TAU, rule=OnPredicted(1.0), t_final=T_FINAL, rate=rate, predictor=Predictor(model=model))
     with variant_engines(variant):
         return simulate(plant, gain, x0, **call)
