@@ -21,7 +21,7 @@ that step by the exact zero-order-hold transition of the model linearised about 
 * "pade": the MRP of the rotation 4 v by a Padé form of tan (`pade_prediction_expr`): the angle of "rotation"
   to 1e-3 up to π, still no libm call.
 
-Three parts, each printed:
+Four parts, each printed:
 
 1. ``count``: the lane program of the sample as the lane engine emits it (`emit_lanes` of `engine_sample`, the
    outputs the engine does not read dropped, W = 8, d = 500, 1 kHz): lane values (``const double v`` lines),
@@ -41,8 +41,10 @@ Three parts, each printed:
    on the lanes, one thread, CPU time: plain ``OnDelayed`` (paper gain), form (b) and the variants, interleaved
    rounds in one process; min/median/max of the per-round ratios to plain.
 
-Run: ``.venv/bin/python bench/predictor_linear_study.py [count|accuracy|lanes ...] [--rounds N]`` (default: all,
-7 rounds).
+4. ``campaign``: the 48 cases run by run on the scalar engine of each sample: settled, final |σ|, fast turning.
+
+Run: ``.venv/bin/python bench/predictor_linear_study.py [count|accuracy|accuracy100|campaign|lanes ...] [--rounds N]``
+(default: count, accuracy, campaign, lanes; 7 rounds).
 """
 
 from __future__ import annotations
@@ -533,6 +535,40 @@ def lanes(rounds: int) -> None:
         )
 
 
+def campaign() -> None:
+    """Each variant on the 48 cases of ``bench/predictor_lanes.py`` run by run (`mrpctl.simulate`, the scalar engine
+    of the variant's sample): settled in 20 s, the final |σ| of the others, and the runs still turning fast at the end
+    (|ω| > 1 rad/s at 20 s)."""
+    sys.path.insert(0, os.path.dirname(__file__))
+    import predictor_lanes
+
+    runs = 48
+    case = predictor_lanes.cases(runs)
+    predictor = Predictor(model=predictor_lanes.NOMINAL)
+    print(
+        f"{runs} runs of bench/predictor_lanes.py's cases (plant J_ii ± 15 %, products ± 2 kg m², diagonal nominal "
+        "model, fast gains, tau = 0.5 s, 1 kHz, 20 s), run by run"
+    )
+    print(
+        f"{'variant':28s} {'settled':>8s} {'final |s| of the others: median':>32s} {'max':>9s} {'|w| > 1 rad/s':>14s}"
+    )
+    for variant in VARIANTS:
+        settled, others, fast = 0, [], 0
+        with variant_engines(variant):
+            for i in range(runs):
+                result = simulate(
+                    case["spacecraft"][i], case["K"], case["x0"][i], tau=TAU, t_final=T_FINAL, rate=case["rate"],
+                    rule=OnPredicted(1.0 if i % 2 == 0 else 1.2), predictor=predictor,
+                )  # fmt: skip
+                sigma = np.linalg.norm(result.sigma[-1])
+                settled += result.settling_time is not None
+                if result.settling_time is None:
+                    others.append(float(sigma))
+                fast += bool(np.linalg.norm(result.omega[-1]) > 1.0)
+        shown = f"{np.median(others):32.2e} {max(others):9.2e}" if others else f"{'-':>32s} {'-':>9s}"
+        print(f"{LABELS[variant]:28s} {settled:8d} {shown} {fast:14d}")
+
+
 def main() -> None:
     args = sys.argv[1:]
     rounds = 7
@@ -540,7 +576,7 @@ def main() -> None:
         at = args.index("--rounds")
         rounds = int(args[at + 1])
         del args[at : at + 2]
-    parts = args or ["count", "accuracy", "lanes"]
+    parts = args or ["count", "accuracy", "campaign", "lanes"]
     for part in parts:
         if part == "count":
             count()
@@ -548,6 +584,8 @@ def main() -> None:
             accuracy()
         elif part == "accuracy100":  # 100 Hz only
             accuracy((100.0,))
+        elif part == "campaign":
+            campaign()
         elif part == "lanes":
             lanes(rounds)
         else:
