@@ -24,6 +24,7 @@ from mrpctl.cli.common import (
     print_json,
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
+from mrpctl.cli.verify_predictor import check_predictor_options, verify_predictor
 from mrpctl.cli.verify_tracking import check_tracking_options, verify_tracking
 from mrpctl.cli.wheels import WHEELS_NOT_CERTIFIED
 from mrpctl.design import (
@@ -260,6 +261,15 @@ def _verify(args: argparse.Namespace) -> int:
         except SpecificationError as exc:
             raise SpecificationError(f"--tau {tau:g} at the scenario's rate {scenario.rate:g} Hz: {exc}") from exc
         return verify_tracking(args, scenario, tau)
+    if scenario is not None and scenario.predictor is not None:
+        # a predictor scenario: the predictor loop linearised about the origin (verify_predictor), not the plain
+        # delayed loop
+        check_predictor_options(args)
+        try:
+            check_delay(tau, scenario.rate)
+        except SpecificationError as exc:
+            raise SpecificationError(f"--tau {tau:g} at the scenario's rate {scenario.rate:g} Hz: {exc}") from exc
+        return verify_predictor(args, scenario, tau)
     # The loop as flown first: a refusal (bad option, lifted system too large) comes before the long searches.
     flown = _flown_checks(args, spacecraft, gain, tau, scenario)
     joint = _joint_verdict(args, spacecraft, gain, tau, scenario)
@@ -396,8 +406,10 @@ def add_parser(commands: Any) -> None:
         "the loop as flown (each adds a certificate; see design/lmi.md section 7). A scenario file adds them "
         "itself: its rate (sampled loop), [delay] (jitter, rate unknown) and [uncertainty] (inertia box); "
         "these options override the file's values. A tracking scenario ([reference]) is verified as its tracking "
-        "loop linearised about the reference (exact margin, LMI at tau, the sampled loop at its rate); these "
-        "options do not apply to it, and what its checks do not cover is listed and makes it NOT VERIFIED"
+        "loop linearised about the reference (exact margin, LMI at tau, the sampled loop at its rate), a "
+        "predictor scenario ([predictor]) as its predictor loop linearised about the origin (the exact test of the "
+        "sampled loop at its rate, with the inertia mismatch margin); these options do not apply to either, and "
+        "what their checks do not cover is listed and makes them NOT VERIFIED"
     )
     flown.add_argument(
         "--jitter",
