@@ -7,9 +7,11 @@ nominal spacecraft. Measured: metrics-only ``simulate_batch`` calls of the predi
 the same calls on the scalar engine (the lanes switched off, what a predictor campaign did before), and the plain
 ``OnDelayed`` law on the lanes with the same plants and states and the paper's gain (with the fast gains every
 plain run diverges within a second, and a lane batch whose runs all diverged stops early: no measure of the
-lanes). Each predictor variant is checked bit for
-bit against the scalar engine. Rounds interleaved, best of the rounds; CPU time on one thread, wall clock on every
-core. Read the ratios, measured in this process, rather than the absolute numbers.
+lanes). Both predictor forms are measured: the default nonlinear model copy (form (b)) and
+``PredictorForm.LINEAR`` (the linearised copy, the FSA increment on the group; ``design/predictor.md``). Each
+predictor variant is checked bit for bit against the scalar engine. Rounds interleaved; the best rate of the
+rounds, and the min/median/max over the rounds of each round's ratio to the plain lanes of that round; CPU time on
+one thread, wall clock on every core. Read the ratios, measured in this process, rather than the absolute numbers.
 
 Run: ``.venv/bin/python bench/predictor_lanes.py [runs] [rounds]`` (defaults 48 runs, 3 rounds).
 """
@@ -29,7 +31,7 @@ from mrpctl import mrp, paper, simulate_batch
 from mrpctl.design import pd_gains
 from mrpctl.engines import isa as host_isa
 from mrpctl.engines import lanes as lane_engines
-from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.predictor import OnPredicted, Predictor, PredictorForm
 from mrpctl.simulation import _batch
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import OnDelayed
@@ -80,16 +82,17 @@ def vector_flags() -> str:
     return " ".join(flag for flag in wanted if flag in flags) or "unknown"
 
 
-def best_rates(
+def round_rates(
     table: dict[str, Callable[[], Any]], runs: int, rounds: int, clock: Callable[[], float]
-) -> dict[str, float]:
-    best = dict.fromkeys(table, 0.0)
+) -> dict[str, list[float]]:
+    """Runs/s of each entry in each of ``rounds`` interleaved rounds."""
+    rates: dict[str, list[float]] = {label: [] for label in table}
     for _ in range(rounds):
         for label, call in table.items():
             start = clock()
             call()
-            best[label] = max(best[label], runs / (clock() - start))
-    return best
+            rates[label].append(runs / (clock() - start))
+    return rates
 
 
 def main() -> None:
@@ -97,10 +100,10 @@ def main() -> None:
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 3
     case = cases(runs)
     predicted = dict(case, rule=[OnPredicted(1.0 if i % 2 == 0 else 1.2) for i in range(runs)])
-    predictor = Predictor(model=NOMINAL)
+    forms = {"": Predictor(model=NOMINAL), " (linear form)": Predictor(model=NOMINAL, form=PredictorForm.LINEAR)}
     threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
-    def predictor_on(lanes: bool, count: int) -> Any:
+    def predictor_on(lanes: bool, count: int, predictor: Predictor) -> Any:
         _batch._LANES = lanes
         try:
             return simulate_batch(**predicted, predictor=predictor, threads=count)
@@ -110,20 +113,26 @@ def main() -> None:
     def plain(count: int) -> Any:  # the paper's gain: the fast gains diverge on the plain law (a batch stops early)
         return simulate_batch(**dict(case, K=paper.GAIN), rule=OnDelayed(), threads=count)
 
-    lanes, scalar = predictor_on(True, 1), predictor_on(False, 1)  # warm the caches, check the bits
     fields = ("switch_count", "settling_time", "max_sigma", "diverged", "peak_torque", "peak_command")
-    same = all(np.asarray(getattr(lanes, f)).tobytes() == np.asarray(getattr(scalar, f)).tobytes() for f in fields)
-    diverged = {"predictor": int(lanes.diverged.sum()), "plain": int(plain(1).diverged.sum())}
+    same, diverged, settled = True, {"plain": int(plain(1).diverged.sum())}, {}
+    for name, predictor in forms.items():
+        lanes, scalar = predictor_on(True, 1, predictor), predictor_on(False, 1, predictor)  # warm, check the bits
+        same = same and all(
+            np.asarray(getattr(lanes, f)).tobytes() == np.asarray(getattr(scalar, f)).tobytes() for f in fields
+        )
+        diverged["predictor" + name] = int(lanes.diverged.sum())
+        settled["predictor" + name] = int(np.isfinite(lanes.settling_time).sum())
 
     def table(count: int) -> dict[str, Callable[[], Any]]:
-        return {
-            "predictor, lanes": lambda: predictor_on(True, count),
-            "predictor, scalar engine": lambda: predictor_on(False, count),
-            "plain OnDelayed, lanes": lambda: plain(count),
-        }
+        entries: dict[str, Callable[[], Any]] = {}
+        for name, predictor in forms.items():
+            entries[f"predictor{name}, lanes"] = lambda p=predictor: predictor_on(True, count, p)
+            entries[f"predictor{name}, scalar engine"] = lambda p=predictor: predictor_on(False, count, p)
+        entries["plain OnDelayed, lanes"] = lambda: plain(count)
+        return entries
 
-    serial = best_rates(table(1), runs, rounds, time.process_time)
-    wall = best_rates(table(threads), runs, rounds, time.perf_counter)
+    serial = round_rates(table(1), runs, rounds, time.process_time)
+    wall = round_rates(table(threads), runs, rounds, time.perf_counter)
     isa = host_isa.host_isa_flags()
     wanted = ("-mavx2", "-mavx512f", "-mfma")
     shown = [flag for flag in isa if flag.startswith(("-march", "-mprefer")) or flag in wanted]
@@ -134,14 +143,18 @@ def main() -> None:
         f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
     )
     print(
-        f"predictor lanes equal to the scalar engine bit for bit: {'yes' if same else 'NO'}; diverged runs "
-        f"(a lane batch stops early when all its runs diverged): predictor {diverged['predictor']}, plain "
-        f"{diverged['plain']} of {runs}"
+        f"predictor lanes equal to the scalar engine bit for bit (both forms): {'yes' if same else 'NO'}; diverged "
+        "runs (a lane batch stops early when all its runs diverged): "
+        + ", ".join(f"{label} {count}" for label, count in diverged.items())
+        + f" of {runs}; settled in {T_FINAL:g} s: "
+        + ", ".join(f"{label} {count}" for label, count in settled.items())
     )
     for title, rates in (("CPU-time runs/s, one thread", serial), (f"wall-clock runs/s, {threads} threads", wall)):
-        print(f"{title:34s} {'runs/s':>8s} {'x plain lanes':>14s}")
-        for label, rate in rates.items():
-            print(f"{label:34s} {rate:8.1f} {rate / rates['plain OnDelayed, lanes']:14.2f}")
+        plain_rates = np.asarray(rates["plain OnDelayed, lanes"])
+        print(f"{title:44s} {'best runs/s':>11s} {'x plain lanes: min':>19s} {'median':>7s} {'max':>6s}")
+        for label, values in rates.items():
+            ratio = np.asarray(values) / plain_rates
+            print(f"{label:44s} {max(values):11.1f} {ratio.min():19.2f} {np.median(ratio):7.2f} {ratio.max():6.2f}")
     if not same:
         raise SystemExit(1)
 

@@ -24,7 +24,7 @@ from mrpctl.errors import (
 )
 from mrpctl.loop import ClosedLoopFunctions, closed_loop_functions
 from mrpctl.model import PlantModel, plant_model
-from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.predictor import OnPredicted, Predictor, PredictorForm
 from mrpctl.provenance import mrpctl_version
 from mrpctl.scenario import Scenario, load_scenario
 from mrpctl.simulation import BatchResult, SimulationResult, simulate, simulate_batch
@@ -52,6 +52,7 @@ __all__ = [
     "PDGains",
     "PlantModel",
     "Predictor",
+    "PredictorForm",
     "Scenario",
     "SimulationResult",
     "Spacecraft",

@@ -61,6 +61,7 @@ from mrpctl.loop import (
 )
 from mrpctl.loop.wheels import wheel_controller_function, wheel_step_function
 from mrpctl.model import gain_matrix, wheel_dynamics_expr, wheel_hub_inertia
+from mrpctl.predictor import PredictorForm
 from mrpctl.provenance import mrpctl_version
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import SwitchingRule
@@ -830,7 +831,13 @@ def _predictor_manifest(closed: ClosedLoopFunctions) -> dict[str, Any]:
     constants = [float(value) for value in flight.constants]
     alpha = float(closed.rule.parameters()[0])
     return {
-        "form": "model copy with the error composed on the rotation group (design/predictor.md, form (b))",
+        "form": (
+            "linear: the linearised model's exact ZOH copy (never shortened) and the FSA increment composed on the "
+            "rotation group by its Pade MRP (design/predictor.md, the linear form)"
+            if predictor.form is PredictorForm.LINEAR
+            else "model copy with the error composed on the rotation group (design/predictor.md, form (b))"
+        ),
+        "form_name": predictor.form.value,
         "model_inertia": predictor.model.inertia.tolist(),
         "tau": closed.tau,
         "alpha": None if math.isinf(alpha) else alpha,

@@ -60,7 +60,7 @@ TABLE_KEYS = {
     "sensor": {"attitude_noise", "rate_noise", "gyro_bias", "seed"},
     "disturbance": {"torque", "torque_file"},
     "delay": {"tau_min", "tau_max", "seed", "sequence_file"},
-    "predictor": {"inertia", "inertia_error"},
+    "predictor": {"inertia", "inertia_error", "form"},
     "uncertainty": {"inertia_tolerance", "product_bound"},
 }
 

@@ -26,7 +26,7 @@ from mrpctl._files import memory_limit, regular_file, size_text
 from mrpctl._validation import finite_array, integer, nonnegative_scalar, positive_scalar, readonly, sealed
 from mrpctl.errors import DimensionError, MrpctlError, SpecificationError
 from mrpctl.loop import check_substeps, delay_samples
-from mrpctl.predictor import Predictor
+from mrpctl.predictor import Predictor, PredictorForm
 from mrpctl.provenance import versions
 from mrpctl.rules import RULE_NAMES, rule_from_name
 from mrpctl.scenario import sample_count
@@ -397,7 +397,8 @@ def _result(dataset: xr.Dataset, checked: dict[str, Any]) -> SimulationResult:
         history = readonly(dataset["history"].values)
     predictor = None
     if "predictor_inertia" in dataset:
-        predictor = Predictor(model=Spacecraft(dataset["predictor_inertia"].values))
+        form = dataset["predictor_inertia"].attrs.get("predictor_form", PredictorForm.NONLINEAR.value)
+        predictor = Predictor(model=Spacecraft(dataset["predictor_inertia"].values), form=PredictorForm.parse(form))
     flown: dict[str, Any] = {}
     if "saturated_fraction" in dataset:
         flown["saturated_fraction"] = float(dataset["saturated_fraction"])

@@ -52,7 +52,7 @@ from mrpctl.guidance import (
 )
 from mrpctl.loop import delay_samples
 from mrpctl.model import gain_matrix
-from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.predictor import OnPredicted, Predictor, PredictorForm
 from mrpctl.rules import RULE_NAMES, rule_from_name, rule_name
 from mrpctl.simulation import SETTLING_ATTITUDE_DEG, SETTLING_OMEGA, SimulationResult, settling_tolerances, simulate
 from mrpctl.simulation.estimated import EstimatedResult
@@ -365,7 +365,8 @@ def _predictor_table(
             f"[predictor] needs history = 'constant' (the model copy starts at x0), got {history!r}"
         )
     try:
-        return Predictor(model=predictor_model(spacecraft, table.get("inertia"), table.get("inertia_error")))
+        model = predictor_model(spacecraft, table.get("inertia"), table.get("inertia_error"))
+        return Predictor(model=model, form=PredictorForm.parse(table.get("form", PredictorForm.NONLINEAR.value)))
     except (SpecificationError, DimensionError) as exc:
         raise type(exc)(f"[predictor] {exc}") from exc
 
@@ -727,6 +728,8 @@ def scenario_toml(scenario: Scenario, *, comment: str = "", physical: bool = Fal
         model = scenario.predictor.model
         model_inertia = np.diag(model.inertia) if model.is_diagonal else model.inertia
         lines += ["", "[predictor]", f"inertia = {toml_value(model_inertia)}  # the controller's model J_m, kg m^2"]
+        if scenario.predictor.form is not PredictorForm.NONLINEAR:
+            lines.append(f'form = "{scenario.predictor.form.value}"  # the linearised model copy, FSA on the group')
     lines += flight_toml(scenario.actuator, scenario.sensor, scenario.disturbance, scenario.delay)
     lines += reference_toml(scenario.reference)
     if scenario.reference is not None:

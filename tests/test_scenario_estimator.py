@@ -273,6 +273,7 @@ def test_cli_mrp_ekf_sigma_is_the_mekf_sigma_in_rotation_units(tmp_path: Path, c
     [
         (["--torque-limit", "1"], "--torque-limit does not apply to a scenario with an [estimator] table"),
         (["--predictor"], "--predictor does not apply"),
+        (["--predictor-form", "linear"], "--predictor-form does not apply"),
         (["--wheels-plot", "w.png"], "--wheels-plot does not apply"),
         (["--noise-seed", "-1"], "--noise-seed must be >= 0"),
         (["--hysteresis", "1.5"], "--hysteresis"),

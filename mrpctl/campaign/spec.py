@@ -121,7 +121,7 @@ from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayModel, Hysteretic, Saturation
 from mrpctl.guidance import FileReference
 from mrpctl.loop import delay_samples
-from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.predictor import OnPredicted, Predictor, PredictorForm
 from mrpctl.scenario import (
     RULE_NAMES,
     Scenario,
@@ -152,7 +152,7 @@ __all__ = [
 ]
 
 _CAMPAIGN_KEYS = {"count", "seed", "dispersions", "peak_torque", "flight", "rule", "predictor"}
-_PREDICTOR_KEYS = {"inertia", "inertia_error"}
+_PREDICTOR_KEYS = {"inertia", "inertia_error", "form"}
 _DISPERSION_KEYS = {
     "attitude",
     "omega",
@@ -781,7 +781,8 @@ def _predictor(data: dict[str, Any], base: Scenario, rules: tuple[SwitchingRule,
             f"[predictor] needs history = 'constant' (the model copy starts at x0), got {base.history!r}"
         )
     try:
-        return Predictor(predictor_model(base.spacecraft, table.get("inertia"), table.get("inertia_error")))
+        model = predictor_model(base.spacecraft, table.get("inertia"), table.get("inertia_error"))
+        return Predictor(model, form=PredictorForm.parse(table.get("form", PredictorForm.NONLINEAR.value)))
     except (SpecificationError, DimensionError) as exc:
         raise type(exc)(f"[predictor] {exc}") from exc
 

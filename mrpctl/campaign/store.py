@@ -161,6 +161,8 @@ def _attrs(spec: CampaignSpec) -> dict[str, Any]:
         "predictor_model_inertia": json.dumps(
             None if spec.predictor is None else np.asarray(spec.predictor.model.inertia, dtype=float).tolist()
         ),
+        # the predictor's form ("nonlinear" or "linear"; "null" without the predictor)
+        "predictor_form": json.dumps(None if spec.predictor is None else spec.predictor.form.value),
         "versions": json.dumps(versions(), sort_keys=True),
         "noise_revision": NOISE_REVISION,
     }

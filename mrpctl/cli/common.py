@@ -24,6 +24,7 @@ import numpy as np
 
 from mrpctl.design import FlownVerdict
 from mrpctl.errors import MrpctlError, SpecificationError
+from mrpctl.predictor import PredictorForm
 from mrpctl.scenario import RULE_NAMES
 
 __all__ = [
@@ -203,6 +204,12 @@ def add_flight_options(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         metavar="E",
         help="the predictor with the model J_m = J / (1 + E) of the plant J (J = (1 + E) J_m): 1 value, or 3 per axis",
+    )
+    predicted.add_argument(
+        "--predictor-form",
+        choices=[form.value for form in PredictorForm],
+        help="the predictor's form: nonlinear (default; the model copy by RK4, corrected on the rotation group) or "
+        "linear (the linearised copy, the FSA increment on the group: cheaper, exact about a fixed axis only)",
     )
 
 

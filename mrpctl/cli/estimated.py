@@ -52,6 +52,7 @@ _OTHER_OPTIONS = (
     ("--jitter-seed", "jitter_seed"),
     ("--predictor-inertia", "predictor_inertia"),
     ("--predictor-error", "predictor_error"),
+    ("--predictor-form", "predictor_form"),
     ("--pointing-plot", "pointing_plot"),
     ("--wheels-plot", "wheels_plot"),
 )

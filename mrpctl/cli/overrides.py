@@ -17,7 +17,7 @@ from mrpctl.cli.common import options_given
 from mrpctl.conventions import PDGains, state
 from mrpctl.errors import DimensionError, SpecificationError
 from mrpctl.flight import ActuatorModel, DelayKind, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel
-from mrpctl.predictor import OnPredicted, Predictor
+from mrpctl.predictor import OnPredicted, Predictor, PredictorForm
 from mrpctl.reproduction import paper_scenarios
 from mrpctl.rules import DEFAULT_DELTA, DEFAULT_RULE
 from mrpctl.scenario import (
@@ -169,6 +169,7 @@ def _predictor_given(args: argparse.Namespace) -> list[str]:
         ("--predictor", getattr(args, "predictor", False) or None),
         ("--predictor-inertia", getattr(args, "predictor_inertia", None)),
         ("--predictor-error", getattr(args, "predictor_error", None)),
+        ("--predictor-form", getattr(args, "predictor_form", None)),
     )
 
 
@@ -413,8 +414,11 @@ def _apply_predictor_options(scenario: Scenario, args: argparse.Namespace) -> Sc
         error = errors[0] if len(errors) == 1 else errors
         model = _option_value("--predictor-error", lambda: predictor_model(scenario.spacecraft, inertia_error=error))
         predictor = Predictor(model=model)
-    elif args.predictor:
+    elif args.predictor or (getattr(args, "predictor_form", None) is not None and predictor is None):
         predictor = Predictor(model=scenario.spacecraft)
+    if getattr(args, "predictor_form", None) is not None:
+        assert predictor is not None
+        predictor = replace(predictor, form=PredictorForm.parse(args.predictor_form, "--predictor-form"))
     updated = replace(scenario, predictor=predictor) if predictor is not scenario.predictor else scenario
     on_predicted = isinstance(updated.rule, OnPredicted)
     if on_predicted and updated.predictor is None:

@@ -119,6 +119,7 @@ def _scenario_summary(scenario: Scenario) -> dict[str, Any]:
         "substeps": scenario.substeps,
         "flight_models": {name: str(model) for name, model in scenario.flight_options.items()},
         "predictor_inertia": None if scenario.predictor is None else scenario.predictor.model.inertia,
+        "predictor_form": None if scenario.predictor is None else scenario.predictor.form.value,
         "wheels": wheels_json(scenario),
         "reference": None if scenario.reference is None else str(scenario.reference),
         "steering": None if scenario.law is None else steering_json(scenario.law),

@@ -92,6 +92,7 @@ from mrpctl.loop import (
 )
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_structure
 from mrpctl.loop.wheels import wheel_core_function
+from mrpctl.predictor.controller import PredictorForm
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import SwitchingRule
 from mrpctl.wheels import WheelCluster
@@ -716,15 +717,16 @@ def predictor_lane_engine(
     torque_input: bool = False,
     torque_per_lane: bool = False,
     own_streams: bool = False,
+    form: PredictorForm = PredictorForm.NONLINEAR,
 ) -> LaneEngine:
     """The (cached) lane engine of the predictor sample (`mrpctl.loop.predictor_core_function`) of the scalar
     engine's structure: the plant's inertia layout (J, J⁻¹ per lane), the model's layout ``model`` (τ, J_m, J_m⁻¹
     per lane, in each run's ``flight`` constants: `mrpctl.loop.options.predictor_constants`), d, h, substeps,
     ``saturation``, ``sensor`` (a sensor given: a ``noise`` stream shared by the lanes, or each lane's own with
     ``own_streams``), ``limited`` (an actuator given) and ``torque_input`` (a per-sample torque, shared or with
-    ``torque_per_lane`` each lane's own). Its delayed input is fed from the ``ring`` output, (m_k, z_k): the
-    history of the measurements and of the model copy's states; its `LaneEngine.structure` is (``sensor``,
-    ``limited``, disturbed), the constant w being always in the sample.
+    ``torque_per_lane`` each lane's own); ``form``: the predictor's. Its delayed input is fed from the ``ring``
+    output, (m_k, z_k): the history of the measurements and of the model copy's states; its
+    `LaneEngine.structure` is (``sensor``, ``limited``, disturbed), the constant w being always in the sample.
 
     Raises
     ------
@@ -736,16 +738,18 @@ def predictor_lane_engine(
     per_lane = bool(torque_per_lane and torque_input)
     key: tuple[Any, ...] = ("predictor", layout, model, d, period, substeps, width, saturation)
     key += (bool(sensor), bool(limited), bool(torque_input), per_lane, own)
+    key += ("linear",) if form is PredictorForm.LINEAR else ()
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
             core = predictor_core_function(
                 spacecraft, d, period, substeps, inertia=layout, model_inertia=model, saturation=saturation,
-                sensor=bool(sensor), limited=bool(limited), torque_input=bool(torque_input),
+                sensor=bool(sensor), limited=bool(limited), torque_input=bool(torque_input), form=form,
             )  # fmt: skip
             label = f"onpredicted_d{d}_s{substeps}_{layout.value}_{saturation.value}_model_{model.value}"
             label += ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
             label += ("_torque" if torque_input else "") + ("_lanes" if per_lane else "") + ("_own" if own else "")
+            label += "_linear" if form is PredictorForm.LINEAR else ""
             noise = ("noise",) if sensor and not own else ()
             found = LaneEngine(
                 engine_sample(core, d, f"mrpctl_lanes_{label}"),

@@ -93,6 +93,7 @@ from mrpctl.loop.functions import true_error_function
 from mrpctl.loop.options import NO_FLIGHT_OPTIONS, flight_memory, predictor_memory
 from mrpctl.loop.wheels import wheel_core_function, wheel_memory, wheel_memory_roots
 from mrpctl.model import INPUT_SIZE, ORBIT_SIZE, STATE_SIZE
+from mrpctl.predictor.controller import PredictorForm
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import (
     MEMORY_SIZE,
@@ -310,6 +311,7 @@ class Engine:
         law: SteeringLaw | None = None,
         gravity_gradient: bool = False,
         lagged_settling: bool = False,
+        predictor_form: PredictorForm = PredictorForm.NONLINEAR,
     ) -> None:
         self.d = d
         self.lagged_settling = lagged_settling
@@ -361,6 +363,7 @@ class Engine:
                 limited=limited,
                 torque_input=self.torque_input,
                 records=True,
+                form=predictor_form,
                 **({"reference_input": True, "feedforward": feedforward} if reference_input else {}),
             )
         elif self.flight:
@@ -412,6 +415,7 @@ class Engine:
             label += f"_model_{predictor.value}" + ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
             label += "_torque" if self.torque_input else ""
             label += ("_tracking" + ("_ff" if feedforward else "")) if reference_input else ""
+            label += "_linear" if predictor_form is PredictorForm.LINEAR else ""
         elif self.flight:
             label += ("" if sensor else "_ideal") + ("" if limited else "_unlimited") + ("" if disturbed else "_free")
             label += "_torque" if torque_input else ""
@@ -817,6 +821,7 @@ def engine(
     law: SteeringLaw | None = None,
     gravity_gradient: bool = False,
     lagged_settling: bool = False,
+    predictor_form: PredictorForm = PredictorForm.NONLINEAR,
 ) -> Any:
     """The engine of this structure (compiled, or the virtual machine's without a compiler), cached.
 
@@ -834,7 +839,8 @@ def engine(
     ([`flight_core_function`][mrpctl.loop.flight_core_function]); without it the library of before.
     ``lagged_settling``: a tracking flight sample with an ideal sensor, d >= 1, the measurement-time error and a
     fixed delay takes the statistics of sample k − d from the controller's own error (no true error formed at
-    t_k; the last d samples' at the end of the run); its runs refuse anything else.
+    t_k; the last d samples' at the end of the run); its runs refuse anything else. ``predictor_form``: the
+    predictor sample's form ([`PredictorForm`][mrpctl.predictor.PredictorForm]; one library per form).
     """
     model = None if predictor is None else inertia_input(predictor)
     flight = isinstance(rule, Hysteretic)
@@ -861,6 +867,7 @@ def engine(
         key = (inertia_input(spacecraft), "predictor", model, sensor, limited, d, period, substeps, saturation)
         key += ("torque",) if torque_input else ()  # without it the key (and the library) of before
         key += (("tracking", feedforward),) if reference_input else ()
+        key += ("linear",) if predictor_form is PredictorForm.LINEAR else ()  # the default: the key of before
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
@@ -881,6 +888,7 @@ def engine(
                 law=law if flight else None,
                 gravity_gradient=bool(gravity_gradient),
                 lagged_settling=lagged_settling and model is None,
+                predictor_form=predictor_form,
             )
             if not found.compiled_code:  # no C compiler: the same sample in CasADi's virtual machine
                 found = VirtualMachineEngine(found.virtual_machine_sample(), d, found.inertia, flight=found.flight)

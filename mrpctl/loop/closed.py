@@ -51,12 +51,15 @@ from mrpctl.loop.functions import (
     CONTROLLER_MEMORY_SIZE,
     PREDICTOR_MEMORY_SIZE,
     PREDICTOR_RING_WIDTH,
+    InertiaInput,
     chunk_function,
     core_function,
     flight_chunk_function,
     flight_core_function,
     inertia_input,
     inertia_values,
+    linear_model_step_expr,
+    linear_prediction_expr,
     prediction_expr,
     predictor_core_function,
     step_function,
@@ -72,7 +75,7 @@ from mrpctl.loop.options import (
     varying_delay,
 )
 from mrpctl.model import INPUT_SIZE, STATE_SIZE, gain_matrix, plant_model
-from mrpctl.predictor import OnPredicted
+from mrpctl.predictor import OnPredicted, PredictorForm
 from mrpctl.spacecraft import Spacecraft, check_spacecraft
 from mrpctl.switching import MEMORY_SIZE, OnCurrent, SwitchingRule
 
@@ -570,6 +573,8 @@ def _predictor_loop(
       model copy: `prediction_expr`, u_c = K x̂, the actuator, z_{k+1} = short(RK4_m(z_k, u));
     * ``prediction(y, z_delayed, z, sigma_prev) -> (x_hat, switched)``: the correction and the rule;
     * ``model_step(z, u) -> z_next``: one RK4 step of J_m over h, kept in the short set;
+    * with the predictor's form `PredictorForm.LINEAR`: `linear_prediction_expr` and the linear copy's exact ZOH
+      step (`linear_model_step_expr`, never shortened) in their place;
     * ``sensor(x, noise) -> (x_true, measurement)``: as in the flight loop.
 
     The pieces are written from the same builders in the same order as ``sample``.
@@ -592,6 +597,7 @@ def _predictor_loop(
         saturation=saturation,
         sensor=True,
         torque_input=per_sample,
+        form=checked.form,
     )
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", PREDICTOR_MEMORY_SIZE)
@@ -623,18 +629,19 @@ def _predictor_loop(
     model_j, model_j_inv = inertia_values(checked.model, model_kind)
     z = ca.SX.sym("z", STATE_SIZE)
     u_in = ca.SX.sym("u", INPUT_SIZE)
-    raw = step_function(spacecraft, period, 1, inertia=model_kind)(z, u_in, ca.DM(model_j), ca.DM(model_j_inv))
-    model_step = ca.Function(
-        "model_step",
-        [z, u_in],
-        [ca.vertcat(short_expr(raw[0:3]), raw[3:6])],
-        ["z", "u"],
-        ["z_next"],
-    )
+    linear = checked.form is PredictorForm.LINEAR
+    if linear:
+        j_inv = ca.DM(model_j_inv if model_kind is InertiaInput.DIAGONAL else checked.model.inertia_inverse)
+        z_next = linear_model_step_expr(z, u_in, j_inv, period)
+    else:
+        raw = step_function(spacecraft, period, 1, inertia=model_kind)(z, u_in, ca.DM(model_j), ca.DM(model_j_inv))
+        z_next = ca.vertcat(short_expr(raw[0:3]), raw[3:6])
+    model_step = ca.Function("model_step", [z, u_in], [z_next], ["z", "u"], ["z_next"])
     y = ca.SX.sym("y", STATE_SIZE)
     z_delayed = ca.SX.sym("z_delayed", STATE_SIZE)
     previous = ca.SX.sym("sigma_prev", 3)
-    x_hat, switched = prediction_expr(y, z_delayed, z, previous, alpha[0], constants[FLIGHT_CONSTANTS_SIZE])
+    predict = linear_prediction_expr if linear else prediction_expr
+    x_hat, switched = predict(y, z_delayed, z, previous, alpha[0], constants[FLIGHT_CONSTANTS_SIZE])
     prediction = ca.Function(
         "prediction",
         [y, z_delayed, z, previous],

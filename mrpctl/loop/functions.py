@@ -42,6 +42,7 @@ from mrpctl.model import (
     orbit_turn_expr,
     plant_model,
 )
+from mrpctl.predictor.controller import PredictorForm
 from mrpctl.spacecraft import Spacecraft
 from mrpctl.switching import MEMORY_SIZE, PARAMETER_SIZE, OnCurrent, SwitchingRule
 
@@ -427,6 +428,9 @@ PREDICTOR_RING_WIDTH = 2 * STATE_SIZE
 #: Below this |σ̂|² the continuity test of the predicted MRP is skipped (its shadow is far away).
 _CONTINUITY_FLOOR = 1e-8
 _SMALL_ROTATION = 1e-4
+#: The linear form's guard on its Padé factor: |v|² is held at 1.25² (a rotation of 5 rad over τ; the pole is at
+#: |v|² = 2.5), so the predicted increment keeps its axis and grows monotonically, 4 atan(2.389 |v|) < 2π.
+PADE_HOLD = 1.5625
 
 
 def predictor_constants_size(model_inertia: InertiaInput) -> int:
@@ -474,8 +478,10 @@ def predictor_core_function(
     reference_input: bool = False,
     feedforward: bool = False,
     records: bool = False,
+    form: PredictorForm = PredictorForm.NONLINEAR,
 ) -> ca.Function:
-    """One sample of the predictor loop (``design/predictor.md``, form (b)) (pure SX).
+    """One sample of the predictor loop (``design/predictor.md``, form (b); with ``form`` LINEAR the linear
+    form of `linear_prediction_expr`) (pure SX).
 
     ``core(x, memory, x_delayed, K, parameters[, J, J_inv], flight[, noise][, torque]) ->
     (x_next, memory_next, x_meas, u, switched, ring)``: memory of `PREDICTOR_MEMORY_SIZE`
@@ -506,6 +512,9 @@ def predictor_core_function(
        kept in the short set: z_{k+1} = short(RK4_m(z_k, u)). The controller does not know w: the
        copy never sees it, it enters the prediction only through the measurement y.
 
+    With ``form`` = `PredictorForm.LINEAR` steps 3 and 5 are `linear_prediction_expr` and the copy's exact ZOH
+    step of the linearised model, z_{k+1} = Φ z_k + Γ_m u (`linear_model_step_expr`, never shortened).
+
     With ``reference_input`` the predictor tracks a reference (``design/tracking.md``): the inputs
     ``reference`` (the row of t_k: the true error) and ``reference_error`` (the controller's row) as in
     [`flight_core_function`][mrpctl.loop.flight_core_function]; step 4 acts on the tracking error of the
@@ -515,8 +524,9 @@ def predictor_core_function(
     """
     if feedforward and not reference_input:
         raise SpecificationError("feedforward: the feedforward terms need a reference (reference_input)")
+    linear = PredictorForm.parse(form) is PredictorForm.LINEAR
     step = step_function(spacecraft, period, substeps, inertia=inertia)
-    model_step = step_function(spacecraft, period, 1, inertia=model_inertia)
+    model_step = None if linear else step_function(spacecraft, period, 1, inertia=model_inertia)
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", PREDICTOR_MEMORY_SIZE)
     x_delayed = ca.SX.sym("x_delayed", PREDICTOR_RING_WIDTH)
@@ -543,8 +553,10 @@ def predictor_core_function(
     reference_error = ca.SX.sym("reference_error", REFERENCE_WIDTH)  # the controller's row
     if reference_input:
         x_hat, switched, predicted, omega_r_body, scale = _prediction_tracking_expr(
-            y, z_old, z, memory[2:5], parameters[0], tau, reference_error
+            y, z_old, z, memory[2:5], parameters[0], tau, reference_error, linear=linear
         )
+    elif linear:
+        x_hat, switched = linear_prediction_expr(y, z_old, z, memory[2:5], parameters[0], tau)
     else:
         x_hat, switched = prediction_expr(y, z_old, z, memory[2:5], parameters[0], tau)
     sigma_hat = x_hat[0:3]
@@ -564,8 +576,11 @@ def predictor_core_function(
     else:
         u, u_plant, saturated = command, command + w, ca.DM(0.0)
     x_next = step(x_meas, u_plant, *extra)
-    z_next = model_step(z, u, model_j, model_j_inv)
-    z_next = ca.vertcat(short_expr(z_next[0:3]), z_next[3:6])
+    if model_step is None:
+        z_next = linear_model_step_expr(z, u, model_j_inv, period)
+    else:
+        z_next = model_step(z, u, model_j, model_j_inv)
+        z_next = ca.vertcat(short_expr(z_next[0:3]), z_next[3:6])
     # the peaks by comparisons: casadi_fmax is a libm call per use (no -ffinite-math-only)
     size = [ca.fabs(command[i]) for i in range(INPUT_SIZE)]
     peaks = [ca.if_else(size[i] > memory[6 + i], size[i], memory[6 + i]) for i in range(INPUT_SIZE)]
@@ -614,17 +629,21 @@ def predictor_core_function(
 
 
 def _prediction_tracking_expr(
-    y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any, row: Any
+    y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any, row: Any, *, linear: bool = False
 ) -> tuple[Any, Any, Any, Any, Any]:
     """[`prediction_expr`][mrpctl.loop.prediction_expr] on the tracking error: (x̂ = [σ_B/R; ω_B/R/4], switched,
-    the prediction [σ̂_B/N; ω̂/4], [B̂N] ω_R/N, the rotation scale) against the reference ``row`` (9)."""
-    q_y = quaternion_from_mrp_expr(y[0:3])
-    q_old = quaternion_from_mrp_expr(z_old[0:3])
-    q_z = quaternion_from_mrp_expr(z[0:3])
-    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
-    delta_omega = 4 * (y[3:6] - z_old[3:6])
-    q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
-    predicted = ca.vertcat(_short_mrp_from_quaternion(q_hat), z[3:6] + (y[3:6] - z_old[3:6]))
+    the prediction [σ̂_B/N; ω̂/4], [B̂N] ω_R/N, the rotation scale) against the reference ``row`` (9); with
+    ``linear`` the prediction of [`linear_prediction_expr`][mrpctl.loop.functions.linear_prediction_expr]."""
+    if linear:
+        predicted = ca.vertcat(_linear_prediction_mrp(y, z_old, z, tau), y[3:6] + (z[3:6] - z_old[3:6]))
+    else:
+        q_y = quaternion_from_mrp_expr(y[0:3])
+        q_old = quaternion_from_mrp_expr(z_old[0:3])
+        q_z = quaternion_from_mrp_expr(z[0:3])
+        q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
+        delta_omega = 4 * (y[3:6] - z_old[3:6])
+        q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
+        predicted = ca.vertcat(_short_mrp_from_quaternion(q_hat), z[3:6] + (y[3:6] - z_old[3:6]))
     sigma, rate, omega_r_body, scale = tracking_error_expr(predicted[0:3], predicted[3:6], row[0:3], row[3:6])
     shadow = _safe_shadow(sigma)
     nearer = ca.logic_and(
@@ -661,6 +680,56 @@ def prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: 
     switched = ca.if_else(ca.dot(sigma_hat, sigma_hat) >= alpha * alpha, 1.0, 0.0)
     sigma_hat = ca.if_else(switched, _safe_shadow(sigma_hat), sigma_hat)
     return ca.vertcat(sigma_hat, z[3:6] + (y[3:6] - z_old[3:6])), switched
+
+
+def linear_model_step_expr(z: Any, u: Any, model_j_inv: Any, period: float) -> Any:
+    """z_{k+1} = Φ z_k + Γ_m u: the exact zero-order-hold step of the model linearised about the origin,
+    ẋ = A x + B_m u with A = [0 I; 0 0], B_m = [0; ¼ J_m⁻¹] (x = [σ; ω/4]): σ += h w + (h²/8) J_m⁻¹ u,
+    w += (h/4) J_m⁻¹ u. ``model_j_inv``: J_m⁻¹ as 3 diagonal values or a 3x3 SX."""
+    acceleration = model_j_inv @ u if model_j_inv.shape == (3, 3) else model_j_inv * u
+    h = float(period)
+    return ca.vertcat(z[0:3] + h * z[3:6] + (h * h / 8.0) * acceleration, z[3:6] + (h / 4.0) * acceleration)
+
+
+def _linear_prediction_mrp(y: Any, z_old: Any, z: Any, tau: Any) -> Any:
+    """The short MRP of Ĉ = C(p) C(y): the FSA increment v = τ w_y + S_σ as the rotation 4v, by its [3/2] Padé
+    MRP p = v N/D (N = 15 − h, D = 15 − 6h, h = min(|v|², `PADE_HOLD`)), with one division. p's quaternion is
+    (D² − |v|² N², 2 N D v) / n_p and σ_y's (1 − |σ_y|², 2 σ_y) / n_y, with n_p = D² + |v|² N² and
+    n_y = 1 + |σ_y|² their norms; with Q the product of the unnormalised two, the short MRP of Ĉ is
+    sign(Q₀) Q_v / (n_p n_y + |Q₀|)."""
+    increment = tau * y[3:6] + (z[0:3] - z_old[0:3] - tau * z_old[3:6])
+    squared = ca.dot(increment, increment)
+    held = ca.if_else(squared > PADE_HOLD, PADE_HOLD, squared)
+    numerator, denominator = 15 - held, 15 - 6 * held
+    d2, n2 = denominator * denominator, squared * (numerator * numerator)
+    measured = ca.dot(y[0:3], y[0:3])
+    q_p = ca.vertcat(d2 - n2, (2 * numerator * denominator) * increment)
+    q = _quaternion_product(q_p, ca.vertcat(1 - measured, 2 * y[0:3]))
+    return (ca.if_else(q[0] >= 0, 1.0, -1.0) / ((d2 + n2) * (1 + measured) + ca.fabs(q[0]))) * q[1:4]
+
+
+def linear_prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:
+    """(x̂, switched) of the linear predictor form (`PredictorForm.LINEAR`) as SX expressions.
+
+    The copy z is linear (`linear_model_step_expr`), so S = z_k − Φ^d z_{k−d} is its forced response over the
+    last τ: S_σ = z_σ(k) − z_σ(k−d) − τ z_w(k−d), S_w = z_w(k) − z_w(k−d). The FSA prediction's σ increment
+    v = τ w_y + S_σ is applied to the measured attitude as the rotation by 4v: Ĉ = C(p) C(y), with
+    p = v (15 − h)/(15 − 6 h), h = min(|v|², `PADE_HOLD`), the [3/2] Padé form of tan(|v|) v/|v| (relative
+    error below 1e-3 up to a rotation of π over τ); ŵ = w_y + S_w. The rule of
+    [`prediction_expr`][mrpctl.loop.functions.prediction_expr] without dividing first: with s = |σ̂|² and c = σ̂·σ̂_{k−1}, the
+    shadow −σ̂/s is nearer σ̂_{k−1} exactly when 1 + 2c < s (s − 2c) (continuity, when s > 1e-8), and the set
+    chosen has |σ̂|² >= α² exactly when s >= α² (σ̂ kept) or α² s <= 1 (the shadow taken). No libm call; two
+    divisions (the MRP of Ĉ, `_linear_prediction_mrp`, and the shadow).
+    """
+    sigma = _linear_prediction_mrp(y, z_old, z, tau)
+    squared = ca.dot(sigma, sigma)
+    along = ca.dot(sigma, previous)
+    nearer = ca.logic_and(squared > _CONTINUITY_FLOOR, 1 + 2 * along < squared * (squared - 2 * along))
+    limit = alpha * alpha
+    switched = ca.if_else(nearer, limit * squared <= 1, squared >= limit)
+    shadow = (-1 / ca.if_else(squared > 0, squared, 1.0)) * sigma
+    sigma_hat = ca.if_else(nearer, ca.if_else(switched, sigma, shadow), ca.if_else(switched, shadow, sigma))
+    return ca.vertcat(sigma_hat, y[3:6] + (z[3:6] - z_old[3:6])), ca.if_else(switched, 1.0, 0.0)
 
 
 def _safe_shadow(sigma: Any) -> Any:

@@ -40,7 +40,7 @@ from mrpctl.predictor.analysis import (
     sampled_predictor_matrices,
     synthesize_predictor_pd,
 )
-from mrpctl.predictor.controller import OnPredicted, Predictor
+from mrpctl.predictor.controller import OnPredicted, Predictor, PredictorForm
 
 __all__ = [
     "MarginInterval",
@@ -48,6 +48,7 @@ __all__ = [
     "OnPredicted",
     "Predictor",
     "PredictorDesign",
+    "PredictorForm",
     "PredictorStability",
     "StabilityMethod",
     "StabilityStatus",

@@ -50,7 +50,7 @@ from mrpctl.loop.options import (
 )
 from mrpctl.loop.wheels import wheel_memory, wheel_memory_roots
 from mrpctl.model import INPUT_SIZE, STATE_SIZE
-from mrpctl.predictor import Predictor
+from mrpctl.predictor import Predictor, PredictorForm
 from mrpctl.simulation._batch_inputs import (
     SHARED_HINT,
     batch_gains,
@@ -466,7 +466,7 @@ def simulate_batch(
             settling=settling,
             law=law,
             gravity_gradient=gravity_gradient is not None,
-            predicted=None if checked is None else (checked.model, predictor_by_run, actuators),
+            predicted=None if checked is None else (checked, predictor_by_run, actuators),
         )
 
     by_structure: dict[tuple[Any, ...], Any] = {}  # objects alive during the call: id() is safe
@@ -511,6 +511,7 @@ def simulate_batch(
                 substeps,
                 saturation,
                 predictor=None if checked is None else checked.model,
+                predictor_form=PredictorForm.NONLINEAR if checked is None else checked.form,
                 **structure,
                 **({"torque_input": True} if torque_input else {}),
                 **({} if tracked_by_run[i] is None else {"reference_input": True, "feedforward": feedforward}),
@@ -671,7 +672,7 @@ def _run_lanes(
     settling: tuple[float, float] | None = None,
     law: SteeringLaw | None = None,
     gravity_gradient: bool = False,
-    predicted: tuple[Spacecraft, list[np.ndarray | None], list[ActuatorModel | None]] | None = None,
+    predicted: tuple[Predictor, list[np.ndarray | None], list[ActuatorModel | None]] | None = None,
 ) -> list[int]:
     """Run the metrics-only batch on the lane engine, one packed group per structure (inertia
     layout, rule expressions, d, a torque stream; the flight sample specialised to the union of its
@@ -876,7 +877,7 @@ def _run_lanes(
 
 def _predictor_batches(
     members: list[int],
-    predicted: tuple[Spacecraft, list[np.ndarray | None], list[ActuatorModel | None]],
+    predicted: tuple[Predictor, list[np.ndarray | None], list[ActuatorModel | None]],
     crafts: Sequence[Spacecraft],
     states: np.ndarray,
     gains: np.ndarray,
@@ -895,7 +896,8 @@ def _predictor_batches(
     model's J_m) a per-lane constant, its noise shared or its own, its torque rows shared or its own; the delayed
     entries (m, z) start with z = m = x0 (the constant history), the memory with `predictor_memory`, as the scalar
     engine's run."""
-    model, constants_by_run, actuators = predicted
+    predictor, constants_by_run, actuators = predicted
+    model = predictor.model
     _, saturation, sensors, _ = flight
     streamed_by_run, shared = torques
     first = members[0]
@@ -905,7 +907,7 @@ def _predictor_batches(
     lanes = lane_engines.predictor_lane_engine(
         crafts[first], inertia_input(model), d, 1.0 / rate, substeps, saturation=saturation,
         sensor=sensors[first] is not None, limited=actuators[first] is not None, torque_input=torque is not None,
-        torque_per_lane=own_torque, own_streams=own_sensors is not None,
+        torque_per_lane=own_torque, own_streams=own_sensors is not None, form=predictor.form,
     )  # fmt: skip
     x0 = states[members]
     rows = np.concatenate((x0, x0), axis=1)[:, :, None]  # (m, z) = x0 before t = 0: one column, constant in time

@@ -35,7 +35,7 @@ from mrpctl.loop.options import (
     varying_delay,
 )
 from mrpctl.model import STATE_SIZE, gain_matrix
-from mrpctl.predictor import Predictor
+from mrpctl.predictor import Predictor, PredictorForm
 from mrpctl.simulation._budget import (
     SWITCH_LIMIT,
     check_keep_every,
@@ -455,6 +455,7 @@ def simulate(
         substeps,
         saturation,
         predictor=None if checked is None else checked.model,
+        predictor_form=PredictorForm.NONLINEAR if checked is None else checked.form,
         **engine_structure(checked, options, sensor, actuator, gravity_gradient=gravity_gradient is not None),
         **({} if streamed is None else {"torque_input": True}),
         **({} if tracked is None else {"reference_input": True, "feedforward": feedforward}),

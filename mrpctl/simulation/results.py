@@ -781,7 +781,11 @@ def _run_dataset(result: SimulationResult) -> xr.Dataset:
         data["predictor_inertia"] = (
             ("row", "col"),
             np.asarray(result.predictor.model.inertia),
-            {"units": "kg m^2", "long_name": "the predictor's model inertia J_m"},
+            {
+                "units": "kg m^2",
+                "long_name": "the predictor's model inertia J_m",
+                "predictor_form": result.predictor.form.value,
+            },
         )
     if result.saturated_fraction is not None:
         data["saturated_fraction"] = ((), float(result.saturated_fraction), {"long_name": "samples at a torque limit"})
