@@ -16,6 +16,13 @@ Predictor forms (see design/predictor.md):
   C_E = C_z(k−d)ᵀ C_y (inertial-frame attitude error, invariant under equal body rates),
   δω = ω_y − ω_z(k−d) (body frame), Ĉ_k = C(τ δω) C_z(k) C_E, ω̂_k = ω_z(k) + δω.
 * ``"smith"``: the same without the τ δω rotation (the textbook Smith correction x̂ = z_k + (y − z_{k−d})).
+* ``"linear"``: the copy is the linear zero-order-hold model of [σ; w] (w = ω/4), never shortened:
+  z_σ ← z_σ + h z_w + (h²/8) J_m⁻¹ u_k, z_w ← z_w + (h/4) J_m⁻¹ u_k, z_0 = x0 (short set). Its forced
+  response over the last τ is S_σ = z_σ(k) − z_σ(k−d) − τ z_w(k−d), S_w = z_w(k) − z_w(k−d) (for k < d,
+  z_{k−d} is z_0). The FSA increment v = τ w_y + S_σ is applied on the rotation group as the MRP
+  p = v (15 − x²)/(15 − 6x²), x² = min(v·v, 1.5625) (the [3/2] Padé form of tan|v| along v, ≈ the MRP
+  of the rotation by the vector 4v; the guard keeps it off the pole at v·v = 2.5):
+  Ĉ_k = C(p) C(σ_y), ω̂_k = 4 (w_y + S_w).
 
 Flight-loop options (for the compiled engine's predictor sample): ``u_max`` clips each torque axis (the
 torque actually applied drives both the plant and the model copy), ``disturbance`` is a torque added on
@@ -35,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-FORMS = ("none", "reintegrate", "model-copy", "smith")
+FORMS = ("none", "reintegrate", "model-copy", "smith", "linear")
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -188,6 +195,15 @@ def run(
             for j in range(max(k - d, 0), k):
                 p = to_short(rk4(model, model_inverse, p, us[j], h, 1))
             c_hat, omega_hat = dcm(p[:3]), 4.0 * p[3:]
+        elif form == "linear":
+            z_old = zs[k - d] if k >= d else zs[0]
+            forced_sigma = z[:3] - z_old[:3] - tau * z_old[3:]
+            forced_w = z[3:] - z_old[3:]
+            v = tau * y[3:] + forced_sigma
+            x2 = min(float(v @ v), 1.5625)
+            p = v * (15.0 - x2) / (15.0 - 6.0 * x2)
+            c_hat = dcm(p) @ dcm(y[:3])
+            omega_hat = 4.0 * (y[3:] + forced_w)
         else:
             z_old = zs[k - d] if k >= d else zs[0]
             c_error = dcm(z_old[:3]).T @ dcm(y[:3])
@@ -218,7 +234,11 @@ def run(
         else:
             w = disturbance[k] if np.ndim(disturbance) == 2 else np.asarray(disturbance, float)
         x = to_short(rk4(inertia, inverse, x, u + w, h, plant_substeps))
-        z = to_short(rk4(model, model_inverse, z, u, h, 1))
+        if form == "linear":
+            acceleration = model_inverse @ u
+            z = np.concatenate((z[:3] + h * z[3:] + (h * h / 8.0) * acceleration, z[3:] + (h / 4.0) * acceleration))
+        else:
+            z = to_short(rk4(model, model_inverse, z, u, h, 1))
         if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > 1e6:
             n = k + 1
             break
