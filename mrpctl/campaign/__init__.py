@@ -5,7 +5,8 @@
 >>> run_campaign(spec, "results/tumble")                                     # doctest: +SKIP
 >>> open_campaign("results/tumble")                                          # doctest: +SKIP
 
-See ``design/campaigns.md`` for the sampling, the store layout, resuming and clusters.
+See ``design/campaigns.md`` for the sampling, the store layout and resuming, ``design/campaigns-cluster.md`` for
+clusters.
 """
 
 from __future__ import annotations

@@ -139,7 +139,7 @@ def simulate_batch(
     exception from ``progress``) sets a stop flag that the workers check between slices.
     Without ``trajectories`` the runs go to the lane engine (`mrpctl.engines.lanes`): the
     same sample vectorised across runs, W = 8 runs per C call, each run's metrics bit for bit
-    those of the scalar engine (about 5x its runs/s per core; ``design/campaigns.md``).
+    those of the scalar engine (about 5x its runs/s per core; ``design/lanes.md``).
     Without a C compiler the runs are evaluated one after the other in CasADi's virtual
     machine.
 
