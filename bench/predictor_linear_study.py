@@ -25,7 +25,7 @@ Four parts, each printed:
 
 1. ``count``: the lane program of the sample as the lane engine emits it (`emit_lanes` of `engine_sample`, the
    outputs the engine does not read dropped, W = 8, d = 500, 1 kHz): lane values (``const double v`` lines),
-   divisions (OP_DIV/OP_INV instructions; the slashes of the C text, as counted in ``design/campaigns.md``, are
+   divisions (OP_DIV/OP_INV instructions; the slashes of the C text, as counted before in ``design/lanes.md``, are
    8 more: the comments), libm calls (sin, cos, ...) and segments, for the plain ``OnDelayed`` sample, form (b)
    and the variants.
 2. ``accuracy``: the paper case (J = diag(140, 100, 80), x0 = paper.INITIAL_STATE, τ = 0.5 s, 20 s; and a skew-axis
