@@ -716,10 +716,10 @@ def linear_prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any
     v = τ w_y + S_σ is applied to the measured attitude as the rotation by 4v: Ĉ = C(p) C(y), with
     p = v (15 − h)/(15 − 6 h), h = min(|v|², `PADE_HOLD`), the [3/2] Padé form of tan(|v|) v/|v| (relative
     error below 1e-3 up to a rotation of π over τ); ŵ = w_y + S_w. The rule of
-    [`prediction_expr`][mrpctl.loop.functions.prediction_expr] without dividing first: with s = |σ̂|² and c = σ̂·σ̂_{k−1}, the
-    shadow −σ̂/s is nearer σ̂_{k−1} exactly when 1 + 2c < s (s − 2c) (continuity, when s > 1e-8), and the set
-    chosen has |σ̂|² >= α² exactly when s >= α² (σ̂ kept) or α² s <= 1 (the shadow taken). No libm call; two
-    divisions (the MRP of Ĉ, `_linear_prediction_mrp`, and the shadow).
+    [`prediction_expr`][mrpctl.loop.functions.prediction_expr] without dividing first: with s = |σ̂|² and
+    c = σ̂·σ̂_{k−1}, the shadow −σ̂/s is nearer σ̂_{k−1} exactly when 1 + 2c < s (s − 2c) (continuity, when
+    s > 1e-8), and the set chosen has |σ̂|² >= α² exactly when s >= α² (σ̂ kept) or α² s <= 1 (the shadow taken).
+    No libm call; two divisions (the MRP of Ĉ, `_linear_prediction_mrp`, and the shadow).
     """
     sigma = _linear_prediction_mrp(y, z_old, z, tau)
     squared = ca.dot(sigma, sigma)
