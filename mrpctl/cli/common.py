@@ -261,6 +261,18 @@ def options_given(*options: tuple[str, object]) -> list[str]:
     return [option for option, value in options if value is not None]
 
 
+def flown_options_given(args: argparse.Namespace, *, no_flown: bool = True) -> list[str]:
+    """The loop-as-flown options of ``verify`` that were given (with ``no_flown``, ``--no-flown`` too)."""
+    return options_given(
+        ("--jitter", args.jitter),
+        ("--jitter-rate", args.jitter_rate),
+        ("--sampled", args.sampled),
+        ("--inertia-tolerance", args.inertia_tolerance),
+        ("--product-bound", args.product_bound),
+        *((("--no-flown", args.no_flown or None),) if no_flown else ()),
+    )
+
+
 @contextlib.contextmanager
 def atomic_output(path: Path, mode: str = "w") -> Iterator[IO[Any]]:
     """Open a temporary sibling of ``path`` for writing; move it onto ``path`` only when the block succeeds."""

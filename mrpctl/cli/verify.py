@@ -19,8 +19,8 @@ from mrpctl.cli.common import (
     Formatter,
     add_json,
     add_plant_options,
+    flown_options_given,
     joint_json,
-    options_given,
     print_json,
 )
 from mrpctl.cli.overrides import gain_from_args, plant_given, spacecraft_from
@@ -56,13 +56,7 @@ def _flown_plan(args: argparse.Namespace, tau: float, scenario: Scenario | None)
     and its ``[uncertainty]`` inertia box. ``--jitter``, ``--jitter-rate``, ``--sampled`` and
     ``--inertia-tolerance`` override the scenario's values; ``--no-flown`` keeps the idealised loop only.
     """
-    given = options_given(
-        ("--jitter", args.jitter),
-        ("--jitter-rate", args.jitter_rate),
-        ("--sampled", args.sampled),
-        ("--inertia-tolerance", args.inertia_tolerance),
-        ("--product-bound", args.product_bound),
-    )
+    given = flown_options_given(args, no_flown=False)
     if args.no_flown and given:
         raise SpecificationError(f"{given[0]} does not apply with --no-flown (the idealised loop only)")
     from_file = scenario is not None and not args.no_flown

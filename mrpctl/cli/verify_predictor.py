@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mrpctl.cli.common import NOT_VERIFIED, options_given, print_json
+from mrpctl.cli.common import NOT_VERIFIED, flown_options_given, print_json
 from mrpctl.clock import delay_samples
 from mrpctl.errors import SpecificationError
 from mrpctl.predictor import StabilityStatus, inertia_mismatch_margin, predictor_stability
@@ -31,14 +31,7 @@ __all__ = ["check_predictor_options", "verify_predictor"]
 def check_predictor_options(args: argparse.Namespace) -> None:
     """Refuse the loop-as-flown options of ``verify``: they build certificates of the plain delayed loop (the
     jitter interval, the inertia polytope, the sampled PD loop) that the predictor loop does not have."""
-    given = options_given(
-        ("--jitter", args.jitter),
-        ("--jitter-rate", args.jitter_rate),
-        ("--sampled", args.sampled),
-        ("--inertia-tolerance", args.inertia_tolerance),
-        ("--product-bound", args.product_bound),
-        ("--no-flown", args.no_flown or None),
-    )
+    given = flown_options_given(args)
     if given:
         raise SpecificationError(
             f"{given[0]} does not apply to a predictor scenario ([predictor]): its verdict is the linearised "

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from mrpctl.cli.common import NOT_VERIFIED, options_given, print_json
+from mrpctl.cli.common import NOT_VERIFIED, flown_options_given, print_json
 from mrpctl.clock import delay_samples
 from mrpctl.design.lmi import criterion_name
 from mrpctl.design.sampled import MAX_LIFTED_SIZE
@@ -79,14 +79,7 @@ class _Check:
 def check_tracking_options(args: argparse.Namespace) -> None:
     """Refuse the loop-as-flown options of ``verify``: they build regulation certificates (the per-axis
     jitter interval, the inertia polytope) that a tracking loop does not have."""
-    given = options_given(
-        ("--jitter", args.jitter),
-        ("--jitter-rate", args.jitter_rate),
-        ("--sampled", args.sampled),
-        ("--inertia-tolerance", args.inertia_tolerance),
-        ("--product-bound", args.product_bound),
-        ("--no-flown", args.no_flown or None),
-    )
+    given = flown_options_given(args)
     if given:
         raise SpecificationError(
             f"{given[0]} does not apply to a tracking scenario ([reference]): its verdict is the linearised tracking "

@@ -637,12 +637,7 @@ def _prediction_tracking_expr(
     if linear:
         predicted = ca.vertcat(_linear_prediction_mrp(y, z_old, z, tau), y[3:6] + (z[3:6] - z_old[3:6]))
     else:
-        q_y = quaternion_from_mrp_expr(y[0:3])
-        q_old = quaternion_from_mrp_expr(z_old[0:3])
-        q_z = quaternion_from_mrp_expr(z[0:3])
-        q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
-        delta_omega = 4 * (y[3:6] - z_old[3:6])
-        q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
+        q_hat = _group_prediction_quaternion(y, z_old, z, tau)
         predicted = ca.vertcat(_short_mrp_from_quaternion(q_hat), z[3:6] + (y[3:6] - z_old[3:6]))
     sigma, rate, omega_r_body, scale = tracking_error_expr(predicted[0:3], predicted[3:6], row[0:3], row[3:6])
     shadow = _safe_shadow(sigma)
@@ -656,6 +651,16 @@ def _prediction_tracking_expr(
     return ca.vertcat(sigma, rate), switched, predicted, omega_r_body, scale
 
 
+def _group_prediction_quaternion(y: Any, z_old: Any, z: Any, tau: Any) -> Any:
+    """β of form (b)'s prediction Ĉ = C(τ δω) C(z_k) C(z_{k−d})ᵀ C(y), δω = ω_y − ω_z(k−d) (quaternion products)."""
+    q_y = quaternion_from_mrp_expr(y[0:3])
+    q_old = quaternion_from_mrp_expr(z_old[0:3])
+    q_z = quaternion_from_mrp_expr(z[0:3])
+    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
+    delta_omega = 4 * (y[3:6] - z_old[3:6])
+    return _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
+
+
 def prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: Any) -> tuple[Any, Any]:
     """(x̂, switched): the predictor's correction and its switching rule as SX expressions.
 
@@ -664,13 +669,7 @@ def prediction_expr(y: Any, z_old: Any, z: Any, previous: Any, alpha: Any, tau: 
     products, σ̂ its short MRP, the shadow when nearer ``previous`` (|σ̂|² > 1e-8), then the shadow
     when |σ̂|² >= α² (``switched`` = 1.0); x̂ = [σ̂; ω_z(k)/4 + (ω_y − ω_z(k−d))/4].
     """
-    q_y = quaternion_from_mrp_expr(y[0:3])
-    q_old = quaternion_from_mrp_expr(z_old[0:3])
-    q_z = quaternion_from_mrp_expr(z[0:3])
-    q_error = _quaternion_product(ca.vertcat(q_old[0], -q_old[1:4]), q_y)  # C(z_{k−d})ᵀ C(y)
-    delta_omega = 4 * (y[3:6] - z_old[3:6])
-    q_hat = _quaternion_product(_rotation_quaternion(tau * delta_omega), _quaternion_product(q_z, q_error))
-    sigma_hat = _short_mrp_from_quaternion(q_hat)
+    sigma_hat = _short_mrp_from_quaternion(_group_prediction_quaternion(y, z_old, z, tau))
     shadow = _safe_shadow(sigma_hat)
     nearer = ca.logic_and(
         ca.dot(sigma_hat, sigma_hat) > _CONTINUITY_FLOOR,
