@@ -221,15 +221,24 @@ def predictor_tracking_loop(
     alpha: float = 1.0,
     feedforward: bool = False,
     model_inertia: Any = None,
+    form: str = "model-copy",
 ) -> TrackingRun:
-    """The predictor (model copy, error composed on the rotation group and carried over τ) on the tracking
-    error of the prediction against the reference of t_k, in quaternions:
+    """The predictor on the tracking error of the prediction against the reference of t_k, in quaternions.
 
-    q_E = q_z(k−d)* ⊗ q_y, δω = ω_y − ω_z(k−d), q̂ = q(τ δω) ⊗ q_z(k) ⊗ q_E, ω̂ = ω_z(k) + δω;
-    σ_B/R the short MRP of q̂ ⊗ q_R*, ω_B/R = ω̂ − C(q̂) ω_R; the set nearest the previous σ_B/R
-    (|σ|² > 1e-8), then its shadow when |σ| >= α (a switch); u = K [σ_B/R; ω_B/R/4] (+ the feedforward of ω̂,
-    C(q̂) and J_m); the plant and the copy z (J_m, one RK4 step) driven by u, both kept short.
+    ``form="model-copy"`` (form (b): the model copy, error composed on the rotation group and carried over τ):
+    q_E = q_z(k−d)* ⊗ q_y, δω = ω_y − ω_z(k−d), q̂ = q(τ δω) ⊗ q_z(k) ⊗ q_E, ω̂ = ω_z(k) + δω; the copy z
+    (J_m, one RK4 step) kept short.
+
+    ``form="linear"``: the copy z is the linear ZOH model of [σ; w] (w = ω/4, J_m), never shortened:
+    z_σ += h z_w + (h²/8) J_m⁻¹ u, z_w += (h/4) J_m⁻¹ u; S_σ = z_σ(k) − z_σ(k−d) − τ z_w(k−d),
+    S_w = z_w(k) − z_w(k−d); v = τ w_y + S_σ, p = v (15 − x²)/(15 − 6x²) with x² = min(v·v, 1.5625) (the [3/2]
+    Padé form of tan |v| along v), q̂ = q(p) ⊗ q_y, ω̂ = 4 (w_y + S_w).
+
+    Then, for either form: σ_B/R the short MRP of q̂ ⊗ q_R*, ω_B/R = ω̂ − C(q̂) ω_R; the set nearest the
+    previous σ_B/R (|σ|² > 1e-8), then its shadow when |σ| >= α (a switch); u = K [σ_B/R; ω_B/R/4] (+ the
+    feedforward of ω̂, C(q̂) and J_m); the plant and the copy z driven by u, the plant kept short.
     """
+    assert form in ("model-copy", "linear"), form
     inertia = np.asarray(inertia, dtype=float)
     inertia = np.diag(inertia) if inertia.shape == (3,) else inertia
     model = inertia if model_inertia is None else np.asarray(model_inertia, dtype=float)
@@ -254,10 +263,18 @@ def predictor_tracking_loop(
         zs.append(z.copy())
         y = xs[k - d] if k >= d else xs[0]
         z_old = zs[k - d] if k >= d else zs[0]
-        q_error = _product(_conjugate(_quaternion(z_old[0:3])), _quaternion(y[0:3]))
-        d_omega = 4.0 * (y[3:6] - z_old[3:6])
-        q_hat = _product(_noise_quaternion(tau * d_omega), _product(_quaternion(z[0:3]), q_error))
-        omega_hat = 4.0 * z[3:6] + d_omega
+        if form == "linear":
+            forced_sigma = z[0:3] - z_old[0:3] - tau * z_old[3:6]
+            forced_w = z[3:6] - z_old[3:6]
+            v = tau * y[3:6] + forced_sigma
+            x2 = min(float(v @ v), 1.5625)
+            q_hat = _product(_quaternion(v * (15.0 - x2) / (15.0 - 6.0 * x2)), _quaternion(y[0:3]))
+            omega_hat = 4.0 * (y[3:6] + forced_w)
+        else:
+            q_error = _product(_conjugate(_quaternion(z_old[0:3])), _quaternion(y[0:3]))
+            d_omega = 4.0 * (y[3:6] - z_old[3:6])
+            q_hat = _product(_noise_quaternion(tau * d_omega), _product(_quaternion(z[0:3]), q_error))
+            omega_hat = 4.0 * z[3:6] + d_omega
         row = reference[k]
         sigma = _short_mrp(_product(q_hat, _conjugate(_quaternion(row[0:3]))))
         dcm = _dcm(q_hat if q_hat[0] >= 0.0 else -q_hat)
@@ -284,10 +301,14 @@ def predictor_tracking_loop(
         x = np.concatenate((sigma_next, omega_next / 4.0))
         if x[0:3] @ x[0:3] > 1.0:
             x[0:3] = _mrp_shadow(x[0:3])
-        sigma_m, omega_m = _rk4(z[0:3], 4.0 * z[3:6], command, h, 1, model, model_inverse)
-        z = np.concatenate((sigma_m, omega_m / 4.0))
-        if z[0:3] @ z[0:3] > 1.0:
-            z[0:3] = _mrp_shadow(z[0:3])
+        if form == "linear":
+            acceleration = model_inverse @ command
+            z = np.concatenate((z[0:3] + h * z[3:6] + (h * h / 8.0) * acceleration, z[3:6] + (h / 4.0) * acceleration))
+        else:
+            sigma_m, omega_m = _rk4(z[0:3], 4.0 * z[3:6], command, h, 1, model, model_inverse)
+            z = np.concatenate((sigma_m, omega_m / 4.0))
+            if z[0:3] @ z[0:3] > 1.0:
+                z[0:3] = _mrp_shadow(z[0:3])
     settle = unsettled + 1
     return TrackingRun(
         switches=np.array(switches, dtype=np.int64),
