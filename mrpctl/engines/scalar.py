@@ -112,6 +112,7 @@ __all__ = [
     "STATE_BLOCK",
     "Engine",
     "clear_engines",
+    "delay_label",
     "engine",
     "engine_sample",
     "noise_rows",
@@ -178,6 +179,17 @@ def noise_rows(sensor: SensorModel, k0: int, k1: int) -> np.ndarray:
 def slice_samples(substeps: int) -> int:
     """Samples per slice for ``substeps`` RK4 substeps (the work per slice stays about the same)."""
     return max(1, SLICE_SAMPLES // substeps)
+
+
+def delay_label(d: int) -> str:
+    """The delay's part of a compiled sample's name: ``d0`` for d = 0, ``dn`` for every d > 0.
+
+    The drivers take d at run time (ring size and indices), and the samples' SX depends on d through
+    d > 0 only (m_{k−d} read, or m_k itself), so one library serves every d > 0; where a sample's
+    expressions hold d itself (``DelayAware``'s count, the lagged statistics, a user's rule) its code, and so
+    its library's hash, differ by d.
+    """
+    return "d0" if d == 0 else "dn"
 
 
 def engine_sample(
@@ -403,7 +415,7 @@ class Engine:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
         self.memory_size = core.size1_in(1)
         self.ring_width = core.size1_in(2)
-        label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
+        label = f"{type(rule).__name__.lower()}_{delay_label(d)}_s{substeps}_{self.inertia.value}"
         if self.flight:
             label += f"_{saturation.value}"
         if wheels is not None:
