@@ -76,7 +76,7 @@ from mrpctl.engines.lane_streams import (
     own_streams,
     tracking_rows,
 )
-from mrpctl.engines.scalar import engine_sample, noise_rows, rule_key
+from mrpctl.engines.scalar import delay_label, engine_sample, noise_rows, rule_key
 from mrpctl.engines.stats import S_DIVERGED, S_K, initial_stats
 from mrpctl.errors import CodegenError, DimensionError, SpecificationError
 from mrpctl.flight import NOISE_SIZE, DelayModel, Disturbance, Hysteretic, Saturation, SensorModel, newest_arrived_slice
@@ -586,7 +586,7 @@ def lane_engine(
     with _ENGINES_LOCK:
         found = _ENGINES.get(key)
         if found is None:
-            label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{layout.value}"
+            label = f"{type(rule).__name__.lower()}_{delay_label(d)}_s{substeps}_{layout.value}"
             if structure is not None:
                 core = flight_core_function(
                     spacecraft,
@@ -683,7 +683,7 @@ def wheel_lane_engine(
                 torque_input=torque_input, law=law,
             )  # fmt: skip
             digest = hashlib.sha256(repr(key[1:3]).encode()).hexdigest()[:12]
-            label = f"hysteretic_wheels{wheels.count}_{digest}_d{d}_s{substeps}"
+            label = f"hysteretic_wheels{wheels.count}_{digest}_{delay_label(d)}_s{substeps}"
             label += ("" if structure["sensor"] else "_ideal") + ("" if disturbed else "_free")
             label += ("_torque" if torque_input else "") + ("_lanes" if torque_input and torque_per_lane else "")
             label += "" if law is None else "_" + law.label()
@@ -746,7 +746,7 @@ def predictor_lane_engine(
                 spacecraft, d, period, substeps, inertia=layout, model_inertia=model, saturation=saturation,
                 sensor=bool(sensor), limited=bool(limited), torque_input=bool(torque_input), form=form,
             )  # fmt: skip
-            label = f"onpredicted_d{d}_s{substeps}_{layout.value}_{saturation.value}_model_{model.value}"
+            label = f"onpredicted_{delay_label(d)}_s{substeps}_{layout.value}_{saturation.value}_model_{model.value}"
             label += ("_sensor" if sensor else "") + ("" if limited else "_unlimited")
             label += ("_torque" if torque_input else "") + ("_lanes" if per_lane else "") + ("_own" if own else "")
             label += "_linear" if form is PredictorForm.LINEAR else ""

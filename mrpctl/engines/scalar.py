@@ -112,6 +112,7 @@ __all__ = [
     "STATE_BLOCK",
     "Engine",
     "clear_engines",
+    "delay_label",
     "engine",
     "engine_sample",
     "noise_rows",
@@ -180,6 +181,17 @@ def slice_samples(substeps: int) -> int:
     return max(1, SLICE_SAMPLES // substeps)
 
 
+def delay_label(d: int) -> str:
+    """The delay's part of a compiled sample's name: ``d0`` for d = 0, ``dn`` for every d > 0.
+
+    The drivers take d at run time (ring size and indices), and the samples' SX depends on d through
+    d > 0 only (m_{k−d} read, or m_k itself), so one library serves every d > 0; where a sample's
+    expressions hold d itself (``DelayAware``'s count, the lagged statistics, a user's rule) its code, and so
+    its library's hash, differ by d.
+    """
+    return "d0" if d == 0 else "dn"
+
+
 def engine_sample(
     core: ca.Function, d: int, name: str = "engine_sample", *, frozen_memory: bool = True, stats_first: bool = False
 ) -> ca.Function:
@@ -198,6 +210,8 @@ def engine_sample(
     (the switch count and the torque), then the statistics' true error, then RK4 (the divergence test), so
     that the work off the plant's serial path comes before the integration that waits for the torque; the same
     operations, the same bits (the scalar driver's tracking samples: ``MRPCTL_STATS_FIRST``).
+    A core whose statistics lag (its output ``tracking_settling_lagged``: those of sample k − d) gives the sample a
+    last input ``delay``, d, which the scalar driver feeds from its own d: one library for every d >= 1.
     """
     x = ca.SX.sym("x", STATE_SIZE)
     memory = ca.SX.sym("memory", core.size1_in(1))  # MEMORY_SIZE; FLIGHT_MEMORY_SIZE for the flight sample
@@ -231,8 +245,10 @@ def engine_sample(
 
     k = stats[S_K]
     counted = counting if self_frozen and frozen_memory else ca.logic_and(k < stats[S_N], stats[S_DIVERGED] < 0)
-    # the sample whose true error the statistics take: k, or k − d (from k = d on; the last d at the run's end)
-    settled_index, settled_counted = (k - d, ca.logic_and(counted, k >= d)) if lagged else (k, counted)
+    # the sample whose true error the statistics take: k, or k − d (from k = d on; the last d at the run's end),
+    # d a last input ``delay`` that the driver feeds (one library for every d >= 1: the same IEEE k − d)
+    delay = ca.SX.sym("delay") if lagged else None
+    settled_index, settled_counted = (k - delay, ca.logic_and(counted, k >= delay)) if lagged else (k, counted)
     sigma_raw, omega_raw = x_raw[0:3], 4 * x_raw[3:6]
     bound = DIVERGENCE_BOUND**2
     # NaN compares false, so a NaN or inf state is "not ok".
@@ -277,9 +293,11 @@ def engine_sample(
     first_names = ["stats_next", "x_next", "memory_next"] if stats_first else ["x_next", "memory_next", "stats_next"]
     return ca.Function(
         name,
-        [x, memory, stats, x_delayed, gain, parameters, *extra],
+        [x, memory, stats, x_delayed, gain, parameters, *extra, *([] if delay is None else [delay])],
         [*first, x_meas, u, switched, *more],
-        ["x", "memory", "stats", "x_delayed", "K", "parameters"] + [core.name_in(i) for i in ports],
+        ["x", "memory", "stats", "x_delayed", "K", "parameters"]
+        + [core.name_in(i) for i in ports]
+        + ([] if delay is None else ["delay"]),
         [*first_names, "x_meas", "u", "switched", *more_names],
     )
 
@@ -403,7 +421,7 @@ class Engine:
             core = core_function(spacecraft, rule, d, period, substeps, inertia=self.inertia)
         self.memory_size = core.size1_in(1)
         self.ring_width = core.size1_in(2)
-        label = f"{type(rule).__name__.lower()}_d{d}_s{substeps}_{self.inertia.value}"
+        label = f"{type(rule).__name__.lower()}_{delay_label(d)}_s{substeps}_{self.inertia.value}"
         if self.flight:
             label += f"_{saturation.value}"
         if wheels is not None:

@@ -29,7 +29,8 @@
  * folds them itself when the run ends in its call (at sample reference_control[1], the run's n, or by diverging) and
  * the rows of the last d samples are in the slice's reference, and then sets reference_control[2] to 1 (else the
  * caller folds them by MRPCTL_TAIL_RUN). With MRPCTL_TRUE_ERROR_INPUT, MRPCTL_TRUE_ERROR_ONE(x_meas, row, out) is
- * MRPCTL_TRUE_ERROR of one sample (the controller's memory at k = 0). With MRPCTL_STATS_FIRST the sample's first three outputs are
+ * MRPCTL_TRUE_ERROR of one sample (the controller's memory at k = 0). With MRPCTL_DELAY_INPUT (its input index) the
+ * sample reads d, as a casadi_real, from that input (the lagged statistics' k - d). With MRPCTL_STATS_FIRST the sample's first three outputs are
  * stats_next, x_next, memory_next (the order of its generated code), else x_next, memory_next, stats_next.
  *
  * MRPCTL_RUN runs samples k0 .. k1-1 of one run. It only moves pointers: x, memory and
@@ -195,6 +196,11 @@ CASADI_SYMBOL_EXPORT long long MRPCTL_RUN(casadi_real* state, const casadi_real*
 #endif
 #if !MRPCTL_RECORD_OUTPUT
   (void)kept_records;
+#endif
+#if MRPCTL_DELAY_INPUT
+  /* the lagged statistics take sample k - d: d is an input of the sample (one library for every d) */
+  const casadi_real delay_value = (casadi_real)d;
+  arg[MRPCTL_DELAY_INPUT] = &delay_value;
 #endif
 #if MRPCTL_REFERENCE_INPUT
   const long long held = reference_control ? reference_control[0] : 0;

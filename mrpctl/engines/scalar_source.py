@@ -62,6 +62,8 @@ def driver_source(
         "MRPCTL_TORQUE_INPUT": sample.name_in().index("torque") if "torque" in sample.name_in() else 0,
         "MRPCTL_REFERENCE_INPUT": sample.name_in().index("reference") if "reference" in sample.name_in() else 0,
         "MRPCTL_REFERENCE_BOUND": repr(REFERENCE_BOUND),
+        # the lagged statistics' d, fed by the driver from its own d (an input, not a constant of the code)
+        "MRPCTL_DELAY_INPUT": sample.name_in().index("delay") if "delay" in sample.name_in() else 0,
         "MRPCTL_RECORD_WIDTH": record_width + (0 if true_error is None else true_error.size1_out(0)),
         "MRPCTL_RING_WIDTH": sample.size1_in(3),
         "MRPCTL_ROTATION_INPUT": int(rotation is not None),
