@@ -351,8 +351,9 @@ def simulate_batch(
         )
         check_memory(estimate, limit, t_final=t_final, keep_every=keep, runs=n_runs)
     checked = None
-    for one in rules:
-        checked = check_predictor(predictor, one, history, next((m for m in delay_models if m is not None), None))
+    delay_model = next((m for m in delay_models if m is not None), None)
+    for index, one in enumerate(rules):  # every run's rule; the compiler once (it is a search of PATH)
+        checked = check_predictor(predictor, one, history, delay_model, compiled=index == 0)
     tracked_by_run = each_run_reference(
         reference, error_time, feedforward, pointing_tolerance, rules, checked, n, rate, samples_by_run
     )
