@@ -247,23 +247,17 @@ def _verify(args: argparse.Namespace) -> int:
         tau = args.tau
     if not math.isfinite(tau) or tau < 0:
         raise SpecificationError(f"--tau must be finite and >= 0 s, got {tau}")
-    if scenario is not None and scenario.reference is not None:
-        # a tracking scenario: the tracking-error loop linearised about its reference (verify_tracking)
-        check_tracking_options(args)
-        try:
-            check_delay(tau, scenario.rate)
-        except SpecificationError as exc:
-            raise SpecificationError(f"--tau {tau:g} at the scenario's rate {scenario.rate:g} Hz: {exc}") from exc
-        return verify_tracking(args, scenario, tau)
-    if scenario is not None and scenario.predictor is not None:
-        # a predictor scenario: the predictor loop linearised about the origin (verify_predictor), not the plain
+    if scenario is not None and (scenario.reference is not None or scenario.predictor is not None):
+        # a tracking scenario: the tracking-error loop linearised about its reference (verify_tracking); a
+        # predictor scenario: the predictor loop linearised about the origin (verify_predictor), not the plain
         # delayed loop
-        check_predictor_options(args)
+        tracking = scenario.reference is not None
+        (check_tracking_options if tracking else check_predictor_options)(args)
         try:
             check_delay(tau, scenario.rate)
         except SpecificationError as exc:
             raise SpecificationError(f"--tau {tau:g} at the scenario's rate {scenario.rate:g} Hz: {exc}") from exc
-        return verify_predictor(args, scenario, tau)
+        return (verify_tracking if tracking else verify_predictor)(args, scenario, tau)
     # The loop as flown first: a refusal (bad option, lifted system too large) comes before the long searches.
     flown = _flown_checks(args, spacecraft, gain, tau, scenario)
     joint = _joint_verdict(args, spacecraft, gain, tau, scenario)
