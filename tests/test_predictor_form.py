@@ -16,6 +16,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 import pytest
+from test_scenario_predictor import BASE as SCENARIO
 
 from mrpctl import OnPredicted, Predictor, PredictorForm, data, paper, simulate, simulate_batch
 from mrpctl._compile import find_compiler
@@ -119,17 +120,8 @@ def test_lanes_equal_the_scalar_engine_bit_for_bit() -> None:
 
 
 def _scenario(form: str | None) -> dict[str, Any]:
-    table = {} if form is None else {"form": form}
-    return {
-        "tau": 0.5,
-        "rate": 100.0,
-        "t_final": 2.0,
-        "spacecraft": {"inertia": [140.0, 100.0, 80.0]},
-        "gains": {"K1": -4.0, "K2": -4.0},
-        "initial": {"sigma": [0.93, 0.0, 0.0], "omega": [0.46, 0.0, 0.0]},
-        "rule": {"type": "on-predicted", "alpha": 1.0},
-        "predictor": table,
-    }
+    """The predictor scenario of tests/test_scenario_predictor.py, with ``form`` in its [predictor] table."""
+    return copy.deepcopy(SCENARIO) | {"predictor": {} if form is None else {"form": form}}
 
 
 @pytest.mark.parametrize(("form", "expected"), [(None, PredictorForm.NONLINEAR), ("linear", PredictorForm.LINEAR)])
